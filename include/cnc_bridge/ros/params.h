@@ -1,0 +1,40 @@
+// Parameter helpers shared by the nodes: required parameters fail with the resolved name, ranges
+// are checked, and the link parameters have the same names in every node (DESIGN section 3).
+#pragma once
+
+#include <ros/ros.h>
+
+#include <string>
+
+#include "cnc_bridge/transport/serial_port.h"
+
+namespace cnc_bridge
+{
+namespace params
+{
+/// \brief Reads a required parameter. \throws ConfigError "Required parameter /ns/node/name not given."
+template <class T>
+T required(const ros::NodeHandle& pnh, const std::string& name)
+{
+  T value;
+  if (!pnh.getParam(name, value))
+  {
+    throw ConfigError("Required parameter " + pnh.resolveName(name) + " not given.");
+  }
+  return value;
+}
+
+/// \brief Reads a positive number; logs and falls back to \p fallback if the value is not positive.
+double positive(const ros::NodeHandle& pnh, const std::string& name, double fallback);
+
+/// \brief ~port (required), ~baud, ~data_bits, ~parity, ~stop_bits, ~flow_control.
+/// \throws ConfigError on a missing port or an invalid value.
+SerialSettings serialSettings(const ros::NodeHandle& pnh, unsigned default_baud = 9600);
+
+/// \brief Milliseconds from a parameter given in seconds (float), e.g. ~timeout: 1.5.
+Milliseconds seconds(const ros::NodeHandle& pnh, const std::string& name, double fallback_seconds);
+}  // namespace params
+
+/// \brief Routes the core's log lines to rosconsole under the node's name.
+void routeCoreLogToRosconsole();
+}  // namespace cnc_bridge

@@ -1,0 +1,68 @@
+// RS-232 serial port in raw mode with every line option the seeds use: Haas settings 11 (baud),
+// 12 (parity), 13 (stop bits), 37 (data bits) and the flow control of DNC drip-feed.
+#pragma once
+
+#include <boost/asio/serial_port.hpp>
+#include <string>
+
+#include "cnc_bridge/transport/asio_stream.h"
+
+namespace cnc_bridge
+{
+enum class Parity
+{
+  kNone,
+  kEven,
+  kOdd
+};
+
+enum class FlowControl
+{
+  kNone,
+  kXonXoff,  ///< handled by the kernel (IXON/IXOFF); drip-feed may handle DC1/DC3 itself instead
+  kRtsCts
+};
+
+/// \brief Line settings of a serial port. Defaults: 9600 8N1, no flow control.
+struct SerialSettings
+{
+  std::string device;
+  unsigned baud = 9600;
+  unsigned data_bits = 8;  ///< 5..8; 7 with even parity is the ISO tape code of older controls
+  Parity parity = Parity::kNone;
+  unsigned stop_bits = 1;  ///< 1 or 2
+  FlowControl flow_control = FlowControl::kNone;
+
+  /// \brief "/dev/ttyUSB0@9600 8N1" for messages.
+  std::string describe() const;
+  /// \throws ConfigError if a value is out of range.
+  void validate() const;
+};
+
+Parity parseParity(const std::string& text);            ///< none|even|odd; \throws ConfigError
+FlowControl parseFlowControl(const std::string& text);  ///< none|xonxoff|rtscts; \throws ConfigError
+const char* toString(Parity parity);
+const char* toString(FlowControl flow);
+
+/// \brief A serial port (or pty slave) opened raw. Thread-safe only for interrupt().
+class SerialPort : public AsioStreamTransport<boost::asio::serial_port>
+{
+ public:
+  /// \brief Opens and configures the port.
+  /// \throws ConfigError for invalid settings, LinkError if the device cannot be opened.
+  explicit SerialPort(SerialSettings settings);
+  ~SerialPort() override;
+
+  void drain() override;
+  size_t pendingOutput() const override;
+  void discardInput() override;
+  std::string describe() const override { return settings_.describe(); }
+  const SerialSettings& settings() const { return settings_; }
+
+  /// \brief Native file descriptor, for ioctls the interface does not cover (modem lines).
+  int nativeHandle() { return stream_.native_handle(); }
+
+ private:
+  SerialSettings settings_;
+};
+}  // namespace cnc_bridge

@@ -1,0 +1,52 @@
+#!/usr/bin/env python3
+"""Counts JUnit XML test results under a directory and prints "N passed, N failed" last.
+
+Every runner of the test suite (GoogleTest, rostest, the lint and fuzz steps) writes JUnit XML;
+a result file that cannot be parsed counts as one failure, so a crashed test is never silent.
+Exit status 1 if anything failed or nothing ran.
+"""
+import os
+import sys
+import xml.etree.ElementTree as ET
+
+
+def count(directory):
+    passed, failed, failures = 0, 0, []
+    for dirpath, _, files in os.walk(directory):
+        for name in sorted(files):
+            if not name.endswith(".xml"):
+                continue
+            path = os.path.join(dirpath, name)
+            try:
+                root = ET.parse(path).getroot()
+            except ET.ParseError as error:
+                failed += 1
+                failures.append(f"{path}: unreadable result ({error})")
+                continue
+            cases = list(root.iter("testcase"))
+            if not cases and root.get("errors", "0") not in ("0", ""):
+                failed += 1
+                failures.append(f"{path}: the test did not run")
+            for case in cases:
+                label = f"{case.get('classname', '')}.{case.get('name', '')}"
+                if case.find("failure") is not None or case.find("error") is not None:
+                    failed += 1
+                    failures.append(label)
+                elif case.find("skipped") is not None or case.get("status") == "notrun":
+                    continue
+                else:
+                    passed += 1
+    return passed, failed, failures
+
+
+def main():
+    directory = sys.argv[1] if len(sys.argv) > 1 else ".build/test_results"
+    passed, failed, failures = count(directory)
+    for label in failures:
+        print(f"FAILED: {label}")
+    print(f"{passed} passed, {failed} failed")
+    return 0 if failed == 0 and passed > 0 else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

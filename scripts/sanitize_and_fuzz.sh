@@ -1,0 +1,56 @@
+#!/usr/bin/env bash
+# The ROS-free core built a second time with clang, AddressSanitizer and UndefinedBehaviorSanitizer
+# (.build-asan/): its unit tests run under the sanitizers, then every libFuzzer target runs for a
+# bounded time from its seed corpus (test/fuzz/corpus/<target>/). Results as JUnit XML.
+# usage: sanitize_and_fuzz.sh RESULTS_DIR [SECONDS_PER_FUZZ_TARGET]
+set -uo pipefail
+root=$(cd "$(dirname "$0")/.." && pwd)
+source "$root/scripts/env.sh"
+results=${1:?results directory}
+seconds=${2:-10}
+build=${ASAN_BUILD_DIR:-$root/.build-asan}
+mkdir -p "$results" "$build"
+launcher=()
+command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+if [[ ! -f "$build/CMakeCache.txt" ]]; then
+  CC=clang CXX=clang++ cmake -S "$root" -B "$build" -DCNC_BRIDGE_CORE_ONLY=ON -DCNC_BRIDGE_FUZZ=ON \
+    -DCMAKE_BUILD_TYPE=Debug "${launcher[@]}" \
+    -DCMAKE_CXX_FLAGS="-O1 -fsanitize=address,undefined,fuzzer-no-link -fno-sanitize-recover=undefined -fno-omit-frame-pointer" \
+    -DCMAKE_EXE_LINKER_FLAGS="-fsanitize=address,undefined" >"$build/configure.log" \
+    || { cat "$build/configure.log"; exit 1; }
+fi
+cmake --build "$build" -- -j"${JOBS:-$(nproc)}" || exit 1
+
+status=0
+export ASAN_OPTIONS=detect_leaks=1:abort_on_error=0 UBSAN_OPTIONS=print_stacktrace=1
+for test in "$build"/bin/test_*; do
+  [[ -x "$test" ]] || continue
+  name=$(basename "$test")
+  "$test" --gtest_output="xml:$results/asan_$name.xml" >"$build/$name.log" 2>&1 \
+    || { status=1; echo "sanitizer run failed: $name (log: $build/$name.log)"; tail -20 "$build/$name.log"; }
+  # A sanitizer abort leaves no XML: count it as a failure.
+  [[ -f "$results/asan_$name.xml" ]] || echo "<testsuite name=\"asan_$name\" errors=\"1\"></testsuite>" >"$results/asan_$name.xml"
+  # Prefix suite names so these results are told apart from the plain build's.
+  sed -i "s/classname=\"/classname=\"asan./g" "$results/asan_$name.xml"
+done
+
+for fuzzer in "$build"/bin/fuzz_*; do
+  [[ -x "$fuzzer" ]] || continue
+  name=$(basename "$fuzzer")
+  corpus="$build/corpus/$name"
+  mkdir -p "$corpus"
+  seeds="$root/test/fuzz/corpus/$name"
+  [[ -d "$seeds" ]] || seeds=""
+  if "$fuzzer" -max_total_time="$seconds" -timeout=5 -rss_limit_mb=2048 -print_final_stats=1 "$corpus" $seeds \
+      >"$build/$name.log" 2>&1; then
+    runs=$(grep -oE 'stat::number_of_executed_units: *[0-9]+' "$build/$name.log" | grep -oE '[0-9]+$')
+    echo "fuzz $name: ${runs:-?} inputs in ${seconds}s, no crash"
+    echo "<testsuite name=\"fuzz\"><testcase classname=\"fuzz\" name=\"$name\"/></testsuite>" >"$results/fuzz_$name.xml"
+  else
+    status=1
+    echo "fuzz $name: FAILED (log: $build/$name.log)"
+    grep -A15 'ERROR:' "$build/$name.log" | head -30
+    echo "<testsuite name=\"fuzz\"><testcase classname=\"fuzz\" name=\"$name\"><failure message=\"crash, see $build/$name.log\"/></testcase></testsuite>" >"$results/fuzz_$name.xml"
+  fi
+done
+exit $status

@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# Runs every test of cnc_bridge and ends with one line "N passed, N failed":
+#   1. catkin build, then `make run_tests` (GoogleTest unit tests, rostests, launch-file checks);
+#   2. lint: clang-format on every C++ file, the core free of ROS (checked when configuring);
+#   3. the core and its unit tests again under AddressSanitizer + UndefinedBehaviorSanitizer,
+#      with the libFuzzer targets, each fuzzed for FUZZ_SECONDS (default 10).
+# Every step writes JUnit XML under .build/test_results; scripts/count_results.py counts it.
+# Exit status is non-zero if anything failed.
+set -uo pipefail
+root=$(cd "$(dirname "$0")/.." && pwd)
+source "$root/scripts/env.sh"
+build=${BUILD_DIR:-$root/.build}
+results=$build/test_results/cnc_bridge
+fuzz_seconds=${FUZZ_SECONDS:-10}
+status=0
+step() { echo; echo "=== $*"; }
+
+step "build"
+"$root/scripts/build.sh" || exit 1
+cmake --build "$build" -- -j"${JOBS:-$(nproc)}" tests || exit 1
+rm -rf "$build/test_results"
+mkdir -p "$results"
+
+step "unit tests, rostests, launch checks"
+# One test at a time: rostests start their own roscore and simulators.
+(cd "$build" && source devel/setup.bash && make -j1 run_tests >"$build/run_tests.log" 2>&1) || status=1
+grep -E '^\[ *(OK|FAILED|PASSED) *\]|^(SUMMARY|  \* RESULT|ERROR)' "$build/run_tests.log" | grep -vE 'OK \]' | tail -40
+
+step "lint"
+python3 "$root/scripts/lint.py" --junit "$results/lint.xml" || status=1
+
+step "sanitizers (ASan + UBSan) and fuzzing"
+"$root/scripts/sanitize_and_fuzz.sh" "$results" "$fuzz_seconds" || status=1
+
+step "results"
+python3 "$root/scripts/count_results.py" "$build/test_results" || status=1
+exit $status

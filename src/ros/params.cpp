@@ -1,0 +1,57 @@
+// Parameter helpers (see params.h).
+#include "cnc_bridge/ros/params.h"
+
+#include <cmath>
+
+namespace cnc_bridge
+{
+namespace params
+{
+double positive(const ros::NodeHandle& pnh, const std::string& name, double fallback)
+{
+  double value = fallback;
+  pnh.param(name, value, fallback);
+  if (!(value > 0.0) || !std::isfinite(value))
+  {
+    ROS_WARN_STREAM(pnh.resolveName(name) << " must be positive, not " << value << "; using " << fallback);
+    value = fallback;
+  }
+  return value;
+}
+
+SerialSettings serialSettings(const ros::NodeHandle& pnh, unsigned default_baud)
+{
+  SerialSettings settings;
+  // ~port: serial device, e.g. /dev/ttyUSB0.
+  settings.device = required<std::string>(pnh, "port");
+  int baud = static_cast<int>(default_baud), data_bits = 8, stop_bits = 1;
+  std::string parity = "none", flow = "none";
+  // ~baud: bits per second (Haas setting 11).
+  pnh.param("baud", baud, baud);
+  // ~data_bits: 7 or 8 (Haas setting 37).
+  pnh.param("data_bits", data_bits, data_bits);
+  // ~parity: none, even or odd (Haas setting 12).
+  pnh.param("parity", parity, parity);
+  // ~stop_bits: 1 or 2 (Haas setting 13).
+  pnh.param("stop_bits", stop_bits, stop_bits);
+  // ~flow_control: none, xonxoff or rtscts.
+  pnh.param("flow_control", flow, flow);
+  if (baud <= 0 || data_bits <= 0 || stop_bits <= 0)
+  {
+    throw ConfigError(pnh.resolveName("baud") + ", data_bits and stop_bits must be positive");
+  }
+  settings.baud = static_cast<unsigned>(baud);
+  settings.data_bits = static_cast<unsigned>(data_bits);
+  settings.stop_bits = static_cast<unsigned>(stop_bits);
+  settings.parity = parseParity(parity);
+  settings.flow_control = parseFlowControl(flow);
+  settings.validate();
+  return settings;
+}
+
+Milliseconds seconds(const ros::NodeHandle& pnh, const std::string& name, double fallback_seconds)
+{
+  return Milliseconds(static_cast<Milliseconds::rep>(std::llround(positive(pnh, name, fallback_seconds) * 1000.0)));
+}
+}  // namespace params
+}  // namespace cnc_bridge

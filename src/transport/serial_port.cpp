@@ -1,0 +1,227 @@
+// SerialPort: Boost.Asio's serial_port does the I/O; the line settings, output queue size, drain
+// and input flush use termios directly.
+#include "cnc_bridge/transport/serial_port.h"
+
+#include <sys/ioctl.h>
+#include <termios.h>
+
+#include <cerrno>
+#include <cstring>
+#include <utility>
+
+#include <sstream>
+
+namespace cnc_bridge
+{
+namespace asio = boost::asio;
+
+std::string SerialSettings::describe() const
+{
+  std::ostringstream out;
+  out << device << "@" << baud << " " << data_bits
+      << (parity == Parity::kNone   ? 'N'
+          : parity == Parity::kEven ? 'E'
+                                    : 'O')
+      << stop_bits;
+  if (flow_control != FlowControl::kNone)
+  {
+    out << " " << toString(flow_control);
+  }
+  return out.str();
+}
+
+void SerialSettings::validate() const
+{
+  if (device.empty())
+  {
+    throw ConfigError("serial port: no device given");
+  }
+  if (baud == 0)
+  {
+    throw ConfigError(device + ": baud rate must be positive");
+  }
+  if (data_bits < 5 || data_bits > 8)
+  {
+    throw ConfigError(device + ": data bits must be 5..8, not " + std::to_string(data_bits));
+  }
+  if (stop_bits != 1 && stop_bits != 2)
+  {
+    throw ConfigError(device + ": stop bits must be 1 or 2, not " + std::to_string(stop_bits));
+  }
+}
+
+Parity parseParity(const std::string& text)
+{
+  if (text == "none" || text == "N" || text == "n")
+    return Parity::kNone;
+  if (text == "even" || text == "E" || text == "e")
+    return Parity::kEven;
+  if (text == "odd" || text == "O" || text == "o")
+    return Parity::kOdd;
+  throw ConfigError("parity must be none, even or odd, not '" + text + "'");
+}
+
+FlowControl parseFlowControl(const std::string& text)
+{
+  if (text == "none")
+    return FlowControl::kNone;
+  if (text == "xonxoff" || text == "software")
+    return FlowControl::kXonXoff;
+  if (text == "rtscts" || text == "hardware")
+    return FlowControl::kRtsCts;
+  throw ConfigError("flow control must be none, xonxoff or rtscts, not '" + text + "'");
+}
+
+const char* toString(Parity parity)
+{
+  switch (parity)
+  {
+    case Parity::kNone:
+      return "none";
+    case Parity::kEven:
+      return "even";
+    case Parity::kOdd:
+      return "odd";
+  }
+  return "?";
+}
+
+const char* toString(FlowControl flow)
+{
+  switch (flow)
+  {
+    case FlowControl::kNone:
+      return "none";
+    case FlowControl::kXonXoff:
+      return "xonxoff";
+    case FlowControl::kRtsCts:
+      return "rtscts";
+  }
+  return "?";
+}
+
+namespace
+{
+speed_t speedConstant(unsigned baud)
+{
+  static const std::pair<unsigned, speed_t> kRates[] = {
+      {50, B50},           {75, B75},           {110, B110},         {134, B134},         {150, B150},
+      {200, B200},         {300, B300},         {600, B600},         {1200, B1200},       {1800, B1800},
+      {2400, B2400},       {4800, B4800},       {9600, B9600},       {19200, B19200},     {38400, B38400},
+      {57600, B57600},     {115200, B115200},   {230400, B230400},   {460800, B460800},   {500000, B500000},
+      {576000, B576000},   {921600, B921600},   {1000000, B1000000}, {1152000, B1152000}, {1500000, B1500000},
+      {2000000, B2000000}, {2500000, B2500000}, {3000000, B3000000}, {3500000, B3500000}, {4000000, B4000000}};
+  for (const auto& rate : kRates)
+  {
+    if (rate.first == baud)
+    {
+      return rate.second;
+    }
+  }
+  throw ConfigError("baud rate " + std::to_string(baud) + " is not a standard rate (50 .. 4000000)");
+}
+
+tcflag_t characterSize(unsigned data_bits)
+{
+  switch (data_bits)
+  {
+    case 5:
+      return CS5;
+    case 6:
+      return CS6;
+    case 7:
+      return CS7;
+    default:
+      return CS8;
+  }
+}
+}  // namespace
+
+SerialPort::SerialPort(SerialSettings settings) : settings_(std::move(settings))
+{
+  settings_.validate();
+  const speed_t speed = speedConstant(settings_.baud);
+  boost::system::error_code error;
+  stream_.open(settings_.device, error);
+  if (error)
+  {
+    throw LinkError(settings_.describe() + ": cannot open: " + error.message());
+  }
+  // termios directly rather than Asio's option classes: Asio reads each option back and rejects
+  // what a pty does not emulate (character size, parity), and ptys are our test devices.
+  struct termios tio;
+  const int fd = stream_.native_handle();
+  if (::tcgetattr(fd, &tio) != 0)
+  {
+    const std::string reason = std::strerror(errno);
+    close();
+    throw LinkError(settings_.describe() + ": not a serial port: " + reason);
+  }
+  ::cfmakeraw(&tio);  // no echo, no line editing, no CR/LF translation, all 8 bits kept
+  tio.c_cflag |= CLOCAL | CREAD;
+  tio.c_cflag = (tio.c_cflag & ~CSIZE) | characterSize(settings_.data_bits);
+  tio.c_cflag &= ~(PARENB | PARODD | CSTOPB | CRTSCTS);
+  tio.c_iflag &= ~(INPCK | IXON | IXOFF | IXANY);
+  if (settings_.parity != Parity::kNone)
+  {
+    tio.c_cflag |= PARENB | (settings_.parity == Parity::kOdd ? PARODD : 0);
+    tio.c_iflag |= INPCK;
+  }
+  if (settings_.stop_bits == 2)
+  {
+    tio.c_cflag |= CSTOPB;
+  }
+  if (settings_.flow_control == FlowControl::kXonXoff)
+  {
+    tio.c_iflag |= IXON | IXOFF;
+  }
+  else if (settings_.flow_control == FlowControl::kRtsCts)
+  {
+    tio.c_cflag |= CRTSCTS;
+  }
+  tio.c_cc[VMIN] = 1;
+  tio.c_cc[VTIME] = 0;
+  ::cfsetispeed(&tio, speed);
+  ::cfsetospeed(&tio, speed);
+  if (::tcsetattr(fd, TCSANOW, &tio) != 0)
+  {
+    const std::string reason = std::strerror(errno);
+    close();
+    throw LinkError(settings_.describe() + ": cannot configure: " + reason);
+  }
+  // Bytes left in the driver from before we opened belong to nobody.
+  discardInput();
+}
+
+SerialPort::~SerialPort()
+{
+  close();
+}
+
+void SerialPort::drain()
+{
+  if (isOpen())
+  {
+    ::tcdrain(stream_.native_handle());
+  }
+}
+
+size_t SerialPort::pendingOutput() const
+{
+  int queued = 0;
+  auto& port = const_cast<asio::serial_port&>(stream_);
+  if (!port.is_open() || ::ioctl(port.native_handle(), TIOCOUTQ, &queued) != 0 || queued < 0)
+  {
+    return 0;
+  }
+  return static_cast<size_t>(queued);
+}
+
+void SerialPort::discardInput()
+{
+  if (isOpen())
+  {
+    ::tcflush(stream_.native_handle(), TCIFLUSH);
+  }
+}
+}  // namespace cnc_bridge

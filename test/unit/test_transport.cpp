@@ -1,0 +1,321 @@
+// Transports against real peers: a pty pair (the test acts as the device on the master side, the
+// SerialPort opens the slave), loopback TCP, and the scripted fake. Nothing here sleeps to wait
+// for an event: every wait is a blocking read with a timeout or a condition variable.
+#include <gtest/gtest.h>
+
+#include <future>
+#include <thread>
+
+#include "cnc_bridge/common/error.h"
+#include "cnc_bridge/transport/backoff.h"
+#include "cnc_bridge/transport/fake_transport.h"
+#include "cnc_bridge/transport/pty.h"
+#include "cnc_bridge/transport/serial_port.h"
+#include "cnc_bridge/transport/tcp.h"
+
+using namespace cnc_bridge;
+using std::chrono::steady_clock;
+
+namespace
+{
+SerialSettings ptySettings(const PtyMaster& pty)
+{
+  SerialSettings settings;
+  settings.device = pty.slavePath();
+  settings.baud = 115200;
+  return settings;
+}
+
+std::string readString(Transport& t, size_t n, Milliseconds per_byte = Milliseconds(2000))
+{
+  std::string out(n, '\0');
+  const size_t got = t.readExactly(reinterpret_cast<uint8_t*>(&out[0]), n, per_byte);
+  out.resize(got);
+  return out;
+}
+}  // namespace
+
+TEST(SerialPort, ExchangesBytesBothWaysOverAPty)
+{
+  PtyMaster device;
+  SerialPort port(ptySettings(device));
+  port.write(std::string("G00 X1\n"));
+  EXPECT_EQ(readString(device, 7), "G00 X1\n");
+  device.write(std::string("\x06\x15", 2));
+  EXPECT_EQ(port.readByte(Milliseconds(1000)), 0x06);
+  EXPECT_EQ(port.readByte(Milliseconds(1000)), 0x15);
+}
+
+TEST(SerialPort, RawModeKeepsEveryByteValue)
+{
+  PtyMaster device;
+  SerialPort port(ptySettings(device));
+  std::vector<uint8_t> all(256);
+  for (int i = 0; i < 256; ++i)
+    all[i] = static_cast<uint8_t>(i);
+  device.write(all);
+  std::vector<uint8_t> got(256);
+  ASSERT_EQ(port.readExactly(got.data(), got.size(), Milliseconds(2000)), 256u);
+  EXPECT_EQ(got, all);  // no CR/LF translation, no XON/XOFF eaten, no echo
+  port.write(all);
+  std::vector<uint8_t> back(256);
+  ASSERT_EQ(device.readExactly(back.data(), back.size(), Milliseconds(2000)), 256u);
+  EXPECT_EQ(back, all);
+}
+
+TEST(SerialPort, ReadTimesOutWithNothingToRead)
+{
+  PtyMaster device;
+  SerialPort port(ptySettings(device));
+  const auto start = steady_clock::now();
+  uint8_t byte;
+  EXPECT_EQ(port.read(&byte, 1, Milliseconds(50)), 0u);
+  EXPECT_GE(steady_clock::now() - start, Milliseconds(45));
+}
+
+TEST(SerialPort, PartialReadsReturnWhatIsThere)
+{
+  PtyMaster device;
+  SerialPort port(ptySettings(device));
+  device.write(std::string("abc"));
+  uint8_t buffer[64];
+  size_t total = 0;
+  while (total < 3)
+  {
+    const size_t n = port.read(buffer + total, sizeof(buffer) - total, Milliseconds(1000));
+    ASSERT_GT(n, 0u);
+    total += n;
+  }
+  EXPECT_EQ(std::string(reinterpret_cast<char*>(buffer), total), "abc");
+}
+
+TEST(SerialPort, AcceptsEveryLineSettingTheSeedsUse)
+{
+  PtyMaster device;
+  for (const unsigned baud : {1200u, 9600u, 19200u, 38400u, 57600u, 115200u, 230400u})
+  {
+    for (const Parity parity : {Parity::kNone, Parity::kEven, Parity::kOdd})
+    {
+      SerialSettings settings = ptySettings(device);
+      settings.baud = baud;
+      settings.data_bits = parity == Parity::kNone ? 8 : 7;
+      settings.parity = parity;
+      settings.stop_bits = baud == 9600 ? 2 : 1;
+      settings.flow_control = baud == 57600 ? FlowControl::kXonXoff : FlowControl::kNone;
+      EXPECT_NO_THROW(SerialPort port(settings)) << settings.describe();
+    }
+  }
+}
+
+TEST(SerialPort, RejectsInvalidSettingsWithTheirName)
+{
+  SerialSettings settings;
+  settings.device = "/dev/null";
+  settings.data_bits = 9;
+  try
+  {
+    SerialPort port(settings);
+    FAIL() << "9 data bits accepted";
+  }
+  catch (const ConfigError& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("data bits"), std::string::npos);
+  }
+  EXPECT_THROW(parseParity("mark"), ConfigError);
+  EXPECT_THROW(parseFlowControl("dtr"), ConfigError);
+  EXPECT_EQ(parseParity("even"), Parity::kEven);
+}
+
+TEST(SerialPort, MissingDeviceIsALinkErrorNamingIt)
+{
+  SerialSettings settings;
+  settings.device = "/dev/does-not-exist";
+  try
+  {
+    SerialPort port(settings);
+    FAIL();
+  }
+  catch (const LinkError& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("/dev/does-not-exist@9600 8N1"), std::string::npos) << e.what();
+  }
+}
+
+TEST(SerialPort, InterruptCancelsABlockedReadFromAnotherThread)
+{
+  PtyMaster device;
+  SerialPort port(ptySettings(device));
+  auto reader = std::async(std::launch::async,
+                           [&]
+                           {
+                             uint8_t byte;
+                             port.read(&byte, 1, Milliseconds(30000));
+                           });
+  // The interrupt may land before or during the read: both must end it with CancelledError.
+  port.interrupt();
+  ASSERT_EQ(reader.wait_for(std::chrono::seconds(5)), std::future_status::ready);
+  EXPECT_THROW(reader.get(), CancelledError);
+  // The port stays usable afterwards.
+  device.write(std::string("x"));
+  EXPECT_EQ(port.readByte(Milliseconds(1000)), 'x');
+}
+
+TEST(Tcp, ConnectsAcceptsAndExchanges)
+{
+  TcpServer server(0, "127.0.0.1");
+  ASSERT_GT(server.port(), 0);
+  auto accepted = std::async(std::launch::async, [&] { return server.accept(Milliseconds(5000)); });
+  auto client = TcpConnection::connect("127.0.0.1", server.port(), Milliseconds(2000));
+  auto peer = accepted.get();
+  ASSERT_TRUE(peer);
+  client->write(std::string("?Q500\r\n"));
+  EXPECT_EQ(readString(*peer, 7), "?Q500\r\n");
+  peer->write(std::string(">PROGRAM, O00110, IDLE, PARTS, 4523\r\n"));
+  EXPECT_EQ(readString(*client, 37), ">PROGRAM, O00110, IDLE, PARTS, 4523\r\n");
+}
+
+TEST(Tcp, PeerThatDisappearsIsALinkError)
+{
+  TcpServer server(0, "127.0.0.1");
+  auto accepted = std::async(std::launch::async, [&] { return server.accept(Milliseconds(5000)); });
+  auto client = TcpConnection::connect("127.0.0.1", server.port(), Milliseconds(2000));
+  auto peer = accepted.get();
+  ASSERT_TRUE(peer);
+  peer.reset();  // the machine is switched off
+  uint8_t byte;
+  try
+  {
+    client->read(&byte, 1, Milliseconds(5000));
+    FAIL() << "read returned after the peer closed";
+  }
+  catch (const LinkError& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("127.0.0.1:" + std::to_string(server.port())), std::string::npos) << e.what();
+  }
+}
+
+TEST(Tcp, ConnectionRefusedIsALinkErrorWithHostAndPort)
+{
+  uint16_t port;
+  {
+    TcpServer probe(0, "127.0.0.1");
+    port = probe.port();
+  }
+  EXPECT_THROW(TcpConnection::connect("127.0.0.1", port, Milliseconds(2000)), LinkError);
+}
+
+TEST(Tcp, AcceptTimesOutAndCanBeInterrupted)
+{
+  TcpServer server(0, "127.0.0.1");
+  EXPECT_EQ(server.accept(Milliseconds(20)), nullptr);
+  auto waiting = std::async(std::launch::async, [&] { return server.accept(Milliseconds(30000)); });
+  server.interrupt();
+  ASSERT_EQ(waiting.wait_for(std::chrono::seconds(5)), std::future_status::ready);
+  EXPECT_THROW(waiting.get(), CancelledError);
+}
+
+TEST(Tcp, ReadTimeoutThenDataStillArrives)
+{
+  TcpServer server(0, "127.0.0.1");
+  auto accepted = std::async(std::launch::async, [&] { return server.accept(Milliseconds(5000)); });
+  auto client = TcpConnection::connect("localhost", server.port(), Milliseconds(2000));
+  auto peer = accepted.get();
+  uint8_t byte;
+  EXPECT_EQ(client->read(&byte, 1, Milliseconds(20)), 0u);
+  peer->write(std::string("!"));
+  EXPECT_EQ(client->readByte(Milliseconds(2000)), '!');
+}
+
+TEST(FakeTransport, ScriptedRepliesPartialReadsAndDisconnect)
+{
+  FakeTransport fake;
+  fake.onWrite(
+      [](FakeTransport& self, const std::vector<uint8_t>& bytes)
+      {
+        if (bytes == std::vector<uint8_t>{'?'})
+          self.feed(std::string("ok\n"));
+      });
+  fake.setMaxReadChunk(1);
+  fake.write(std::string("?"));
+  uint8_t buffer[8];
+  EXPECT_EQ(fake.read(buffer, sizeof(buffer), Milliseconds(100)), 1u);
+  EXPECT_EQ(buffer[0], 'o');
+  EXPECT_EQ(fake.read(buffer, sizeof(buffer), Milliseconds(100)), 1u);
+  EXPECT_EQ(fake.read(buffer, sizeof(buffer), Milliseconds(100)), 1u);
+  EXPECT_EQ(fake.read(buffer, sizeof(buffer), Milliseconds(1)), 0u);
+  fake.disconnect();
+  EXPECT_THROW(fake.read(buffer, sizeof(buffer), Milliseconds(100)), LinkError);
+}
+
+TEST(Transport, PurgeDropsUntilTheLineIsQuiet)
+{
+  FakeTransport fake;
+  fake.feed(std::string("noise noise"));
+  EXPECT_EQ(fake.purge(Milliseconds(5)), 11u);
+  EXPECT_EQ(fake.readByte(Milliseconds(1)), -1);
+}
+
+TEST(Backoff, GrowsGeometricallyUpToTheCapAndResets)
+{
+  Backoff backoff(Milliseconds(100), Milliseconds(1000), 2.0);
+  EXPECT_EQ(backoff.next(), Milliseconds(100));
+  EXPECT_EQ(backoff.next(), Milliseconds(200));
+  EXPECT_EQ(backoff.next(), Milliseconds(400));
+  EXPECT_EQ(backoff.next(), Milliseconds(800));
+  EXPECT_EQ(backoff.next(), Milliseconds(1000));
+  EXPECT_EQ(backoff.next(), Milliseconds(1000));
+  EXPECT_EQ(backoff.failures(), 6u);
+  backoff.reset();
+  EXPECT_EQ(backoff.next(), Milliseconds(100));
+}
+
+TEST(Reconnector, RetriesUntilTheLinkComesUpAndReportsStates)
+{
+  std::mutex mutex;
+  std::condition_variable cv;
+  std::vector<LinkState> states;
+  int attempts = 0;
+  bool session_ran = false;
+  StopSignal session_end;
+  Reconnector::Callbacks callbacks;
+  callbacks.connect = [&]
+  {
+    std::lock_guard<std::mutex> lock(mutex);
+    if (++attempts < 3)
+      throw LinkError("machine switched off");
+  };
+  callbacks.session = [&]
+  {
+    {
+      std::lock_guard<std::mutex> lock(mutex);
+      session_ran = true;
+    }
+    cv.notify_all();
+    session_end.waitFor(Milliseconds(30000));
+  };
+  callbacks.on_state = [&](LinkState s, const std::string&)
+  {
+    std::lock_guard<std::mutex> lock(mutex);
+    states.push_back(s);
+  };
+  std::atomic<bool> stopping{false};
+  callbacks.disconnect = [&]
+  {
+    if (stopping)
+      session_end.stop();
+  };
+  Reconnector reconnector("test link", callbacks, Backoff(Milliseconds(1), Milliseconds(2)));
+  reconnector.start();
+  {
+    std::unique_lock<std::mutex> lock(mutex);
+    ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(5), [&] { return session_ran; }));
+    EXPECT_EQ(attempts, 3);
+    ASSERT_GE(states.size(), 5u);
+    EXPECT_EQ(states[0], LinkState::kConnecting);
+    EXPECT_EQ(states[1], LinkState::kDown);
+    EXPECT_EQ(states.back(), LinkState::kUp);
+  }
+  stopping = true;
+  reconnector.stop();
+  EXPECT_EQ(reconnector.failures(), 2u);
+}
