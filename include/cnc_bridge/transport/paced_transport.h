@@ -1,0 +1,44 @@
+// A Transport decorator that lets bytes out no faster than a real serial line would carry them.
+// Simulators use it to behave like a 9600 or 115200 baud port on a pty (which has no baud rate),
+// and a host can use it to pace a drip-feed so that little is queued when the control says XOFF.
+#pragma once
+
+#include <chrono>
+
+#include "cnc_bridge/transport/transport.h"
+
+namespace cnc_bridge
+{
+/// \brief Bits on the wire per character: start + data + parity + stop.
+unsigned bitsPerCharacter(unsigned data_bits, bool parity, unsigned stop_bits);
+
+/// \brief Paces writes of an inner transport to \p characters_per_second. Reads pass through.
+/// Not thread-safe beyond what the inner transport offers (interrupt() is forwarded).
+class PacedTransport : public Transport
+{
+ public:
+  /// \param inner the link to pace; must outlive this object.
+  /// \param characters_per_second e.g. 11520 for 115200 baud 8N1 (10 bits per character).
+  PacedTransport(Transport& inner, double characters_per_second);
+
+  using Transport::write;
+  size_t read(uint8_t* buffer, size_t size, Milliseconds timeout) override;
+  /// Writes in small slices, each at the time the line would have finished the previous one.
+  void write(const uint8_t* data, size_t size, Milliseconds timeout = kWaitForever) override;
+  void drain() override;
+  size_t pendingOutput() const override { return inner_.pendingOutput(); }
+  void discardInput() override { inner_.discardInput(); }
+  void interrupt() override { inner_.interrupt(); }
+  void close() override { inner_.close(); }
+  bool isOpen() const override { return inner_.isOpen(); }
+  std::string describe() const override;
+
+  double charactersPerSecond() const { return rate_; }
+
+ private:
+  using Clock = std::chrono::steady_clock;
+  Transport& inner_;
+  double rate_;
+  Clock::time_point line_free_at_;  // when the simulated line has sent everything written so far
+};
+}  // namespace cnc_bridge

@@ -1,0 +1,61 @@
+// PacedTransport: sleeps until the simulated line is free, in slices of a few milliseconds, so the
+// receiver sees a steady trickle as from a UART rather than bursts.
+#include "cnc_bridge/transport/paced_transport.h"
+
+#include <algorithm>
+#include <sstream>
+#include <thread>
+
+namespace cnc_bridge
+{
+unsigned bitsPerCharacter(unsigned data_bits, bool parity, unsigned stop_bits)
+{
+  return 1 + data_bits + (parity ? 1 : 0) + stop_bits;
+}
+
+PacedTransport::PacedTransport(Transport& inner, double characters_per_second)
+    : inner_(inner), rate_(characters_per_second), line_free_at_(Clock::now())
+{
+}
+
+size_t PacedTransport::read(uint8_t* buffer, size_t size, Milliseconds timeout)
+{
+  return inner_.read(buffer, size, timeout);
+}
+
+void PacedTransport::write(const uint8_t* data, size_t size, Milliseconds timeout)
+{
+  // About 2 ms of line time per slice: fine-grained enough to look like a UART, coarse enough
+  // that the scheduler's wake-up jitter stays small against it.
+  const size_t slice = std::max<size_t>(1, static_cast<size_t>(rate_ * 0.002));
+  const auto per_char = std::chrono::duration<double>(1.0 / rate_);
+  size_t done = 0;
+  while (done < size)
+  {
+    const size_t n = std::min(slice, size - done);
+    const auto now = Clock::now();
+    if (line_free_at_ < now)
+    {
+      line_free_at_ = now;  // the line was idle: no credit for the time it sat unused
+    }
+    // The slice leaves when the line has finished what was before it.
+    std::this_thread::sleep_until(line_free_at_);
+    inner_.write(data + done, n, timeout);
+    line_free_at_ += std::chrono::duration_cast<Clock::duration>(per_char * static_cast<double>(n));
+    done += n;
+  }
+}
+
+void PacedTransport::drain()
+{
+  std::this_thread::sleep_until(line_free_at_);
+  inner_.drain();
+}
+
+std::string PacedTransport::describe() const
+{
+  std::ostringstream out;
+  out << inner_.describe() << " paced to " << rate_ << " char/s";
+  return out.str();
+}
+}  // namespace cnc_bridge
