@@ -11,6 +11,7 @@
 
 #include "cnc_bridge/common/atomic_file.h"
 #include "cnc_bridge/common/error.h"
+#include "cnc_bridge/common/port_lock.h"
 #include "cnc_bridge/common/program_dir.h"
 
 using namespace cnc_bridge;
@@ -135,4 +136,23 @@ TEST_F(ProgramDir, ResolvesNamesInsideAndRefusesEscapes)
 TEST_F(ProgramDir, RootMustExist)
 {
   EXPECT_THROW(ProgramDirectory(dir_ + "/nope"), ConfigError);
+}
+
+TEST(PortLock, OneHolderAtATimeAcrossObjects)
+{
+  // Two objects stand for two processes: flock locks belong to the open file description.
+  PortLock dnc("/dev/ttyS_test_cnc_bridge");
+  PortLock mdc("/dev/ttyS_test_cnc_bridge");
+  EXPECT_FALSE(mdc.heldElsewhere());
+  ASSERT_TRUE(dnc.tryLock());
+  EXPECT_TRUE(mdc.heldElsewhere());
+  EXPECT_FALSE(mdc.tryLock());
+  EXPECT_THROW(ScopedPortLock guard(mdc), LinkError);
+  dnc.unlock();
+  EXPECT_FALSE(mdc.heldElsewhere());
+  {
+    ScopedPortLock guard(mdc);
+    EXPECT_TRUE(dnc.heldElsewhere());
+  }
+  EXPECT_FALSE(dnc.heldElsewhere());
 }
