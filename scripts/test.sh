@@ -22,8 +22,10 @@ rm -rf "$build/test_results"
 mkdir -p "$results"
 
 step "unit tests, rostests, launch checks"
-# One test at a time: rostests start their own roscore and simulators.
-(cd "$build" && source devel/setup.bash && make -j1 run_tests >"$build/run_tests.log" 2>&1) || status=1
+# One test at a time: rostests start their own roscore and simulators. The X server is for the
+# rviz screenshot test.
+(cd "$build" && source devel/setup.bash &&
+  xvfb-run -a -s "-screen 0 1280x900x24" make -j1 run_tests >"$build/run_tests.log" 2>&1) || status=1
 grep -E '^\[ *(OK|FAILED|PASSED) *\]|^(SUMMARY|  \* RESULT|ERROR)' "$build/run_tests.log" | grep -vE 'OK \]' | tail -40
 
 step "lint"

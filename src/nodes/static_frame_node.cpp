@@ -17,6 +17,7 @@ int main(int argc, char** argv)
     ROS_FATAL("usage: static_frame_node x y z yaw pitch roll parent_frame child_frame");
     return 2;
   }
+  tf2_ros::StaticTransformBroadcaster broadcaster;  // starts the node, so the clock is valid
   geometry_msgs::TransformStamped t;
   t.header.stamp = ros::Time::now();
   t.header.frame_id = args[7];
@@ -30,7 +31,6 @@ int main(int argc, char** argv)
   t.transform.rotation.y = q.y();
   t.transform.rotation.z = q.z();
   t.transform.rotation.w = q.w();
-  tf2_ros::StaticTransformBroadcaster broadcaster;
   broadcaster.sendTransform(t);
   ros::spin();
   return 0;
