@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Runs every test of cnc_bridge and ends with one line "N passed, N failed":
 #   1. catkin build, then `make run_tests` (GoogleTest unit tests, rostests, launch-file checks);
-#   2. lint: clang-format on every C++ file, the core free of ROS (checked when configuring);
-#   3. the core and its unit tests again under AddressSanitizer + UndefinedBehaviorSanitizer,
+#   2. two hosts (network namespaces): a machine's state and tf cross to the cell's master;
+#   3. lint: clang-format on every C++ file, the core free of ROS (checked when configuring);
+#   4. the core and its unit tests again under AddressSanitizer + UndefinedBehaviorSanitizer,
 #      with the libFuzzer targets, each fuzzed for FUZZ_SECONDS (default 10).
 # Every step writes JUnit XML under .build/test_results; scripts/count_results.py counts it.
 # Exit status is non-zero if anything failed.
@@ -27,6 +28,9 @@ step "unit tests, rostests, launch checks"
 (cd "$build" && source devel/setup.bash &&
   xvfb-run -a -s "-screen 0 1280x900x24" make -j1 run_tests >"$build/run_tests.log" 2>&1) || status=1
 grep -E '^\[ *(OK|FAILED|PASSED) *\]|^(SUMMARY|  \* RESULT|ERROR)' "$build/run_tests.log" | grep -vE 'OK \]' | tail -40
+
+step "distributed: a machine node on another host"
+"$root/test/net/test_two_hosts.sh" "$results/two_hosts.xml" || status=1
 
 step "lint"
 python3 "$root/scripts/lint.py" --junit "$results/lint.xml" || status=1
