@@ -1,0 +1,204 @@
+// DPRNT inputs: reopened streams (serial, TCP) and a followed file.
+#include "cnc_bridge/dprnt/input.h"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+
+#include "cnc_bridge/common/error.h"
+#include "cnc_bridge/common/log.h"
+
+namespace cnc_bridge
+{
+namespace dprnt
+{
+namespace
+{
+constexpr size_t kChunk = 4096;
+// A read returns at least this often so a stop request is seen even if interrupt() raced a reopen.
+constexpr Milliseconds kReadSlice(200);
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+StreamInput::StreamInput(std::function<std::unique_ptr<Transport>()> open, std::string description, Backoff backoff)
+    : open_(std::move(open)), description_(std::move(description)), backoff_(backoff)
+{
+}
+
+StreamInput::~StreamInput()
+{
+  stop();
+}
+
+void StreamInput::start(BytesHandler on_bytes, StateHandler on_state)
+{
+  on_bytes_ = std::move(on_bytes);
+  Reconnector::Callbacks callbacks;
+  callbacks.connect = [this]
+  {
+    auto link = open_();
+    std::lock_guard<std::mutex> lock(mutex_);
+    link_ = std::move(link);
+  };
+  callbacks.session = [this] { session(); };
+  callbacks.on_state = std::move(on_state);
+  // Called from stop() (another thread) and after a failure: interrupt only, the reading thread
+  // owns the link and replaces it on the next connect.
+  callbacks.disconnect = [this]
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (link_)
+      link_->interrupt();
+  };
+  reconnector_ = std::make_unique<Reconnector>(description_, std::move(callbacks), backoff_);
+  reconnector_->start();
+}
+
+void StreamInput::session()
+{
+  Transport* link = nullptr;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    link = link_.get();
+  }
+  uint8_t buffer[kChunk];
+  while (!stopping_)
+  {
+    const size_t n = link->read(buffer, sizeof buffer, kReadSlice);
+    if (n > 0)
+      on_bytes_(buffer, n);
+  }
+}
+
+void StreamInput::stop()
+{
+  stopping_ = true;
+  if (reconnector_)
+  {
+    reconnector_->stop();
+    reconnector_.reset();
+  }
+  std::lock_guard<std::mutex> lock(mutex_);
+  link_.reset();
+}
+
+unsigned StreamInput::reconnects() const
+{
+  return reconnector_ ? reconnector_->reconnects() : 0;
+}
+
+// ---------------------------------------------------------------------------------------------
+FileInput::FileInput(std::string path, bool from_start, Milliseconds poll, Backoff backoff)
+    : path_(std::move(path)), from_start_(from_start), poll_(poll), backoff_(backoff)
+{
+}
+
+FileInput::~FileInput()
+{
+  stop();
+  closeFile();
+}
+
+void FileInput::start(BytesHandler on_bytes, StateHandler on_state)
+{
+  on_bytes_ = std::move(on_bytes);
+  Reconnector::Callbacks callbacks;
+  callbacks.connect = [this] { openFile(); };
+  callbacks.session = [this] { session(); };
+  on_state_ = on_state;
+  callbacks.on_state = std::move(on_state);
+  reconnector_ = std::make_unique<Reconnector>(describe(), std::move(callbacks), backoff_);
+  reconnector_->start();
+}
+
+void FileInput::stop()
+{
+  stop_.stop();
+  if (reconnector_)
+  {
+    reconnector_->stop();
+    reconnector_.reset();
+  }
+}
+
+unsigned FileInput::reconnects() const
+{
+  return reconnector_ ? reconnector_->reconnects() : 0;
+}
+
+void FileInput::closeFile()
+{
+  if (fd_ >= 0)
+  {
+    ::close(fd_);
+    fd_ = -1;
+  }
+}
+
+void FileInput::openFile()
+{
+  closeFile();
+  fd_ = ::open(path_.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd_ < 0)
+  {
+    throw LinkError("file " + path_ + ": " + std::strerror(errno));
+  }
+  // The first open may skip history; a reopen after a failure reads the (new) file from its start,
+  // since whatever it holds was written while we were away.
+  if (!opened_once_ && !from_start_)
+  {
+    ::lseek(fd_, 0, SEEK_END);
+  }
+  opened_once_ = true;
+}
+
+void FileInput::session()
+{
+  uint8_t buffer[kChunk];
+  while (!stop_.stopped())
+  {
+    const ssize_t n = ::read(fd_, buffer, sizeof buffer);
+    if (n > 0)
+    {
+      on_bytes_(buffer, static_cast<size_t>(n));
+      continue;
+    }
+    if (n < 0 && errno != EINTR)
+    {
+      throw LinkError("file " + path_ + ": " + std::strerror(errno));
+    }
+    // At the end of what was written: truncated, rotated, or just nothing new yet?
+    struct stat open_stat, path_stat;
+    if (::fstat(fd_, &open_stat) != 0)
+    {
+      throw LinkError("file " + path_ + ": " + std::strerror(errno));
+    }
+    const off_t position = ::lseek(fd_, 0, SEEK_CUR);
+    if (open_stat.st_size < position)
+    {
+      ++restarts_;
+      CNC_LOG_INFO("file " << path_ << " was truncated: reading from its start");
+      ::lseek(fd_, 0, SEEK_SET);
+      if (on_state_)
+        on_state_(LinkState::kUp, "file truncated: reading from its start");
+      continue;
+    }
+    if (::stat(path_.c_str(), &path_stat) == 0 &&
+        (path_stat.st_ino != open_stat.st_ino || path_stat.st_dev != open_stat.st_dev))
+    {
+      // Everything of the old file has been read (read() returned 0 above): switch to the new one.
+      ++restarts_;
+      CNC_LOG_INFO("file " << path_ << " was rotated: following the new file");
+      openFile();
+      if (on_state_)
+        on_state_(LinkState::kUp, "file rotated: following the new file");
+      continue;
+    }
+    stop_.waitFor(poll_);
+  }
+}
+}  // namespace dprnt
+}  // namespace cnc_bridge
