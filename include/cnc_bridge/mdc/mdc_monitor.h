@@ -1,0 +1,180 @@
+// What a host learns from polling a Haas control over MDC, and how it polls: a scheduler that runs
+// each query at its own period, a monitor that folds replies (ours and those meant for another MDC
+// client) into one machine status and detects cycle start/end and part-count events, and a poller
+// that drives both over an MdcClient while respecting the shared serial-port lock of a DNC transfer.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "cnc_bridge/common/port_lock.h"
+#include "cnc_bridge/mdc/mdc_client.h"
+#include "cnc_bridge/transport/backoff.h"
+
+namespace cnc_bridge
+{
+namespace mdc
+{
+using Clock = std::chrono::steady_clock;
+
+/// \brief Runs each query at its own period. Queries due at the same time go in the order they
+/// were added. Not thread-safe.
+class QueryScheduler
+{
+ public:
+  /// \param period Milliseconds(0): once per connection (serial number, model).
+  void add(const Query& query, Milliseconds period);
+  /// \brief Everything due at \p now again, once-only queries included (after a reconnect).
+  void reset(Clock::time_point now);
+  /// \returns the query due first and when; nullopt when nothing is left.
+  std::optional<std::pair<Query, Clock::time_point>> next() const;
+  /// \brief The query next() returned was sent (answered or not) at \p now: schedule its next run
+  /// one period after its due time, or at \p now if that is already past (no bursts after a stall).
+  void done(Clock::time_point now);
+  size_t size() const { return slots_.size(); }
+
+ private:
+  struct Slot
+  {
+    Query query;
+    Milliseconds period;
+    Clock::time_point due;
+    bool finished = false;
+  };
+  std::vector<Slot> slots_;
+};
+
+/// \brief Linear unit of the positions the control reports, from G20/G21 (macro #4006).
+enum class Units
+{
+  kUnknown,
+  kInch,
+  kMillimetre
+};
+
+/// \brief Everything known about the machine. Plain data.
+struct MachineStatus
+{
+  std::string serial_number, software_version, model;
+  std::string mode_text;  ///< Q104 as sent, "(MEM)"
+  Mode mode = Mode::kUnknown;
+  std::string status_text;  ///< Q500 status as sent, "IDLE"
+  Execution execution = Execution::kUnknown;
+  std::string program;
+  std::optional<int64_t> parts;
+  std::optional<int64_t> tool;
+  std::optional<int64_t> tool_changes;
+  std::optional<int64_t> m30_counter1, m30_counter2;
+  std::optional<double> last_cycle_s, previous_cycle_s, power_on_s, motion_s;
+  std::map<int, double> variables;  ///< Q600 values by variable number
+  Units units = Units::kUnknown;    ///< from #4006 when it is polled
+  uint64_t updates = 0;             ///< replies folded in
+};
+
+/// \brief A cycle or part-count event (values as cnc_bridge/CycleEvent).
+struct CycleEventData
+{
+  enum Type : uint8_t
+  {
+    kCycleStart = 1,
+    kCycleEnd = 2,
+    kPartCount = 3,
+    kAlarm = 5
+  };
+  Type type = kCycleStart;
+  std::string program;
+  int64_t part_count = -1;
+  double cycle_time = -1;  ///< s; negative when unknown (the cycle began before we connected)
+  std::string text;
+};
+
+/// \brief Folds replies into a MachineStatus and finds cycle events. Not thread-safe.
+///
+/// Cycle rules (Q500): a change from not running to BUSY or FEED HOLD starts a cycle; back to IDLE
+/// (or a stop) ends it, carrying the part count the control reports then and the time since the
+/// start; ALARM during a cycle ends it with an alarm event; a part count that rises while no cycle
+/// was seen (a cycle shorter than the poll period) is a part-count event. The first status after
+/// start-up gives no event: we do not know what came before.
+class MdcMonitor
+{
+ public:
+  /// \brief Applies one reply received at \p now.
+  /// \returns the events it caused (usually none).
+  std::vector<CycleEventData> apply(const Reply& reply, Clock::time_point now);
+  const MachineStatus& status() const { return status_; }
+  bool inCycle() const { return in_cycle_; }
+
+ private:
+  std::vector<CycleEventData> applyProgramStatus(const ProgramStatus& ps, Clock::time_point now);
+
+  MachineStatus status_;
+  bool seen_status_ = false;
+  bool in_cycle_ = false;
+  std::optional<Clock::time_point> cycle_start_;
+};
+
+/// \brief What to poll and how often.
+struct PollPlan
+{
+  Milliseconds status_period{250};     ///< Q500 and Q104
+  Milliseconds variables_period{250};  ///< each Q600 variable
+  Milliseconds counters_period{2000};  ///< Q201 tool, Q303/Q304 cycle times, Q402 M30 counter, Q200
+  std::vector<int> variables;          ///< Q600 list (positions, spindle, counters, #100s)
+  bool identity = true;                ///< Q100, Q101, Q102 once per connection
+
+  /// \brief The scheduler for this plan.
+  QueryScheduler scheduler() const;
+};
+
+/// \brief Polls over one connection until stopped or the link fails. Thread-safe as documented
+/// per method: run() in one thread; withClient() from any other.
+class MdcPoller
+{
+ public:
+  /// \brief Called (under the client lock) after each reply is folded in, with the events found.
+  using UpdateListener = std::function<void(const MachineStatus&, const std::vector<CycleEventData>&)>;
+
+  /// \param port_lock if set, polls are skipped while another process holds it (a DNC transfer
+  ///        on the same serial port: polling a Classic control then can freeze it).
+  MdcPoller(PollPlan plan, Milliseconds reply_timeout, PortLock* port_lock = nullptr);
+
+  void setListener(UpdateListener listener) { listener_ = std::move(listener); }
+
+  /// \brief Polls over \p transport until \p stop is stopped (returns) or the link fails (throws
+  /// LinkError / CancelledError). A query left unanswered is counted and the poll goes on.
+  void run(Transport& transport, StopSignal& stop);
+
+  /// \brief Runs \p action with the live client, between two polls.
+  /// \throws LinkError when there is no connection.
+  void withClient(const std::function<void(MdcClient&)>& action);
+
+  /// \brief A copy of the status and counters. Thread-safe.
+  MachineStatus status() const;
+  ClientStats stats() const;
+  uint64_t skippedForPortLock() const;
+  uint64_t polls() const;
+
+ private:
+  void notify(const Reply& reply);
+
+  PollPlan plan_;
+  Milliseconds reply_timeout_;
+  PortLock* port_lock_;
+  UpdateListener listener_;
+
+  mutable std::mutex mutex_;  // guards everything below, and all use of client_
+  MdcClient* client_ = nullptr;
+  MdcMonitor monitor_;
+  ClientStats stats_;  // of past connections plus the live one
+  ClientStats base_stats_;
+  uint64_t skipped_ = 0;
+  uint64_t polls_ = 0;
+};
+}  // namespace mdc
+}  // namespace cnc_bridge

@@ -1,0 +1,87 @@
+// The scripted Haas machine behind sim_haas_mdc: a timeline of phases (idle, a cycle with moving
+// axes, a part counted, an alarm, a dropped link) that repeats, and the MDC replies such a machine
+// gives at any moment. Kept in the core, without sockets, so unit tests can check it directly.
+#pragma once
+
+#include <chrono>
+#include <istream>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace cnc_bridge
+{
+namespace mdc
+{
+/// \brief A Haas control as a pure function of time. Not thread-safe.
+///
+/// Script format (one statement per line, `#` starts a comment; see test/data/mdc/cell.mdcsim):
+/// ```
+/// serial 1234567               ?Q100
+/// software 100.20.000.1200     ?Q101
+/// model VF2D                   ?Q102
+/// units inch|mm                #4006 = 20|21; positions below are in these units
+/// work X Y Z                   machine coordinates of the active work zero (#5041.. = #5021.. - work)
+/// var N VALUE                  initial value of macro variable #N (writable with ?E)
+/// phase SECONDS key=value ...  one step of the timeline; the timeline repeats
+/// ```
+/// Phase keys: `mode=MEM|MDI|JOG|ZERO RET|EDIT` (underscores stand for spaces), `status=IDLE|BUSY|
+/// FEED_HOLD|ALARM`, `program=O00110`, `tool=N`, `parts+=N` (counted on entering the phase),
+/// `x=`, `y=`, `z=` (axis targets, reached linearly at the end of the phase), `spindle=RPM`,
+/// and the flag `drop` (every connection is closed on entering the phase). Unset keys keep the
+/// previous phase's value.
+class SimMachine
+{
+ public:
+  using Clock = std::chrono::steady_clock;
+
+  /// \brief Parses a script. \throws ConfigError naming the line.
+  static SimMachine fromScript(std::istream& in, const std::string& name = "script");
+
+  /// \brief Starts the timeline at \p start.
+  void start(Clock::time_point start) { start_ = start; }
+
+  /// \brief The reply lines (without framing) to one line from a client at \p now. Unknown or
+  /// malformed queries get "?, <query>" as the control does.
+  std::string answer(const std::string& line, Clock::time_point now);
+
+  /// \returns true once each time the timeline enters a phase with `drop`.
+  bool dropDue(Clock::time_point now);
+
+  /// \brief The state at \p now (for tests and the simulator's log).
+  struct State
+  {
+    std::string mode = "MEM", status = "IDLE", program = "O00000";
+    int tool = 1;
+    double spindle = 0;
+    long long parts = 0;
+    double x = 0, y = 0, z = 0;
+    size_t phase = 0;
+    long long loop = 0;
+  };
+  State stateAt(Clock::time_point now) const;
+
+  double timelineSeconds() const;
+
+ private:
+  struct Phase
+  {
+    double seconds = 1.0;
+    std::map<std::string, std::string> set;
+    long long parts_increment = 0;
+    std::optional<double> x, y, z;
+    bool drop = false;
+    size_t line = 0;
+  };
+
+  std::string serial_ = "1234567", software_ = "100.20.000.1200", model_ = "VF2D";
+  bool inch_ = true;
+  double work_[3] = {0, 0, 0};
+  std::map<int, double> variables_;
+  std::vector<Phase> phases_;
+  Clock::time_point start_ = Clock::now();
+  std::optional<std::pair<long long, size_t>> last_drop_;
+};
+}  // namespace mdc
+}  // namespace cnc_bridge

@@ -1,0 +1,340 @@
+// SimMachine: the scripted Haas control behind sim_haas_mdc (see sim_machine.h).
+#include "cnc_bridge/mdc/sim_machine.h"
+
+#include <cmath>
+#include <cstdio>
+#include <sstream>
+
+#include "cnc_bridge/common/error.h"
+#include "cnc_bridge/mdc/mdc_protocol.h"
+
+namespace cnc_bridge
+{
+namespace mdc
+{
+namespace
+{
+std::string upper(std::string text)
+{
+  for (auto& c : text)
+    c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+  return text;
+}
+
+std::string number(double value, int decimals)
+{
+  char buffer[64];
+  std::snprintf(buffer, sizeof buffer, "%.*f", decimals, value);
+  return buffer;
+}
+
+std::string hms(double seconds, int hour_digits)
+{
+  const long long total = static_cast<long long>(seconds);
+  char buffer[48];
+  std::snprintf(buffer, sizeof buffer, "%0*lld:%02lld:%02lld", hour_digits, total / 3600, (total / 60) % 60,
+                total % 60);
+  return buffer;
+}
+}  // namespace
+
+SimMachine SimMachine::fromScript(std::istream& in, const std::string& name)
+{
+  SimMachine machine;
+  std::string text;
+  size_t line_number = 0;
+  auto fail = [&](const std::string& why)
+  { throw ConfigError(name + ":" + std::to_string(line_number) + ": " + why + ": \"" + text + "\""); };
+  auto toDouble = [&](const std::string& value) -> double
+  {
+    try
+    {
+      return parseNumber(value);
+    }
+    catch (const ProtocolError&)
+    {
+      fail("not a number");
+    }
+    return 0;
+  };
+  while (std::getline(in, text))
+  {
+    ++line_number;
+    std::string line = text.substr(0, text.find('#'));
+    std::istringstream words(line);
+    std::string keyword;
+    if (!(words >> keyword))
+      continue;
+    if (keyword == "serial")
+      words >> machine.serial_;
+    else if (keyword == "software")
+      words >> machine.software_;
+    else if (keyword == "model")
+      words >> machine.model_;
+    else if (keyword == "units")
+    {
+      std::string units;
+      words >> units;
+      if (units != "inch" && units != "mm")
+        fail("units must be inch or mm");
+      machine.inch_ = units == "inch";
+    }
+    else if (keyword == "work")
+    {
+      std::string x, y, z;
+      if (!(words >> x >> y >> z))
+        fail("work needs X Y Z");
+      machine.work_[0] = toDouble(x);
+      machine.work_[1] = toDouble(y);
+      machine.work_[2] = toDouble(z);
+    }
+    else if (keyword == "var")
+    {
+      std::string n, value;
+      if (!(words >> n >> value))
+        fail("var needs N VALUE");
+      machine.variables_[static_cast<int>(toDouble(n))] = toDouble(value);
+    }
+    else if (keyword == "phase")
+    {
+      Phase phase;
+      phase.line = line_number;
+      std::string seconds;
+      if (!(words >> seconds))
+        fail("phase needs SECONDS");
+      phase.seconds = toDouble(seconds);
+      if (!(phase.seconds > 0) || phase.seconds > 1e6)
+        fail("phase length must be positive");
+      std::string item;
+      while (words >> item)
+      {
+        if (item == "drop")
+        {
+          phase.drop = true;
+          continue;
+        }
+        const size_t eq = item.find('=');
+        if (eq == std::string::npos || eq == 0)
+          fail("expected key=value, not " + item);
+        std::string key = item.substr(0, eq), value = item.substr(eq + 1);
+        for (auto& c : value)
+          if (c == '_')
+            c = ' ';
+        if (key == "parts+")
+          phase.parts_increment = static_cast<long long>(toDouble(value));
+        else if (key == "x")
+          phase.x = toDouble(value);
+        else if (key == "y")
+          phase.y = toDouble(value);
+        else if (key == "z")
+          phase.z = toDouble(value);
+        else if (key == "mode" || key == "status" || key == "program")
+          phase.set[key] = upper(value);
+        else if (key == "tool" || key == "spindle" || key == "parts")
+        {
+          toDouble(value);
+          phase.set[key] = value;
+        }
+        else
+          fail("unknown key " + key);
+      }
+      machine.phases_.push_back(phase);
+    }
+    else
+      fail("unknown statement " + keyword);
+  }
+  if (machine.phases_.empty())
+  {
+    line_number = 0;
+    text.clear();
+    fail("no phase");
+  }
+  return machine;
+}
+
+double SimMachine::timelineSeconds() const
+{
+  double total = 0;
+  for (const auto& phase : phases_)
+    total += phase.seconds;
+  return total;
+}
+
+SimMachine::State SimMachine::stateAt(Clock::time_point now) const
+{
+  const double total = timelineSeconds();
+  const double elapsed = std::max(0.0, std::chrono::duration<double>(now - start_).count());
+  State state;
+  state.loop = static_cast<long long>(std::floor(elapsed / total));
+  double t = elapsed - static_cast<double>(state.loop) * total;
+  size_t index = 0;
+  while (index + 1 < phases_.size() && t >= phases_[index].seconds)
+  {
+    t -= phases_[index].seconds;
+    ++index;
+  }
+  state.phase = index;
+  const double fraction = std::min(1.0, t / phases_[index].seconds);
+
+  long long increments_per_loop = 0, base_parts = 0;
+  for (const auto& phase : phases_)
+  {
+    increments_per_loop += phase.parts_increment;
+    if (phase.set.count("parts"))
+      base_parts = std::stoll(phase.set.at("parts"));
+  }
+  // Settings carry over from the previous loop's end, so apply the whole timeline first when
+  // this is not the first loop, then the phases up to the current one.
+  double axis_end[3] = {0, 0, 0};
+  auto applyPhase = [&](const Phase& phase)
+  {
+    for (const auto& [key, value] : phase.set)
+    {
+      if (key == "mode")
+        state.mode = value;
+      else if (key == "status")
+        state.status = value;
+      else if (key == "program")
+        state.program = value;
+      else if (key == "tool")
+        state.tool = std::stoi(value);
+      else if (key == "spindle")
+        state.spindle = std::stod(value);
+    }
+    if (phase.x)
+      axis_end[0] = *phase.x;
+    if (phase.y)
+      axis_end[1] = *phase.y;
+    if (phase.z)
+      axis_end[2] = *phase.z;
+  };
+  if (state.loop > 0)
+  {
+    for (const auto& phase : phases_)
+      applyPhase(phase);
+  }
+  long long parts = 0;
+  for (size_t i = 0; i < index; ++i)
+  {
+    applyPhase(phases_[i]);
+    parts += phases_[i].parts_increment;
+  }
+  const double from[3] = {axis_end[0], axis_end[1], axis_end[2]};
+  applyPhase(phases_[index]);
+  parts += phases_[index].parts_increment;
+  state.parts = base_parts + state.loop * increments_per_loop + parts;
+  state.x = from[0] + (axis_end[0] - from[0]) * fraction;
+  state.y = from[1] + (axis_end[1] - from[1]) * fraction;
+  state.z = from[2] + (axis_end[2] - from[2]) * fraction;
+  return state;
+}
+
+bool SimMachine::dropDue(Clock::time_point now)
+{
+  const State state = stateAt(now);
+  if (!phases_[state.phase].drop)
+    return false;
+  const auto key = std::make_pair(state.loop, state.phase);
+  if (last_drop_ == key)
+    return false;
+  last_drop_ = key;
+  return true;
+}
+
+std::string SimMachine::answer(const std::string& raw, Clock::time_point now)
+{
+  std::string line;
+  for (char c : raw)
+    if (c >= 0x20 && c < 0x7F)
+      line.push_back(c);
+  while (!line.empty() && line.back() == ' ')
+    line.pop_back();
+  while (!line.empty() && line.front() == ' ')
+    line.erase(0, 1);
+  const std::string command = upper(line);
+  if (command.empty())
+    return "";
+  const State s = stateAt(now);
+
+  // A write: ?E<var> <value>.
+  if (command.size() > 2 && command[0] == '?' && command[1] == 'E')
+  {
+    std::istringstream words(command.substr(2));
+    std::string var, value;
+    if (words >> var >> value)
+    {
+      try
+      {
+        const double n = parseNumber(var), v = parseNumber(value);
+        // System variables (#1000 and up here) are read-only on the control.
+        if (n == std::floor(n) && n >= 1 && n < 1000)
+        {
+          variables_[static_cast<int>(n)] = v;
+          return "!";
+        }
+      }
+      catch (const ProtocolError&)
+      {
+      }
+    }
+    return "?, " + command;
+  }
+  const auto query = parseReadOnlyQuery(command);
+  if (!query)
+    return "?, " + command;
+  switch (query->code)
+  {
+    case 100:
+      return "SERIAL NUMBER, " + serial_;
+    case 101:
+      return "SOFTWARE VERSION, " + software_;
+    case 102:
+      return "MODEL, " + model_;
+    case 104:
+      return "MODE, (" + s.mode + ")";
+    case 200:
+      return "TOOL CHANGES, " + std::to_string(s.loop * 2);
+    case 201:
+      return "USING TOOL, " + std::to_string(s.tool);
+    case 300:
+      return "P.O. TIME, " + hms(std::chrono::duration<double>(now - start_).count() + 100000.0, 5);
+    case 301:
+      return "C.S. TIME, " + hms(std::chrono::duration<double>(now - start_).count(), 5);
+    case 303:
+      return "LAST CYCLE, " + hms(s.loop > 0 ? timelineSeconds() : 0, 3);
+    case 304:
+      return "PREV CYCLE, " + hms(s.loop > 1 ? timelineSeconds() : 0, 3);
+    case 402:
+    case 403:
+      return std::string(query->code == 402 ? "M30 #1, " : "M30 #2, ") + std::to_string(s.parts);
+    case 500:
+      if (s.status == "BUSY")
+        return "STATUS, BUSY";
+      return "PROGRAM, " + s.program + ", " + s.status + ", PARTS, " + std::to_string(s.parts);
+    case 600:
+    {
+      if (!query->argument || *query->argument != std::floor(*query->argument) || *query->argument < 0)
+        return "?, " + command;
+      const int n = static_cast<int>(*query->argument);
+      double value = 0;
+      const double work[3] = {s.x - work_[0], s.y - work_[1], s.z - work_[2]};
+      if (n >= 5021 && n <= 5023)
+        value = n == 5021 ? s.x : n == 5022 ? s.y : s.z;
+      else if (n >= 5041 && n <= 5043)
+        value = work[n - 5041];
+      else if (n == 4006)
+        value = inch_ ? 20 : 21;
+      else if (n == 3027)
+        value = s.spindle;
+      else if (n == 3901)
+        value = static_cast<double>(s.parts);
+      else if (variables_.count(n))
+        value = variables_[n];
+      return "MACRO, " + std::to_string(n) + ", " + number(value, 6);
+    }
+    default:
+      return "?, " + command;
+  }
+}
+}  // namespace mdc
+}  // namespace cnc_bridge

@@ -1,0 +1,346 @@
+// MdcClient, WritePolicy, QueryScheduler, MdcMonitor and MdcPoller against a scripted transport:
+// reply matching with another client's replies interleaved, timeouts, oversize lines, the write
+// allow-list, cycle events, and polls skipped while a DNC transfer holds the serial port.
+#include <gtest/gtest.h>
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <condition_variable>
+#include <thread>
+
+#include "cnc_bridge/common/error.h"
+#include "cnc_bridge/mdc/mdc_client.h"
+#include "cnc_bridge/mdc/mdc_monitor.h"
+#include "cnc_bridge/transport/fake_transport.h"
+
+using namespace cnc_bridge;
+using namespace cnc_bridge::mdc;
+using namespace std::chrono_literals;
+
+namespace
+{
+std::string text(const std::vector<uint8_t>& bytes)
+{
+  return std::string(bytes.begin(), bytes.end());
+}
+
+// Answers each query line with the given replies, in order.
+void answerWith(FakeTransport& fake, std::vector<std::string> replies)
+{
+  auto queue = std::make_shared<std::vector<std::string>>(std::move(replies));
+  fake.onWrite(
+      [queue](FakeTransport& f, const std::vector<uint8_t>&)
+      {
+        if (!queue->empty())
+        {
+          f.feed(queue->front());
+          queue->erase(queue->begin());
+        }
+      });
+}
+}  // namespace
+
+TEST(MdcClient, SendsTheQueryWithCrLf)
+{
+  FakeTransport fake;
+  answerWith(fake, {">MODE, (MEM)\r\n"});
+  MdcClient client(fake);
+  const Reply reply = client.request(q(104), 1000ms);
+  EXPECT_EQ(text(fake.written()), "?Q104\r\n");
+  EXPECT_EQ(valueOf(reply), "(MEM)");
+  EXPECT_EQ(client.stats().sent, 1u);
+  EXPECT_EQ(client.stats().answered, 1u);
+}
+
+TEST(MdcClient, ForeignRepliesInterleavedAreSetAsideNotTakenForOurs)
+{
+  FakeTransport fake;
+  // Another MDC client asked for Q100 and a macro; the control sent those replies to us too,
+  // before and after ours, split across reads.
+  answerWith(fake, {">SERIAL NUMBER, 1234567\r\n>MACRO, 5022, 2.0\r\n>MACRO, 5021, 1.5\r\n>MODE, (MDI)\r\n"});
+  fake.setMaxReadChunk(7);
+  MdcClient client(fake);
+  std::vector<std::string> foreign;
+  client.setForeignListener([&](const Reply& r) { foreign.push_back(r.line); });
+  EXPECT_DOUBLE_EQ(client.readVariable(5021, 1000ms), 1.5);
+  EXPECT_EQ(foreign, (std::vector<std::string>{"SERIAL NUMBER, 1234567", "MACRO, 5022, 2.0"}));
+  // The reply after ours stays buffered and is seen on the next request.
+  answerWith(fake, {">PROGRAM, O1, IDLE, PARTS, 3\r\n"});
+  const Reply reply = client.request(q(500), 1000ms);
+  EXPECT_EQ(toProgramStatus(reply).parts, 3);
+  EXPECT_EQ(foreign.back(), "MODE, (MDI)");
+  EXPECT_EQ(client.stats().foreign, 3u);
+}
+
+TEST(MdcClient, NoAnswerIsATimeoutAndCounted)
+{
+  FakeTransport fake;
+  answerWith(fake, {">MODE, (MEM)\r\n"});  // answers the wrong question
+  MdcClient client(fake);
+  EXPECT_THROW(client.request(q(500), 50ms), TimeoutError);
+  EXPECT_EQ(client.stats().unanswered, 1u);
+  EXPECT_EQ(client.stats().foreign, 1u);
+}
+
+TEST(MdcClient, RejectedQueryIsReportedNotWaitedOut)
+{
+  FakeTransport fake;
+  answerWith(fake, {">?, ?Q105\r\n", ">?, ?Q105\r\n"});
+  MdcClient client(fake);
+  EXPECT_EQ(client.request(q(105), 1000ms).kind, ReplyKind::kUnknownQuery);
+  EXPECT_THROW(client.requestValue(q(105), 1000ms), ProtocolError);
+  EXPECT_EQ(client.stats().rejected, 2u);
+}
+
+TEST(MdcClient, OversizeLineIsDroppedAndTheNextReplyStillArrives)
+{
+  FakeTransport fake;
+  answerWith(fake, {">" + std::string(3 * kMaxLineLength, 'A') + "\r\n>MODE, (MEM)\r\n"});
+  MdcClient client(fake);
+  EXPECT_EQ(valueOf(client.request(q(104), 1000ms)), "(MEM)");
+  EXPECT_EQ(client.stats().dropped_lines, 1u);
+}
+
+TEST(MdcClient, PeerVanishingIsALinkError)
+{
+  FakeTransport fake;
+  fake.onWrite([](FakeTransport& f, const std::vector<uint8_t>&) { f.disconnect(); });
+  MdcClient client(fake);
+  EXPECT_THROW(client.request(q(500), 1000ms), LinkError);
+}
+
+TEST(MdcClient, WriteUsesTheECommand)
+{
+  FakeTransport fake;
+  answerWith(fake, {">!\r\n", ">?, ?E5021\r\n"});
+  MdcClient client(fake);
+  client.writeVariable(100, 2.5, 1000ms);
+  EXPECT_EQ(text(fake.written()), "?E100 2.5\r\n");
+  EXPECT_THROW(client.writeVariable(5021, 1, 1000ms), ProtocolError);
+}
+
+TEST(MdcWritePolicy, RefusalNamesTheParameter)
+{
+  const WritePolicy none({}, "/haas/writable_variables");
+  try
+  {
+    none.check(100);
+    FAIL();
+  }
+  catch (const DisabledError& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("/haas/writable_variables"), std::string::npos);
+    EXPECT_NE(std::string(e.what()).find("disabled"), std::string::npos);
+  }
+  const WritePolicy some({101, 100, 100}, "~writable_variables");
+  EXPECT_NO_THROW(some.check(100));
+  EXPECT_TRUE(some.allows(101));
+  EXPECT_EQ(some.allowed().size(), 2u);
+  try
+  {
+    some.check(5021);
+    FAIL();
+  }
+  catch (const DisabledError& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("#5021"), std::string::npos);
+    EXPECT_NE(std::string(e.what()).find("~writable_variables"), std::string::npos);
+  }
+}
+
+TEST(MdcScheduler, EachQueryAtItsOwnPeriod)
+{
+  QueryScheduler s;
+  s.add(q(100), 0ms);
+  s.add(q(500), 100ms);
+  s.add(q(201), 1000ms);
+  const Clock::time_point t0{};
+  s.reset(t0);
+  std::vector<int> order;
+  auto now = t0;
+  // Simulate 1 s with replies taking no time: record what is sent.
+  for (;;)
+  {
+    const auto next = s.next();
+    ASSERT_TRUE(next);
+    if (next->second >= t0 + 1000ms)
+      break;
+    now = std::max(now, next->second);
+    order.push_back(next->first.code);
+    s.done(now);
+  }
+  EXPECT_EQ(std::count(order.begin(), order.end(), 100), 1);
+  EXPECT_EQ(std::count(order.begin(), order.end(), 500), 10);
+  EXPECT_EQ(std::count(order.begin(), order.end(), 201), 1);
+  EXPECT_EQ(order[0], 100);  // ties go in the order added
+  EXPECT_EQ(order[1], 500);
+}
+
+TEST(MdcScheduler, NoBurstAfterAStall)
+{
+  QueryScheduler s;
+  s.add(q(500), 100ms);
+  const Clock::time_point t0{};
+  s.reset(t0);
+  s.done(t0 + 5000ms);  // the query took 5 s (a stalled link)
+  EXPECT_EQ(s.next()->second, t0 + 5000ms);
+  s.done(t0 + 5000ms);
+  EXPECT_EQ(s.next()->second, t0 + 5100ms);
+}
+
+TEST(MdcMonitor, CycleStartEndAndPartCount)
+{
+  MdcMonitor monitor;
+  Clock::time_point t{};
+  auto apply = [&](const std::string& line, std::chrono::milliseconds after)
+  {
+    t += after;
+    return monitor.apply(*parseReply(line), t);
+  };
+  EXPECT_TRUE(apply("PROGRAM, O00110, IDLE, PARTS, 10", 0ms).empty());  // first status: no event
+  auto events = apply("STATUS, BUSY", 100ms);
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events[0].type, CycleEventData::kCycleStart);
+  EXPECT_EQ(events[0].program, "O00110");
+  EXPECT_TRUE(apply("PROGRAM, O00110, FEED HOLD, PARTS, 10", 1000ms).empty());
+  EXPECT_EQ(monitor.status().execution, Execution::kPaused);
+  EXPECT_TRUE(apply("STATUS, BUSY", 500ms).empty());
+  events = apply("PROGRAM, O00110, IDLE, PARTS, 11", 1500ms);
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events[0].type, CycleEventData::kCycleEnd);
+  EXPECT_EQ(events[0].part_count, 11);
+  EXPECT_NEAR(events[0].cycle_time, 3.0, 1e-9);
+  // A cycle shorter than the poll period: only the counter shows it.
+  events = apply("PROGRAM, O00110, IDLE, PARTS, 12", 100ms);
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events[0].type, CycleEventData::kPartCount);
+  // Alarm during a cycle.
+  apply("STATUS, BUSY", 100ms);
+  events = apply("PROGRAM, O00110, ALARM, PARTS, 12", 100ms);
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events[0].type, CycleEventData::kAlarm);
+  EXPECT_EQ(monitor.status().execution, Execution::kAlarm);
+  EXPECT_FALSE(monitor.inCycle());
+}
+
+TEST(MdcMonitor, JoiningMidCycleReportsTheEndWithUnknownTime)
+{
+  MdcMonitor monitor;
+  Clock::time_point t{};
+  EXPECT_TRUE(monitor.apply(*parseReply("STATUS, BUSY"), t).empty());
+  const auto events = monitor.apply(*parseReply("PROGRAM, O2, IDLE, PARTS, 5"), t + 1s);
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events[0].type, CycleEventData::kCycleEnd);
+  EXPECT_LT(events[0].cycle_time, 0);
+}
+
+TEST(MdcMonitor, FoldsEveryReadIntoTheStatus)
+{
+  MdcMonitor monitor;
+  const Clock::time_point t{};
+  for (const char* line :
+       {"SERIAL NUMBER, 1234567", "MODEL, VF2D", "SOFTWARE VERSION, 100.20", "MODE, (ZERO RET)", "USING TOOL, 7",
+        "LAST CYCLE, 000:01:05", "M30 #1, 42", "MACRO, 4006, 20.0", "MACRO, 5021, -1.25", "USING TOOL, bad"})
+  {
+    monitor.apply(*parseReply(line), t);
+  }
+  const auto& s = monitor.status();
+  EXPECT_EQ(s.serial_number, "1234567");
+  EXPECT_EQ(s.model, "VF2D");
+  EXPECT_EQ(s.mode, Mode::kHoming);
+  EXPECT_EQ(s.tool, 7);  // the malformed reply did not clobber it
+  EXPECT_EQ(s.last_cycle_s, 65.0);
+  EXPECT_EQ(s.m30_counter1, 42);
+  EXPECT_EQ(s.units, Units::kInch);
+  EXPECT_EQ(s.variables.at(5021), -1.25);
+  EXPECT_EQ(s.updates, 9u);
+}
+
+namespace
+{
+// A fake control for the poller: answers every query line from a small table.
+void fakeControl(FakeTransport& fake, const std::string& status)
+{
+  fake.onWrite(
+      [status](FakeTransport& f, const std::vector<uint8_t>& bytes)
+      {
+        const std::string query(bytes.begin(), bytes.end());
+        if (query.rfind("?Q500", 0) == 0)
+          f.feed(">" + status + "\r\n");
+        else if (query.rfind("?Q104", 0) == 0)
+          f.feed(">MODE, (MEM)\r\n");
+        else if (query.rfind("?Q600 5021", 0) == 0)
+          f.feed(">MACRO, 5021, 1.0\r\n");
+        else
+          f.feed(">?, " + query.substr(0, query.size() - 2) + "\r\n");
+      });
+}
+}  // namespace
+
+TEST(MdcPoller, PollsUntilStoppedAndCountsRejectedQueries)
+{
+  FakeTransport fake;
+  fakeControl(fake, "PROGRAM, O7, IDLE, PARTS, 1");
+  PollPlan plan;
+  plan.status_period = 5ms;
+  plan.variables_period = 5ms;
+  plan.counters_period = 50ms;
+  plan.variables = {5021};
+  MdcPoller poller(plan, 500ms);
+  StopSignal stop;
+  std::mutex m;
+  std::condition_variable cv;
+  int updates = 0;
+  poller.setListener(
+      [&](const MachineStatus& s, const std::vector<CycleEventData>&)
+      {
+        std::lock_guard<std::mutex> lock(m);
+        ++updates;
+        cv.notify_all();
+      });
+  std::thread thread([&] { poller.run(fake, stop); });
+  {
+    std::unique_lock<std::mutex> lock(m);
+    ASSERT_TRUE(cv.wait_for(lock, 5s, [&] { return updates >= 20; }));
+  }
+  double read = 0;
+  poller.withClient([&](MdcClient& c) { read = c.readVariable(5021, 500ms); });
+  EXPECT_EQ(read, 1.0);
+  stop.stop();
+  thread.join();
+  const auto status = poller.status();
+  EXPECT_EQ(status.program, "O7");
+  EXPECT_EQ(status.execution, Execution::kReady);
+  EXPECT_EQ(status.mode, Mode::kAuto);
+  EXPECT_EQ(status.variables.at(5021), 1.0);
+  // Q100..Q102 and the counters are "unknown" to this fake control: rejected, not unanswered.
+  EXPECT_GE(poller.stats().rejected, 3u);
+  EXPECT_EQ(poller.stats().unanswered, 0u);
+  EXPECT_THROW(poller.withClient([](MdcClient&) {}), LinkError);
+}
+
+TEST(MdcPoller, SkipsPollsWhileADncTransferHoldsThePort)
+{
+  const std::string device = "/tmp/cnc_bridge_test_mdc_port_" + std::to_string(::getpid());
+  PortLock dnc(device);
+  ASSERT_TRUE(dnc.tryLock());
+  PortLock mine(device);
+  FakeTransport fake;
+  fakeControl(fake, "STATUS, BUSY");
+  PollPlan plan;
+  plan.status_period = 2ms;
+  plan.identity = false;
+  MdcPoller poller(plan, 500ms, &mine);
+  StopSignal stop;
+  std::thread thread([&] { poller.run(fake, stop); });
+  // Not one byte while the transfer runs (a bounded wait for a write that must not come).
+  EXPECT_FALSE(fake.waitForWritten(1, 200ms));
+  EXPECT_GT(poller.skippedForPortLock(), 0u);
+  EXPECT_THROW(poller.withClient([](MdcClient&) {}), LinkError);
+  dnc.unlock();
+  ASSERT_TRUE(fake.waitForWritten(6, 5s));
+  stop.stop();
+  thread.join();
+  EXPECT_EQ(poller.status().execution, Execution::kActive);
+}

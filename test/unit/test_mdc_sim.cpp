@@ -1,0 +1,128 @@
+// The scripted machine behind sim_haas_mdc (test/data/mdc/cell.mdcsim): its timeline, its replies
+// in the Haas formats, writes, drops, and script errors. The node's rostest relies on all of this.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <sstream>
+
+#include "cnc_bridge/common/error.h"
+#include "cnc_bridge/mdc/mdc_monitor.h"
+#include "cnc_bridge/mdc/sim_machine.h"
+
+using namespace cnc_bridge;
+using namespace cnc_bridge::mdc;
+using namespace std::chrono_literals;
+
+namespace
+{
+SimMachine cell()
+{
+  std::ifstream in(MDC_TEST_DATA "/cell.mdcsim");
+  EXPECT_TRUE(in);
+  return SimMachine::fromScript(in, "cell.mdcsim");
+}
+
+SimMachine script(const std::string& text)
+{
+  std::istringstream in(text);
+  return SimMachine::fromScript(in);
+}
+}  // namespace
+
+TEST(MdcSim, AnswersInTheHaasFormats)
+{
+  SimMachine m = cell();
+  const SimMachine::Clock::time_point t0{};
+  m.start(t0);
+  EXPECT_EQ(m.answer("?Q100", t0), "SERIAL NUMBER, 1234567");
+  EXPECT_EQ(m.answer("?Q102\r", t0), "MODEL, VF2D");
+  EXPECT_EQ(m.answer("?Q104", t0), "MODE, (MEM)");
+  EXPECT_EQ(m.answer("?Q500", t0), "PROGRAM, O00110, IDLE, PARTS, 4523");
+  EXPECT_EQ(m.answer("?Q500", t0 + 2s), "STATUS, BUSY");
+  EXPECT_EQ(m.answer("?Q500", t0 + 3700ms), "PROGRAM, O00110, FEED HOLD, PARTS, 4523");
+  EXPECT_EQ(m.answer("?Q500", t0 + 5100ms), "PROGRAM, O00110, IDLE, PARTS, 4524");
+  EXPECT_EQ(m.answer("?Q500", t0 + 6600ms), "PROGRAM, O00110, ALARM, PARTS, 4524");
+  EXPECT_EQ(m.answer("?Q104", t0 + 6600ms), "MODE, (MDI)");
+  EXPECT_EQ(m.answer("?Q500", t0 + 9s + 5100ms), "PROGRAM, O00110, IDLE, PARTS, 4525");  // second loop
+  EXPECT_EQ(m.answer("?Q201", t0 + 2s), "USING TOOL, 3");
+  EXPECT_EQ(m.answer("?Q105", t0), "?, ?Q105");
+  EXPECT_EQ(m.answer("hello", t0), "?, HELLO");
+  EXPECT_EQ(m.answer("", t0), "");
+  EXPECT_EQ(m.answer("?Q600 4006", t0), "MACRO, 4006, 20.000000");
+  // Every reply the simulator gives is one our parser recognises.
+  for (const char* query : {"?Q100", "?Q101", "?Q102", "?Q104", "?Q200", "?Q201", "?Q300", "?Q301", "?Q303", "?Q304",
+                            "?Q402", "?Q403", "?Q500", "?Q600 5021"})
+  {
+    const auto reply = parseReply(m.answer(query, t0 + 20s));
+    ASSERT_TRUE(reply) << query;
+    EXPECT_TRUE(answers(*parseReadOnlyQuery(query), *reply)) << query << " -> " << reply->line;
+  }
+}
+
+TEST(MdcSim, AxesMoveLinearlyAndWorkPositionsFollow)
+{
+  SimMachine m = cell();
+  const SimMachine::Clock::time_point t0{};
+  m.start(t0);
+  // Phase 2 (1.5 s .. 3.5 s) moves X from 0 to 8 in: half way at 2.5 s.
+  EXPECT_NEAR(macroOf(*parseReply(m.answer("?Q600 5021", t0 + 2500ms))).second, 4.0, 1e-6);
+  EXPECT_NEAR(macroOf(*parseReply(m.answer("?Q600 5041", t0 + 2500ms))).second, 4.0 - 5.0, 1e-6);
+  EXPECT_NEAR(macroOf(*parseReply(m.answer("?Q600 5023", t0 + 3500ms))).second, -3.0, 1e-6);
+}
+
+TEST(MdcSim, WritesOnlyToUserVariables)
+{
+  SimMachine m = cell();
+  const SimMachine::Clock::time_point t0{};
+  m.start(t0);
+  EXPECT_EQ(m.answer("?E100 2.5", t0), "!");
+  EXPECT_EQ(m.answer("?Q600 100", t0), "MACRO, 100, 2.500000");
+  EXPECT_EQ(m.answer("?E5021 1", t0), "?, ?E5021 1");
+  EXPECT_EQ(m.answer("?E100", t0), "?, ?E100");
+}
+
+TEST(MdcSim, DropFiresOncePerDropPhase)
+{
+  SimMachine m = cell();
+  const SimMachine::Clock::time_point t0{};
+  m.start(t0);
+  EXPECT_FALSE(m.dropDue(t0 + 1s));
+  EXPECT_TRUE(m.dropDue(t0 + 8100ms));
+  EXPECT_FALSE(m.dropDue(t0 + 8200ms));
+  EXPECT_TRUE(m.dropDue(t0 + 17100ms));
+}
+
+TEST(MdcSim, MonitorFollowingTheSimulatorSeesEveryEvent)
+{
+  SimMachine m = cell();
+  const SimMachine::Clock::time_point t0{};
+  m.start(t0);
+  MdcMonitor monitor;
+  std::vector<CycleEventData::Type> seen;
+  for (auto t = t0; t < t0 + 9s; t += 100ms)
+  {
+    for (const auto& e : monitor.apply(*parseReply(m.answer("?Q500", t)), t))
+      seen.push_back(e.type);
+  }
+  EXPECT_EQ(seen, (std::vector<CycleEventData::Type>{CycleEventData::kCycleStart, CycleEventData::kCycleEnd}));
+  EXPECT_EQ(monitor.status().parts, 4524);
+}
+
+TEST(MdcSim, ScriptErrorsNameTheLine)
+{
+  try
+  {
+    script("serial 1\nphase 1 status=IDLE\nphase x\n");
+    FAIL();
+  }
+  catch (const ConfigError& e)
+  {
+    EXPECT_NE(std::string(e.what()).find(":3:"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(script("serial 1\n"), ConfigError);
+  EXPECT_THROW(script("phase 1 colour=red\n"), ConfigError);
+  EXPECT_THROW(script("phase 0 status=IDLE\n"), ConfigError);
+  EXPECT_THROW(script("units furlong\nphase 1\n"), ConfigError);
+  EXPECT_THROW(script("frobnicate\nphase 1\n"), ConfigError);
+  EXPECT_NO_THROW(script("# comment only\nphase 1 status=IDLE # trailing comment\n"));
+}
