@@ -1,0 +1,13 @@
+# dnc module: XModem program transfer (core library cnc_bridge_xmodem, the cnc_dnc tool, the
+# sim_haas_serial xmodem mode, dnc_node) and the fault-injection transport its tests use.
+cnc_core_module(cnc_bridge_xmodem
+  src/xmodem/packet.cpp
+  src/xmodem/session.cpp
+  src/xmodem/file_transfer.cpp
+  src/transport/faulty_transport.cpp)
+
+if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
+  cnc_core_gtest(test_xmodem test/unit/test_xmodem.cpp)
+  target_link_libraries(test_xmodem cnc_bridge_xmodem yaml-cpp)
+  target_compile_definitions(test_xmodem PRIVATE XMODEM_TEST_DATA="${PROJECT_SOURCE_DIR}/test/data/xmodem")
+endif()

@@ -1,0 +1,154 @@
+// The two ends of an XModem transfer, as state machines over a Transport: the sender (PC -> CNC
+// upload) and the receiver (CNC -> PC download). They follow Forsberg's reference and lrzsz on
+// timeouts, retries and duplicates, and the real Haas of the seed's capture on its quirks.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "cnc_bridge/transport/transport.h"
+#include "cnc_bridge/xmodem/packet.h"
+
+namespace cnc_bridge
+{
+namespace xmodem
+{
+/// \brief Which XModem the local side asks for (receiver) or offers (sender).
+enum class Mode
+{
+  kChecksum,  ///< 128-byte blocks, 8-bit sum. The receiver starts with NAK (what a Haas needs).
+  kCrc,       ///< 128-byte blocks, CRC-16. The receiver starts with 'C', falls back to NAK.
+  k1K         ///< 1024-byte blocks, CRC-16 (a sender falls back to 128/checksum on a NAK start).
+};
+const char* toString(Mode mode);
+/// \brief "checksum"|"xmodem", "crc"|"xmodem-crc", "1k"|"xmodem-1k". \throws ConfigError.
+Mode parseMode(const std::string& text);
+
+/// \brief Timeouts and limits (DESIGN section 6). Defaults are the protocol's; tests shorten them.
+struct Config
+{
+  /// Receiver: NAK (or 'C') again after this long without the first packet.
+  Milliseconds nak_interval{10000};
+  /// Receiver: give up when no first packet arrived within this long (0 = nak_interval * max_retries).
+  Milliseconds start_timeout{0};
+  /// Receiver: 'C' requests sent before falling back to checksum mode (CRC mode only).
+  unsigned crc_attempts = 3;
+  /// Receiver: wait for the next packet's first byte (then NAK it).
+  Milliseconds block_timeout{10000};
+  /// Both: the longest gap between two bytes inside a packet.
+  Milliseconds char_timeout{1000};
+  /// Receiver: before a NAK the line is read until this long passes in silence (the rest of a
+  /// garbled packet must not be taken for the next one).
+  Milliseconds purge_quiet{1000};
+  /// Receiver: an EOT counts only if this long passes without another byte (a garbled SOH can look
+  /// like EOT; lrzsz waits 1 s the same way).
+  Milliseconds eot_quiet{250};
+  /// Sender: wait this long for the receiver's start character (NAK or 'C').
+  Milliseconds start_wait{60000};
+  /// Sender: wait this long for ACK/NAK after a packet or EOT.
+  Milliseconds ack_timeout{10000};
+  /// Sender, block 1 only: a NAK is answered only after this long without an ACK, because the NAKs a
+  /// receiver repeats while it waits may still be queued when block 1 goes out (see the capture).
+  Milliseconds stale_nak_settle{100};
+  /// Both: errors in a row on one block (NAKs, timeouts, garbled packets) before the transfer aborts.
+  unsigned max_retries = 10;
+  /// Sender: EOT sent at most this many times.
+  unsigned eot_retries = 10;
+};
+
+/// \brief Where a transfer is; given to the progress callback after every block.
+struct Progress
+{
+  uint64_t bytes = 0;    ///< payload bytes acknowledged (sender) or accepted (receiver)
+  uint64_t total = 0;    ///< payload bytes in all (sender; 0 for the receiver)
+  uint32_t block = 0;    ///< blocks done, counting from 1, not wrapped at 256
+  uint32_t retries = 0;  ///< blocks sent again / NAKed so far
+};
+using ProgressCallback = std::function<void(const Progress&)>;
+
+/// \brief Counters of one transfer, valid after success or failure (diagnostics read them).
+struct Stats
+{
+  uint64_t bytes = 0;
+  uint32_t blocks = 0;                     ///< blocks acknowledged / accepted
+  uint32_t retries = 0;                    ///< packets sent again or NAKed
+  uint32_t timeouts = 0;                   ///< waits that ran out
+  uint32_t duplicates = 0;                 ///< receiver: repeats of the previous block (lost ACK), ACKed and dropped
+  uint32_t garbled = 0;                    ///< receiver: packets that failed a check
+  CheckType check = CheckType::kChecksum;  ///< what was negotiated
+  bool used_1k = false;                    ///< at least one 1024-byte block went across
+  /// The peer answered our EOT with CANs after every block was ACKed (a Haas does): complete.
+  bool eot_answered_with_can = false;
+  std::string summary() const;
+};
+
+/// \brief Sends one payload by XModem. Not thread-safe, except that cancel may be set (and the
+/// transport interrupted) from another thread.
+class Sender
+{
+ public:
+  /// \param link must outlive the sender.
+  /// \param cancel if given, set it and call link.interrupt() to abort (CANs are sent).
+  Sender(Transport& link, Mode mode, Config config = Config(), const std::atomic<bool>* cancel = nullptr);
+
+  /// \brief Waits for the receiver's start, sends every block, ends with EOT.
+  /// \returns the counters of the completed transfer (check eot_answered_with_can).
+  /// \throws TimeoutError (no start, too many retries), ProtocolError (receiver cancelled),
+  ///         CancelledError, LinkError. CANs are sent to the peer before a local abort.
+  Stats send(const std::vector<uint8_t>& payload, const ProgressCallback& progress = nullptr);
+
+  const Stats& stats() const { return stats_; }
+
+ private:
+  enum class Reply
+  {
+    kAck,
+    kNak,
+    kCancel,
+    kTimeout
+  };
+  uint8_t waitForStart();
+  Reply waitForReply(bool first_block);
+  void checkCancel();
+  [[noreturn]] void abort(const std::string& why, bool send_can, bool timeout);
+
+  Transport& link_;
+  Mode mode_;
+  Config config_;
+  const std::atomic<bool>* cancel_;
+  Stats stats_;
+};
+
+/// \brief Receives one payload by XModem. Threading as Sender.
+class Receiver
+{
+ public:
+  Receiver(Transport& link, Mode mode, Config config = Config(), const std::atomic<bool>* cancel = nullptr);
+
+  /// \brief Asks for the transfer (NAK or 'C'), accepts 128 and 1024-byte packets, ACKs the EOT.
+  /// \returns every data byte received, padding included (see stripSubPadding()).
+  /// \throws TimeoutError (sender never started, too many errors), ProtocolError (out-of-sequence
+  ///         block, sender cancelled), CancelledError, LinkError.
+  std::vector<uint8_t> receive(const ProgressCallback& progress = nullptr);
+
+  const Stats& stats() const { return stats_; }
+
+ private:
+  void nak(uint8_t request);
+  void checkCancel();
+  [[noreturn]] void abort(const std::string& why, bool send_can, bool timeout);
+
+  Transport& link_;
+  Mode mode_;
+  Config config_;
+  const std::atomic<bool>* cancel_;
+  Stats stats_;
+};
+
+/// \brief Sends CAN CAN CAN (lrzsz sends more; two are what a receiver needs) and does not throw.
+void sendCancel(Transport& link) noexcept;
+}  // namespace xmodem
+}  // namespace cnc_bridge

@@ -1,0 +1,71 @@
+// File-level XModem transfers: end-of-block conversion, padding, atomic writes (file_transfer.h).
+#include "cnc_bridge/xmodem/file_transfer.h"
+
+#include <cerrno>
+#include <cstring>
+#include <fstream>
+#include <iterator>
+
+#include "cnc_bridge/common/atomic_file.h"
+#include "cnc_bridge/common/error.h"
+
+namespace cnc_bridge
+{
+namespace xmodem
+{
+std::vector<uint8_t> toWire(const std::string& file_contents, const TextOptions& options)
+{
+  const std::string wire = options.binary ? file_contents : toControlEob(file_contents, options.control_eob);
+  return std::vector<uint8_t>(wire.begin(), wire.end());
+}
+
+std::string fromWire(std::vector<uint8_t> payload, const TextOptions& options)
+{
+  if (options.binary)
+  {
+    return std::string(payload.begin(), payload.end());
+  }
+  stripSubPadding(payload);
+  return fromControlEob(std::string(payload.begin(), payload.end()), options.control_eob, options.file_eob);
+}
+
+FileResult sendFile(Transport& link, const std::string& path, Mode mode, const Config& config,
+                    const TextOptions& options, const ProgressCallback& progress, const std::atomic<bool>* cancel)
+{
+  std::ifstream in(path, std::ios::binary);
+  if (!in)
+  {
+    throw ConfigError("cannot read " + path + ": " + std::strerror(errno));
+  }
+  const std::string contents((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (in.bad())
+  {
+    throw ConfigError("cannot read " + path + ": read error");
+  }
+  Sender sender(link, mode, config, cancel);
+  FileResult result;
+  result.stats = sender.send(toWire(contents, options), progress);
+  result.file_bytes = contents.size();
+  result.path = path;
+  result.message = "sent " + path + ": " + result.stats.summary();
+  return result;
+}
+
+FileResult receiveFile(Transport& link, const std::string& path, Mode mode, const Config& config,
+                       const TextOptions& options, const ProgressCallback& progress, const std::atomic<bool>* cancel)
+{
+  // Opened first: an unwritable destination fails before the control is asked for anything.
+  AtomicFileWriter writer(path);
+  Receiver receiver(link, mode, config, cancel);
+  const std::string contents = fromWire(receiver.receive(progress), options);
+  writer.write(contents);
+  writer.commit();
+  FileResult result;
+  result.stats = receiver.stats();
+  result.file_bytes = contents.size();
+  result.path = path;
+  result.message = "received " + path + " (" + std::to_string(contents.size()) + " bytes): " + result.stats.summary();
+  return result;
+}
+}  // namespace xmodem
+}  // namespace cnc_bridge

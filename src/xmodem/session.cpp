@@ -1,0 +1,495 @@
+// XModem sender and receiver state machines (see session.h for the contract).
+//
+// Protocol as implemented (Forsberg's XMODEM/YMODEM reference, lrzsz, and the Haas capture in the
+// seed opendnc_haas_xmodem_dprnt.md, Appendix, extracted in fixtures/haas_xmodem_capture.json):
+//
+//   receiver                         sender
+//   NAK | 'C'  (again every nak_interval; 'C' crc_attempts times, then NAK)
+//                                    SOH|STX blk ~blk data check
+//   ACK (good, expected block)       next block
+//   ACK (repeat of the previous block: our ACK was lost; data dropped)
+//   NAK (garbled, short or timed out; the line is purged until purge_quiet of silence first)
+//   CAN CAN (block number out of sequence: the two sides disagree, nothing can repair it)
+//                                    EOT  (resent on NAK or timeout, eot_retries times)
+//   ACK  (only after eot_quiet of silence: a garbled SOH must not end the file)
+//
+// Haas quirks handled: the control NAKs several times before the PC starts sending, so NAKs may be
+// queued when block 1 goes out (the sender discards queued input after the start character and
+// waits stale_nak_settle for an ACK before honouring a NAK of block 1); and it answers EOT with
+// CAN CAN CAN instead of ACK, which after every block was ACKed means "complete".
+#include "cnc_bridge/xmodem/session.h"
+
+#include <algorithm>
+#include <sstream>
+
+#include "cnc_bridge/common/error.h"
+#include "cnc_bridge/common/log.h"
+
+namespace cnc_bridge
+{
+namespace xmodem
+{
+namespace
+{
+using Clock = std::chrono::steady_clock;
+
+Milliseconds remainingUntil(Clock::time_point deadline)
+{
+  const auto left = std::chrono::duration_cast<Milliseconds>(deadline - Clock::now());
+  return left.count() > 0 ? left : Milliseconds(0);
+}
+
+std::string seconds(Milliseconds ms)
+{
+  std::ostringstream out;
+  out << ms.count() / 1000.0 << " s";
+  return out.str();
+}
+}  // namespace
+
+const char* toString(Mode mode)
+{
+  switch (mode)
+  {
+    case Mode::kChecksum:
+      return "xmodem";
+    case Mode::kCrc:
+      return "xmodem-crc";
+    case Mode::k1K:
+      return "xmodem-1k";
+  }
+  return "?";
+}
+
+Mode parseMode(const std::string& text)
+{
+  if (text == "checksum" || text == "xmodem")
+    return Mode::kChecksum;
+  if (text == "crc" || text == "xmodem-crc")
+    return Mode::kCrc;
+  if (text == "1k" || text == "xmodem-1k")
+    return Mode::k1K;
+  throw ConfigError("XModem mode '" + text + "' is not one of checksum (xmodem), crc (xmodem-crc), 1k (xmodem-1k)");
+}
+
+std::string Stats::summary() const
+{
+  std::ostringstream out;
+  out << bytes << " bytes in " << blocks << " blocks (" << toString(check) << (used_1k ? ", 1K" : "") << "), "
+      << retries << " retries";
+  if (eot_answered_with_can)
+  {
+    out << "; the receiver answered EOT with CAN after the last block was acknowledged (as a Haas does)";
+  }
+  return out.str();
+}
+
+void sendCancel(Transport& link) noexcept
+{
+  const uint8_t cans[] = {kCan, kCan, kCan};
+  // Two tries: the first write may meet the interrupt() that stopped the transfer and throw.
+  for (int attempt = 0; attempt < 2; ++attempt)
+  {
+    try
+    {
+      link.write(cans, sizeof(cans), Milliseconds(1000));
+      return;
+    }
+    catch (const CancelledError&)
+    {
+      continue;
+    }
+    catch (const std::exception&)
+    {
+      return;  // the link is gone or stuck: nothing more can be told to the peer
+    }
+  }
+}
+
+// ------------------------------------------------------------------------------------------------
+Sender::Sender(Transport& link, Mode mode, Config config, const std::atomic<bool>* cancel)
+    : link_(link), mode_(mode), config_(config), cancel_(cancel)
+{
+}
+
+void Sender::checkCancel()
+{
+  if (cancel_ && cancel_->load())
+  {
+    throw CancelledError(link_.describe() + ": XModem send cancelled");
+  }
+}
+
+void Sender::abort(const std::string& why, bool send_can, bool timeout)
+{
+  if (send_can)
+  {
+    sendCancel(link_);
+  }
+  const std::string message = link_.describe() + ": XModem send failed: " + why;
+  if (timeout)
+    throw TimeoutError(message);
+  throw ProtocolError(message);
+}
+
+uint8_t Sender::waitForStart()
+{
+  const auto deadline = Clock::now() + config_.start_wait;
+  bool saw_can = false;
+  for (;;)
+  {
+    checkCancel();
+    const Milliseconds left = remainingUntil(deadline);
+    const int c = left.count() > 0 ? link_.readByte(left) : -1;
+    if (c < 0)
+    {
+      ++stats_.timeouts;
+      abort("the receiver did not start (no NAK or 'C' within " + seconds(config_.start_wait) + ")", true, true);
+    }
+    if (c == kNak || c == kCrcStart)
+    {
+      return static_cast<uint8_t>(c);
+    }
+    if (c == kCan)
+    {
+      if (saw_can)
+        abort("the receiver cancelled (CAN CAN) before the first block", false, false);
+      saw_can = true;
+      continue;
+    }
+    saw_can = false;  // line noise or a terminal's chatter: wait on
+  }
+}
+
+Sender::Reply Sender::waitForReply(bool first_block)
+{
+  const auto deadline = Clock::now() + config_.ack_timeout;
+  for (;;)
+  {
+    checkCancel();
+    const Milliseconds left = remainingUntil(deadline);
+    const int c = left.count() > 0 ? link_.readByte(left) : -1;
+    if (c < 0)
+    {
+      return Reply::kTimeout;
+    }
+    if (c == kAck)
+    {
+      return Reply::kAck;
+    }
+    if (c == kNak)
+    {
+      if (!first_block)
+      {
+        return Reply::kNak;
+      }
+      // A NAK right after block 1 is most likely one the receiver sent while it still waited for
+      // us to start. If block 1 arrived, its ACK follows: wait for it before sending block 1 again.
+      const auto settle = Clock::now() + config_.stale_nak_settle;
+      for (;;)
+      {
+        const Milliseconds wait = remainingUntil(settle);
+        const int next = wait.count() > 0 ? link_.readByte(wait) : -1;
+        if (next < 0)
+          return Reply::kNak;
+        if (next == kAck)
+          return Reply::kAck;
+        if (next == kCan && link_.readByte(config_.char_timeout) == kCan)
+          return Reply::kCancel;
+      }
+    }
+    if (c == kCan)
+    {
+      const int next = link_.readByte(config_.char_timeout);
+      if (next == kCan)
+        return Reply::kCancel;
+      if (next == kAck)
+        return Reply::kAck;
+      if (next == kNak)
+        return Reply::kNak;
+      continue;
+    }
+    // 'C' after block 1 is a start request still in flight; anything else is noise.
+  }
+}
+
+Stats Sender::send(const std::vector<uint8_t>& payload, const ProgressCallback& progress)
+{
+  stats_ = Stats();
+  try
+  {
+    const uint8_t start = waitForStart();
+    // NAKs (or 'C's) the receiver repeated while it waited are still queued: drop them so that
+    // none of them is read as the answer to block 1 (the capture's PC sent block 1 twice for this).
+    link_.discardInput();
+    const bool crc = start == kCrcStart;
+    stats_.check = crc ? CheckType::kCrc16 : CheckType::kChecksum;
+    // XModem-1K needs CRC (Forsberg): a receiver that asks for checksum mode gets 128-byte blocks.
+    const bool use_1k = mode_ == Mode::k1K && crc;
+    CNC_LOG_DEBUG("xmodem: " << link_.describe() << " started the transfer with "
+                             << (crc ? "'C' (CRC)" : "NAK (checksum)") << "; sending " << payload.size() << " bytes");
+
+    Progress state;
+    state.total = payload.size();
+    size_t offset = 0;
+    uint32_t block = 1;
+    while (offset < payload.size())
+    {
+      const size_t left = payload.size() - offset;
+      // A 1K block for the tail only if it is more than 7 short blocks' worth: padding the same, 6
+      // packets' overhead saved, and a short file still goes in 128-byte blocks as lrzsz does.
+      const size_t block_size = use_1k && left > 7 * kBlockSize ? kBlockSize1K : kBlockSize;
+      const size_t n = std::min(left, block_size);
+      const std::vector<uint8_t> packet = encodePacket(block, payload.data() + offset, n, block_size, stats_.check);
+      unsigned errors = 0;
+      for (;;)
+      {
+        checkCancel();
+        link_.write(packet);
+        const Reply reply = waitForReply(block == 1);
+        if (reply == Reply::kAck)
+          break;
+        if (reply == Reply::kCancel)
+          abort("the receiver cancelled (CAN CAN) at block " + std::to_string(block), false, false);
+        if (reply == Reply::kTimeout)
+          ++stats_.timeouts;
+        ++stats_.retries;
+        ++state.retries;
+        if (++errors > config_.max_retries)
+        {
+          abort("block " + std::to_string(block) + " not acknowledged after " + std::to_string(errors) + " tries", true,
+                reply == Reply::kTimeout);
+        }
+        CNC_LOG_DEBUG("xmodem: block " << block << (reply == Reply::kTimeout ? " not answered" : " NAKed")
+                                       << ", sending it again");
+      }
+      stats_.used_1k = stats_.used_1k || block_size == kBlockSize1K;
+      offset += n;
+      stats_.bytes = offset;
+      stats_.blocks = block;
+      state.bytes = offset;
+      state.block = block;
+      ++block;
+      if (progress)
+        progress(state);
+    }
+
+    for (unsigned attempt = 1;; ++attempt)
+    {
+      checkCancel();
+      link_.writeByte(kEot);
+      const Reply reply = waitForReply(false);
+      if (reply == Reply::kAck)
+        break;
+      if (reply == Reply::kCancel)
+      {
+        // A Haas answers EOT with CAN CAN CAN. Every block was ACKed, so the data is there.
+        stats_.eot_answered_with_can = true;
+        link_.purge(std::min(config_.char_timeout, Milliseconds(100)), Milliseconds(500));
+        break;
+      }
+      if (reply == Reply::kTimeout)
+        ++stats_.timeouts;
+      if (attempt >= config_.eot_retries)
+      {
+        abort("every block was acknowledged but EOT was not (sent " + std::to_string(attempt) + " times)", false, true);
+      }
+    }
+    return stats_;
+  }
+  catch (const CancelledError&)
+  {
+    sendCancel(link_);
+    throw CancelledError(link_.describe() + ": XModem send cancelled after " + std::to_string(stats_.blocks) +
+                         " blocks (CAN sent)");
+  }
+}
+
+// ------------------------------------------------------------------------------------------------
+Receiver::Receiver(Transport& link, Mode mode, Config config, const std::atomic<bool>* cancel)
+    : link_(link), mode_(mode), config_(config), cancel_(cancel)
+{
+}
+
+void Receiver::checkCancel()
+{
+  if (cancel_ && cancel_->load())
+  {
+    throw CancelledError(link_.describe() + ": XModem receive cancelled");
+  }
+}
+
+void Receiver::abort(const std::string& why, bool send_can, bool timeout)
+{
+  if (send_can)
+  {
+    sendCancel(link_);
+  }
+  const std::string message = link_.describe() + ": XModem receive failed: " + why;
+  if (timeout)
+    throw TimeoutError(message);
+  throw ProtocolError(message);
+}
+
+void Receiver::nak(uint8_t request)
+{
+  // Whatever is left of a garbled packet must not be read as the start of the next one.
+  link_.purge(config_.purge_quiet);
+  link_.writeByte(request);
+}
+
+std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
+{
+  stats_ = Stats();
+  std::vector<uint8_t> data;
+  try
+  {
+    bool crc = mode_ != Mode::kChecksum;
+    uint8_t request = crc ? kCrcStart : kNak;
+    const Milliseconds start_timeout =
+        config_.start_timeout.count() > 0 ? config_.start_timeout : config_.nak_interval * config_.max_retries;
+    const auto start_deadline = Clock::now() + start_timeout;
+    unsigned requests = 1;
+    link_.writeByte(request);
+
+    bool started = false;  // a good packet arrived: the check type is settled
+    uint8_t expected = 1;
+    Progress state;
+    unsigned errors = 0;
+    std::vector<uint8_t> buffer(packetSize(kBlockSize1K, CheckType::kCrc16));
+    int pending = -1;  // a byte read ahead (after a lone CAN) that starts the next round
+
+    auto error = [&](const std::string& what)
+    {
+      ++stats_.retries;
+      ++state.retries;
+      if (++errors > config_.max_retries)
+      {
+        abort(
+            what + " (" + std::to_string(errors) + " errors in a row at block " + std::to_string(state.block + 1) + ")",
+            true, false);
+      }
+      CNC_LOG_DEBUG("xmodem: " << what << " at block " << state.block + 1 << ", NAK");
+      nak(started ? kNak : request);
+    };
+
+    for (;;)
+    {
+      checkCancel();
+      const Milliseconds wait =
+          started ? config_.block_timeout : std::min(config_.nak_interval, remainingUntil(start_deadline));
+      int c = pending;
+      pending = -1;
+      if (c < 0)
+        c = wait.count() > 0 ? link_.readByte(wait) : -1;
+      if (c < 0)
+      {
+        ++stats_.timeouts;
+        if (!started)
+        {
+          if (Clock::now() >= start_deadline)
+            abort("the sender did not start within " + seconds(start_timeout), true, true);
+          if (crc && requests >= config_.crc_attempts)
+          {
+            crc = false;  // the sender does not know 'C': fall back to checksum mode
+            request = kNak;
+          }
+          ++requests;
+          link_.writeByte(request);
+          continue;
+        }
+        ++stats_.retries;
+        ++state.retries;
+        if (++errors > config_.max_retries)
+          abort("nothing from the sender for " + seconds(config_.block_timeout) + ", " + std::to_string(errors) +
+                    " times in a row",
+                true, true);
+        link_.writeByte(kNak);
+        continue;
+      }
+
+      if (c == kSoh || c == kStx)
+      {
+        const CheckType check = crc ? CheckType::kCrc16 : CheckType::kChecksum;
+        const size_t data_size = c == kSoh ? kBlockSize : kBlockSize1K;
+        const size_t need = packetSize(data_size, check);
+        buffer[0] = static_cast<uint8_t>(c);
+        const size_t got = link_.readExactly(buffer.data() + 1, need - 1, config_.char_timeout);
+        if (got < need - 1)
+        {
+          ++stats_.garbled;
+          ++stats_.timeouts;
+          error("short packet (" + std::to_string(got + 1) + " of " + std::to_string(need) + " bytes)");
+          continue;
+        }
+        const Packet packet = decodePacket(buffer.data(), need, check);
+        if (packet.status != PacketStatus::kOk)
+        {
+          ++stats_.garbled;
+          error(toString(packet.status));
+          continue;
+        }
+        if (packet.block == expected)
+        {
+          started = true;
+          stats_.check = check;
+          stats_.used_1k = stats_.used_1k || data_size == kBlockSize1K;
+          data.insert(data.end(), packet.data, packet.data + packet.data_size);
+          link_.writeByte(kAck);
+          errors = 0;
+          ++expected;
+          ++state.block;
+          state.bytes = data.size();
+          stats_.blocks = state.block;
+          stats_.bytes = data.size();
+          if (progress)
+            progress(state);
+          continue;
+        }
+        if (started && packet.block == static_cast<uint8_t>(expected - 1))
+        {
+          // The sender did not get our ACK and sent the block again: ACK it, keep the first copy.
+          ++stats_.duplicates;
+          link_.writeByte(kAck);
+          continue;
+        }
+        abort("block " + std::to_string(packet.block) + " out of sequence (expected " + std::to_string(expected) +
+                  "): the two sides disagree on the position in the file",
+              true, false);
+      }
+      if (c == kEot)
+      {
+        // A real EOT is followed by silence; a garbled SOH is followed by the rest of its packet.
+        if (link_.readByte(config_.eot_quiet) >= 0)
+        {
+          ++stats_.garbled;
+          error("EOT followed by more data (line noise)");
+          continue;
+        }
+        link_.writeByte(kAck);
+        stats_.check = crc ? CheckType::kCrc16 : CheckType::kChecksum;
+        return data;
+      }
+      if (c == kCan)
+      {
+        const int next = link_.readByte(config_.char_timeout);
+        if (next == kCan)
+          abort("the sender cancelled (CAN CAN) after " + std::to_string(state.block) + " blocks", false, false);
+        pending = next;  // a lone CAN is line noise; what follows it is looked at as usual
+        continue;
+      }
+      // Noise between packets: drop the rest of the burst and ask again.
+      ++stats_.garbled;
+      static const char kHex[] = "0123456789abcdef";
+      error(std::string("unexpected byte 0x") + kHex[(c >> 4) & 0xF] + kHex[c & 0xF]);
+    }
+  }
+  catch (const CancelledError&)
+  {
+    sendCancel(link_);
+    throw CancelledError(link_.describe() + ": XModem receive cancelled after " + std::to_string(stats_.blocks) +
+                         " blocks (CAN sent)");
+  }
+}
+}  // namespace xmodem
+}  // namespace cnc_bridge
