@@ -1,0 +1,114 @@
+// A simulated universal-CNC master with its I2C slaves, for tests, benchmarks and sim_slave_bus.
+// The master runs the seed's receive state machine on its serial link, hands every payload to its
+// slave as a real WirePacker frame (CRC-8 checked by the slave), and while idle polls the slaves
+// and writes their answers on the uplink. Slaves act on what they get: axes move, the tool toggles,
+// generic slaves echo (as the seed's slave sketch does).
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "cnc_bridge/slave_bus/array_protocol.h"
+#include "cnc_bridge/slave_bus/value_codec.h"
+#include "cnc_bridge/transport/backoff.h"
+#include "cnc_bridge/transport/transport.h"
+
+namespace cnc_bridge
+{
+namespace slave_bus
+{
+/// \brief What a slave board does with its payload.
+enum class SimRole
+{
+  kAxis,    ///< payload: target position (one value, device units); moves there; answers its position
+  kTool,    ///< payload: one value, non-zero = on; answers its state (1/0)
+  kGeneric  ///< echoes every payload back
+};
+SimRole parseSimRole(const std::string& text);  ///< axis|tool|generic; \throws ConfigError
+
+/// \brief One simulated I2C slave. Not thread-safe.
+class SimSlave
+{
+ public:
+  SimSlave(uint8_t address, SimRole role, Encoding encoding);
+
+  /// \brief The master's I2C write: one WirePacker frame. A frame that fails its CRC is ignored
+  /// (counted), as the ESP32 library's unpacker rejects it.
+  void receive(const std::vector<uint8_t>& i2c_frame);
+  /// \brief The master's I2C read: the slave's answer as a WirePacker frame, once per payload it
+  /// acted on; empty if it has nothing to say.
+  std::vector<uint8_t> request();
+
+  uint8_t address() const { return address_; }
+  SimRole role() const { return role_; }
+  int32_t position() const { return position_; }  ///< axis: device units
+  bool toolOn() const { return tool_on_; }
+  uint64_t rejected() const { return rejected_; }
+
+ private:
+  uint8_t address_;
+  SimRole role_;
+  Encoding encoding_;
+  int32_t position_ = 0;
+  bool tool_on_ = false;
+  bool has_reply_ = false;
+  std::vector<uint8_t> reply_;
+  uint64_t rejected_ = 0;
+};
+
+/// \brief The master board: serial link on one side, slaves on the other. Not thread-safe; stop
+/// run() from another thread by stopping its StopSignal and interrupting the link.
+class SimMaster
+{
+ public:
+  struct Options
+  {
+    Framing framing = Framing::kRaw;
+    /// Raw mode: drop a partial frame after this much silence (0 = never, as the seed's firmware).
+    Milliseconds resync_gap{0};
+    /// Corrupt one byte of every Nth uplink write (0 = never): exercises the PC's CRC check.
+    unsigned corrupt_uplink_every = 0;
+  };
+  struct Stats
+  {
+    uint64_t frames = 0;          ///< step frames completed
+    uint64_t deliveries = 0;      ///< payloads handed to slaves
+    uint64_t bad_frames = 0;      ///< framed mode: bursts of corrupted or malformed step frames
+    uint64_t unknown_slaves = 0;  ///< payloads for addresses the master does not have
+    uint64_t resyncs = 0;         ///< raw mode: partial frames dropped after a silence
+    uint64_t uplink_records = 0;
+  };
+
+  SimMaster(Transport& link, std::vector<SimSlave> slaves, Options options);
+
+  /// \brief Serves the link until \p stop is stopped (or the link fails: LinkError propagates).
+  void run(StopSignal& stop);
+  /// \brief Processes bytes from the PC as if they had arrived on the link.
+  void processInput(const uint8_t* data, size_t size);
+  /// \brief Polls every slave once and writes what they answer (the seed's idle loop).
+  void pollSlaves();
+
+  const std::vector<SimSlave>& slaves() const { return slaves_; }
+  const Stats& stats() const { return stats_; }
+
+ private:
+  void deliver(const StepReceiver::Delivery& delivery);
+  void processFrames(const std::vector<std::vector<uint8_t>>& frames, const WireStreamUnpacker::Stats& before);
+  void sendStatus(MasterStatus status, int address = -1);
+  void queueUplink(const UplinkRecord& record);
+  void flushUplink();
+
+  Transport& link_;
+  std::vector<SimSlave> slaves_;
+  Options options_;
+  StepReceiver receiver_;
+  WireStreamUnpacker unpacker_;
+  std::vector<uint8_t> uplink_;
+  unsigned uplink_writes_ = 0;
+  Stats stats_;
+};
+}  // namespace slave_bus
+}  // namespace cnc_bridge

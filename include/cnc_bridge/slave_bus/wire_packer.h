@@ -1,0 +1,92 @@
+// WirePacker framing: the packet format of the ESP32 I2C slave library that the universal-CNC seed
+// (universal_cnc_serial_i2c_protocol.md, "I2C packet format") uses between the master and its
+// slaves. cnc_bridge uses the same framing on the serial link in its optional framed mode, so one
+// codec serves the simulated I2C bus and the PC <-> master link.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+namespace cnc_bridge
+{
+namespace slave_bus
+{
+/// \brief CRC-8/MAXIM (Dallas 1-Wire): reflected polynomial 0x8C (0x31 unreflected), init 0, no final
+/// XOR. Check value over "123456789" is 0xA1.
+uint8_t crc8Maxim(const uint8_t* data, size_t size, uint8_t crc = 0);
+
+/// \brief Packs and unpacks WirePacker frames.
+///
+/// Wire format (seed figure 17; DESIGN section 6):
+/// \code
+///   [0]     0x02            start byte (STX)
+///   [1]     total length    every byte of the frame: data + 4, so 4..255
+///   [2..]   data            0..251 bytes
+///   [n+2]   CRC-8/MAXIM     over the length byte then the data
+///   [n+3]   0x04            end byte (EOT)
+/// \endcode
+/// The start and end bytes are not escaped: 0x02 and 0x04 may appear inside the data, so a receiver
+/// finds frame boundaries from the length byte and trusts a frame only when the end byte and the CRC
+/// match. All functions are pure.
+struct WirePacker
+{
+  static constexpr uint8_t kStart = 0x02;
+  static constexpr uint8_t kEnd = 0x04;
+  static constexpr size_t kOverhead = 4;
+  static constexpr size_t kMaxData = 255 - kOverhead;
+
+  /// \brief Frames \p data.
+  /// \throws ProtocolError if \p data is longer than kMaxData (251) bytes.
+  static std::vector<uint8_t> pack(const uint8_t* data, size_t size);
+  static std::vector<uint8_t> pack(const std::vector<uint8_t>& data) { return pack(data.data(), data.size()); }
+
+  /// \brief Unpacks one complete frame (nothing before or after it).
+  /// \throws ProtocolError naming what is wrong: start, length, CRC or end byte.
+  static std::vector<uint8_t> unpack(const uint8_t* frame, size_t size);
+  static std::vector<uint8_t> unpack(const std::vector<uint8_t>& frame) { return unpack(frame.data(), frame.size()); }
+};
+
+/// \brief Finds WirePacker frames in a byte stream that may hold garbage, torn frames and
+/// corrupted bytes (a serial link with no other framing). Not thread-safe.
+///
+/// Resynchronisation: bytes before a start byte are dropped and counted as garbage. A candidate
+/// frame (start, a length of 4..255, that many bytes) is accepted only if its end byte is 0x04 and
+/// its CRC matches. Otherwise the candidate's start byte alone is dropped and the search restarts at
+/// the byte after it, so a real frame that began inside the rejected candidate is still found and
+/// nothing valid is lost. A frame split across feed() calls is kept until it completes. A stray
+/// start byte with a large length holds the frames behind it until that many bytes arrived; the
+/// owner calls resync() when the line has been silent, which abandons such a candidate and
+/// delivers the frames it was hiding.
+class WireStreamUnpacker
+{
+ public:
+  struct Stats
+  {
+    uint64_t frames = 0;          ///< good frames delivered
+    uint64_t crc_errors = 0;      ///< candidates whose end byte matched but CRC did not
+    uint64_t framing_errors = 0;  ///< candidates with a bad length or end byte
+    uint64_t garbage_bytes = 0;   ///< bytes dropped while searching for a frame
+  };
+
+  /// \brief Adds bytes from the link.
+  /// \returns the data of every complete, valid frame they finish, in order.
+  std::vector<std::vector<uint8_t>> feed(const uint8_t* data, size_t size);
+
+  /// \brief After a silence: the peer will not finish a partial frame. Abandons every incomplete
+  /// candidate (one start byte at a time, counted as framing errors) and rescans what follows it.
+  /// \returns complete frames found behind the abandoned candidates; pending() is 0 afterwards.
+  std::vector<std::vector<uint8_t>> resync();
+
+  /// \brief Bytes held of a frame not yet complete.
+  size_t pending() const { return buffer_.size(); }
+  const Stats& stats() const { return stats_; }
+
+ private:
+  void scan(std::vector<std::vector<uint8_t>>& frames, bool abandon_incomplete);
+
+  std::vector<uint8_t> buffer_;
+  Stats stats_;
+};
+}  // namespace slave_bus
+}  // namespace cnc_bridge

@@ -1,0 +1,138 @@
+// sim_slave_bus: a universal-CNC master board with its I2C slaves, on a pty. It runs the seed's
+// receive state machine on the serial link, forwards each payload to its slave as a WirePacker
+// frame, and while idle polls the slaves and writes their answers up the link (the uplink format of
+// include/cnc_bridge/slave_bus/array_protocol.h). First line: "sim_slave_bus pty <path>".
+#include <boost/program_options.hpp>
+#include <iostream>
+#include <memory>
+#include <sstream>
+
+#include "cnc_bridge/common/error.h"
+#include "cnc_bridge/common/log.h"
+#include "cnc_bridge/sim/sim_support.h"
+#include "cnc_bridge/slave_bus/sim_master.h"
+#include "cnc_bridge/transport/paced_transport.h"
+#include "cnc_bridge/transport/pty.h"
+
+namespace
+{
+using namespace cnc_bridge;
+using namespace cnc_bridge::slave_bus;
+
+// The slaves of config/slave_bus_example.yaml: three axes, a tool, four generic boards.
+const std::vector<std::string> kDefaultSlaves = {"1:axis:be16s",    "2:axis:be16s",    "3:axis:be16s",
+                                                 "4:tool:bytes",    "5:generic:bytes", "6:generic:bytes",
+                                                 "7:generic:bytes", "8:generic:bytes"};
+
+/// "ADDR:ROLE[:ENCODING]", e.g. "1:axis:be16s".
+SimSlave parseSlave(const std::string& text)
+{
+  std::vector<std::string> parts;
+  std::stringstream in(text);
+  for (std::string part; std::getline(in, part, ':');)
+  {
+    parts.push_back(part);
+  }
+  if (parts.size() < 2 || parts.size() > 3)
+  {
+    throw ConfigError("--slave '" + text + "' is not ADDR:ROLE[:ENCODING]");
+  }
+  int address = 0;
+  try
+  {
+    address = std::stoi(parts[0]);
+  }
+  catch (const std::exception&)
+  {
+    throw ConfigError("--slave '" + text + "': address is not a number");
+  }
+  if (address < 1 || address > static_cast<int>(kMaxSlaves))
+  {
+    throw ConfigError("--slave '" + text + "': address out of range 1..127");
+  }
+  return SimSlave(static_cast<uint8_t>(address), parseSimRole(parts[1]),
+                  parts.size() == 3 ? parseEncoding(parts[2]) : Encoding::kBytes);
+}
+}  // namespace
+
+int main(int argc, char** argv)
+{
+  namespace po = boost::program_options;
+  po::options_description options("sim_slave_bus options");
+  std::string link, framing;
+  std::vector<std::string> slave_specs;
+  unsigned baud = 0, resync_gap_ms = 0, corrupt_every = 0;
+  options.add_options()("help,h", "this help")("link", po::value(&link),
+                                               "symbolic link to create to the pty device (default: none)")(
+      "framing", po::value(&framing)->default_value("raw"), "raw (the seed's bytes) or framed (WirePacker + CRC-8)")(
+      "slave", po::value(&slave_specs)->composing(),
+      "ADDR:ROLE[:ENCODING], repeatable, addresses 1..N in order; ROLE axis|tool|generic, ENCODING "
+      "bytes|hundreds|be16|be16s (default: 3 be16s axes, a tool, 4 generic slaves)")(
+      "baud", po::value(&baud)->default_value(0), "pace the uplink to this line rate, 8N1 (0: unpaced)")(
+      "resync-gap-ms", po::value(&resync_gap_ms)->default_value(0),
+      "raw mode: drop a partial frame after this silence (0: never, as the seed's firmware)")(
+      "corrupt-uplink-every", po::value(&corrupt_every)->default_value(0),
+      "corrupt one byte of every Nth uplink write (0: never)")("verbose,v", "log every frame on stderr");
+  po::variables_map vm;
+  try
+  {
+    po::store(po::parse_command_line(argc, argv, options), vm);
+    po::notify(vm);
+  }
+  catch (const po::error& e)
+  {
+    std::cerr << "sim_slave_bus: " << e.what() << "\n" << options;
+    return 2;
+  }
+  if (vm.count("help"))
+  {
+    std::cout << options;
+    return 0;
+  }
+  try
+  {
+    auto& stop = sim::installStopHandler();
+    std::vector<SimSlave> slaves;
+    for (const auto& spec : slave_specs.empty() ? kDefaultSlaves : slave_specs)
+    {
+      slaves.push_back(parseSlave(spec));
+    }
+    SimMaster::Options sim_options;
+    sim_options.framing = parseFraming(framing);
+    sim_options.resync_gap = Milliseconds(resync_gap_ms);
+    sim_options.corrupt_uplink_every = corrupt_every;
+
+    PtyMaster pty(link);
+    sim::onStop([&pty] { pty.interrupt(); });
+    std::unique_ptr<PacedTransport> paced;
+    Transport* transport = &pty;
+    if (baud > 0)
+    {
+      paced = std::make_unique<PacedTransport>(pty, baud / static_cast<double>(bitsPerCharacter(8, false, 1)));
+      transport = paced.get();
+    }
+    if (vm.count("verbose"))
+    {
+      setLogHandler([](LogLevel level, const std::string& line)
+                    { std::cerr << toString(level) << ": " << line << "\n"; });
+    }
+    SimMaster master(*transport, std::move(slaves), sim_options);
+    sim::announce("sim_slave_bus", "pty " + pty.slavePath());
+    master.run(stop);
+    const auto& s = master.stats();
+    std::cerr << "sim_slave_bus: " << s.frames << " frames, " << s.deliveries << " payloads, " << s.bad_frames
+              << " bad frames, " << s.unknown_slaves << " for unknown slaves, " << s.uplink_records
+              << " uplink records\n";
+    return 0;
+  }
+  catch (const LinkError& e)
+  {
+    std::cerr << "sim_slave_bus: " << e.what() << std::endl;
+    return 1;
+  }
+  catch (const std::exception& e)
+  {
+    std::cerr << "sim_slave_bus: " << e.what() << std::endl;
+    return 1;
+  }
+}

@@ -1,0 +1,256 @@
+// The simulated master and slaves (see sim_master.h).
+#include "cnc_bridge/slave_bus/sim_master.h"
+
+#include "cnc_bridge/common/error.h"
+#include "cnc_bridge/common/log.h"
+
+namespace cnc_bridge
+{
+namespace slave_bus
+{
+SimRole parseSimRole(const std::string& text)
+{
+  if (text == "axis" || text == "x" || text == "y" || text == "z")
+  {
+    return SimRole::kAxis;
+  }
+  if (text == "tool")
+  {
+    return SimRole::kTool;
+  }
+  if (text == "generic")
+  {
+    return SimRole::kGeneric;
+  }
+  throw ConfigError("slave role '" + text + "' is not one of axis (x, y, z), tool, generic");
+}
+
+SimSlave::SimSlave(uint8_t address, SimRole role, Encoding encoding)
+    : address_(address), role_(role), encoding_(encoding)
+{
+}
+
+void SimSlave::receive(const std::vector<uint8_t>& i2c_frame)
+{
+  std::vector<uint8_t> payload;
+  std::vector<int32_t> values;
+  try
+  {
+    payload = WirePacker::unpack(i2c_frame);
+    if (role_ != SimRole::kGeneric)
+    {
+      values = decodeValues(payload, encoding_);
+      if (values.empty())
+      {
+        throw ProtocolError("no value");
+      }
+    }
+  }
+  catch (const ProtocolError& e)
+  {
+    ++rejected_;
+    CNC_LOG_WARN("slave " << int(address_) << " ignores its payload: " << e.what());
+    return;
+  }
+  switch (role_)
+  {
+    case SimRole::kAxis:
+      position_ = values.front();
+      reply_ = encodeValues({position_}, encoding_);
+      break;
+    case SimRole::kTool:
+      tool_on_ = values.front() != 0;
+      reply_ = encodeValues({tool_on_ ? 1 : 0}, encoding_);
+      break;
+    case SimRole::kGeneric:
+      reply_ = payload;
+      break;
+  }
+  has_reply_ = true;
+}
+
+std::vector<uint8_t> SimSlave::request()
+{
+  if (!has_reply_)
+  {
+    return {};
+  }
+  has_reply_ = false;
+  return WirePacker::pack(reply_);
+}
+
+SimMaster::SimMaster(Transport& link, std::vector<SimSlave> slaves, Options options)
+    : link_(link),
+      slaves_(std::move(slaves)),
+      options_(options),
+      receiver_(
+          slaves_.size(), [this](const StepReceiver::Delivery& d) { deliver(d); }, [this] { ++stats_.frames; })
+{
+  for (size_t i = 0; i < slaves_.size(); ++i)
+  {
+    if (slaves_[i].address() != i + 1)
+    {
+      throw ConfigError("simulated slaves must have addresses 1..N in order (slave " + std::to_string(i + 1) + " has " +
+                        std::to_string(slaves_[i].address()) + ")");
+    }
+  }
+}
+
+void SimMaster::deliver(const StepReceiver::Delivery& delivery)
+{
+  if (!delivery.known)
+  {
+    ++stats_.unknown_slaves;
+    sendStatus(MasterStatus::kNoSuchSlave, delivery.address);
+    return;
+  }
+  CNC_LOG_DEBUG("slave " << int(delivery.address) << " <- " << delivery.payload.size() << " bytes");
+  // The real bytes of the I2C write, as I2C_send_packed() sends them.
+  slaves_[delivery.address - 1].receive(WirePacker::pack(delivery.payload));
+  ++stats_.deliveries;
+}
+
+void SimMaster::sendStatus(MasterStatus status, int address)
+{
+  UplinkRecord record;
+  record.address = 0;
+  record.payload.push_back(static_cast<uint8_t>(status));
+  if (address >= 0)
+  {
+    record.payload.push_back(static_cast<uint8_t>(address));
+  }
+  queueUplink(record);
+}
+
+void SimMaster::queueUplink(const UplinkRecord& record)
+{
+  const auto bytes = encodeUplink(record, options_.framing);
+  uplink_.insert(uplink_.end(), bytes.begin(), bytes.end());
+  ++stats_.uplink_records;
+}
+
+void SimMaster::flushUplink()
+{
+  if (uplink_.empty())
+  {
+    return;
+  }
+  ++uplink_writes_;
+  if (options_.corrupt_uplink_every > 0 && uplink_writes_ % options_.corrupt_uplink_every == 0)
+  {
+    uplink_[uplink_.size() / 2] ^= 0x5A;  // a noise burst on the line: one byte changed
+  }
+  link_.write(uplink_);
+  uplink_.clear();
+}
+
+void SimMaster::processInput(const uint8_t* data, size_t size)
+{
+  if (options_.framing == Framing::kRaw)
+  {
+    receiver_.feed(data, size);
+  }
+  else
+  {
+    const auto before = unpacker_.stats();
+    const auto frames = unpacker_.feed(data, size);
+    processFrames(frames, before);
+  }
+  flushUplink();
+}
+
+void SimMaster::processFrames(const std::vector<std::vector<uint8_t>>& frames, const WireStreamUnpacker::Stats& before)
+{
+  // A corrupted frame makes the unpacker reject several candidates (its own start byte, then any
+  // 0x02 inside it): tell the PC once per burst that a step was lost, so that it need not wait out
+  // its reply timeout.
+  const auto& after = unpacker_.stats();
+  if (after.crc_errors != before.crc_errors || after.framing_errors != before.framing_errors)
+  {
+    ++stats_.bad_frames;
+    sendStatus(MasterStatus::kBadFrame);
+  }
+  for (const auto& frame : frames)
+  {
+    // One WirePacker frame holds exactly one step frame: anything else is malformed.
+    receiver_.reset();
+    receiver_.feed(frame.data(), frame.size());
+    if (frame.empty() || !receiver_.idle())
+    {
+      receiver_.reset();
+      ++stats_.bad_frames;
+      sendStatus(MasterStatus::kBadFrame);
+    }
+  }
+}
+
+void SimMaster::pollSlaves()
+{
+  for (auto& slave : slaves_)
+  {
+    const auto frame = slave.request();
+    if (frame.empty())
+    {
+      continue;
+    }
+    UplinkRecord record;
+    record.address = slave.address();
+    try
+    {
+      record.payload = WirePacker::unpack(frame);  // WireSlaveRequest checks the slave's CRC
+    }
+    catch (const ProtocolError&)
+    {
+      sendStatus(MasterStatus::kSlaveNoAnswer, slave.address());
+      continue;
+    }
+    queueUplink(record);
+  }
+  flushUplink();
+}
+
+void SimMaster::run(StopSignal& stop)
+{
+  std::vector<uint8_t> buffer(4096);
+  auto last_byte = std::chrono::steady_clock::now();
+  while (!stop.stopped())
+  {
+    size_t n = 0;
+    try
+    {
+      n = link_.read(buffer.data(), buffer.size(), Milliseconds(20));
+    }
+    catch (const CancelledError&)
+    {
+      continue;  // the stop handler interrupted us: the loop condition decides
+    }
+    const auto now = std::chrono::steady_clock::now();
+    if (n > 0)
+    {
+      last_byte = now;
+      processInput(buffer.data(), n);
+    }
+    else if (options_.resync_gap.count() > 0 && now - last_byte >= options_.resync_gap)
+    {
+      if (options_.framing == Framing::kRaw && receiver_.reset())
+      {
+        ++stats_.resyncs;
+      }
+      else if (options_.framing == Framing::kFramed && unpacker_.pending() > 0)
+      {
+        ++stats_.resyncs;
+        const auto before = unpacker_.stats();
+        const auto frames = unpacker_.resync();
+        processFrames(frames, before);
+        flushUplink();
+      }
+    }
+    // The seed's master polls its slaves only between frames.
+    if (receiver_.idle())
+    {
+      pollSlaves();
+    }
+  }
+}
+}  // namespace slave_bus
+}  // namespace cnc_bridge
