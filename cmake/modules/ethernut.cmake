@@ -1,0 +1,14 @@
+# ethernut: the qCNC 5-float opcode protocol (codec, client session, settings file, simulated
+# board), sim_ethernut, and ethernut_node (job streaming and preview; uses cnc_bridge_gcode).
+cnc_core_module(cnc_bridge_ethernut
+  src/ethernut/protocol.cpp
+  src/ethernut/client.cpp
+  src/ethernut/settings.cpp
+  src/ethernut/board.cpp)
+cnc_tool(sim_ethernut src/sim/sim_ethernut.cpp)
+target_link_libraries(sim_ethernut cnc_bridge_ethernut)
+if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
+  cnc_core_gtest(test_ethernut test/unit/test_ethernut_codec.cpp test/unit/test_ethernut_client.cpp)
+  target_link_libraries(test_ethernut cnc_bridge_ethernut)
+endif()
+cnc_fuzz_target(fuzz_ethernut_stream test/fuzz/fuzz_ethernut_stream.cpp)

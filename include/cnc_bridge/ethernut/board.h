@@ -1,0 +1,63 @@
+// The board side of the ethernut protocol, as a ROS-free class: the heart of sim_ethernut, and a
+// peer for in-process tests and benchmarks. It answers every opcode of Table 1 the way client.h
+// reads the seed (pause-achieved from the board, resume by READYTOSEND), moves a simulated tool
+// to each coordinate at a set speed, reports its position (status 4), and injects faults.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <fstream>
+#include <mutex>
+#include <random>
+#include <string>
+
+#include "cnc_bridge/ethernut/protocol.h"
+#include "cnc_bridge/transport/backoff.h"
+#include "cnc_bridge/transport/transport.h"
+
+namespace cnc_bridge
+{
+namespace ethernut
+{
+struct BoardOptions
+{
+  double speed_mm_per_s = 500.0;    ///< tool speed; 0 moves instantly
+  Milliseconds report_period{100};  ///< status-4 position reports at most this often; 0: none
+  unsigned resend_every = 0;        ///< RESEND the first receipt of every Nth coordinate; 0: never
+  double resend_probability = 0.0;  ///< RESEND a first receipt with this probability
+  uint32_t seed = 1;                ///< for resend_probability
+  uint64_t drop_after = 0;          ///< close the connection after the Nth coordinate (once); 0: never
+  uint64_t silent_after = 0;        ///< go silent (answer nothing, keep the socket) after the Nth (once)
+  std::string log_path;             ///< append every accepted coordinate as "x y z" (mm)
+};
+
+/// \brief Simulated ethernut board. serve() runs one connection on the calling thread; the
+/// counters may be read from any thread.
+class Board
+{
+ public:
+  explicit Board(const BoardOptions& options);
+
+  /// \brief Serves one connected client until it goes away, the board drops it (kill, standalone,
+  /// drop_after) or \p stop is set. Never throws for link failures (they end the connection).
+  void serve(Transport& link, StopSignal& stop);
+
+  uint64_t coordinatesAccepted() const { return accepted_; }
+  uint64_t resendsSent() const { return resends_; }
+
+ private:
+  void log(float x, float y, float z);
+
+  BoardOptions options_;
+  std::mt19937 rng_;
+  std::ofstream log_;
+  std::atomic<uint64_t> accepted_{0};
+  std::atomic<uint64_t> received_{0};
+  std::atomic<uint64_t> resends_{0};
+  bool dropped_ = false;
+  bool silenced_ = false;
+  // Board memory survives reconnections (the machine does not move back when the PC goes away).
+  float position_[3] = {0.0f, 0.0f, 0.0f};
+};
+}  // namespace ethernut
+}  // namespace cnc_bridge
