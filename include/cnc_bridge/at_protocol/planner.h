@@ -1,0 +1,151 @@
+// Trajectory planning for the '@'-protocol (seed esprit_at_protocol_controller.md, section 4.1):
+// the add-in, not the controller, turns a tool path into "the required speed and position for each
+// axis at each time loop" of 1 ms, with acceleration and deceleration. This file holds that planner:
+// a polyline in pulses becomes a time-parametrised trapezoidal velocity profile along the path,
+// sampled every period into the integer feed values and pulse positions of the protocol.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <vector>
+
+#include "cnc_bridge/at_protocol/codec.h"
+
+namespace cnc_bridge
+{
+namespace at_protocol
+{
+using Vec3 = std::array<double, 3>;
+
+/// \brief Machine limits and timing of the planner. Lengths in millimetres (the machinist's unit;
+/// the ROS layer converts from metres), times in seconds.
+struct PlannerLimits
+{
+  double period = 0.001;                ///< s, the controller's time loop (seed: 1 ms)
+  Vec3 max_speed{50.0, 50.0, 25.0};     ///< mm/s per axis; also the speed a feed value of 255 means
+  Vec3 max_accel{500.0, 500.0, 250.0};  ///< mm/s^2 per axis
+  /// Share of each axis' acceleration budget kept for the change of direction at a corner. Along a
+  /// segment the path accelerates with (1 - share) of the limit; at a corner the axis velocity may
+  /// jump by at most share * max_accel * period. A sample straddling a corner then sees both, and
+  /// the sum stays within max_accel: the limit holds at every sample, corners included.
+  double corner_share = 0.2;
+
+  /// \throws ConfigError if a value is not positive or corner_share is not in (0, 1).
+  void validate() const;
+};
+
+/// \brief The state of the path at one instant, in pulses (1/1000 mm) and pulses per second.
+struct Sample
+{
+  Vec3 position{};
+  Vec3 velocity{};
+  double path_speed = 0.0;  ///< pulses/s along the path
+  double distance = 0.0;    ///< pulses travelled along the path
+};
+
+/// \brief A planned move along a polyline: trapezoidal speed along each segment, junction speeds
+/// limited so that every axis stays within its speed and acceleration limits. Immutable after
+/// planning, so thread-safe for concurrent readers.
+///
+/// Speeds: the path speed on a segment with unit direction u is at most min(feed, max_speed_i/|u_i|);
+/// its acceleration is (1 - corner_share) * min(max_accel_i/|u_i|). Speeds at the junctions come from
+/// a backward and a forward pass (the classic look-ahead of CNC interpolators), so the path never
+/// needs more deceleration than it has room for and ends at rest.
+class Trajectory
+{
+ public:
+  /// \brief Plans a path through \p points (pulses), starting at \p entry_speed.
+  /// \param feed path speed wanted, mm/s (capped by the axis limits).
+  /// \param entry_speed pulses/s at the first point, in the direction of the first segment (0 from rest).
+  /// \throws ConfigError on fewer than one point, a non-positive feed, or invalid limits.
+  /// Consecutive identical points are merged; a path of one point is a trajectory of zero length.
+  Trajectory(const std::vector<Vec3>& points, double feed, const PlannerLimits& limits, double entry_speed = 0.0);
+
+  /// \returns false if \p entry_speed was too high to stop within the path (the profile then
+  /// starts slower than asked); true for every path planned from rest.
+  bool entryFeasible() const { return entry_feasible_; }
+  /// Seconds from the first point to rest at the last.
+  double duration() const { return duration_; }
+  /// Pulses along the path.
+  double length() const { return length_; }
+  /// Setpoints this trajectory is streamed as: one per period, the last exactly at duration().
+  size_t steps() const;
+  const PlannerLimits& limits() const { return limits_; }
+  const Vec3& start() const { return start_; }
+  const Vec3& end() const { return end_; }
+
+  /// \brief The state at time \p t (clamped to [0, duration()]).
+  Sample at(double t) const;
+  /// \brief The state after \p k periods (k = 1..steps(); the last is the end point at rest).
+  Sample step(size_t k) const { return at(static_cast<double>(k) * limits_.period); }
+
+  /// \brief The protocol's setpoint for a sample: positions rounded to whole pulses, feed values
+  /// scaled so that 255 is the axis' max_speed, with the sign of the direction.
+  Setpoint toSetpoint(const Sample& sample) const;
+
+  /// \brief A trajectory that continues from \p from along the rest of this path, decelerating at
+  /// the path's limits until it stops (a cancel: never a jump in position or speed).
+  Trajectory stopFrom(const Sample& from) const;
+
+  struct Segment
+  {
+    Vec3 start{};
+    Vec3 direction{};  ///< unit vector
+    double length = 0.0;
+    double accel = 0.0;  ///< pulses/s^2 along the path
+    double v_max = 0.0;  ///< pulses/s
+    double v_entry = 0.0, v_cruise = 0.0, v_exit = 0.0;
+    double t_accel = 0.0, t_cruise = 0.0, t_decel = 0.0;
+    double t_start = 0.0;  ///< s from the start of the trajectory
+    double s_start = 0.0;  ///< pulses from the start of the trajectory
+  };
+  const std::vector<Segment>& segments() const { return segments_; }
+
+ private:
+  void plan(const std::vector<Vec3>& points, double entry_speed);
+  Sample sampleSegment(const Segment& segment, double tau) const;
+
+  PlannerLimits limits_;
+  double feed_mm_ = 0.0;
+  double feed_ = 0.0;  // pulses/s
+  std::vector<Segment> segments_;
+  Vec3 start_{};
+  Vec3 end_{};
+  double duration_ = 0.0;
+  double length_ = 0.0;
+  bool entry_feasible_ = true;
+};
+
+/// \brief Streams a trajectory one setpoint per call, and switches to a deceleration ramp on
+/// request. Used by the sender thread only: not thread-safe.
+class TrajectoryStream
+{
+ public:
+  explicit TrajectoryStream(Trajectory trajectory);
+
+  /// \brief The next setpoint. \returns false when the trajectory (or its stop ramp) is done.
+  bool next(Setpoint& setpoint);
+  /// \brief From the next call on, decelerate to a stop along the path. Idempotent.
+  void stop();
+  bool stopping() const { return stopping_; }
+  /// Setpoints handed out so far.
+  size_t sent() const { return sent_; }
+  /// Setpoints in all (changes once when stop() shortens the stream).
+  size_t total() const { return sent_ - index_ + active().steps(); }
+  /// The sample of the last setpoint handed out (pulses).
+  const Sample& current() const { return current_; }
+
+ private:
+  const Trajectory& active() const { return stop_ ? *stop_ : trajectory_; }
+
+  Trajectory trajectory_;
+  std::optional<Trajectory> stop_;
+  size_t index_ = 0;  // steps of *active_ streamed
+  size_t sent_ = 0;
+  bool stopping_ = false;
+  Sample current_;
+};
+}  // namespace at_protocol
+}  // namespace cnc_bridge
