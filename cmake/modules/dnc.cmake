@@ -11,3 +11,8 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   target_link_libraries(test_xmodem cnc_bridge_xmodem yaml-cpp)
   target_compile_definitions(test_xmodem PRIVATE XMODEM_TEST_DATA="${PROJECT_SOURCE_DIR}/test/data/xmodem")
 endif()
+
+if(NOT CNC_BRIDGE_CORE_ONLY)
+  cnc_node(dnc_node src/nodes/dnc_node.cpp)
+  target_link_libraries(dnc_node cnc_bridge_xmodem)
+endif()

@@ -30,7 +30,8 @@ std::string fromWire(std::vector<uint8_t> payload, const TextOptions& options)
 }
 
 FileResult sendFile(Transport& link, const std::string& path, Mode mode, const Config& config,
-                    const TextOptions& options, const ProgressCallback& progress, const std::atomic<bool>* cancel)
+                    const TextOptions& options, const ProgressCallback& progress, const std::atomic<bool>* cancel,
+                    Stats* stats)
 {
   std::ifstream in(path, std::ios::binary);
   if (!in)
@@ -44,7 +45,18 @@ FileResult sendFile(Transport& link, const std::string& path, Mode mode, const C
   }
   Sender sender(link, mode, config, cancel);
   FileResult result;
-  result.stats = sender.send(toWire(contents, options), progress);
+  try
+  {
+    result.stats = sender.send(toWire(contents, options), progress);
+  }
+  catch (...)
+  {
+    if (stats)
+      *stats = sender.stats();
+    throw;
+  }
+  if (stats)
+    *stats = result.stats;
   result.file_bytes = contents.size();
   result.path = path;
   result.message = "sent " + path + ": " + result.stats.summary();
@@ -52,12 +64,26 @@ FileResult sendFile(Transport& link, const std::string& path, Mode mode, const C
 }
 
 FileResult receiveFile(Transport& link, const std::string& path, Mode mode, const Config& config,
-                       const TextOptions& options, const ProgressCallback& progress, const std::atomic<bool>* cancel)
+                       const TextOptions& options, const ProgressCallback& progress, const std::atomic<bool>* cancel,
+                       Stats* stats)
 {
   // Opened first: an unwritable destination fails before the control is asked for anything.
   AtomicFileWriter writer(path);
   Receiver receiver(link, mode, config, cancel);
-  const std::string contents = fromWire(receiver.receive(progress), options);
+  std::vector<uint8_t> payload;
+  try
+  {
+    payload = receiver.receive(progress);
+  }
+  catch (...)
+  {
+    if (stats)
+      *stats = receiver.stats();
+    throw;
+  }
+  if (stats)
+    *stats = receiver.stats();
+  const std::string contents = fromWire(std::move(payload), options);
   writer.write(contents);
   writer.commit();
   FileResult result;

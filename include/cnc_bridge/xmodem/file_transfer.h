@@ -40,15 +40,16 @@ std::vector<uint8_t> toWire(const std::string& file_contents, const TextOptions&
 std::string fromWire(std::vector<uint8_t> payload, const TextOptions& options);
 
 /// \brief Reads \p path and sends it.
+/// \param stats if given, receives the counters, also when the transfer fails.
 /// \throws ConfigError if the file cannot be read; the errors of Sender::send().
 FileResult sendFile(Transport& link, const std::string& path, Mode mode, const Config& config,
                     const TextOptions& options, const ProgressCallback& progress = nullptr,
-                    const std::atomic<bool>* cancel = nullptr);
+                    const std::atomic<bool>* cancel = nullptr, Stats* stats = nullptr);
 
 /// \brief Receives into \p path atomically: on any failure the destination is left as it was.
 /// \throws ConfigError if the directory cannot be written; the errors of Receiver::receive().
 FileResult receiveFile(Transport& link, const std::string& path, Mode mode, const Config& config,
                        const TextOptions& options, const ProgressCallback& progress = nullptr,
-                       const std::atomic<bool>* cancel = nullptr);
+                       const std::atomic<bool>* cancel = nullptr, Stats* stats = nullptr);
 }  // namespace xmodem
 }  // namespace cnc_bridge

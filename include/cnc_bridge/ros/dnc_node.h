@@ -1,0 +1,101 @@
+// dnc_node: NC programs to and from a control over its RS-232 port. The node owns the serial link
+// (opened per transfer or kept open, with a PortLock held while a transfer runs so a status poller
+// on the same line stays quiet), runs one transfer at a time, and dispatches each transfer to a
+// protocol handler by name. XModem (xmodem, xmodem-crc, xmodem-1k) is registered here; other
+// protocols (drip-feed, backup) register with registerProtocol() in the constructor.
+#pragma once
+
+#include <actionlib/server/simple_action_server.h>
+#include <ros/ros.h>
+
+#include <atomic>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+
+#include "cnc_bridge/ReceiveProgram.h"
+#include "cnc_bridge/SendProgram.h"
+#include "cnc_bridge/TransferAction.h"
+#include "cnc_bridge/common/port_lock.h"
+#include "cnc_bridge/common/program_dir.h"
+#include "cnc_bridge/ros/machine_state_publisher.h"
+#include "cnc_bridge/transport/serial_port.h"
+#include "cnc_bridge/xmodem/file_transfer.h"
+
+namespace cnc_bridge
+{
+/// \brief One transfer as a protocol handler sees it.
+struct TransferJob
+{
+  TransferGoal goal;  ///< as requested (protocol already defaulted to ~xmodem_mode)
+  std::string path;   ///< goal.file resolved inside ~program_dir
+  bool send = true;   ///< direction == send
+};
+
+/// \brief Moves one file over \p link. Reports progress through \p feedback (throttled by the
+/// node), stops with CancelledError when \p cancel is set (the link is interrupted too), and
+/// returns the result or throws a cnc_bridge::Error whose message becomes the result message.
+using ProtocolHandler = std::function<TransferResult(Transport& link, const TransferJob& job,
+                                                     const std::function<void(const TransferFeedback&)>& feedback,
+                                                     const std::atomic<bool>& cancel)>;
+
+/// \brief The dnc_node. Services and the action may be called from any spinner thread.
+class DncNode
+{
+ public:
+  DncNode(ros::NodeHandle nh, ros::NodeHandle pnh);
+  ~DncNode();
+
+  /// \brief Makes \p protocol available to ~transfer, ~send_program and ~receive_program.
+  void registerProtocol(const std::string& protocol, ProtocolHandler handler);
+
+ private:
+  /// Runs a job start to end: refuses if busy or the file is outside ~program_dir, holds the port
+  /// lock, opens the link (if not open), updates state and diagnostics.
+  TransferResult run(TransferGoal goal, const std::function<void(const TransferFeedback&)>& feedback);
+  /// Opens the serial port if it is not open (the only place the link is opened).
+  Transport& openLink();
+  void closeLink();
+  void onGoal(const TransferGoalConstPtr& goal);
+  void onPreempt();
+  bool onSend(SendProgram::Request& request, SendProgram::Response& response);
+  bool onReceive(ReceiveProgram::Request& request, ReceiveProgram::Response& response);
+  void transferDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& status);
+  TransferResult runXmodem(Transport& link, const TransferJob& job,
+                           const std::function<void(const TransferFeedback&)>& feedback,
+                           const std::atomic<bool>& cancel);
+
+  ros::NodeHandle nh_;
+  ros::NodeHandle pnh_;
+  SerialSettings serial_;
+  std::unique_ptr<ProgramDirectory> programs_;
+  std::string default_protocol_;
+  bool keep_open_ = false;
+  xmodem::Config xmodem_config_;
+  xmodem::TextOptions text_options_;
+  ros::Duration feedback_period_;
+
+  std::map<std::string, ProtocolHandler> protocols_;
+  std::unique_ptr<MachineStatePublisher> state_;
+  PortLock port_lock_;
+
+  std::mutex busy_;        ///< held for the whole of a transfer (try_lock: a second one is refused)
+  std::mutex link_mutex_;  ///< guards link_ for onPreempt()
+  std::unique_ptr<SerialPort> link_;
+  std::atomic<bool> cancel_{false};
+
+  std::mutex stats_mutex_;
+  struct Counters
+  {
+    uint64_t transfers = 0, completed = 0, failed = 0, cancelled = 0, refused = 0;
+    uint64_t blocks = 0, retries = 0, timeouts = 0, bytes = 0;
+    std::string last_result;
+  } counters_;
+
+  ros::ServiceServer send_srv_;
+  ros::ServiceServer receive_srv_;
+  std::unique_ptr<actionlib::SimpleActionServer<TransferAction>> action_;
+};
+}  // namespace cnc_bridge

@@ -1,0 +1,393 @@
+// dnc_node: NC program transfer between ~program_dir and a control's RS-232 port (see dnc_node.h
+// and docs/dnc_node.md). This file holds the ROS plumbing (parameters, services, action, state,
+// diagnostics, the serial link) and the XModem protocol handler; the protocol itself is the core
+// library cnc_bridge_xmodem.
+#include "cnc_bridge/ros/dnc_node.h"
+
+#include "cnc_bridge/common/error.h"
+#include "cnc_bridge/ros/params.h"
+
+namespace cnc_bridge
+{
+DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh)
+    : nh_(nh), pnh_(pnh), serial_(params::serialSettings(pnh, 115200)), port_lock_(serial_.device)
+{
+  // ~program_dir (string, required): the only directory files are read from and written to.
+  programs_ = std::make_unique<ProgramDirectory>(params::required<std::string>(pnh, "program_dir"));
+  // ~xmodem_mode (string, default "xmodem"): protocol when a request leaves it empty. A Haas
+  // speaks XModem checksum only (xmodem); xmodem-crc and xmodem-1k suit PC-based controls.
+  pnh.param<std::string>("xmodem_mode", default_protocol_, "xmodem");
+  xmodem::parseMode(default_protocol_);  // fails early on a typo
+  // ~keep_open (bool, default false): keep the port open between transfers (otherwise it is opened
+  // for each transfer, so other programs can use the port in between).
+  pnh.param("keep_open", keep_open_, false);
+  // ~eob (string, default "lf"): the control's end-of-block pattern, Haas setting 25
+  // (lf, cr, crlf, crcr, lflf). Programs are sent with it.
+  text_options_.control_eob = xmodem::parseEob(pnh.param<std::string>("eob", "lf"));
+  // ~file_eob (string, default "lf"): line ends of programs stored in ~program_dir.
+  text_options_.file_eob = xmodem::parseEob(pnh.param<std::string>("file_eob", "lf"));
+  // ~binary (bool, default false): move bytes exactly (no EOB conversion; received files keep the
+  // SUB padding of the last block).
+  pnh.param("binary", text_options_.binary, false);
+  // XModem timing (seconds) and limits; defaults are the protocol's (DESIGN section 6).
+  // ~start_timeout: receiving, how long to wait for the control to start sending (the operator
+  // starts the punch on the control), NAK repeated every ~nak_interval meanwhile.
+  xmodem_config_.start_timeout = params::seconds(pnh, "start_timeout", 120.0);
+  xmodem_config_.nak_interval = params::seconds(pnh, "nak_interval", 10.0);
+  // ~start_wait: sending, how long to wait for the control's NAK (the operator starts the receive).
+  xmodem_config_.start_wait = params::seconds(pnh, "start_wait", 120.0);
+  // ~char_timeout: longest gap between two bytes of a packet.
+  xmodem_config_.char_timeout = params::seconds(pnh, "char_timeout", 1.0);
+  // ~purge_quiet: silence that ends the purge of a garbled packet before a NAK.
+  xmodem_config_.purge_quiet = params::seconds(pnh, "purge_quiet", 1.0);
+  // ~block_timeout: receiving, wait for the next packet before a NAK.
+  xmodem_config_.block_timeout = params::seconds(pnh, "block_timeout", 10.0);
+  // ~ack_timeout: sending, wait for ACK/NAK after a packet before sending it again.
+  xmodem_config_.ack_timeout = params::seconds(pnh, "ack_timeout", 10.0);
+  // ~eot_quiet: receiving, silence after EOT before it is believed (a garbled SOH looks like EOT).
+  xmodem_config_.eot_quiet = params::seconds(pnh, "eot_quiet", 0.25);
+  // ~max_retries (int, default 10): errors in a row on one block before the transfer aborts.
+  int max_retries = pnh.param("max_retries", 10);
+  if (max_retries < 1)
+  {
+    ROS_WARN("~max_retries %d is below 1; using 10", max_retries);
+    max_retries = 10;
+  }
+  xmodem_config_.max_retries = static_cast<unsigned>(max_retries);
+  xmodem_config_.eot_retries = static_cast<unsigned>(max_retries);
+  xmodem_config_.stale_nak_settle = std::min(xmodem_config_.char_timeout, Milliseconds(1000));
+  // ~feedback_rate (Hz, default 20): action feedback at most this often (and after the last block).
+  feedback_period_ = ros::Duration(1.0 / params::positive(pnh, "feedback_rate", 20.0));
+
+  for (const char* name : {"xmodem", "xmodem-crc", "xmodem-1k"})
+  {
+    registerProtocol(name, [this](Transport& link, const TransferJob& job, const auto& feedback, const auto& cancel)
+                     { return runXmodem(link, job, feedback, cancel); });
+  }
+
+  state_ = std::make_unique<MachineStatePublisher>(nh, pnh, serial_.describe());
+  state_->update(
+      [&](MachineState& s)
+      {
+        s.mode = MachineState::MODE_DNC;
+        s.execution = MachineState::EXECUTION_READY;
+      });
+  state_->setLink(LinkState::kDown, "port opened on demand");
+  state_->diagnostics().add("Transfers", this, &DncNode::transferDiagnostics);
+
+  if (keep_open_)
+  {
+    try
+    {
+      openLink();
+    }
+    catch (const Error& e)
+    {
+      ROS_ERROR("%s (retried at the next transfer)", e.what());
+    }
+  }
+
+  send_srv_ = pnh.advertiseService("send_program", &DncNode::onSend, this);
+  receive_srv_ = pnh.advertiseService("receive_program", &DncNode::onReceive, this);
+  action_ = std::make_unique<actionlib::SimpleActionServer<TransferAction>>(
+      pnh, "transfer", [this](const TransferGoalConstPtr& goal) { onGoal(goal); }, false);
+  action_->registerPreemptCallback([this] { onPreempt(); });
+  action_->start();
+  ROS_INFO("dnc_node on %s, programs in %s, default protocol %s", serial_.describe().c_str(), programs_->root().c_str(),
+           default_protocol_.c_str());
+}
+
+DncNode::~DncNode()
+{
+  cancel_ = true;
+  {
+    std::lock_guard<std::mutex> lock(link_mutex_);
+    if (link_)
+      link_->interrupt();
+  }
+  if (action_)
+    action_->shutdown();
+}
+
+void DncNode::registerProtocol(const std::string& protocol, ProtocolHandler handler)
+{
+  protocols_[protocol] = std::move(handler);
+}
+
+Transport& DncNode::openLink()
+{
+  std::lock_guard<std::mutex> lock(link_mutex_);
+  if (!link_ || !link_->isOpen())
+  {
+    state_->setLink(LinkState::kConnecting, "opening " + serial_.describe());
+    try
+    {
+      link_ = std::make_unique<SerialPort>(serial_);
+    }
+    catch (const Error& e)
+    {
+      link_.reset();
+      state_->setLink(LinkState::kDown, e.what());
+      throw;
+    }
+    state_->setLink(LinkState::kUp, "");
+  }
+  return *link_;
+}
+
+void DncNode::closeLink()
+{
+  std::lock_guard<std::mutex> lock(link_mutex_);
+  link_.reset();
+  state_->setLink(LinkState::kDown, keep_open_ ? "port closed after a link error" : "port opened on demand");
+}
+
+TransferResult DncNode::run(TransferGoal goal, const std::function<void(const TransferFeedback&)>& feedback)
+{
+  TransferResult result;
+  std::unique_lock<std::mutex> busy(busy_, std::try_to_lock);
+  if (!busy.owns_lock())
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    ++counters_.refused;
+    result.message = "refused: another transfer is running on " + serial_.device + " (one at a time)";
+    return result;
+  }
+  if (goal.protocol.empty())
+    goal.protocol = default_protocol_;
+  const auto handler = protocols_.find(goal.protocol);
+  if (handler == protocols_.end())
+  {
+    std::string known;
+    for (const auto& p : protocols_)
+      known += (known.empty() ? "" : ", ") + p.first;
+    result.message = "refused: unknown protocol '" + goal.protocol + "' (known: " + known + ")";
+    return result;
+  }
+  if (goal.direction != TransferGoal::DIRECTION_SEND && goal.direction != TransferGoal::DIRECTION_RECEIVE)
+  {
+    result.message = "refused: direction must be 'send' or 'receive', not '" + goal.direction + "'";
+    return result;
+  }
+  TransferJob job;
+  job.send = goal.direction == TransferGoal::DIRECTION_SEND;
+  job.goal = goal;
+  try
+  {
+    job.path = job.send ? programs_->resolveExisting(goal.file) : programs_->resolveForWrite(goal.file);
+  }
+  catch (const ConfigError& e)
+  {
+    result.message = std::string("refused: ") + e.what();
+    return result;
+  }
+
+  cancel_ = false;
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    ++counters_.transfers;
+  }
+  state_->update(
+      [&](MachineState& s)
+      {
+        s.execution = MachineState::EXECUTION_ACTIVE;
+        s.program = goal.file;
+        s.block = 0;
+        s.message = (job.send ? "sending " : "receiving ") + goal.file + " (" + goal.protocol + ")";
+      });
+  ROS_INFO("%s %s by %s", job.send ? "sending" : "receiving", job.path.c_str(), goal.protocol.c_str());
+
+  bool cancelled = false;
+  try
+  {
+    // A status poller on the same line (haas_mdc_node) skips its polls while this is held.
+    if (!port_lock_.tryLock())
+      throw LinkError(serial_.device + " is in use by another process (port lock " + port_lock_.lockFile() + ")");
+    Transport& link = openLink();
+    result = handler->second(link, job, feedback, cancel_);
+  }
+  catch (const CancelledError& e)
+  {
+    cancelled = true;
+    result.success = false;
+    result.message = e.what();
+  }
+  catch (const LinkError& e)
+  {
+    result.success = false;
+    result.message = e.what();
+    closeLink();  // reopened at the next transfer
+  }
+  catch (const Error& e)
+  {
+    result.success = false;
+    result.message = e.what();
+  }
+  if (!keep_open_)
+    closeLink();
+  port_lock_.unlock();
+
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    (result.success ? counters_.completed : cancelled ? counters_.cancelled : counters_.failed)++;
+    counters_.blocks += result.blocks;
+    counters_.retries += result.retries;
+    counters_.bytes += result.bytes;
+    counters_.last_result = result.message;
+  }
+  state_->update(
+      [&](MachineState& s)
+      {
+        s.execution = result.success ? MachineState::EXECUTION_READY : MachineState::EXECUTION_STOPPED;
+        s.message = result.message;
+      });
+  if (result.success)
+    ROS_INFO("%s", result.message.c_str());
+  else
+    ROS_ERROR("%s", result.message.c_str());
+  return result;
+}
+
+TransferResult DncNode::runXmodem(Transport& link, const TransferJob& job,
+                                  const std::function<void(const TransferFeedback&)>& feedback,
+                                  const std::atomic<bool>& cancel)
+{
+  const xmodem::Mode mode = xmodem::parseMode(job.goal.protocol);
+  ros::Time last_feedback;
+  auto progress = [&](const xmodem::Progress& p)
+  {
+    const ros::Time now = ros::Time::now();
+    const bool last = p.total > 0 && p.bytes >= p.total;
+    if (!last && now - last_feedback < feedback_period_)
+      return;
+    last_feedback = now;
+    TransferFeedback f;
+    f.bytes = p.bytes;
+    f.total = p.total;
+    f.block = p.block;
+    f.retries = p.retries;
+    f.percent = p.total > 0 ? static_cast<float>(100.0 * p.bytes / p.total) : 0.0f;
+    if (feedback)
+      feedback(f);
+    state_->update([&](MachineState& s) { s.block = p.block; });
+  };
+  xmodem::FileResult file;
+  xmodem::Stats stats;
+  auto count = [&](bool failed)
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    counters_.timeouts += stats.timeouts;
+    if (failed)
+      counters_.retries += stats.retries;  // a successful transfer's retries come with its result
+  };
+  try
+  {
+    file = job.send
+               ? xmodem::sendFile(link, job.path, mode, xmodem_config_, text_options_, progress, &cancel, &stats)
+               : xmodem::receiveFile(link, job.path, mode, xmodem_config_, text_options_, progress, &cancel, &stats);
+  }
+  catch (...)
+  {
+    count(true);
+    throw;
+  }
+  count(false);
+  TransferResult result;
+  result.success = true;
+  result.message = file.message;
+  result.bytes = file.file_bytes;
+  result.blocks = file.stats.blocks;
+  result.retries = file.stats.retries;
+  return result;
+}
+
+void DncNode::onGoal(const TransferGoalConstPtr& goal)
+{
+  const TransferResult result =
+      run(*goal, [this](const TransferFeedback& feedback) { action_->publishFeedback(feedback); });
+  if (action_->isPreemptRequested() || !ros::ok())
+    action_->setPreempted(result, result.message);
+  else if (result.success)
+    action_->setSucceeded(result, result.message);
+  else
+    action_->setAborted(result, result.message);
+}
+
+void DncNode::onPreempt()
+{
+  cancel_ = true;
+  std::lock_guard<std::mutex> lock(link_mutex_);
+  if (link_)
+    link_->interrupt();
+}
+
+bool DncNode::onSend(SendProgram::Request& request, SendProgram::Response& response)
+{
+  TransferGoal goal;
+  goal.direction = TransferGoal::DIRECTION_SEND;
+  goal.file = request.file;
+  goal.protocol = request.protocol;
+  const TransferResult result = run(goal, nullptr);
+  response.success = result.success;
+  response.message = result.message;
+  response.bytes = result.bytes;
+  response.blocks = result.blocks;
+  response.retries = result.retries;
+  return true;
+}
+
+bool DncNode::onReceive(ReceiveProgram::Request& request, ReceiveProgram::Response& response)
+{
+  TransferGoal goal;
+  goal.direction = TransferGoal::DIRECTION_RECEIVE;
+  goal.file = request.file;
+  goal.protocol = request.protocol;
+  const TransferResult result = run(goal, nullptr);
+  response.success = result.success;
+  response.message = result.message;
+  response.bytes = result.bytes;
+  response.blocks = result.blocks;
+  response.retries = result.retries;
+  return true;
+}
+
+void DncNode::transferDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& status)
+{
+  std::lock_guard<std::mutex> lock(stats_mutex_);
+  if (counters_.failed > 0 && counters_.last_result.find("fail") != std::string::npos)
+    status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "last transfer failed: " + counters_.last_result);
+  else
+    status.summary(diagnostic_msgs::DiagnosticStatus::OK,
+                   counters_.last_result.empty() ? "no transfer yet" : counters_.last_result);
+  status.add("transfers", counters_.transfers);
+  status.add("completed", counters_.completed);
+  status.add("failed (aborts)", counters_.failed);
+  status.add("cancelled", counters_.cancelled);
+  status.add("refused", counters_.refused);
+  status.add("blocks", counters_.blocks);
+  status.add("retries", counters_.retries);
+  status.add("timeouts", counters_.timeouts);
+  status.add("bytes", counters_.bytes);
+  status.add("default protocol", default_protocol_);
+  status.add("program_dir", programs_->root());
+}
+}  // namespace cnc_bridge
+
+int main(int argc, char** argv)
+{
+  ros::init(argc, argv, "dnc_node");
+  cnc_bridge::routeCoreLogToRosconsole();
+  try
+  {
+    cnc_bridge::DncNode node(ros::NodeHandle(), ros::NodeHandle("~"));
+    ros::AsyncSpinner spinner(4);  // a service call may run a whole transfer: keep serving meanwhile
+    spinner.start();
+    ros::waitForShutdown();
+  }
+  catch (const cnc_bridge::Error& e)
+  {
+    ROS_FATAL("%s", e.what());
+    return 1;
+  }
+  return 0;
+}
