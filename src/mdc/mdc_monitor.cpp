@@ -88,6 +88,18 @@ void QueryScheduler::done(Clock::time_point now)
   }
 }
 
+void MdcMonitor::setWorkOffsetAxes(const std::vector<std::pair<int, int>>& machine_work)
+{
+  axes_.clear();
+  for (const auto& [machine, work] : machine_work)
+  {
+    AxisPair pair;
+    pair.machine = machine;
+    pair.work = work;
+    axes_.push_back(pair);
+  }
+}
+
 std::vector<CycleEventData> MdcMonitor::apply(const Reply& reply, Clock::time_point now)
 {
   std::vector<CycleEventData> events;
@@ -139,6 +151,23 @@ std::vector<CycleEventData> MdcMonitor::apply(const Reply& reply, Clock::time_po
       {
         const auto [variable, value] = macroOf(reply);
         status_.variables[variable] = value;
+        for (size_t axis = 0; axis < axes_.size() && axis < 3; ++axis)
+        {
+          auto& pair = axes_[axis];
+          if (variable == pair.machine)
+          {
+            if (pair.work_since && pair.last_machine && *pair.last_machine == value)
+            {
+              status_.work_offset[axis] = value - *pair.work_since;
+            }
+            pair.last_machine = value;
+            pair.work_since.reset();
+          }
+          else if (variable == pair.work && pair.last_machine)
+          {
+            pair.work_since = value;
+          }
+        }
         if (variable == kUnitsVariable)
         {
           status_.units = value == 20.0 ? Units::kInch : value == 21.0 ? Units::kMillimetre : Units::kUnknown;
@@ -242,6 +271,10 @@ QueryScheduler PollPlan::scheduler() const
   {
     scheduler.add(macroQuery(variable), variables_period);
   }
+  for (int variable : slow_variables)
+  {
+    scheduler.add(macroQuery(variable), counters_period);
+  }
   scheduler.add(q(201), counters_period);
   scheduler.add(q(303), counters_period);
   scheduler.add(q(304), counters_period);
@@ -253,6 +286,12 @@ QueryScheduler PollPlan::scheduler() const
 MdcPoller::MdcPoller(PollPlan plan, Milliseconds reply_timeout, PortLock* port_lock)
     : plan_(std::move(plan)), reply_timeout_(reply_timeout), port_lock_(port_lock)
 {
+}
+
+void MdcPoller::setWorkOffsetAxes(const std::vector<std::pair<int, int>>& machine_work)
+{
+  std::lock_guard<std::mutex> lock(mutex_);
+  monitor_.setWorkOffsetAxes(machine_work);
 }
 
 void MdcPoller::notify(const Reply& reply)

@@ -243,7 +243,8 @@ int main(int argc, char** argv)
   po::variables_map vm;
   try
   {
-    po::store(po::parse_command_line(argc, argv, options), vm);
+    // Unregistered arguments are allowed: roslaunch appends __name:= and __log:= to every node.
+    po::store(po::command_line_parser(argc, argv).options(options).allow_unregistered().run(), vm);
     po::notify(vm);
     if (port < 0 || port > 65535)
       throw po::error("--port out of range");
@@ -276,10 +277,12 @@ int main(int argc, char** argv)
     if (!link.empty())
       return runSerial(machine, link, classic);
 
-    cnc_bridge::sim::installStopHandler();
+    auto& stop = cnc_bridge::sim::installStopHandler();
     asio::io_context io;
     TcpSim sim(io, machine, host, static_cast<uint16_t>(port), classic);
     cnc_bridge::sim::onStop([&] { asio::post(io, [&] { io.stop(); }); });
+    if (stop.stopped())
+      return 0;  // a signal came before the callback was registered
     sim.start();
     cnc_bridge::sim::announce("sim_haas_mdc", "tcp " + host + ":" + std::to_string(sim.port()));
     io.run();

@@ -344,3 +344,27 @@ TEST(MdcPoller, SkipsPollsWhileADncTransferHoldsThePort)
   thread.join();
   EXPECT_EQ(poller.status().execution, Execution::kActive);
 }
+
+TEST(MdcMonitor, WorkOffsetOnlyFromReadsWhileTheAxisStoodStill)
+{
+  MdcMonitor monitor;
+  monitor.setWorkOffsetAxes({{5021, 5041}, {5022, 5042}, {5023, 5043}});
+  const Clock::time_point t{};
+  auto macro = [&](int n, double v)
+  { monitor.apply(*parseReply("MACRO, " + std::to_string(n) + ", " + std::to_string(v)), t); };
+  // X moving: machine 1.0, work -4.0 (read a little later, at machine 1.2), machine 1.5.
+  macro(5021, 1.0);
+  macro(5041, -3.8);
+  macro(5021, 1.5);
+  EXPECT_FALSE(monitor.status().work_offset[0]);
+  // X standing at 1.5: the work reading between two equal machine readings gives the offset.
+  macro(5041, -3.5);
+  macro(5021, 1.5);
+  ASSERT_TRUE(monitor.status().work_offset[0]);
+  EXPECT_DOUBLE_EQ(*monitor.status().work_offset[0], 5.0);
+  // Moving again: the last good offset stays.
+  macro(5041, -3.0);
+  macro(5021, 2.5);
+  EXPECT_DOUBLE_EQ(*monitor.status().work_offset[0], 5.0);
+  EXPECT_FALSE(monitor.status().work_offset[1]);
+}

@@ -74,7 +74,9 @@ struct MachineStatus
   std::optional<double> last_cycle_s, previous_cycle_s, power_on_s, motion_s;
   std::map<int, double> variables;  ///< Q600 values by variable number
   Units units = Units::kUnknown;    ///< from #4006 when it is polled
-  uint64_t updates = 0;             ///< replies folded in
+  /// Work zero X Y Z in machine coordinates (device units), see MdcMonitor::setWorkOffsetAxes().
+  std::optional<double> work_offset[3];
+  uint64_t updates = 0;  ///< replies folded in
 };
 
 /// \brief A cycle or part-count event (values as cnc_bridge/CycleEvent).
@@ -104,6 +106,12 @@ struct CycleEventData
 class MdcMonitor
 {
  public:
+  /// \brief Variables of machine and work position per axis (Haas #5021/#5041, #5022/#5042,
+  /// #5023/#5043). The work offset of an axis is machine - work position, but the two are read one
+  /// after the other: it is taken only when the machine position read before and after the work
+  /// position is the same (the axis stood still in between), so motion never leaks into it.
+  void setWorkOffsetAxes(const std::vector<std::pair<int, int>>& machine_work);
+
   /// \brief Applies one reply received at \p now.
   /// \returns the events it caused (usually none).
   std::vector<CycleEventData> apply(const Reply& reply, Clock::time_point now);
@@ -113,7 +121,14 @@ class MdcMonitor
  private:
   std::vector<CycleEventData> applyProgramStatus(const ProgramStatus& ps, Clock::time_point now);
 
+  struct AxisPair
+  {
+    int machine = 0, work = 0;
+    std::optional<double> last_machine, work_since;
+  };
+
   MachineStatus status_;
+  std::vector<AxisPair> axes_;
   bool seen_status_ = false;
   bool in_cycle_ = false;
   std::optional<Clock::time_point> cycle_start_;
@@ -126,6 +141,7 @@ struct PollPlan
   Milliseconds variables_period{250};  ///< each Q600 variable
   Milliseconds counters_period{2000};  ///< Q201 tool, Q303/Q304 cycle times, Q402 M30 counter, Q200
   std::vector<int> variables;          ///< Q600 list (positions, spindle, counters, #100s)
+  std::vector<int> slow_variables;     ///< Q600 list polled at counters_period (#4006 units)
   bool identity = true;                ///< Q100, Q101, Q102 once per connection
 
   /// \brief The scheduler for this plan.
@@ -143,6 +159,9 @@ class MdcPoller
   /// \param port_lock if set, polls are skipped while another process holds it (a DNC transfer
   ///        on the same serial port: polling a Classic control then can freeze it).
   MdcPoller(PollPlan plan, Milliseconds reply_timeout, PortLock* port_lock = nullptr);
+
+  /// \brief See MdcMonitor::setWorkOffsetAxes(). Call before run().
+  void setWorkOffsetAxes(const std::vector<std::pair<int, int>>& machine_work);
 
   void setListener(UpdateListener listener) { listener_ = std::move(listener); }
 

@@ -1,0 +1,428 @@
+// haas_mdc_node: live status of a Haas machine from Machine Data Collection (?Q queries over TCP to
+// an NGC control, or over the RS-232 port of a Classic control) for robot cells: is the machine
+// idle, running, in alarm; which program; how many parts; where the axes are. Publishes `state`,
+// `joint_states`, tf and diagnostics through MachineStatePublisher, cycle events on `events`, and
+// offers ~read_variable, ~write_variable (allow-list) and ~query (read-only raw queries).
+#include <ros/ros.h>
+
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <mutex>
+
+#include "cnc_bridge/CycleEvent.h"
+#include "cnc_bridge/MdcQuery.h"
+#include "cnc_bridge/MdcReadVariable.h"
+#include "cnc_bridge/MdcWriteVariable.h"
+#include "cnc_bridge/common/error.h"
+#include "cnc_bridge/common/port_lock.h"
+#include "cnc_bridge/mdc/mdc_monitor.h"
+#include "cnc_bridge/ros/machine_state_publisher.h"
+#include "cnc_bridge/ros/params.h"
+#include "cnc_bridge/transport/backoff.h"
+#include "cnc_bridge/transport/serial_port.h"
+#include "cnc_bridge/transport/tcp.h"
+
+namespace cnc_bridge
+{
+namespace
+{
+constexpr double kMetresPerInch = 0.0254;
+constexpr double kMetresPerMillimetre = 0.001;
+
+std::vector<int> intList(const ros::NodeHandle& pnh, const std::string& name, const std::vector<int>& fallback)
+{
+  std::vector<int> values = fallback;
+  pnh.param(name, values, fallback);
+  for (int v : values)
+  {
+    if (v < 0)
+    {
+      throw ConfigError(pnh.resolveName(name) + ": variable numbers must not be negative, not " + std::to_string(v));
+    }
+  }
+  return values;
+}
+}  // namespace
+
+class HaasMdcNode
+{
+ public:
+  HaasMdcNode(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh), pnh_(pnh)
+  {
+    // ~port: serial device of a Classic control's RS-232 port; when set, the node uses serial
+    // (with ~baud, ~data_bits, ~parity, ~stop_bits, ~flow_control) instead of TCP.
+    if (pnh.hasParam("port"))
+    {
+      serial_ = params::serialSettings(pnh, 9600);
+      hardware_id_ = serial_->describe();
+      // ~lock_dir: where the serial-port lock shared with dnc_node lives.
+      std::string lock_dir;
+      pnh.param<std::string>("lock_dir", lock_dir, "/tmp");
+      port_lock_ = std::make_unique<PortLock>(serial_->device, lock_dir);
+    }
+    else
+    {
+      // ~host: address of an NGC control (or sim_haas_mdc).
+      host_ = params::required<std::string>(pnh, "host");
+      // ~tcp_port: the control's MDC port, Haas setting 143.
+      int tcp_port = 5051;
+      pnh.param("tcp_port", tcp_port, tcp_port);
+      if (tcp_port <= 0 || tcp_port > 65535)
+      {
+        throw ConfigError(pnh.resolveName("tcp_port") + " must be 1..65535, not " + std::to_string(tcp_port));
+      }
+      tcp_port_ = static_cast<uint16_t>(tcp_port);
+      hardware_id_ = host_ + ":" + std::to_string(tcp_port_);
+    }
+    // ~connect_timeout: s allowed for a TCP connection.
+    connect_timeout_ = params::seconds(pnh, "connect_timeout", 3.0);
+    // ~reply_timeout: s to wait for the reply to one query before counting it unanswered.
+    reply_timeout_ = params::seconds(pnh, "reply_timeout", 1.0);
+
+    mdc::PollPlan plan;
+    // ~status_period: s between Q500 (program, status, parts) polls, and Q104 (mode).
+    plan.status_period = params::seconds(pnh, "status_period", 0.25);
+    // ~variables_period: s between polls of each position variable and ~variables entry.
+    plan.variables_period = params::seconds(pnh, "variables_period", 0.25);
+    // ~counters_period: s between polls of tool in use, cycle times, M30 counters and #4006.
+    plan.counters_period = params::seconds(pnh, "counters_period", 2.0);
+    // ~position_variables: machine position X Y Z (Haas #5021-#5023); [] to not poll positions.
+    position_vars_ = intList(pnh, "position_variables", {5021, 5022, 5023});
+    // ~work_position_variables: work position X Y Z (#5041-#5043) giving the work offset; [] for none.
+    work_vars_ = intList(pnh, "work_position_variables", {5041, 5042, 5043});
+    // ~spindle_variable: spindle speed in rpm (#3027); 0 to not poll it.
+    pnh.param("spindle_variable", spindle_var_, 3027);
+    // ~variables: more macro variables polled via Q600 and shown in diagnostics (#100s, counters).
+    extra_vars_ = intList(pnh, "variables", {});
+    // ~units: linear unit of positions: auto (from G20/G21, #4006), inch or mm.
+    pnh.param<std::string>("units", units_, "auto");
+    if (units_ != "auto" && units_ != "inch" && units_ != "mm")
+    {
+      throw ConfigError(pnh.resolveName("units") + " must be auto, inch or mm, not " + units_);
+    }
+    // ~writable_variables: macro variables ~write_variable may set with the E command; empty
+    // (the default) disables writes.
+    policy_ = std::make_unique<mdc::WritePolicy>(intList(pnh, "writable_variables", {}),
+                                                 pnh.resolveName("writable_variables"));
+    if ((position_vars_.size() != 0 && position_vars_.size() != 3) ||
+        (work_vars_.size() != 0 && work_vars_.size() != 3))
+    {
+      throw ConfigError(pnh.resolveName("position_variables") + " and work_position_variables need 3 entries or none");
+    }
+    for (const auto* list : {&position_vars_, &work_vars_, &extra_vars_})
+    {
+      plan.variables.insert(plan.variables.end(), list->begin(), list->end());
+    }
+    if (spindle_var_ > 0)
+    {
+      plan.variables.push_back(spindle_var_);
+    }
+    if (units_ == "auto" && !position_vars_.empty())
+    {
+      plan.slow_variables.push_back(4006);
+    }
+    poller_ = std::make_unique<mdc::MdcPoller>(plan, reply_timeout_, port_lock_.get());
+    if (!position_vars_.empty() && !work_vars_.empty())
+    {
+      poller_->setWorkOffsetAxes(
+          {{position_vars_[0], work_vars_[0]}, {position_vars_[1], work_vars_[1]}, {position_vars_[2], work_vars_[2]}});
+    }
+
+    state_ = std::make_unique<MachineStatePublisher>(nh, pnh, hardware_id_);
+    state_->diagnostics().add("mdc", this, &HaasMdcNode::diagnose);
+    events_pub_ = nh.advertise<CycleEvent>("events", 20);
+    poller_->setListener([this](const mdc::MachineStatus& s, const std::vector<mdc::CycleEventData>& events)
+                         { onStatus(s, events); });
+    read_srv_ = pnh.advertiseService("read_variable", &HaasMdcNode::readVariable, this);
+    write_srv_ = pnh.advertiseService("write_variable", &HaasMdcNode::writeVariable, this);
+    query_srv_ = pnh.advertiseService("query", &HaasMdcNode::query, this);
+
+    Reconnector::Callbacks callbacks;
+    callbacks.connect = [this] { connect(); };
+    callbacks.session = [this]
+    {
+      std::shared_ptr<Transport> link;
+      {
+        std::lock_guard<std::mutex> lock(link_mutex_);
+        link = link_;
+      }
+      poller_->run(*link, stop_);
+    };
+    callbacks.disconnect = [this]
+    {
+      std::lock_guard<std::mutex> lock(link_mutex_);
+      if (link_)
+      {
+        link_->interrupt();
+      }
+    };
+    callbacks.on_state = [this](LinkState link, const std::string& why)
+    {
+      state_->update(
+          [&](MachineState& m)
+          {
+            m.link = MachineStatePublisher::toMessage(link);
+            if (!why.empty())
+              m.message = why;
+            if (link != LinkState::kUp)
+            {
+              // Nothing is known about a machine we cannot reach (MTConnect: UNAVAILABLE).
+              m.mode = MachineState::MODE_UNKNOWN;
+              m.execution = MachineState::EXECUTION_UNKNOWN;
+              m.position_valid = false;
+            }
+          });
+    };
+    reconnector_ = std::make_unique<Reconnector>("haas_mdc " + hardware_id_, callbacks);
+    reconnector_->start();
+    ROS_INFO_STREAM("haas_mdc_node polling " << hardware_id_ << " (Q500 every " << plan.status_period.count()
+                                             << " ms; writes "
+                                             << (policy_->allowed().empty() ? "disabled" : "allow-listed") << ")");
+  }
+
+  ~HaasMdcNode()
+  {
+    stop_.stop();
+    reconnector_->stop();
+  }
+
+ private:
+  void connect()
+  {
+    std::shared_ptr<Transport> link;
+    {
+      // Release the previous link first: a serial port must be closed before it is reopened.
+      std::lock_guard<std::mutex> lock(link_mutex_);
+      link_.reset();
+    }
+    if (serial_)
+    {
+      link = std::make_shared<SerialPort>(*serial_);
+    }
+    else
+    {
+      link = std::shared_ptr<Transport>(TcpConnection::connect(host_, tcp_port_, connect_timeout_));
+    }
+    std::lock_guard<std::mutex> lock(link_mutex_);
+    link_ = link;
+  }
+
+  // Called by the poller after each reply, under its lock.
+  void onStatus(const mdc::MachineStatus& s, const std::vector<mdc::CycleEventData>& events)
+  {
+    const ros::Time now = ros::Time::now();
+    state_->update(
+        [&](MachineState& m)
+        {
+          m.header.stamp = now;
+          m.link = MachineState::LINK_UP;
+          m.mode = static_cast<uint8_t>(s.mode);
+          m.execution = static_cast<uint8_t>(s.execution);
+          m.program = s.program;
+          m.part_count = s.parts.value_or(-1);
+          m.tool = s.tool ? static_cast<int32_t>(*s.tool) : -1;
+          m.message = s.execution == mdc::Execution::kAlarm ? "Haas status " + s.status_text : "";
+          if (spindle_var_ > 0 && s.variables.count(spindle_var_))
+          {
+            // #3027 is in rev/min, the unit of MachineState.spindle_speed.
+            m.spindle_speed = s.variables.at(spindle_var_);
+          }
+          const double scale = metresPerUnit(s);
+          m.position_valid = false;
+          if (scale > 0 && !position_vars_.empty() && haveAll(s, position_vars_))
+          {
+            // Positions arrive in the control's unit (inch under G20, mm under G21): to metres.
+            m.position_valid = true;
+            m.position.x = s.variables.at(position_vars_[0]) * scale;
+            m.position.y = s.variables.at(position_vars_[1]) * scale;
+            m.position.z = s.variables.at(position_vars_[2]) * scale;
+            if (s.work_offset[0] && s.work_offset[1] && s.work_offset[2])
+            {
+              // Work zero in machine coordinates, taken while the axes stood still (MdcMonitor).
+              m.work_offset_valid = true;
+              m.work_offset.x = *s.work_offset[0] * scale;
+              m.work_offset.y = *s.work_offset[1] * scale;
+              m.work_offset.z = *s.work_offset[2] * scale;
+            }
+          }
+        });
+    for (const auto& e : events)
+    {
+      CycleEvent msg;
+      msg.header.stamp = now;
+      msg.header.frame_id = state_->frame("machine");
+      msg.machine = state_->machineName();
+      msg.event = e.type;
+      msg.program = e.program;
+      msg.part_count = e.part_count;
+      msg.cycle_time = e.cycle_time >= 0 ? e.cycle_time : std::numeric_limits<double>::quiet_NaN();
+      msg.text = e.text;
+      events_pub_.publish(msg);
+      ROS_INFO_STREAM("haas_mdc_node: " << e.text << " (program " << e.program << ", parts " << e.part_count << ")");
+    }
+  }
+
+  double metresPerUnit(const mdc::MachineStatus& s) const
+  {
+    if (units_ == "inch")
+      return kMetresPerInch;
+    if (units_ == "mm")
+      return kMetresPerMillimetre;
+    switch (s.units)
+    {
+      case mdc::Units::kInch:
+        return kMetresPerInch;
+      case mdc::Units::kMillimetre:
+        return kMetresPerMillimetre;
+      default:
+        return 0;  // not known yet: no position rather than a wrong one
+    }
+  }
+
+  static bool haveAll(const mdc::MachineStatus& s, const std::vector<int>& vars)
+  {
+    for (int v : vars)
+      if (!s.variables.count(v))
+        return false;
+    return true;
+  }
+
+  bool readVariable(MdcReadVariable::Request& req, MdcReadVariable::Response& res)
+  {
+    try
+    {
+      if (req.variable < 0)
+        throw ConfigError("variable numbers are not negative");
+      poller_->withClient([&](mdc::MdcClient& c) { res.value = c.readVariable(req.variable, reply_timeout_); });
+      res.success = true;
+    }
+    catch (const Error& e)
+    {
+      res.success = false;
+      res.message = e.what();
+    }
+    return true;
+  }
+
+  bool writeVariable(MdcWriteVariable::Request& req, MdcWriteVariable::Response& res)
+  {
+    try
+    {
+      policy_->check(req.variable);
+      if (!std::isfinite(req.value))
+        throw ConfigError("the value must be a finite number");
+      poller_->withClient([&](mdc::MdcClient& c) { c.writeVariable(req.variable, req.value, reply_timeout_); });
+      res.success = true;
+      res.message = "#" + std::to_string(req.variable) + " set";
+      ROS_INFO_STREAM("haas_mdc_node: wrote #" << req.variable << " = " << req.value);
+    }
+    catch (const Error& e)
+    {
+      res.success = false;
+      res.message = e.what();
+      ROS_WARN_STREAM("haas_mdc_node: write of #" << req.variable << " refused: " << e.what());
+    }
+    return true;
+  }
+
+  bool query(MdcQuery::Request& req, MdcQuery::Response& res)
+  {
+    const auto parsed = mdc::parseReadOnlyQuery(req.query);
+    if (!parsed)
+    {
+      res.success = false;
+      res.message = "only read-only queries (?Qnnn, optionally one number) are sent; use " +
+                    pnh_.resolveName("write_variable") + " to write";
+      return true;
+    }
+    try
+    {
+      poller_->withClient([&](mdc::MdcClient& c) { res.reply = c.request(*parsed, reply_timeout_).line; });
+      res.success = true;
+    }
+    catch (const Error& e)
+    {
+      res.success = false;
+      res.message = e.what();
+    }
+    return true;
+  }
+
+  void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status)
+  {
+    const auto stats = poller_->stats();
+    const auto s = poller_->status();
+    const uint64_t new_unanswered = stats.unanswered - last_unanswered_;
+    last_unanswered_ = stats.unanswered;
+    if (state_->snapshot().link != MachineState::LINK_UP)
+      status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "not connected");
+    else if (new_unanswered > 0)
+      status.summaryf(diagnostic_msgs::DiagnosticStatus::WARN, "%llu queries unanswered since the last report",
+                      static_cast<unsigned long long>(new_unanswered));
+    else
+      status.summary(diagnostic_msgs::DiagnosticStatus::OK, "polling");
+    status.add("serial number", s.serial_number);
+    status.add("model", s.model);
+    status.add("software version", s.software_version);
+    status.add("mode", s.mode_text);
+    status.add("status", s.status_text);
+    status.add("queries sent", stats.sent);
+    status.add("answered", stats.answered);
+    status.add("unanswered", stats.unanswered);
+    status.add("rejected by the control", stats.rejected);
+    status.add("other clients' replies", stats.foreign);
+    status.add("oversize lines dropped", stats.dropped_lines);
+    status.add("latency last (ms)", stats.last_latency_ms);
+    status.add("latency mean (ms)", stats.answered ? stats.total_latency_ms / stats.answered : 0.0);
+    status.add("latency max (ms)", stats.max_latency_ms);
+    status.add("polls skipped for a DNC transfer", poller_->skippedForPortLock());
+    status.add("reconnects", reconnector_ ? reconnector_->reconnects() : 0u);
+    if (s.last_cycle_s)
+      status.add("last cycle (s)", *s.last_cycle_s);
+    if (s.m30_counter1)
+      status.add("M30 counter #1", *s.m30_counter1);
+    for (const auto& [variable, value] : s.variables)
+      status.add("#" + std::to_string(variable), value);
+  }
+
+  ros::NodeHandle nh_, pnh_;
+  std::optional<SerialSettings> serial_;
+  std::string host_;
+  uint16_t tcp_port_ = 0;
+  std::string hardware_id_;
+  Milliseconds connect_timeout_{3000}, reply_timeout_{1000};
+  std::vector<int> position_vars_, work_vars_, extra_vars_;
+  int spindle_var_ = 3027;
+  std::string units_;
+  std::unique_ptr<mdc::WritePolicy> policy_;
+  std::unique_ptr<PortLock> port_lock_;
+  std::unique_ptr<mdc::MdcPoller> poller_;
+  std::unique_ptr<MachineStatePublisher> state_;
+  ros::Publisher events_pub_;
+  ros::ServiceServer read_srv_, write_srv_, query_srv_;
+  uint64_t last_unanswered_ = 0;
+
+  std::mutex link_mutex_;
+  std::shared_ptr<Transport> link_;
+  StopSignal stop_;
+  std::unique_ptr<Reconnector> reconnector_;
+};
+}  // namespace cnc_bridge
+
+int main(int argc, char** argv)
+{
+  ros::init(argc, argv, "haas_mdc_node");
+  cnc_bridge::routeCoreLogToRosconsole();
+  try
+  {
+    cnc_bridge::HaasMdcNode node(ros::NodeHandle(), ros::NodeHandle("~"));
+    ros::spin();
+  }
+  catch (const cnc_bridge::Error& e)
+  {
+    ROS_FATAL_STREAM("haas_mdc_node: " << e.what());
+    return 1;
+  }
+  return 0;
+}
