@@ -76,7 +76,8 @@ int main(int argc, char** argv)
   po::variables_map vm;
   try
   {
-    po::store(po::parse_command_line(argc, argv, options), vm);
+    // Unregistered arguments are allowed: roslaunch appends __name:= and __log:= to every node.
+    po::store(po::command_line_parser(argc, argv).options(options).allow_unregistered().run(), vm);
     po::notify(vm);
   }
   catch (const po::error& e)

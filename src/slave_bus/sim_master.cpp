@@ -1,6 +1,8 @@
 // The simulated master and slaves (see sim_master.h).
 #include "cnc_bridge/slave_bus/sim_master.h"
 
+#include <algorithm>
+
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/log.h"
 
@@ -63,7 +65,9 @@ void SimSlave::receive(const std::vector<uint8_t>& i2c_frame)
       reply_ = encodeValues({tool_on_ ? 1 : 0}, encoding_);
       break;
     case SimRole::kGeneric:
-      reply_ = payload;
+      // Echo, as the seed's slave sketch does, but no more than the master reads.
+      reply_.assign(payload.begin(),
+                    payload.begin() + static_cast<std::ptrdiff_t>(std::min(payload.size(), kMaxReply)));
       break;
   }
   has_reply_ = true;

@@ -147,6 +147,25 @@ TEST(SimMaster, FramedModeReportsBadFramesAndUnknownSlaves)
   EXPECT_EQ(master.stats().unknown_slaves, 1u);
 }
 
+TEST(SimMaster, LongEchoIsCutToWhatTheMasterReads)
+{
+  for (const Framing framing : {Framing::kRaw, Framing::kFramed})
+  {
+    FakeTransport link;
+    SimMaster::Options options;
+    options.framing = framing;
+    SimMaster master(link, eightSlaves(), options);
+    StepPayloads payloads(5);
+    payloads[4] = Bytes(framing == Framing::kRaw ? kMaxPayload : 200, 0x33);
+    const auto frame = encodeStepForLink(payloads, framing);
+    master.processInput(frame.data(), frame.size());
+    master.pollSlaves();
+    const auto records = parseAll(link.written(), framing);
+    ASSERT_EQ(records.size(), 1u);
+    EXPECT_EQ(records[0].payload, Bytes(kMaxReply, 0x33));
+  }
+}
+
 TEST(SimMaster, SlaveIgnoresAPayloadItCannotDecode)
 {
   FakeTransport link;

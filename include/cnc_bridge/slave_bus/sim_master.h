@@ -20,12 +20,15 @@ namespace cnc_bridge
 {
 namespace slave_bus
 {
+/// \brief The most a master reads from one slave: the seed's master calls read_I2C(addr, 32).
+constexpr size_t kMaxReply = 32;
+
 /// \brief What a slave board does with its payload.
 enum class SimRole
 {
   kAxis,    ///< payload: target position (one value, device units); moves there; answers its position
   kTool,    ///< payload: one value, non-zero = on; answers its state (1/0)
-  kGeneric  ///< echoes every payload back
+  kGeneric  ///< echoes every payload back (its first kMaxReply bytes)
 };
 SimRole parseSimRole(const std::string& text);  ///< axis|tool|generic; \throws ConfigError
 

@@ -1,0 +1,114 @@
+// bench_slave_bus: synchronous steps per second through the PC-side BusSession to a master on a
+// serial device (sim_slave_bus on a pty, or a real board), each step one 8-slave frame that waits
+// for every slave's answer. With --baud the PC's writes are paced to that line rate (the simulator
+// paces its own with the same option), and the result is compared with the line-rate bound.
+#include <algorithm>
+#include <boost/program_options.hpp>
+#include <chrono>
+#include <iomanip>
+#include <iostream>
+#include <memory>
+
+#include "cnc_bridge/slave_bus/bus_session.h"
+#include "cnc_bridge/slave_bus/value_codec.h"
+#include "cnc_bridge/transport/paced_transport.h"
+#include "cnc_bridge/transport/serial_port.h"
+
+using namespace cnc_bridge;
+using namespace cnc_bridge::slave_bus;
+
+int main(int argc, char** argv)
+{
+  namespace po = boost::program_options;
+  po::options_description options("bench_slave_bus options");
+  std::string port, framing;
+  unsigned steps = 2000, baud = 0, slaves = 8;
+  options.add_options()("help,h", "this help")("port", po::value(&port)->required(), "serial device of the master")(
+      "framing", po::value(&framing)->default_value("raw"), "raw or framed")(
+      "steps", po::value(&steps)->default_value(2000), "steps to time")("slaves", po::value(&slaves)->default_value(8),
+                                                                        "slaves per frame, each gets a 2-byte value")(
+      "baud", po::value(&baud)->default_value(0), "pace writes to this line rate, 8N1 (0: as fast as the link takes)");
+  po::variables_map vm;
+  try
+  {
+    po::store(po::parse_command_line(argc, argv, options), vm);
+    if (vm.count("help"))
+    {
+      std::cout << options;
+      return 0;
+    }
+    po::notify(vm);
+  }
+  catch (const po::error& e)
+  {
+    std::cerr << "bench_slave_bus: " << e.what() << "\n" << options;
+    return 2;
+  }
+  try
+  {
+    SerialSettings settings;
+    settings.device = port;
+    settings.baud = baud > 0 ? baud : 115200;
+    SerialPort serial(settings);
+    const double cps = baud / static_cast<double>(bitsPerCharacter(8, false, 1));
+    std::unique_ptr<PacedTransport> paced;
+    Transport* link = &serial;
+    if (baud > 0)
+    {
+      paced = std::make_unique<PacedTransport>(serial, cps);
+      link = paced.get();
+    }
+    BusSession session(*link, parseFraming(framing), slaves);
+    std::vector<double> latencies;
+    latencies.reserve(steps);
+    uint64_t missing = 0;
+    for (unsigned i = 0; i < steps + 20; ++i)
+    {
+      if (i == 20)
+      {
+        latencies.clear();  // the first 20 steps warm up
+      }
+      StepPayloads payloads(slaves);
+      for (unsigned s = 0; s < slaves; ++s)
+      {
+        // Axes and generic slaves alike take one be16s value (a tool slave takes 0/1 as two bytes too).
+        payloads[s] = encodeValues({static_cast<int32_t>((i * 7 + s) % 2)}, Encoding::kBigEndian16s);
+      }
+      const auto t0 = std::chrono::steady_clock::now();
+      const auto result = session.step(payloads, Milliseconds(2000));
+      latencies.push_back(std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - t0).count());
+      missing += result.missing.size();
+    }
+    double total = 0;
+    for (double l : latencies)
+    {
+      total += l;
+    }
+    const double seconds = total / 1e6;
+    std::sort(latencies.begin(), latencies.end());
+    const auto& stats = session.stats();
+    const double down = static_cast<double>(stats.bytes_sent) / (steps + 20);
+    const double up = static_cast<double>(stats.bytes_received) / (steps + 20);
+    const double rate = steps / seconds;
+    std::cout << std::fixed << std::setprecision(1);
+    std::cout << "framing=" << framing << " slaves=" << slaves << " baud=" << (baud ? std::to_string(baud) : "pty")
+              << " steps=" << steps << " missing=" << missing << "\n";
+    std::cout << "  bytes per step: " << down << " down, " << up << " up\n";
+    std::cout << "  steps/s: " << rate << "   latency us: median " << latencies[latencies.size() / 2] << ", p99 "
+              << latencies[latencies.size() * 99 / 100] << "\n";
+    if (baud > 0)
+    {
+      // Each step waits for the answers before the next frame: the line carries down + up bytes
+      // one after the other, so the bound is the character rate over both.
+      const double bound = cps / (down + up);
+      std::cout << "  line-rate bound: " << bound << " steps/s   measured/bound = " << std::setprecision(3)
+                << rate / bound << "\n";
+    }
+    return missing == 0 ? 0 : 1;
+  }
+  catch (const std::exception& e)
+  {
+    std::cerr << "bench_slave_bus: " << e.what() << std::endl;
+    return 1;
+  }
+}

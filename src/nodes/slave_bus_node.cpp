@@ -1,0 +1,735 @@
+// slave_bus_node: drives a universal-CNC master board (universal_cnc_serial_i2c_protocol.md) over
+// its serial link. Each step is one serial array frame that carries a payload for every slave, so
+// all slaves get their data together; the slaves' answers come back as per-slave topics, and axis
+// slaves' positions feed state, joint_states and tf. The protocol lives in the core
+// (cnc_bridge/slave_bus); this class turns it into ROS.
+#include <ros/ros.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <deque>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <set>
+#include <thread>
+#include <type_traits>
+
+#include "cnc_bridge/BusFrame.h"
+#include "cnc_bridge/SlaveCommand.h"
+#include "cnc_bridge/SlaveResponse.h"
+#include "cnc_bridge/common/error.h"
+#include "cnc_bridge/ros/machine_state_publisher.h"
+#include "cnc_bridge/ros/params.h"
+#include "cnc_bridge/slave_bus/bus_session.h"
+#include "cnc_bridge/slave_bus/value_codec.h"
+#include "cnc_bridge/transport/backoff.h"
+#include "cnc_bridge/transport/serial_port.h"
+
+namespace cnc_bridge
+{
+namespace
+{
+using slave_bus::Encoding;
+using slave_bus::StepPayloads;
+using slave_bus::UplinkRecord;
+
+enum class Role
+{
+  kAxisX,
+  kAxisY,
+  kAxisZ,
+  kTool,
+  kGeneric
+};
+
+Role parseRole(const std::string& text)
+{
+  if (text == "x" || text == "axis_x")
+    return Role::kAxisX;
+  if (text == "y" || text == "axis_y")
+    return Role::kAxisY;
+  if (text == "z" || text == "axis_z")
+    return Role::kAxisZ;
+  if (text == "tool")
+    return Role::kTool;
+  if (text == "generic")
+    return Role::kGeneric;
+  throw ConfigError("role '" + text + "' is not one of x, y, z, tool, generic");
+}
+
+bool isAxis(Role role)
+{
+  return role == Role::kAxisX || role == Role::kAxisY || role == Role::kAxisZ;
+}
+
+/// Roles whose payloads make the machine move or cut: refused unless ~enable_motion.
+bool startsMotion(Role role)
+{
+  return role != Role::kGeneric;
+}
+
+template <class T>
+T member(XmlRpc::XmlRpcValue& item, const std::string& key, const T& fallback, const std::string& where)
+{
+  if (!item.hasMember(key))
+  {
+    return fallback;
+  }
+  XmlRpc::XmlRpcValue& value = item[key];
+  if constexpr (std::is_same<T, double>::value)
+  {
+    if (value.getType() == XmlRpc::XmlRpcValue::TypeInt)
+      return static_cast<int>(value);
+    if (value.getType() == XmlRpc::XmlRpcValue::TypeDouble)
+      return static_cast<double>(value);
+  }
+  else if constexpr (std::is_same<T, int>::value)
+  {
+    if (value.getType() == XmlRpc::XmlRpcValue::TypeInt)
+      return static_cast<int>(value);
+  }
+  else
+  {
+    if (value.getType() == XmlRpc::XmlRpcValue::TypeString)
+      return static_cast<std::string>(value);
+  }
+  throw ConfigError(where + "." + key + " has the wrong type");
+}
+}  // namespace
+
+class SlaveBusNode
+{
+ public:
+  SlaveBusNode(ros::NodeHandle nh, ros::NodeHandle pnh)
+      : nh_(nh), settings_(params::serialSettings(pnh, 115200)), state_(nh, pnh, settings_.describe())
+  {
+    std::string framing = "raw";
+    // ~framing: raw (the seed's bytes, for its stock master firmware) or framed (every frame in a
+    // WirePacker frame with CRC-8, both directions; recommended where the firmware supports it).
+    pnh.param("framing", framing, framing);
+    framing_ = slave_bus::parseFraming(framing);
+    // ~enable_motion: axis and tool payloads (bus/frame or commands) are refused unless true.
+    pnh.param("enable_motion", enable_motion_, false);
+    // ~reply_timeout (s): how long a slave that got a payload has to answer before it counts a timeout.
+    reply_timeout_ = params::seconds(pnh, "reply_timeout", 0.5);
+    // ~command_delay (s): a step of queued commands leaves this long after its first command, so
+    // that commands published together (x, y, then the tool) travel in one frame.
+    command_delay_ = params::seconds(pnh, "command_delay", 0.005);
+    // ~resync_gap (s): a partial uplink record followed by this much silence is dropped.
+    resync_gap_ = params::seconds(pnh, "resync_gap", 0.05);
+    int max_queued = 100;
+    // ~max_queued_steps: steps waiting for the link; more are refused (and counted), not dropped silently.
+    pnh.param("max_queued_steps", max_queued, max_queued);
+    max_queued_ = static_cast<size_t>(std::max(1, max_queued));
+    loadSlaves(pnh);
+    int bus_size = 0;
+    // ~bus_size: slaves in every frame (the seed's master firmware is built for a fixed count, e.g.
+    // 8); 0 (default): the highest configured address.
+    pnh.param("bus_size", bus_size, bus_size);
+    if (bus_size == 0)
+    {
+      bus_size = static_cast<int>(highest_address_);
+    }
+    if (bus_size < static_cast<int>(highest_address_) || bus_size > static_cast<int>(slave_bus::kMaxSlaves))
+    {
+      throw ConfigError(pnh.resolveName("bus_size") + " must be between the highest slave address (" +
+                        std::to_string(highest_address_) + ") and " + std::to_string(slave_bus::kMaxSlaves));
+    }
+    bus_size_ = static_cast<size_t>(bus_size);
+
+    for (auto& slave : slaves_)
+    {
+      slave.response_pub = nh.advertise<SlaveResponse>("slaves/" + slave.name + "/response", 50);
+      const size_t index = static_cast<size_t>(&slave - slaves_.data());
+      slave.command_sub =
+          nh.subscribe<SlaveCommand>("slaves/" + slave.name + "/command", 50,
+                                     [this, index](const SlaveCommand::ConstPtr& msg) { onCommand(index, *msg); });
+    }
+    frame_sub_ = nh.subscribe("bus/frame", 50, &SlaveBusNode::onFrame, this);
+
+    state_.update(
+        [&](MachineState& s)
+        {
+          s.mode = MachineState::MODE_DNC;  // the PC feeds every step over the link
+          s.execution = MachineState::EXECUTION_READY;
+          s.feed_rate = NAN;
+          s.spindle_speed = NAN;
+        });
+    state_.diagnostics().add("slave bus", this, &SlaveBusNode::diagnose);
+
+    Reconnector::Callbacks callbacks;
+    callbacks.connect = [this] { connect(); };
+    callbacks.session = [this] { ioLoop(); };
+    callbacks.on_state = [this](LinkState link, const std::string& why) { state_.setLink(link, why); };
+    callbacks.disconnect = [this] { disconnect(); };
+    reconnector_ = std::make_unique<Reconnector>(settings_.describe(), callbacks);
+    reconnector_->start();
+    ROS_INFO_STREAM("slave_bus_node: " << slaves_.size() << " slaves on a bus of " << bus_size_ << ", "
+                                       << slave_bus::toString(framing_) << " framing, " << settings_.describe()
+                                       << (enable_motion_ ? ", motion enabled" : ", motion disabled"));
+  }
+
+  ~SlaveBusNode()
+  {
+    stopping_ = true;
+    reconnector_->stop();
+  }
+
+ private:
+  struct Slave
+  {
+    uint8_t address = 0;
+    std::string name;
+    Role role = Role::kGeneric;
+    Encoding encoding = Encoding::kBytes;
+    double scale = 1.0;  // device units per metre (axes)
+    ros::Publisher response_pub;
+    ros::Subscriber command_sub;
+    // Counters, under stats_mutex_.
+    uint64_t replies = 0;
+    uint64_t timeouts = 0;
+    uint64_t decode_errors = 0;
+  };
+
+  struct Step
+  {
+    StepPayloads payloads;
+    bool from_commands = false;
+    ros::WallTime first_command;
+  };
+
+  void loadSlaves(ros::NodeHandle& pnh)
+  {
+    XmlRpc::XmlRpcValue list;
+    // ~slaves: list of {address, name, role (x|y|z|tool|generic), encoding (bytes|hundreds|be16|be16s),
+    // scale (device units per metre, axes only)}.
+    if (!pnh.getParam("slaves", list))
+    {
+      throw ConfigError("Required parameter " + pnh.resolveName("slaves") + " not given.");
+    }
+    if (list.getType() != XmlRpc::XmlRpcValue::TypeArray || list.size() == 0)
+    {
+      throw ConfigError(pnh.resolveName("slaves") + " must be a non-empty list");
+    }
+    std::set<int> addresses;
+    std::set<std::string> names;
+    std::set<Role> axes;
+    for (int i = 0; i < list.size(); ++i)
+    {
+      const std::string where = pnh.resolveName("slaves") + "[" + std::to_string(i) + "]";
+      if (list[i].getType() != XmlRpc::XmlRpcValue::TypeStruct)
+      {
+        throw ConfigError(where + " is not a {address, name, role, ...} map");
+      }
+      Slave slave;
+      const int address = member<int>(list[i], "address", 0, where);
+      if (address < 1 || address > static_cast<int>(slave_bus::kMaxSlaves) || !addresses.insert(address).second)
+      {
+        throw ConfigError(where + ".address must be unique and in 1.." + std::to_string(slave_bus::kMaxSlaves));
+      }
+      slave.address = static_cast<uint8_t>(address);
+      slave.name = member<std::string>(list[i], "name", "", where);
+      std::string error;
+      if (slave.name.empty() || !ros::names::validate(slave.name, error) || slave.name.find('/') != std::string::npos ||
+          !names.insert(slave.name).second)
+      {
+        throw ConfigError(where + ".name '" + slave.name + "' must be a unique, valid topic name part");
+      }
+      slave.role = parseRole(member<std::string>(list[i], "role", "generic", where));
+      slave.encoding = slave_bus::parseEncoding(member<std::string>(list[i], "encoding", "bytes", where));
+      slave.scale = member<double>(list[i], "scale", 1.0, where);
+      if (!(std::isfinite(slave.scale) && slave.scale != 0.0))
+      {
+        throw ConfigError(where + ".scale must be a finite, non-zero number of device units per metre");
+      }
+      if (isAxis(slave.role) && !axes.insert(slave.role).second)
+      {
+        throw ConfigError(where + ": a second slave for the same axis");
+      }
+      highest_address_ = std::max<size_t>(highest_address_, slave.address);
+      slaves_.push_back(slave);
+    }
+    axis_count_ = axes.size();
+    for (size_t i = 0; i < slaves_.size(); ++i)
+    {
+      by_address_[slaves_[i].address] = i;
+    }
+  }
+
+  // ---- ROS inputs -------------------------------------------------------------------------------
+
+  void onFrame(const BusFrame::ConstPtr& msg)
+  {
+    Step step;
+    step.payloads.resize(bus_size_);
+    std::set<uint8_t> seen;
+    for (const auto& payload : msg->payloads)
+    {
+      std::string why;
+      if (payload.address < 1 || payload.address > bus_size_)
+      {
+        why =
+            "address " + std::to_string(payload.address) + " is outside the bus (1.." + std::to_string(bus_size_) + ")";
+      }
+      else if (!seen.insert(payload.address).second)
+      {
+        why = "two payloads for address " + std::to_string(payload.address);
+      }
+      else if (payload.data.size() > slave_bus::kMaxPayload)
+      {
+        why = "payload for address " + std::to_string(payload.address) + " has " + std::to_string(payload.data.size()) +
+              " bytes (at most " + std::to_string(slave_bus::kMaxPayload) + ")";
+      }
+      else if (!payload.data.empty() && !motionAllowed(payload.address))
+      {
+        why = "address " + std::to_string(payload.address) +
+              " is an axis, tool or unconfigured slave and ~enable_motion is false (set it true to send motion)";
+      }
+      if (!why.empty())
+      {
+        refuse("bus/frame refused: " + why);
+        return;
+      }
+      step.payloads[payload.address - 1] = payload.data;
+    }
+    enqueue(std::move(step), false);
+  }
+
+  void onCommand(size_t index, const SlaveCommand& msg)
+  {
+    const Slave& slave = slaves_[index];
+    std::vector<uint8_t> payload;
+    try
+    {
+      payload = commandPayload(slave, msg);
+    }
+    catch (const Error& e)
+    {
+      refuse("slaves/" + slave.name + "/command refused: " + e.what());
+      return;
+    }
+    Step step;
+    step.payloads.resize(bus_size_);
+    step.payloads[slave.address - 1] = std::move(payload);
+    enqueue(std::move(step), true);
+  }
+
+  std::vector<uint8_t> commandPayload(const Slave& slave, const SlaveCommand& msg) const
+  {
+    if (startsMotion(slave.role) && !enable_motion_)
+    {
+      throw DisabledError("slave " + slave.name + " moves or cuts and ~enable_motion is false (set it true)");
+    }
+    if (msg.values.empty() == msg.data.empty())
+    {
+      throw ProtocolError("give either values or data");
+    }
+    if (!msg.data.empty())
+    {
+      if (msg.data.size() > slave_bus::kMaxPayload)
+      {
+        throw ProtocolError(std::to_string(msg.data.size()) + " bytes (at most " +
+                            std::to_string(slave_bus::kMaxPayload) + ")");
+      }
+      return msg.data;
+    }
+    std::vector<int32_t> values;
+    if (isAxis(slave.role))
+    {
+      if (msg.values.size() != 1)
+      {
+        throw ProtocolError("an axis takes one value, its position in m");
+      }
+      // m -> device units (steps, pulses, 1/100 mm...: whatever ~scale says per metre).
+      const double device = std::round(msg.values[0] * slave.scale);
+      if (!std::isfinite(device) || device < slave_bus::minValue(slave.encoding) ||
+          device > slave_bus::maxValue(slave.encoding))
+      {
+        throw ProtocolError("position " + std::to_string(msg.values[0]) + " m is " + std::to_string(device) +
+                            " device units, outside what " + slave_bus::toString(slave.encoding) + " carries");
+      }
+      values.push_back(static_cast<int32_t>(device));
+    }
+    else
+    {
+      for (const double value : msg.values)
+      {
+        if (!std::isfinite(value) || std::fabs(value - std::round(value)) > 1e-9 || std::fabs(value) > 1e9)
+        {
+          throw ProtocolError("value " + std::to_string(value) + " is not an integer");
+        }
+        values.push_back(static_cast<int32_t>(std::round(value)));
+      }
+    }
+    auto payload = slave_bus::encodeValues(values, slave.encoding);
+    if (payload.size() > slave_bus::kMaxPayload)
+    {
+      throw ProtocolError("too many values for one payload");
+    }
+    return payload;
+  }
+
+  bool motionAllowed(uint8_t address) const
+  {
+    if (enable_motion_)
+    {
+      return true;
+    }
+    const auto found = by_address_.find(address);
+    return found != by_address_.end() && !startsMotion(slaves_[found->second].role);
+  }
+
+  void refuse(const std::string& why)
+  {
+    {
+      std::lock_guard<std::mutex> lock(stats_mutex_);
+      ++refused_;
+    }
+    ROS_ERROR_STREAM_THROTTLE(1.0, why);
+  }
+
+  /// Explicit frames queue as they are; commands join the last queued command step if their slot is
+  /// still free there (so a second command to the same slave waits for the following step: none is lost).
+  void enqueue(Step step, bool from_commands)
+  {
+    std::lock_guard<std::mutex> lock(queue_mutex_);
+    if (from_commands)
+    {
+      const size_t slot = static_cast<size_t>(std::find_if(step.payloads.begin(), step.payloads.end(),
+                                                           [](const std::vector<uint8_t>& p) { return !p.empty(); }) -
+                                              step.payloads.begin());
+      for (auto it = queue_.rbegin(); it != queue_.rend(); ++it)
+      {
+        if (!it->from_commands)
+        {
+          break;  // do not reorder commands across an explicit frame
+        }
+        if (it->payloads[slot].empty())
+        {
+          it->payloads[slot] = std::move(step.payloads[slot]);
+          return;
+        }
+        break;
+      }
+      step.from_commands = true;
+      step.first_command = ros::WallTime::now();
+    }
+    if (queue_.size() >= max_queued_)
+    {
+      std::lock_guard<std::mutex> stats_lock(stats_mutex_);
+      ++refused_;
+      ROS_ERROR_STREAM_THROTTLE(
+          1.0, "slave bus: " << queue_.size() << " steps already queued (~max_queued_steps): step refused");
+      return;
+    }
+    queue_.push_back(std::move(step));
+  }
+
+  /// The next step that may leave now, if any.
+  bool takeStep(Step& step)
+  {
+    std::lock_guard<std::mutex> lock(queue_mutex_);
+    if (queue_.empty())
+    {
+      return false;
+    }
+    Step& front = queue_.front();
+    if (front.from_commands && queue_.size() == 1 &&
+        ros::WallTime::now() - front.first_command < ros::WallDuration(command_delay_.count() / 1000.0))
+    {
+      return false;  // more commands may still join it
+    }
+    step = std::move(front);
+    queue_.pop_front();
+    return true;
+  }
+
+  // ---- link -------------------------------------------------------------------------------------
+
+  void connect()
+  {
+    auto port = std::make_unique<SerialPort>(settings_);
+    std::lock_guard<std::mutex> lock(link_mutex_);
+    session_.reset();
+    port_ = std::move(port);
+    session_ = std::make_unique<slave_bus::BusSession>(*port_, framing_, bus_size_, resync_gap_);
+  }
+
+  void disconnect()
+  {
+    std::lock_guard<std::mutex> lock(link_mutex_);
+    if (port_)
+    {
+      port_->interrupt();
+    }
+  }
+
+  /// The I/O thread: sends queued steps one at a time and publishes what comes back.
+  void ioLoop()
+  {
+    try
+    {
+      while (!stopping_)
+      {
+        Step step;
+        if (takeStep(step))
+        {
+          state_.update([](MachineState& s) { s.execution = MachineState::EXECUTION_ACTIVE; });
+          slave_bus::BusSession::StepResult result;
+          try
+          {
+            result = session_->step(step.payloads, reply_timeout_);
+          }
+          catch (const ProtocolError& e)
+          {
+            refuse(std::string("step not sent: ") + e.what());
+            continue;
+          }
+          handle(result.replies);
+          handle(result.master_status);
+          countTimeouts(result.missing);
+          snapshotStats();
+          std::lock_guard<std::mutex> lock(queue_mutex_);
+          if (queue_.empty())
+          {
+            state_.update([](MachineState& s) { s.execution = MachineState::EXECUTION_READY; });
+          }
+          continue;
+        }
+        // Idle: the master may still write (late answers, status). A short timeout keeps a new step
+        // from waiting long; interrupting the read instead could cut a frame being written.
+        handle(session_->poll(Milliseconds(5)));
+        snapshotStats();
+      }
+    }
+    catch (const CancelledError&)
+    {
+      if (!stopping_)
+      {
+        throw LinkError(settings_.describe() + ": interrupted");
+      }
+    }
+    catch (const Error&)
+    {
+      snapshotStats();
+      std::lock_guard<std::mutex> lock(link_mutex_);
+      session_.reset();
+      port_.reset();  // the Reconnector opens it again after a backoff
+      throw;
+    }
+  }
+
+  void handle(const std::vector<UplinkRecord>& records)
+  {
+    for (const auto& record : records)
+    {
+      if (record.address == 0)
+      {
+        onMasterStatus(record);
+        continue;
+      }
+      const auto found = by_address_.find(record.address);
+      if (found == by_address_.end())
+      {
+        std::lock_guard<std::mutex> lock(stats_mutex_);
+        ++unknown_replies_;
+        continue;
+      }
+      publishResponse(slaves_[found->second], record);
+    }
+  }
+
+  void publishResponse(Slave& slave, const UplinkRecord& record)
+  {
+    SlaveResponse msg;
+    msg.header.stamp = ros::Time::now();
+    msg.name = slave.name;
+    msg.address = slave.address;
+    msg.data = record.payload;
+    bool decoded = true;
+    try
+    {
+      for (const int32_t value : slave_bus::decodeValues(record.payload, slave.encoding))
+      {
+        // Axis answers are device units: back to metres with the same scale.
+        msg.values.push_back(isAxis(slave.role) ? value / slave.scale : value);
+      }
+    }
+    catch (const ProtocolError&)
+    {
+      decoded = false;
+      msg.values.clear();
+    }
+    {
+      std::lock_guard<std::mutex> lock(stats_mutex_);
+      ++slave.replies;
+      slave.decode_errors += decoded ? 0 : 1;
+    }
+    if (isAxis(slave.role) && msg.values.size() == 1)
+    {
+      updateAxis(slave.role, msg.values[0], msg.header.stamp);
+    }
+    slave.response_pub.publish(msg);
+  }
+
+  void updateAxis(Role role, double metres, const ros::Time& stamp)
+  {
+    axis_seen_.insert(role);
+    const bool all_known = axis_seen_.size() == axis_count_;
+    state_.update(
+        [&](MachineState& s)
+        {
+          s.header.stamp = stamp;
+          (role == Role::kAxisX ? s.position.x : role == Role::kAxisY ? s.position.y : s.position.z) = metres;
+          s.position_valid = all_known;
+        });
+  }
+
+  void onMasterStatus(const UplinkRecord& record)
+  {
+    const auto code = record.payload.empty() ? 0 : record.payload[0];
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    ++master_reports_[code];
+    if (code == static_cast<uint8_t>(slave_bus::MasterStatus::kBadFrame))
+    {
+      ROS_WARN_STREAM_THROTTLE(1.0, "slave bus master: a step frame arrived corrupted and was dropped");
+    }
+    else
+    {
+      ROS_WARN_STREAM_THROTTLE(
+          1.0,
+          "slave bus master: " << slave_bus::toString(static_cast<slave_bus::MasterStatus>(code))
+                               << (record.payload.size() > 1 ? " (address " + std::to_string(record.payload[1]) + ")"
+                                                             : std::string()));
+    }
+  }
+
+  void countTimeouts(const std::vector<uint8_t>& missing)
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    for (const uint8_t address : missing)
+    {
+      const auto found = by_address_.find(address);
+      if (found != by_address_.end())
+      {
+        ++slaves_[found->second].timeouts;
+      }
+      else
+      {
+        ++unconfigured_timeouts_;
+      }
+    }
+  }
+
+  void snapshotStats()
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    session_stats_ = session_->stats();
+  }
+
+  // ---- diagnostics ------------------------------------------------------------------------------
+
+  void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status)
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    const auto& s = session_stats_;
+    uint64_t timeouts = unconfigured_timeouts_;
+    for (const auto& slave : slaves_)
+    {
+      timeouts += slave.timeouts;
+    }
+    const uint64_t link_errors = s.link.crc_errors + s.link.framing_errors;
+    const uint64_t bad_frames = master_reports_[static_cast<uint8_t>(slave_bus::MasterStatus::kBadFrame)];
+    if (timeouts > last_timeouts_ || link_errors > last_link_errors_ || bad_frames > last_bad_frames_)
+    {
+      status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "slaves timed out or frames were corrupted");
+    }
+    else
+    {
+      status.summary(diagnostic_msgs::DiagnosticStatus::OK, "steps flowing");
+    }
+    last_timeouts_ = timeouts;
+    last_link_errors_ = link_errors;
+    last_bad_frames_ = bad_frames;
+    status.add("framing", slave_bus::toString(framing_));
+    status.add("bus size", bus_size_);
+    status.add("motion enabled", enable_motion_);
+    status.add("frames sent", s.steps_sent);
+    status.add("bytes sent", s.bytes_sent);
+    status.add("bytes received", s.bytes_received);
+    status.add("replies", s.replies);
+    status.add("timeouts", timeouts);
+    status.add("uplink CRC errors", s.link.crc_errors);
+    status.add("uplink framing errors", s.link.framing_errors);
+    status.add("uplink garbage bytes", s.link.garbage_bytes);
+    status.add("uplink resyncs", s.resyncs);
+    status.add("frames the master dropped (bad CRC)", bad_frames);
+    status.add("payloads for absent slaves",
+               master_reports_[static_cast<uint8_t>(slave_bus::MasterStatus::kNoSuchSlave)]);
+    status.add("replies from unconfigured addresses", unknown_replies_);
+    status.add("refused inputs", refused_);
+    for (const auto& slave : slaves_)
+    {
+      status.addf(slave.name + " (address " + std::to_string(slave.address) + ")",
+                  "%llu replies, %llu timeouts, %llu undecodable", static_cast<unsigned long long>(slave.replies),
+                  static_cast<unsigned long long>(slave.timeouts),
+                  static_cast<unsigned long long>(slave.decode_errors));
+    }
+  }
+
+  ros::NodeHandle nh_;
+  SerialSettings settings_;
+  MachineStatePublisher state_;
+  slave_bus::Framing framing_ = slave_bus::Framing::kRaw;
+  bool enable_motion_ = false;
+  Milliseconds reply_timeout_{500};
+  Milliseconds command_delay_{5};
+  Milliseconds resync_gap_{50};
+  size_t max_queued_ = 100;
+  size_t bus_size_ = 0;
+  size_t highest_address_ = 0;
+  size_t axis_count_ = 0;
+  std::vector<Slave> slaves_;  // fixed after construction: subscribers keep indices into it
+  std::map<uint8_t, size_t> by_address_;
+  std::set<Role> axis_seen_;  // I/O thread only
+  ros::Subscriber frame_sub_;
+
+  std::mutex queue_mutex_;
+  std::deque<Step> queue_;
+  std::atomic<bool> stopping_{false};
+
+  std::mutex link_mutex_;  // guards port_ against disconnect() from another thread
+  std::unique_ptr<SerialPort> port_;
+  std::unique_ptr<slave_bus::BusSession> session_;  // I/O thread only
+  std::unique_ptr<Reconnector> reconnector_;
+
+  std::mutex stats_mutex_;  // lock order: queue_mutex_ before stats_mutex_
+  slave_bus::BusSession::Stats session_stats_;
+  std::map<uint8_t, uint64_t> master_reports_;
+  uint64_t unknown_replies_ = 0;
+  uint64_t unconfigured_timeouts_ = 0;
+  uint64_t refused_ = 0;
+  uint64_t last_timeouts_ = 0, last_link_errors_ = 0, last_bad_frames_ = 0;
+};
+}  // namespace cnc_bridge
+
+int main(int argc, char** argv)
+{
+  ros::init(argc, argv, "slave_bus_node");
+  cnc_bridge::routeCoreLogToRosconsole();
+  try
+  {
+    cnc_bridge::SlaveBusNode node(ros::NodeHandle(), ros::NodeHandle("~"));
+    ros::AsyncSpinner spinner(2);
+    spinner.start();
+    ros::waitForShutdown();
+  }
+  catch (const cnc_bridge::Error& e)
+  {
+    ROS_FATAL_STREAM("slave_bus_node: " << e.what());
+    return 1;
+  }
+  return 0;
+}

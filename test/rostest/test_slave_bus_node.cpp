@@ -1,0 +1,234 @@
+// slave_bus_node against sim_slave_bus (see slave_bus_node.test): one step frame moves the three
+// simulated axes and fires the laser; each slave's answer arrives on its own topic, in metres for
+// the axes; state, joint_states and tf follow; per-slave commands work; diagnostics count frames;
+// with motion disabled, axis commands are refused while generic slaves still answer.
+#include <diagnostic_msgs/DiagnosticArray.h>
+#include <gtest/gtest.h>
+#include <ros/ros.h>
+#include <sensor_msgs/JointState.h>
+#include <tf2_ros/buffer.h>
+#include <tf2_ros/transform_listener.h>
+
+#include <condition_variable>
+#include <map>
+#include <mutex>
+
+#include "cnc_bridge/BusFrame.h"
+#include "cnc_bridge/MachineState.h"
+#include "cnc_bridge/SlaveCommand.h"
+#include "cnc_bridge/SlaveResponse.h"
+
+namespace
+{
+const ros::WallDuration kWait(20.0);  // generous for a loaded CI box; healthy replies take ms
+
+/// Collects every SlaveResponse of some slaves and lets the test wait for a condition on them.
+class Responses
+{
+ public:
+  Responses(const std::string& ns, const std::vector<std::string>& names)
+  {
+    ros::NodeHandle nh;
+    for (const auto& name : names)
+    {
+      subs_.push_back(
+          nh.subscribe<cnc_bridge::SlaveResponse>(ns + "/slaves/" + name + "/response", 100,
+                                                  [this, name](const cnc_bridge::SlaveResponse::ConstPtr& msg)
+                                                  {
+                                                    std::lock_guard<std::mutex> lock(mutex_);
+                                                    received_[name].push_back(*msg);
+                                                    cv_.notify_all();
+                                                  }));
+    }
+  }
+  /// Waits until \p pred holds on the responses so far.
+  bool waitFor(const std::function<bool(std::map<std::string, std::vector<cnc_bridge::SlaveResponse>>&)>& pred)
+  {
+    std::unique_lock<std::mutex> lock(mutex_);
+    return cv_.wait_for(lock, std::chrono::duration<double>(kWait.toSec()), [&] { return pred(received_); });
+  }
+  std::vector<cnc_bridge::SlaveResponse> of(const std::string& name)
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return received_[name];
+  }
+
+ private:
+  std::vector<ros::Subscriber> subs_;
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  std::map<std::string, std::vector<cnc_bridge::SlaveResponse>> received_;
+};
+
+template <class M>
+ros::Publisher advertiseAndWait(const std::string& topic)
+{
+  ros::NodeHandle nh;
+  auto pub = nh.advertise<M>(topic, 10);
+  const auto deadline = ros::WallTime::now() + kWait;
+  while (pub.getNumSubscribers() == 0 && ros::WallTime::now() < deadline)
+  {
+    ros::WallDuration(0.01).sleep();  // polling the connection count: roscpp offers no wait for it
+  }
+  EXPECT_GT(pub.getNumSubscribers(), 0u) << topic;
+  return pub;
+}
+
+cnc_bridge::BusPayload payload(uint8_t address, std::vector<uint8_t> data)
+{
+  cnc_bridge::BusPayload p;
+  p.address = address;
+  p.data = std::move(data);
+  return p;
+}
+
+/// Waits for a diagnostics status named like \p name whose key \p key satisfies \p pred.
+bool waitForDiagnostic(const std::string& name, const std::string& key, const std::function<bool(double)>& pred)
+{
+  const auto deadline = ros::WallTime::now() + kWait;
+  while (ros::WallTime::now() < deadline)
+  {
+    const auto diag = ros::topic::waitForMessage<diagnostic_msgs::DiagnosticArray>("/diagnostics", ros::Duration(5.0));
+    if (!diag)
+    {
+      continue;
+    }
+    for (const auto& status : diag->status)
+    {
+      if (status.name.find(name) == std::string::npos)
+      {
+        continue;
+      }
+      for (const auto& kv : status.values)
+      {
+        if (kv.key == key && pred(std::stod(kv.value)))
+        {
+          return true;
+        }
+      }
+    }
+  }
+  return false;
+}
+}  // namespace
+
+TEST(SlaveBusNode, OneStepFrameMovesTheAxesAndAnswersArriveOnTheRightTopics)
+{
+  Responses responses("/cell/laser1", {"x", "y", "z", "laser", "aux6"});
+  auto pub = advertiseAndWait<cnc_bridge::BusFrame>("/cell/laser1/bus/frame");
+  // be16s device units at 10000 per metre: x 1234 = 0.1234 m, y -500 = -0.05 m, z 100 = 0.01 m.
+  cnc_bridge::BusFrame frame;
+  frame.payloads = {payload(1, {0x04, 0xD2}), payload(2, {0xFE, 0x0C}), payload(3, {0x00, 0x64}), payload(4, {1}),
+                    payload(6, {42, 43})};
+  pub.publish(frame);
+  ASSERT_TRUE(responses.waitFor(
+      [](auto& r)
+      { return !r["x"].empty() && !r["y"].empty() && !r["z"].empty() && !r["laser"].empty() && !r["aux6"].empty(); }));
+  const auto x = responses.of("x").back();
+  EXPECT_EQ(x.address, 1);
+  EXPECT_EQ(x.name, "x");
+  EXPECT_EQ(x.data, (std::vector<uint8_t>{0x04, 0xD2}));  // the simulated axis reports where it went
+  ASSERT_EQ(x.values.size(), 1u);
+  EXPECT_NEAR(x.values[0], 0.1234, 1e-9);
+  EXPECT_NEAR(responses.of("y").back().values.at(0), -0.05, 1e-9);
+  EXPECT_NEAR(responses.of("z").back().values.at(0), 0.01, 1e-9);
+  EXPECT_EQ(responses.of("laser").back().values, std::vector<double>{1.0});     // the tool is on
+  EXPECT_EQ(responses.of("aux6").back().data, (std::vector<uint8_t>{42, 43}));  // generic slaves echo
+  EXPECT_GT(x.header.stamp.toSec(), 0.0);
+
+  // state, joint_states and tf follow the axes (metres, machine frame, with the tf prefix).
+  const auto deadline = ros::WallTime::now() + kWait;
+  cnc_bridge::MachineState::ConstPtr state;
+  while (ros::WallTime::now() < deadline)
+  {
+    state = ros::topic::waitForMessage<cnc_bridge::MachineState>("/cell/laser1/state", ros::Duration(5.0));
+    if (state && state->position_valid && std::fabs(state->position.x - 0.1234) < 1e-9)
+    {
+      break;
+    }
+  }
+  ASSERT_TRUE(state);
+  EXPECT_TRUE(state->position_valid);
+  EXPECT_EQ(state->machine, "laser1");
+  EXPECT_EQ(state->link, cnc_bridge::MachineState::LINK_UP);
+  EXPECT_NEAR(state->position.y, -0.05, 1e-9);
+  EXPECT_NEAR(state->position.z, 0.01, 1e-9);
+
+  const auto joints =
+      ros::topic::waitForMessage<sensor_msgs::JointState>("/cell/laser1/joint_states", ros::Duration(kWait.toSec()));
+  ASSERT_TRUE(joints);
+  ASSERT_EQ(joints->name.size(), 3u);
+  EXPECT_EQ(joints->name[0], "laser1/x_axis");
+  EXPECT_NEAR(joints->position[0], 0.1234, 1e-9);
+
+  tf2_ros::Buffer buffer;
+  tf2_ros::TransformListener listener(buffer);
+  const auto tf = buffer.lookupTransform("laser1/machine", "laser1/tool", ros::Time(0), ros::Duration(kWait.toSec()));
+  EXPECT_NEAR(tf.transform.translation.x, 0.1234, 1e-9);
+  EXPECT_NEAR(tf.transform.translation.y, -0.05, 1e-9);
+}
+
+TEST(SlaveBusNode, PerSlaveCommandsAreQueuedIntoTheNextFrame)
+{
+  Responses responses("/cell/laser1", {"x", "laser", "aux7"});
+  auto x = advertiseAndWait<cnc_bridge::SlaveCommand>("/cell/laser1/slaves/x/command");
+  auto laser = advertiseAndWait<cnc_bridge::SlaveCommand>("/cell/laser1/slaves/laser/command");
+  auto aux7 = advertiseAndWait<cnc_bridge::SlaveCommand>("/cell/laser1/slaves/aux7/command");
+  cnc_bridge::SlaveCommand cmd;
+  cmd.values = {-0.25};  // m
+  x.publish(cmd);
+  cmd.values = {0};  // laser off
+  laser.publish(cmd);
+  cmd.values = {1234};  // aux7 takes the seed's hi*100+lo form
+  aux7.publish(cmd);
+  ASSERT_TRUE(responses.waitFor(
+      [](auto& r)
+      {
+        return !r["x"].empty() && std::fabs(r["x"].back().values.at(0) + 0.25) < 1e-9 && !r["laser"].empty() &&
+               r["laser"].back().values == std::vector<double>{0.0} && !r["aux7"].empty();
+      }));
+  EXPECT_EQ(responses.of("x").back().data, (std::vector<uint8_t>{0xF6, 0x3C}));  // -2500 be16s
+  EXPECT_EQ(responses.of("aux7").back().data, (std::vector<uint8_t>{12, 34}));
+  EXPECT_EQ(responses.of("aux7").back().values, std::vector<double>{1234.0});
+}
+
+TEST(SlaveBusNode, DiagnosticsCountFramesAndReplies)
+{
+  // The tests above sent frames; diagnostics report them (published by a timer).
+  auto pub = advertiseAndWait<cnc_bridge::BusFrame>("/cell/laser1/bus/frame");
+  cnc_bridge::BusFrame frame;
+  frame.payloads = {payload(5, {1})};
+  pub.publish(frame);
+  EXPECT_TRUE(waitForDiagnostic("laser1/slave_bus_node: slave bus", "frames sent", [](double v) { return v >= 1; }));
+  EXPECT_TRUE(waitForDiagnostic("laser1/slave_bus_node: slave bus", "replies", [](double v) { return v >= 1; }));
+}
+
+TEST(SlaveBusNode, MotionDisabledRefusesAxesButGenericSlavesAnswerOverTheFramedLink)
+{
+  Responses responses("/cell/laser2", {"x", "aux5"});
+  auto x = advertiseAndWait<cnc_bridge::SlaveCommand>("/cell/laser2/slaves/x/command");
+  auto aux5 = advertiseAndWait<cnc_bridge::SlaveCommand>("/cell/laser2/slaves/aux5/command");
+  auto frames = advertiseAndWait<cnc_bridge::BusFrame>("/cell/laser2/bus/frame");
+  cnc_bridge::SlaveCommand cmd;
+  cmd.values = {0.1};
+  x.publish(cmd);
+  cnc_bridge::BusFrame frame;
+  frame.payloads = {payload(1, {0, 1})};  // a raw payload to the axis: refused too
+  frames.publish(frame);
+  ASSERT_TRUE(waitForDiagnostic("laser2/slave_bus_node: slave bus", "refused inputs", [](double v) { return v >= 2; }));
+  cmd.values.clear();
+  cmd.data = {7, 8, 9};
+  aux5.publish(cmd);
+  ASSERT_TRUE(responses.waitFor([](auto& r) { return !r["aux5"].empty(); }));
+  EXPECT_EQ(responses.of("aux5").back().data, (std::vector<uint8_t>{7, 8, 9}));
+  EXPECT_TRUE(responses.of("x").empty());  // the axis never got a payload, so it never answered
+}
+
+int main(int argc, char** argv)
+{
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_slave_bus_node");
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+  return RUN_ALL_TESTS();
+}
