@@ -12,6 +12,14 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   target_compile_definitions(test_xmodem PRIVATE XMODEM_TEST_DATA="${PROJECT_SOURCE_DIR}/test/data/xmodem")
 endif()
 
+# cnc_dnc: the ROS-free transfer tool (subcommands in a table in src/cli/cnc_dnc.cpp).
+cnc_tool(cnc_dnc src/cli/cnc_dnc.cpp)
+target_link_libraries(cnc_dnc cnc_bridge_xmodem)
+
+# sim_haas_serial xmodem: the Haas of the capture.
+target_sources(sim_haas_serial PRIVATE src/sim/haas_serial/xmodem_mode.cpp)
+target_link_libraries(sim_haas_serial cnc_bridge_xmodem)
+
 if(NOT CNC_BRIDGE_CORE_ONLY)
   cnc_node(dnc_node src/nodes/dnc_node.cpp)
   target_link_libraries(dnc_node cnc_bridge_xmodem)

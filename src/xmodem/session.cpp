@@ -350,7 +350,9 @@ std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
         config_.start_timeout.count() > 0 ? config_.start_timeout : config_.nak_interval * config_.max_retries;
     const auto start_deadline = Clock::now() + start_timeout;
     unsigned requests = 1;
-    link_.writeByte(request);
+    if (!config_.skip_initial_request)
+      link_.writeByte(request);
+    auto next_request = Clock::now() + config_.nak_interval;
 
     bool started = false;  // a good packet arrived: the check type is settled
     uint8_t expected = 1;
@@ -376,8 +378,10 @@ std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
     for (;;)
     {
       checkCancel();
+      // Before the first packet the request is repeated on a fixed schedule: bytes that are not a
+      // packet (a control's own NAKs) must not postpone it.
       const Milliseconds wait =
-          started ? config_.block_timeout : std::min(config_.nak_interval, remainingUntil(start_deadline));
+          started ? config_.block_timeout : std::min(remainingUntil(next_request), remainingUntil(start_deadline));
       int c = pending;
       pending = -1;
       if (c < 0)
@@ -394,8 +398,11 @@ std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
             crc = false;  // the sender does not know 'C': fall back to checksum mode
             request = kNak;
           }
+          if (Clock::now() < next_request)
+            continue;
           ++requests;
           link_.writeByte(request);
+          next_request = Clock::now() + config_.nak_interval;
           continue;
         }
         ++stats_.retries;
@@ -466,7 +473,15 @@ std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
           error("EOT followed by more data (line noise)");
           continue;
         }
-        link_.writeByte(kAck);
+        if (config_.answer_eot_with_can)
+        {
+          const uint8_t cans[] = {kCan, kCan, kCan};
+          link_.write(cans, sizeof(cans));
+        }
+        else
+        {
+          link_.writeByte(kAck);
+        }
         stats_.check = crc ? CheckType::kCrc16 : CheckType::kChecksum;
         return data;
       }
@@ -476,6 +491,12 @@ std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
         if (next == kCan)
           abort("the sender cancelled (CAN CAN) after " + std::to_string(state.block) + " blocks", false, false);
         pending = next;  // a lone CAN is line noise; what follows it is looked at as usual
+        continue;
+      }
+      if (!started && (c == kNak || c == kCrcStart || c == kAck))
+      {
+        // Before the first packet these are a peer's own start requests (a control that NAKs while
+        // it waits, a loopback): not a damaged packet, so nothing to purge.
         continue;
       }
       // Noise between packets: drop the rest of the burst and ask again.

@@ -57,6 +57,10 @@ struct Config
   unsigned max_retries = 10;
   /// Sender: EOT sent at most this many times.
   unsigned eot_retries = 10;
+  /// Receiver: do not send the first NAK/'C' (the caller saw the sender start already; the simulator).
+  bool skip_initial_request = false;
+  /// Receiver: answer EOT with CAN CAN CAN as a Haas control does (the simulator), not with ACK.
+  bool answer_eot_with_can = false;
 };
 
 /// \brief Where a transfer is; given to the progress callback after every block.

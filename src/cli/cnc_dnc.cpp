@@ -1,0 +1,273 @@
+// cnc_dnc: NC program transfer on a bare serial port, without ROS. One subcommand per transfer
+// kind, each an entry in kCommands (name, summary, function), so drip-feed and backup are added
+// with one function and one table line. Exit status 0 only for a verified complete transfer;
+// anything else prints one line saying what went wrong.
+//
+//   cnc_dnc send    --port DEV [serial options] [--mode checksum|crc|1k] FILE
+//   cnc_dnc receive --port DEV [serial options] [--mode checksum|crc] [--timeout S] FILE
+#include <unistd.h>
+
+#include <boost/program_options.hpp>
+#include <chrono>
+#include <cstdio>
+#include <functional>
+#include <iostream>
+#include <string>
+#include <vector>
+
+#include "cnc_bridge/common/error.h"
+#include "cnc_bridge/sim/sim_support.h"
+#include "cnc_bridge/transport/serial_port.h"
+#include "cnc_bridge/xmodem/file_transfer.h"
+
+namespace po = boost::program_options;
+using namespace cnc_bridge;
+
+namespace
+{
+/// Thrown for a bad command line: printed with the usage, exit status 2.
+struct UsageError : std::runtime_error
+{
+  using std::runtime_error::runtime_error;
+};
+
+/// The serial options every subcommand shares (Haas settings 11, 12, 13, 37).
+po::options_description serialOptions()
+{
+  po::options_description options("serial port");
+  options.add_options()("port,p", po::value<std::string>()->required(), "serial device, e.g. /dev/ttyUSB0")(
+      "baud,b", po::value<unsigned>()->default_value(115200), "baud rate (Haas setting 11)")(
+      "parity", po::value<std::string>()->default_value("none"), "none|even|odd (Haas setting 12)")(
+      "data-bits", po::value<unsigned>()->default_value(8), "7|8 (Haas setting 37)")(
+      "stop-bits", po::value<unsigned>()->default_value(1), "1|2 (Haas setting 13)");
+  return options;
+}
+
+SerialSettings serialSettings(const po::variables_map& vm)
+{
+  SerialSettings s;
+  s.device = vm["port"].as<std::string>();
+  s.baud = vm["baud"].as<unsigned>();
+  s.parity = parseParity(vm["parity"].as<std::string>());
+  s.data_bits = vm["data-bits"].as<unsigned>();
+  s.stop_bits = vm["stop-bits"].as<unsigned>();
+  s.validate();
+  return s;
+}
+
+/// Parses a subcommand's arguments; FILE is the one positional argument.
+po::variables_map parse(const std::string& command, const std::vector<std::string>& args,
+                        const po::options_description& options)
+{
+  po::options_description all(options);
+  all.add_options()("file", po::value<std::string>()->required(), "program file");
+  po::positional_options_description positional;
+  positional.add("file", 1);
+  po::variables_map vm;
+  try
+  {
+    po::store(po::command_line_parser(args).options(all).positional(positional).run(), vm);
+    if (vm.count("help"))
+    {
+      std::cout << "usage: cnc_dnc " << command << " [options] FILE\n" << options;
+      std::exit(0);
+    }
+    po::notify(vm);
+  }
+  catch (const po::error& e)
+  {
+    std::ostringstream usage;
+    usage << e.what() << "\nusage: cnc_dnc " << command << " [options] FILE\n" << options;
+    throw UsageError(usage.str());
+  }
+  return vm;
+}
+
+/// Progress on stderr: a bar redrawn in place on a terminal, a plain line now and then otherwise
+/// (a log or a pipe should not fill with carriage returns).
+class ProgressPrinter
+{
+ public:
+  explicit ProgressPrinter(const std::string& what) : what_(what), tty_(::isatty(STDERR_FILENO) == 1) {}
+  ~ProgressPrinter() { finish(); }
+
+  void operator()(const xmodem::Progress& p)
+  {
+    const auto now = std::chrono::steady_clock::now();
+    const bool last = p.total > 0 && p.bytes >= p.total;
+    if (!last && now - last_ < (tty_ ? std::chrono::milliseconds(100) : std::chrono::milliseconds(1000)))
+      return;
+    last_ = now;
+    if (tty_)
+    {
+      const int width = 30;
+      const double fraction = p.total > 0 ? static_cast<double>(p.bytes) / p.total : 0.0;
+      std::string bar(width, ' ');
+      for (int i = 0; i < static_cast<int>(fraction * width); ++i)
+        bar[i] = '#';
+      if (p.total > 0)
+        std::fprintf(stderr, "\r%s [%s] %3.0f%% %llu/%llu bytes, block %u, %u retries ", what_.c_str(), bar.c_str(),
+                     100 * fraction, static_cast<unsigned long long>(p.bytes), static_cast<unsigned long long>(p.total),
+                     p.block, p.retries);
+      else
+        std::fprintf(stderr, "\r%s %llu bytes, block %u, %u retries ", what_.c_str(),
+                     static_cast<unsigned long long>(p.bytes), p.block, p.retries);
+      drawn_ = true;
+    }
+    else
+    {
+      std::fprintf(stderr, "%s: %llu bytes, block %u, %u retries\n", what_.c_str(),
+                   static_cast<unsigned long long>(p.bytes), p.block, p.retries);
+    }
+  }
+
+  void finish()
+  {
+    if (drawn_)
+      std::fputc('\n', stderr);
+    drawn_ = false;
+  }
+
+ private:
+  std::string what_;
+  bool tty_;
+  bool drawn_ = false;
+  std::chrono::steady_clock::time_point last_{};
+};
+
+/// Options shared by send and receive: mode, EOB, binary, timing.
+void addTransferOptions(po::options_description& options, const std::string& default_mode)
+{
+  options.add_options()("help,h", "this help")("mode,m", po::value<std::string>()->default_value(default_mode),
+                                               "checksum (NAK start, what a Haas speaks), crc, or 1k (send only)")(
+      "eob", po::value<std::string>()->default_value("lf"),
+      "the control's end-of-block pattern, Haas setting 25: lf|cr|crlf|crcr|lflf")(
+      "binary", po::bool_switch(), "move bytes exactly: no EOB conversion, received padding kept")(
+      "timeout,t", po::value<double>()->default_value(60.0), "seconds to wait for the other side to start")(
+      "retries", po::value<unsigned>()->default_value(10), "errors in a row on one block before giving up");
+}
+
+xmodem::Config transferConfig(const po::variables_map& vm)
+{
+  xmodem::Config config;
+  const double timeout = vm["timeout"].as<double>();
+  if (timeout <= 0)
+    throw UsageError("--timeout must be positive");
+  config.start_timeout = config.start_wait = Milliseconds(static_cast<int64_t>(timeout * 1000));
+  config.max_retries = config.eot_retries = vm["retries"].as<unsigned>();
+  return config;
+}
+
+/// Runs \p transfer on the port with Ctrl-C turned into a clean cancel (CANs to the peer).
+int withPort(const po::variables_map& vm, const std::function<std::string(Transport&, std::atomic<bool>&)>& transfer)
+{
+  static std::atomic<bool> cancel{false};
+  sim::installStopHandler();
+  SerialPort port(serialSettings(vm));
+  sim::onStop(
+      [&port]
+      {
+        cancel = true;
+        port.interrupt();
+      });
+  std::cout << transfer(port, cancel) << std::endl;
+  return 0;
+}
+
+int runSend(const std::vector<std::string>& args)
+{
+  po::options_description options = serialOptions();
+  addTransferOptions(options, "checksum");
+  const po::variables_map vm = parse("send", args, options);
+  const xmodem::Mode mode = xmodem::parseMode(vm["mode"].as<std::string>());
+  xmodem::TextOptions text;
+  text.binary = vm["binary"].as<bool>();
+  text.control_eob = xmodem::parseEob(vm["eob"].as<std::string>());
+  const xmodem::Config config = transferConfig(vm);
+  const std::string file = vm["file"].as<std::string>();
+  return withPort(vm,
+                  [&](Transport& port, std::atomic<bool>& cancel)
+                  {
+                    ProgressPrinter progress("send " + file);
+                    const xmodem::FileResult result =
+                        xmodem::sendFile(port, file, mode, config, text, std::ref(progress), &cancel);
+                    progress.finish();
+                    return result.message;
+                  });
+}
+
+int runReceive(const std::vector<std::string>& args)
+{
+  po::options_description options = serialOptions();
+  addTransferOptions(options, "crc");
+  options.add_options()("file-eob", po::value<std::string>()->default_value("lf"),
+                        "line ends of the stored file: lf|cr|crlf|crcr|lflf");
+  const po::variables_map vm = parse("receive", args, options);
+  const xmodem::Mode mode = xmodem::parseMode(vm["mode"].as<std::string>());
+  if (mode == xmodem::Mode::k1K)
+    throw UsageError("receive --mode is checksum or crc (1K blocks are accepted in either)");
+  xmodem::TextOptions text;
+  text.binary = vm["binary"].as<bool>();
+  text.control_eob = xmodem::parseEob(vm["eob"].as<std::string>());
+  text.file_eob = xmodem::parseEob(vm["file-eob"].as<std::string>());
+  xmodem::Config config = transferConfig(vm);
+  // Waiting for the other side: the start request is repeated every 10 s (or more often when the
+  // whole wait is short), 'C' three times before falling back to checksum.
+  config.nak_interval = std::min(config.nak_interval, config.start_timeout / 6);
+  const std::string file = vm["file"].as<std::string>();
+  return withPort(vm,
+                  [&](Transport& port, std::atomic<bool>& cancel)
+                  {
+                    ProgressPrinter progress("receive " + file);
+                    const xmodem::FileResult result =
+                        xmodem::receiveFile(port, file, mode, config, text, std::ref(progress), &cancel);
+                    progress.finish();
+                    return result.message;
+                  });
+}
+
+/// The subcommands. A new transfer kind (drip, backup) is one function and one line here.
+struct Command
+{
+  const char* name;
+  const char* summary;
+  int (*run)(const std::vector<std::string>& args);
+};
+const Command kCommands[] = {
+    {"send", "send a program by XModem (the control receives)", &runSend},
+    {"receive", "receive a program by XModem (the control sends)", &runReceive},
+};
+
+void usage(std::ostream& out)
+{
+  out << "usage: cnc_dnc COMMAND [options] FILE   (COMMAND --help for its options)\ncommands:\n";
+  for (const Command& c : kCommands)
+    out << "  " << c.name << "\t" << c.summary << "\n";
+}
+}  // namespace
+
+int main(int argc, char** argv)
+{
+  const std::string name = argc > 1 ? argv[1] : "";
+  for (const Command& command : kCommands)
+  {
+    if (name != command.name)
+      continue;
+    try
+    {
+      return command.run(std::vector<std::string>(argv + 2, argv + argc));
+    }
+    catch (const UsageError& e)
+    {
+      std::cerr << "cnc_dnc " << name << ": " << e.what() << "\n";
+      return 2;
+    }
+    catch (const std::exception& e)
+    {
+      std::cerr << "cnc_dnc " << name << ": error: " << e.what() << std::endl;
+      return 1;
+    }
+  }
+  usage(name == "--help" || name == "-h" ? std::cout : std::cerr);
+  return name == "--help" || name == "-h" ? 0 : 2;
+}

@@ -1,0 +1,217 @@
+// sim_haas_serial xmodem: a Haas Classic Control's RS-232 port with setting 14 = XMODEM, as the
+// seed's capture shows it (opendnc_haas_xmodem_dprnt.md, Appendix): checksum mode only; while
+// waiting to receive it NAKs every --nak-interval, so several NAKs are queued before a host starts
+// sending; it answers the host's EOT with CAN CAN CAN; programs it receives are stored in --dir
+// under their O number. When the host asks for a program (NAK; a 'C' is ignored, as a checksum-only
+// control does) it sends --program. Line-rate pacing (--pace-baud) and seeded faults (--faults).
+//
+//   sim_haas_serial xmodem [--link PATH] [--dir DIR] [--program FILE] [--nak-interval S]
+//                          [--pace-baud N] [--faults flip=..,drop=..,dup=..,lose=..,seed=..] [--eob lf]
+#include <boost/program_options.hpp>
+#include <deque>
+#include <iostream>
+#include <memory>
+#include <regex>
+
+#include "cnc_bridge/common/atomic_file.h"
+#include "cnc_bridge/common/error.h"
+#include "cnc_bridge/sim/haas_serial_modes.h"
+#include "cnc_bridge/sim/sim_support.h"
+#include "cnc_bridge/transport/faulty_transport.h"
+#include "cnc_bridge/transport/paced_transport.h"
+#include "cnc_bridge/transport/pty.h"
+#include "cnc_bridge/xmodem/file_transfer.h"
+
+namespace po = boost::program_options;
+
+namespace cnc_bridge
+{
+namespace sim
+{
+namespace
+{
+/// A byte already read can be put back, so the protocol session that the byte starts sees it.
+class PushbackTransport : public Transport
+{
+ public:
+  explicit PushbackTransport(Transport& inner) : inner_(inner) {}
+  void unread(uint8_t byte) { pushed_.push_front(byte); }
+
+  using Transport::write;
+  size_t read(uint8_t* buffer, size_t size, Milliseconds timeout) override
+  {
+    if (!pushed_.empty() && size > 0)
+    {
+      buffer[0] = pushed_.front();
+      pushed_.pop_front();
+      return 1;
+    }
+    return inner_.read(buffer, size, timeout);
+  }
+  void write(const uint8_t* data, size_t size, Milliseconds timeout = kWaitForever) override
+  {
+    inner_.write(data, size, timeout);
+  }
+  void drain() override { inner_.drain(); }
+  void discardInput() override
+  {
+    pushed_.clear();
+    inner_.discardInput();
+  }
+  void interrupt() override { inner_.interrupt(); }
+  void close() override { inner_.close(); }
+  bool isOpen() const override { return inner_.isOpen(); }
+  std::string describe() const override { return inner_.describe(); }
+
+ private:
+  Transport& inner_;
+  std::deque<uint8_t> pushed_;
+};
+
+/// The name a Haas gives a received program: its O number ("O05555.nc"), else a counter.
+std::string programName(const std::string& text, unsigned counter)
+{
+  std::smatch match;
+  static const std::regex kONumber("(^|\\n)\\s*[Oo](\\d{1,5})");
+  if (std::regex_search(text, match, kONumber))
+    return "O" + std::string(5 - std::min<size_t>(5, match[2].length()), '0') + match[2].str() + ".nc";
+  return "received_" + std::to_string(counter) + ".nc";
+}
+
+int runXmodem(const std::vector<std::string>& args)
+{
+  po::options_description options("sim_haas_serial xmodem options");
+  options.add_options()("help,h", "this help")("link", po::value<std::string>()->default_value(""),
+                                               "make this symbolic link to the pty (a stable device name)")(
+      "dir", po::value<std::string>()->default_value("."), "where received programs are stored")(
+      "program", po::value<std::string>()->default_value(""), "the program sent when the host asks for one")(
+      "nak-interval", po::value<double>()->default_value(1.0), "seconds between NAKs while waiting to receive")(
+      "pace-baud", po::value<unsigned>()->default_value(0), "pace output to this baud rate, 8N1 (0 = pty speed)")(
+      "faults", po::value<std::string>()->default_value(""), "fault injection, e.g. flip=0.001,lose=0.01,seed=3")(
+      "eob", po::value<std::string>()->default_value("lf"), "EOB pattern, Haas setting 25: lf|cr|crlf|crcr|lflf")(
+      "timeout-scale", po::value<double>()->default_value(1.0),
+      "multiply the protocol timeouts (tests use 0.1 for fast recovery)");
+  po::variables_map vm;
+  try
+  {
+    po::store(po::command_line_parser(args).options(options).run(), vm);
+    po::notify(vm);
+  }
+  catch (const po::error& e)
+  {
+    std::cerr << "sim_haas_serial xmodem: " << e.what() << "\n" << options;
+    return 2;
+  }
+  if (vm.count("help"))
+  {
+    std::cout << options;
+    return 0;
+  }
+
+  StopSignal& stop = installStopHandler();
+  try
+  {
+    PtyMaster pty(vm["link"].as<std::string>());
+    onStop([&pty] { pty.interrupt(); });
+    Transport* link = &pty;
+    std::unique_ptr<PacedTransport> paced;
+    if (vm["pace-baud"].as<unsigned>() > 0)
+    {
+      paced = std::make_unique<PacedTransport>(pty, vm["pace-baud"].as<unsigned>() / 10.0);  // 8N1: 10 bits
+      link = paced.get();
+    }
+    std::unique_ptr<FaultyTransport> faulty;
+    const FaultSettings faults = FaultSettings::parse(vm["faults"].as<std::string>());
+    if (faults.any())
+    {
+      faulty = std::make_unique<FaultyTransport>(*link, faults);
+      link = faulty.get();
+    }
+    PushbackTransport line(*link);
+
+    const double scale = vm["timeout-scale"].as<double>();
+    auto scaled = [scale](int ms) { return Milliseconds(std::max<int64_t>(1, static_cast<int64_t>(ms * scale))); };
+    xmodem::Config config;
+    config.char_timeout = scaled(1000);
+    config.purge_quiet = scaled(1000);
+    config.block_timeout = scaled(10000);
+    config.ack_timeout = scaled(10000);
+    config.stale_nak_settle = scaled(1000);
+    config.eot_quiet = scaled(250);
+    config.start_wait = scaled(1000);
+    config.skip_initial_request = true;
+    config.answer_eot_with_can = true;
+    xmodem::TextOptions text;
+    text.control_eob = xmodem::parseEob(vm["eob"].as<std::string>());
+    const std::string dir = vm["dir"].as<std::string>();
+    const std::string program = vm["program"].as<std::string>();
+    const Milliseconds nak_interval(static_cast<int64_t>(vm["nak-interval"].as<double>() * 1000));
+
+    announce("sim_haas_serial", "pty " + pty.slavePath());
+    unsigned received = 0;
+    while (!stop.stopped())
+    {
+      try
+      {
+        // Waiting in "receive" as the control does: a NAK now and then until something happens.
+        line.writeByte(xmodem::kNak);
+        const int c = line.readByte(nak_interval);
+        if (c == xmodem::kSoh || c == xmodem::kStx)
+        {
+          line.unread(static_cast<uint8_t>(c));
+          xmodem::Receiver receiver(line, xmodem::Mode::kChecksum, config);
+          const std::string contents = xmodem::fromWire(receiver.receive(), text);
+          const std::string path = dir + "/" + programName(contents, ++received);
+          AtomicFileWriter writer(path);
+          writer.write(contents);
+          writer.commit();
+          std::cerr << "sim_haas_serial: received " << path << " (" << contents.size() << " bytes, "
+                    << receiver.stats().retries << " retries)" << std::endl;
+        }
+        else if (c == xmodem::kNak)
+        {
+          // The host wants a program (it is a receiver asking in checksum mode).
+          if (program.empty())
+          {
+            std::cerr << "sim_haas_serial: host asked for a program but --program is not set" << std::endl;
+            xmodem::sendCancel(line);
+            line.purge(scaled(1000));
+            continue;
+          }
+          line.unread(xmodem::kNak);
+          const xmodem::FileResult result = xmodem::sendFile(line, program, xmodem::Mode::kChecksum, config, text);
+          std::cerr << "sim_haas_serial: " << result.message << std::endl;
+        }
+        // Anything else ('C' from a host that wants CRC, noise): a checksum-only control ignores it.
+      }
+      catch (const CancelledError&)
+      {
+        break;
+      }
+      catch (const Error& e)
+      {
+        std::cerr << "sim_haas_serial: transfer failed: " << e.what() << std::endl;
+        try
+        {
+          line.purge(scaled(1000));
+        }
+        catch (const CancelledError&)
+        {
+          break;
+        }
+      }
+    }
+  }
+  catch (const Error& e)
+  {
+    std::cerr << "sim_haas_serial xmodem: " << e.what() << std::endl;
+    return 1;
+  }
+  return 0;
+}
+
+const SimMode kXmodemMode("xmodem", "XModem peer as the Haas in the capture (checksum, NAKs, CAN answer to EOT)",
+                          &runXmodem);
+}  // namespace
+}  // namespace sim
+}  // namespace cnc_bridge
