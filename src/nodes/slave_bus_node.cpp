@@ -164,7 +164,7 @@ class SlaveBusNode
     callbacks.session = [this] { ioLoop(); };
     callbacks.on_state = [this](LinkState link, const std::string& why) { state_.setLink(link, why); };
     callbacks.disconnect = [this] { disconnect(); };
-    reconnector_ = std::make_unique<Reconnector>(settings_.describe(), callbacks);
+    reconnector_ = std::make_unique<Reconnector>("slave bus", callbacks);
     reconnector_->start();
     ROS_INFO_STREAM("slave_bus_node: " << slaves_.size() << " slaves on a bus of " << bus_size_ << ", "
                                        << slave_bus::toString(framing_) << " framing, " << settings_.describe()
