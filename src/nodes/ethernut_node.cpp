@@ -1,0 +1,847 @@
+// ethernut_node: drives an ethernut board (the qCNC opcode protocol over TCP) from ROS. It keeps
+// the link up (init, mode, keepalive, reconnect), streams jobs from G-code files or point lists
+// through the ~run_job action, carries pause/resume/reset/kill/mode requests, publishes the
+// machine's reported position as state/joint_states/tf, and a preview of each job for rviz
+// before it runs. The protocol itself lives in the ROS-free cnc_bridge_ethernut library.
+#include <actionlib/server/simple_action_server.h>
+#include <geometry_msgs/PointStamped.h>
+#include <nav_msgs/Path.h>
+#include <ros/ros.h>
+#include <std_srvs/Trigger.h>
+#include <visualization_msgs/MarkerArray.h>
+
+#include <cmath>
+#include <condition_variable>
+#include <fstream>
+#include <memory>
+#include <mutex>
+
+#include "cnc_bridge/EthernutSetMode.h"
+#include "cnc_bridge/RunJobAction.h"
+#include "cnc_bridge/common/program_dir.h"
+#include "cnc_bridge/ethernut/client.h"
+#include "cnc_bridge/ethernut/settings.h"
+#include "cnc_bridge/gcode/gcode.h"
+#include "cnc_bridge/ros/machine_state_publisher.h"
+#include "cnc_bridge/ros/params.h"
+#include "cnc_bridge/transport/backoff.h"
+#include "cnc_bridge/transport/tcp.h"
+
+namespace cnc_bridge
+{
+namespace
+{
+// The board's unit is the millimetre (the seed's coordinates are G-code values; our parser turns
+// inches into mm); messages are in metres.
+constexpr double kMetresPerMm = 0.001;
+
+bool parseMode(const std::string& text, ethernut::BoardMode& mode)
+{
+  if (text == "file")
+  {
+    mode = ethernut::BoardMode::kFile;
+  }
+  else if (text == "gui-control")
+  {
+    mode = ethernut::BoardMode::kGuiControl;
+  }
+  else if (text == "standalone")
+  {
+    mode = ethernut::BoardMode::kStandalone;
+  }
+  else
+  {
+    return false;
+  }
+  return true;
+}
+
+uint8_t stateMode(ethernut::BoardMode mode)
+{
+  switch (mode)
+  {
+    case ethernut::BoardMode::kFile:
+      return MachineState::MODE_DNC;  // the program is fed over the link while it runs
+    case ethernut::BoardMode::kGuiControl:
+      return MachineState::MODE_MANUAL;  // coordinates come from the host's controls
+    case ethernut::BoardMode::kStandalone:
+      return MachineState::MODE_AUTO;  // the board runs on its own
+    default:
+      return MachineState::MODE_UNKNOWN;
+  }
+}
+}  // namespace
+
+class EthernutNode : public ethernut::ClientListener
+{
+ public:
+  EthernutNode(ros::NodeHandle nh, ros::NodeHandle pnh)
+      : nh_(nh),
+        pnh_(pnh),
+        action_(
+            pnh, "run_job", [this](const RunJobGoalConstPtr& goal) { execute(goal); }, false)
+  {
+    readParameters();
+    state_ = std::make_unique<MachineStatePublisher>(nh_, pnh_, host_ + ":" + std::to_string(port_));
+    state_->update(
+        [&](MachineState& s)
+        {
+          s.mode = MachineState::MODE_UNKNOWN;
+          s.execution = MachineState::EXECUTION_UNKNOWN;
+          s.feed_rate = std::nan("");
+          s.spindle_speed = std::nan("");
+        });
+    state_->diagnostics().add("ethernut protocol", this, &EthernutNode::protocolDiagnostics);
+    path_pub_ = nh_.advertise<nav_msgs::Path>("job/path", 1, true);
+    markers_pub_ = nh_.advertise<visualization_msgs::MarkerArray>("job/markers", 1, true);
+    commanded_pub_ = nh_.advertise<geometry_msgs::PointStamped>("commanded_position", 10, true);
+    pause_srv_ = pnh_.advertiseService("pause", &EthernutNode::onPause, this);
+    resume_srv_ = pnh_.advertiseService("resume", &EthernutNode::onResume, this);
+    reset_srv_ = pnh_.advertiseService("reset", &EthernutNode::onReset, this);
+    kill_srv_ = pnh_.advertiseService("kill", &EthernutNode::onKill, this);
+    mode_srv_ = pnh_.advertiseService("set_mode", &EthernutNode::onSetMode, this);
+    action_.start();
+
+    Reconnector::Callbacks callbacks;
+    callbacks.connect = [this] { connect(); };
+    callbacks.session = [this] { runSession(); };
+    callbacks.on_state = [this](LinkState link, const std::string& why) { state_->setLink(link, why); };
+    callbacks.disconnect = [this] { disconnect(); };
+    reconnector_ = std::make_unique<Reconnector>("ethernut " + host_ + ":" + std::to_string(port_), callbacks,
+                                                 Backoff(Milliseconds(200), Milliseconds(5000)));
+    reconnector_->start();
+  }
+
+  ~EthernutNode()
+  {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      stopping_ = true;
+    }
+    hold_cv_.notify_all();
+    reconnector_->stop();
+    action_.shutdown();
+  }
+
+ private:
+  struct Session
+  {
+    std::shared_ptr<TcpConnection> link;  // declared first: destroyed after the client
+    std::shared_ptr<ethernut::Client> client;
+  };
+
+  void readParameters()
+  {
+    // ~settings_file (string, ""): a qCNC settings file (TSS, NAME|value); its INET_ADD, INET_PORT,
+    // INET_DEL and PROG_CNCkill are used where the ROS parameters below are left empty/zero.
+    std::string settings_file;
+    pnh_.param<std::string>("settings_file", settings_file, "");
+    ethernut::Settings settings;
+    if (!settings_file.empty())
+    {
+      settings = ethernut::readSettingsFile(settings_file);
+    }
+    // ~host (string, ""): the board's address; empty: INET_ADD of the settings file.
+    pnh_.param<std::string>("host", host_, "");
+    if (host_.empty())
+    {
+      if (!settings.address)
+      {
+        throw ConfigError("Required parameter " + pnh_.resolveName("host") +
+                          " not given (nor INET_ADD in ~settings_file).");
+      }
+      host_ = *settings.address;
+    }
+    // ~tcp_port (int, 0): the board's TCP port; 0: INET_PORT of the settings file, else 6666.
+    int port = 0;
+    pnh_.param("tcp_port", port, 0);
+    if (port < 0 || port > 65535)
+    {
+      throw ConfigError(pnh_.resolveName("tcp_port") + " must be 0-65535");
+    }
+    port_ = port != 0 ? static_cast<uint16_t>(port) : settings.port.value_or(6666);
+    // ~dead_link_timeout (s, 0): silence after which the link is dead and is reconnected;
+    // 0: INET_DEL (ms) of the settings file, else 2 s.
+    double dead = 0.0;
+    pnh_.param("dead_link_timeout", dead, 0.0);
+    options_.dead_link_timeout =
+        dead > 0 ? Milliseconds(static_cast<long>(dead * 1000)) : Milliseconds(settings.dead_link_ms.value_or(2000));
+    // ~keepalive_period (s, 0.5): silence after which an alive request is sent.
+    options_.keepalive_period = params::seconds(pnh_, "keepalive_period", 0.5);
+    if (options_.dead_link_timeout <= options_.keepalive_period)
+    {
+      throw ConfigError(pnh_.resolveName("dead_link_timeout") + " must be longer than " +
+                        pnh_.resolveName("keepalive_period"));
+    }
+    // ~reply_timeout (s, 2): how long a command waits for the board's answer.
+    options_.reply_timeout = params::seconds(pnh_, "reply_timeout", 2.0);
+    // ~connect_timeout (s, 3): TCP connection timeout.
+    connect_timeout_ = params::seconds(pnh_, "connect_timeout", 3.0);
+    // ~max_resends (int, 5): RESENDs accepted for one set of coordinates before the job fails.
+    int max_resends = 5;
+    pnh_.param("max_resends", max_resends, 5);
+    options_.max_resends = static_cast<unsigned>(std::max(0, max_resends));
+    // ~enable_kill (bool, false): allow ~kill (opcode 99/99). PROG_CNCkill|1 in the settings file
+    // enables it too (qCNC enabled it by default; we do not).
+    pnh_.param("enable_kill", enable_kill_, false);
+    enable_kill_ = enable_kill_ || settings.kill_enabled.value_or(false);
+    options_.kill_enabled = enable_kill_;
+    // ~ack_position_reports (bool, true): answer the board's position reports with an ack (Table 1).
+    pnh_.param("ack_position_reports", options_.ack_position_reports, true);
+    // ~mode (string, "file"): board mode selected on every connection: file, gui-control, standalone.
+    std::string mode;
+    pnh_.param<std::string>("mode", mode, "file");
+    if (!parseMode(mode, options_.initial_mode))
+    {
+      throw ConfigError(pnh_.resolveName("mode") + " must be file, gui-control or standalone, not '" + mode + "'");
+    }
+    // ~program_dir (string, ""): directory G-code jobs are read from; empty: only point jobs.
+    std::string dir;
+    pnh_.param<std::string>("program_dir", dir, "");
+    if (!dir.empty())
+    {
+      program_dir_ = std::make_unique<ProgramDirectory>(dir);
+    }
+    // ~chord_tolerance (m, 0.00001): largest deviation of the streamed chords from a G02/G03 arc.
+    parser_options_.chord_tolerance_mm = params::positive(pnh_, "chord_tolerance", 1e-5) / kMetresPerMm;
+    // ~max_preview_points (int, 100000): job/path is thinned to at most this many poses.
+    pnh_.param("max_preview_points", max_preview_points_, 100000);
+    max_preview_points_ = std::max(max_preview_points_, 2);
+  }
+
+  // ------------------------------------------------------------------------- link
+  void connect()
+  {
+    {
+      std::unique_lock<std::mutex> lock(mutex_);
+      // Standalone mode: the board dropped us on purpose; wait for a request of another mode.
+      hold_cv_.wait(lock, [&] { return !hold_ || stopping_; });
+      if (stopping_)
+      {
+        throw CancelledError("stopping");
+      }
+    }
+    ethernut::ClientOptions options;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      options = options_;
+    }
+    auto link = std::shared_ptr<TcpConnection>(TcpConnection::connect(host_, port_, connect_timeout_));
+    auto client = std::make_shared<ethernut::Client>(*link, options, this);
+    std::lock_guard<std::mutex> lock(mutex_);
+    session_ = Session{link, client};
+  }
+
+  void runSession()
+  {
+    const Session s = session();
+    s.client->run();
+    if (s.client->state() == ethernut::SessionState::kStandalone)
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      hold_ = true;
+    }
+  }
+
+  void disconnect()
+  {
+    const Session s = session();
+    if (s.client)
+    {
+      s.client->stop();
+    }
+    if (s.link)
+    {
+      s.link->interrupt();
+    }
+  }
+
+  Session session()
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return session_;
+  }
+
+  // A running client, or an error message for a service or action.
+  std::shared_ptr<ethernut::Client> client(std::string& why)
+  {
+    const Session s = session();
+    if (!s.client || s.client->state() == ethernut::SessionState::kDisconnected ||
+        s.client->state() == ethernut::SessionState::kInitialising)
+    {
+      why = "not connected to the ethernut board at " + host_ + ":" + std::to_string(port_);
+      return nullptr;
+    }
+    return s.client;
+  }
+
+  // ------------------------------------------------------------------------- listener (run() thread)
+  void onState(ethernut::SessionState st, ethernut::SessionState) override
+  {
+    const Session s = session();
+    const ethernut::BoardMode mode = s.client ? s.client->mode() : ethernut::BoardMode::kUnknown;
+    state_->update(
+        [&](MachineState& m)
+        {
+          m.mode = stateMode(mode);
+          switch (st)
+          {
+            case ethernut::SessionState::kSending:
+            case ethernut::SessionState::kWaitingReady:
+              m.execution = MachineState::EXECUTION_ACTIVE;
+              break;
+            case ethernut::SessionState::kReadyToSend:
+              m.execution =
+                  s.client && s.client->jobActive() ? MachineState::EXECUTION_ACTIVE : MachineState::EXECUTION_READY;
+              break;
+            case ethernut::SessionState::kConnected:
+              m.execution = MachineState::EXECUTION_READY;
+              break;
+            case ethernut::SessionState::kPaused:
+              m.execution = MachineState::EXECUTION_PAUSED;
+              break;
+            case ethernut::SessionState::kKilled:
+              m.execution = MachineState::EXECUTION_STOPPED;
+              m.message = "killed";
+              break;
+            case ethernut::SessionState::kStandalone:
+              m.mode = MachineState::MODE_AUTO;
+              m.execution = MachineState::EXECUTION_UNKNOWN;
+              m.message = "board in standalone mode (call ~set_mode to reconnect)";
+              break;
+            default:
+              m.execution = MachineState::EXECUTION_UNKNOWN;
+              break;
+          }
+        });
+  }
+
+  void onPosition(float x, float y, float z) override
+  {
+    // Status-4 messages are the machine's reported position, mm.
+    state_->setPosition(x * kMetresPerMm, y * kMetresPerMm, z * kMetresPerMm);
+  }
+
+  void onCoordinateDone(uint64_t index, const ethernut::Coordinate& c) override
+  {
+    {
+      std::lock_guard<std::mutex> lock(job_mutex_);
+      job_.done = index + 1;
+      job_.line = c.tag;
+      job_.last = c;
+    }
+    geometry_msgs::PointStamped p;
+    p.header.stamp = ros::Time::now();
+    p.header.frame_id = state_->frame("machine");
+    p.point.x = c.x * kMetresPerMm;
+    p.point.y = c.y * kMetresPerMm;
+    p.point.z = c.z * kMetresPerMm;
+    commanded_pub_.publish(p);
+  }
+
+  void onResend(uint64_t, unsigned) override
+  {
+    std::lock_guard<std::mutex> lock(job_mutex_);
+    ++job_.resends;
+  }
+
+  void onJobFinished(ethernut::JobOutcome outcome, const std::string& message) override
+  {
+    {
+      std::lock_guard<std::mutex> lock(job_mutex_);
+      job_.finished = true;
+      job_.outcome = outcome;
+      job_.message = message;
+    }
+    job_cv_.notify_all();
+    // A job cancelled by ~run_job's cancel leaves the board paused (the held move): say so.
+    const Session s = session();
+    const bool paused = s.client && s.client->state() == ethernut::SessionState::kPaused;
+    state_->update(
+        [&](MachineState& m)
+        {
+          m.execution = paused ? MachineState::EXECUTION_PAUSED
+                               : (outcome == ethernut::JobOutcome::kCompleted ? MachineState::EXECUTION_READY
+                                                                              : MachineState::EXECUTION_STOPPED);
+          m.message = message;
+        });
+  }
+
+  void onBoardError(float code) override
+  {
+    state_->update([&](MachineState& m) { m.message = "board error code " + std::to_string(static_cast<int>(code)); });
+  }
+
+  // ------------------------------------------------------------------------- jobs
+  struct JobProgress
+  {
+    uint64_t done = 0;
+    uint32_t line = 0;
+    uint32_t resends = 0;
+    ethernut::Coordinate last;
+    bool finished = false;
+    ethernut::JobOutcome outcome = ethernut::JobOutcome::kFailed;
+    std::string message;
+  };
+
+  // The preview of a job: poses of job/path and the rapid/feed line lists of job/markers.
+  class Preview
+  {
+   public:
+    Preview(size_t max_points, const std::string& frame) : max_points_(max_points)
+    {
+      path_.header.frame_id = frame;
+      path_.header.stamp = ros::Time::now();
+    }
+    void add(double x_mm, double y_mm, double z_mm, bool rapid)
+    {
+      if (count_++ % stride_ != 0)
+      {
+        return;
+      }
+      geometry_msgs::PoseStamped pose;
+      pose.header = path_.header;
+      pose.pose.position.x = x_mm * kMetresPerMm;
+      pose.pose.position.y = y_mm * kMetresPerMm;
+      pose.pose.position.z = z_mm * kMetresPerMm;
+      pose.pose.orientation.w = 1.0;
+      path_.poses.push_back(pose);
+      rapid_.push_back(rapid);
+      if (path_.poses.size() >= max_points_)
+      {
+        // Thin to every other pose and keep one in 2*stride from now on: memory stays bounded.
+        size_t kept = 0;
+        for (size_t i = 0; i < path_.poses.size(); i += 2)
+        {
+          path_.poses[kept] = path_.poses[i];
+          rapid_[kept] = rapid_[i];
+          ++kept;
+        }
+        path_.poses.resize(kept);
+        rapid_.resize(kept);
+        stride_ *= 2;
+      }
+    }
+    const nav_msgs::Path& path() const { return path_; }
+    visualization_msgs::MarkerArray markers() const
+    {
+      visualization_msgs::MarkerArray array;
+      visualization_msgs::Marker clear;
+      clear.action = visualization_msgs::Marker::DELETEALL;
+      array.markers.push_back(clear);
+      for (int rapid = 0; rapid < 2; ++rapid)
+      {
+        visualization_msgs::Marker m;
+        m.header = path_.header;
+        m.ns = rapid ? "rapid" : "feed";
+        m.id = rapid;
+        m.type = visualization_msgs::Marker::LINE_LIST;
+        m.action = visualization_msgs::Marker::ADD;
+        m.pose.orientation.w = 1.0;
+        m.scale.x = rapid ? 0.0003 : 0.0005;  // line width, m
+        // Feeds green, rapids orange: the colours CAM previews use for cutting and positioning.
+        m.color.r = rapid ? 1.0f : 0.1f;
+        m.color.g = rapid ? 0.55f : 0.8f;
+        m.color.b = rapid ? 0.0f : 0.2f;
+        m.color.a = 1.0f;
+        for (size_t i = 1; i < path_.poses.size(); ++i)
+        {
+          if (static_cast<bool>(rapid_[i]) == static_cast<bool>(rapid))
+          {
+            m.points.push_back(path_.poses[i - 1].pose.position);
+            m.points.push_back(path_.poses[i].pose.position);
+          }
+        }
+        array.markers.push_back(m);
+      }
+      return array;
+    }
+
+   private:
+    size_t max_points_;
+    size_t stride_ = 1;
+    size_t count_ = 0;
+    nav_msgs::Path path_;
+    std::vector<uint8_t> rapid_;
+  };
+
+  void execute(const RunJobGoalConstPtr& goal)
+  {
+    RunJobResult result;
+    auto abort = [&](const std::string& message)
+    {
+      result.success = false;
+      result.message = message;
+      ROS_WARN_STREAM("run_job: " << message);
+      action_.setAborted(result, message);
+    };
+    std::string why;
+    auto c = client(why);
+    if (!c)
+    {
+      abort(why);
+      return;
+    }
+
+    // Load the job: a first pass over the file counts the coordinates and builds the preview, so
+    // the preview is out before the first set is sent and a bad program is refused before it runs.
+    Preview preview(static_cast<size_t>(max_preview_points_), state_->frame("machine"));
+    std::function<bool(ethernut::Coordinate&)> source;
+    uint64_t count = 0;
+    std::string program;
+    if (!goal->file.empty())
+    {
+      if (!program_dir_)
+      {
+        abort("G-code jobs need ~program_dir (" + pnh_.resolveName("program_dir") + ")");
+        return;
+      }
+      std::string path;
+      try
+      {
+        path = program_dir_->resolveExisting(goal->file);
+        std::ifstream in(path, std::ios::binary);
+        if (!in)
+        {
+          throw ConfigError("cannot open " + path);
+        }
+        gcode::Reader reader(in, parser_options_);
+        gcode::Move move;
+        bool first_move = true;
+        Preview fresh(static_cast<size_t>(max_preview_points_), state_->frame("machine"));
+        while (reader.nextMove(move))
+        {
+          if (first_move)
+          {
+            fresh.add(move.start.x, move.start.y, move.start.z, true);
+            first_move = false;
+          }
+          fresh.add(move.end.x, move.end.y, move.end.z, move.motion == gcode::Motion::kRapid);
+          ++count;
+        }
+        preview = std::move(fresh);
+      }
+      catch (const Error& e)
+      {
+        abort(std::string("job refused: ") + e.what());
+        return;
+      }
+      program = goal->file;
+      auto in = std::make_shared<std::ifstream>(path, std::ios::binary);
+      auto reader = std::make_shared<gcode::Reader>(*in, parser_options_);
+      source = [in, reader](ethernut::Coordinate& out)
+      {
+        gcode::Move move;
+        if (!reader->nextMove(move))
+        {
+          return false;
+        }
+        out.x = static_cast<float>(move.end.x);
+        out.y = static_cast<float>(move.end.y);
+        out.z = static_cast<float>(move.end.z);
+        out.tag = move.line;
+        return true;
+      };
+    }
+    else
+    {
+      if (goal->points.empty())
+      {
+        abort("job refused: neither a file nor points given");
+        return;
+      }
+      auto points = std::make_shared<std::vector<ethernut::Coordinate>>();
+      for (const auto& p : goal->points)
+      {
+        if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+        {
+          abort("job refused: point " + std::to_string(points->size()) + " is not finite");
+          return;
+        }
+        ethernut::Coordinate c;
+        c.x = static_cast<float>(p.x / kMetresPerMm);
+        c.y = static_cast<float>(p.y / kMetresPerMm);
+        c.z = static_cast<float>(p.z / kMetresPerMm);
+        points->push_back(c);
+        preview.add(c.x, c.y, c.z, false);
+      }
+      count = points->size();
+      program = "(points)";
+      auto next = std::make_shared<size_t>(0);
+      source = [points, next](ethernut::Coordinate& out)
+      {
+        if (*next >= points->size())
+        {
+          return false;
+        }
+        out = (*points)[(*next)++];
+        return true;
+      };
+    }
+    path_pub_.publish(preview.path());
+    markers_pub_.publish(preview.markers());
+    state_->update(
+        [&](MachineState& m)
+        {
+          m.program = program;
+          m.block = 0;
+        });
+
+    {
+      std::lock_guard<std::mutex> lock(job_mutex_);
+      job_ = JobProgress();
+    }
+    try
+    {
+      c->startJob(source);
+    }
+    catch (const Error& e)
+    {
+      abort(e.what());
+      return;
+    }
+    ROS_INFO_STREAM("run_job: streaming " << count << " coordinates of " << program);
+
+    // Feedback at most every 50 ms (a fast board acknowledges thousands of sets per second).
+    RunJobFeedback feedback;
+    uint64_t reported = UINT64_MAX;
+    bool cancelled = false;
+    for (;;)
+    {
+      std::unique_lock<std::mutex> lock(job_mutex_);
+      job_cv_.wait_for(lock, std::chrono::milliseconds(50), [&] { return job_.finished; });
+      const JobProgress p = job_;
+      lock.unlock();
+      if (p.done != reported)
+      {
+        reported = p.done;
+        feedback.line = p.line;
+        feedback.coordinate_index = p.done > 0 ? static_cast<uint32_t>(p.done - 1) : 0;
+        feedback.coordinate_count = static_cast<uint32_t>(count);
+        feedback.percent = count > 0 ? static_cast<float>(100.0 * p.done / count) : 100.0f;
+        feedback.resends = p.resends;
+        feedback.commanded.x = p.last.x * kMetresPerMm;
+        feedback.commanded.y = p.last.y * kMetresPerMm;
+        feedback.commanded.z = p.last.z * kMetresPerMm;
+        action_.publishFeedback(feedback);
+        state_->update([&](MachineState& m) { m.block = p.line; });
+      }
+      if (p.finished)
+      {
+        result.coordinates_done = static_cast<uint32_t>(p.done);
+        result.coordinate_count = static_cast<uint32_t>(count);
+        result.resends = p.resends;
+        result.message = p.message;
+        result.success = p.outcome == ethernut::JobOutcome::kCompleted;
+        if (cancelled)
+        {
+          action_.setPreempted(result, result.message);
+        }
+        else if (result.success)
+        {
+          action_.setSucceeded(result, result.message);
+        }
+        else
+        {
+          abort(result.message);
+        }
+        return;
+      }
+      if (!cancelled && (action_.isPreemptRequested() || !ros::ok()))
+      {
+        // Cancel: hold the board first (it stops the move in progress), then stop streaming.
+        cancelled = true;
+        try
+        {
+          c->pause();
+        }
+        catch (const Error& e)
+        {
+          ROS_WARN_STREAM("run_job: pause on cancel failed: " << e.what());
+        }
+        c->cancelJob();
+      }
+    }
+  }
+
+  // ------------------------------------------------------------------------- services
+  template <typename F>
+  bool command(std_srvs::Trigger::Response& res, const char* what, F f)
+  {
+    std::string why;
+    auto c = client(why);
+    if (!c)
+    {
+      res.success = false;
+      res.message = why;
+      return true;
+    }
+    try
+    {
+      f(*c);
+      res.success = true;
+      res.message = what;
+    }
+    catch (const Error& e)
+    {
+      res.success = false;
+      res.message = e.what();
+    }
+    return true;
+  }
+
+  bool onPause(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res)
+  {
+    return command(res, "paused", [](ethernut::Client& c) { c.pause(); });
+  }
+  bool onResume(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res)
+  {
+    return command(res, "resumed", [](ethernut::Client& c) { c.resume(); });
+  }
+  bool onReset(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res)
+  {
+    return command(res, "reset: job cancelled, board cleared to 0/0/0", [](ethernut::Client& c) { c.reset(); });
+  }
+  bool onKill(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res)
+  {
+    if (!enable_kill_)
+    {
+      res.success = false;
+      res.message = "kill is disabled: set " + pnh_.resolveName("enable_kill") +
+                    " to true (or PROG_CNCkill|1 in ~settings_file) to allow it";
+      return true;
+    }
+    return command(res, "killed: the board stopped and dropped the link", [](ethernut::Client& c) { c.kill(); });
+  }
+
+  bool onSetMode(EthernutSetMode::Request& req, EthernutSetMode::Response& res)
+  {
+    ethernut::BoardMode mode;
+    if (!parseMode(req.mode, mode))
+    {
+      res.success = false;
+      res.message = "unknown mode '" + req.mode + "' (file, gui-control or standalone)";
+      return true;
+    }
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      options_.initial_mode = mode;  // also the mode after the next reconnection
+      if (hold_)
+      {
+        if (mode == ethernut::BoardMode::kStandalone)
+        {
+          res.success = true;
+          res.message = "already in standalone mode";
+          return true;
+        }
+        hold_ = false;
+        hold_cv_.notify_all();
+        res.success = true;
+        res.message = std::string("reconnecting in ") + ethernut::toString(mode) + " mode";
+        return true;
+      }
+    }
+    std::string why;
+    auto c = client(why);
+    if (!c)
+    {
+      res.success = false;
+      res.message = why;
+      return true;
+    }
+    try
+    {
+      c->setMode(mode);
+      res.success = true;
+      res.message = std::string("mode ") + ethernut::toString(mode);
+      state_->update([&](MachineState& m) { m.mode = stateMode(mode); });
+    }
+    catch (const Error& e)
+    {
+      res.success = false;
+      res.message = e.what();
+    }
+    return true;
+  }
+
+  void protocolDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& status)
+  {
+    const Session s = session();
+    if (!s.client)
+    {
+      status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "not connected yet");
+      return;
+    }
+    const ethernut::ClientStats st = s.client->stats();
+    status.summary(diagnostic_msgs::DiagnosticStatus::OK, ethernut::toString(s.client->state()));
+    if (st.last_board_error != 0.0f)
+    {
+      status.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN, "the board reported an error code");
+    }
+    status.add("session state", ethernut::toString(s.client->state()));
+    status.add("board mode", ethernut::toString(s.client->mode()));
+    status.add("round trip last (ms)", st.last_rtt_ms);
+    status.add("round trip mean (ms)", st.mean_rtt_ms);
+    status.add("round trip max (ms)", st.max_rtt_ms);
+    status.add("coordinates sent", st.coordinates_sent);
+    status.add("coordinates acknowledged", st.coordinates_done);
+    status.add("resends", st.resends);
+    status.add("keepalive requests", st.keepalive_requests);
+    status.add("keepalive misses", st.keepalive_misses);
+    status.add("invalid frames", st.bad_frames);
+    status.add("unexpected messages", st.unexpected_messages);
+    status.add("last board error code", st.last_board_error);
+    status.add("reconnects", reconnector_ ? reconnector_->reconnects() : 0u);
+    status.add("kill enabled", enable_kill_);
+  }
+
+  ros::NodeHandle nh_;
+  ros::NodeHandle pnh_;
+  std::string host_;
+  uint16_t port_ = 6666;
+  Milliseconds connect_timeout_{3000};
+  ethernut::ClientOptions options_;
+  bool enable_kill_ = false;
+  std::unique_ptr<ProgramDirectory> program_dir_;
+  gcode::ParserOptions parser_options_;
+  int max_preview_points_ = 100000;
+
+  std::unique_ptr<MachineStatePublisher> state_;
+  ros::Publisher path_pub_;
+  ros::Publisher markers_pub_;
+  ros::Publisher commanded_pub_;
+  ros::ServiceServer pause_srv_, resume_srv_, reset_srv_, kill_srv_, mode_srv_;
+  actionlib::SimpleActionServer<RunJobAction> action_;
+
+  std::mutex mutex_;  // session_, hold_, stopping_, options_.initial_mode
+  std::condition_variable hold_cv_;
+  Session session_;
+  bool hold_ = false;
+  bool stopping_ = false;
+
+  std::mutex job_mutex_;
+  std::condition_variable job_cv_;
+  JobProgress job_;
+
+  std::unique_ptr<Reconnector> reconnector_;
+};
+}  // namespace cnc_bridge
+
+int main(int argc, char** argv)
+{
+  ros::init(argc, argv, "ethernut_node");
+  cnc_bridge::routeCoreLogToRosconsole();
+  try
+  {
+    ros::AsyncSpinner spinner(4);  // services and the action may wait for the board concurrently
+    spinner.start();
+    cnc_bridge::EthernutNode node(ros::NodeHandle(), ros::NodeHandle("~"));
+    ros::waitForShutdown();
+  }
+  catch (const cnc_bridge::Error& e)
+  {
+    ROS_FATAL_STREAM(e.what());
+    return 1;
+  }
+  return 0;
+}

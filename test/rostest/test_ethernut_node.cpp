@@ -1,0 +1,430 @@
+// ethernut_node against sim_ethernut: jobs streamed in order despite RESENDs (checked against the
+// simulator's log of accepted coordinates and against our own parse of the program), the preview
+// published before the job runs, pause/resume, cancel, the kill gate, and link loss.
+#include <actionlib/client/simple_action_client.h>
+#include <gtest/gtest.h>
+#include <nav_msgs/Path.h>
+#include <ros/ros.h>
+#include <std_srvs/Trigger.h>
+#include <visualization_msgs/MarkerArray.h>
+
+#include <array>
+#include <atomic>
+#include <condition_variable>
+#include <fstream>
+#include <mutex>
+
+#include "cnc_bridge/MachineState.h"
+#include "cnc_bridge/RunJobAction.h"
+#include "cnc_bridge/gcode/gcode.h"
+
+using cnc_bridge::MachineState;
+using cnc_bridge::RunJobAction;
+using cnc_bridge::RunJobFeedbackConstPtr;
+using cnc_bridge::RunJobGoal;
+using Client = actionlib::SimpleActionClient<RunJobAction>;
+
+namespace
+{
+std::string ns, prefix, sim_log, program_dir;
+
+// Everything the node publishes that the tests look at, in arrival order.
+struct Watch
+{
+  std::mutex mutex;
+  std::condition_variable cv;
+  MachineState state;
+  bool have_state = false;
+  std::vector<std::pair<ros::WallTime, uint8_t>> links;  // every link value, with arrival time
+  nav_msgs::Path path;
+  uint64_t path_seq = 0;  // event counter value when the path arrived
+  visualization_msgs::MarkerArray markers;
+  uint64_t events = 0;
+  std::vector<cnc_bridge::RunJobFeedback> feedback;
+  uint64_t first_feedback_seq = 0;
+  ros::WallTime last_feedback_time;
+
+  template <typename F>
+  bool waitFor(F condition, double seconds = 20.0)
+  {
+    std::unique_lock<std::mutex> lock(mutex);
+    return cv.wait_for(lock, std::chrono::duration<double>(seconds), condition);
+  }
+};
+Watch* watch = nullptr;
+
+void onState(const MachineState::ConstPtr& m)
+{
+  std::lock_guard<std::mutex> lock(watch->mutex);
+  if (!watch->have_state || watch->state.link != m->link)
+  {
+    watch->links.push_back({ros::WallTime::now(), m->link});
+  }
+  watch->state = *m;
+  watch->have_state = true;
+  ++watch->events;
+  watch->cv.notify_all();
+}
+
+void onPath(const nav_msgs::Path::ConstPtr& m)
+{
+  std::lock_guard<std::mutex> lock(watch->mutex);
+  watch->path = *m;
+  watch->path_seq = ++watch->events;
+  watch->cv.notify_all();
+}
+
+void onMarkers(const visualization_msgs::MarkerArray::ConstPtr& m)
+{
+  std::lock_guard<std::mutex> lock(watch->mutex);
+  watch->markers = *m;
+  watch->cv.notify_all();
+}
+
+void onFeedback(const RunJobFeedbackConstPtr& f)
+{
+  std::lock_guard<std::mutex> lock(watch->mutex);
+  if (watch->feedback.empty())
+  {
+    watch->first_feedback_seq = ++watch->events;
+  }
+  watch->feedback.push_back(*f);
+  watch->last_feedback_time = ros::WallTime::now();
+  watch->cv.notify_all();
+}
+
+void clearJob()
+{
+  std::lock_guard<std::mutex> lock(watch->mutex);
+  watch->feedback.clear();
+  watch->first_feedback_seq = 0;
+  watch->path_seq = 0;
+}
+
+std::vector<std::array<float, 3>> simLog()
+{
+  std::vector<std::array<float, 3>> lines;
+  std::ifstream in(sim_log);
+  float x, y, z;
+  while (in >> x >> y >> z)
+  {
+    lines.push_back({x, y, z});
+  }
+  return lines;
+}
+
+// The coordinates the node must send for a program: the end of every move, mm, as float.
+std::vector<std::array<float, 3>> expectedFor(const std::string& file)
+{
+  std::ifstream in(program_dir + "/" + file);
+  std::vector<std::array<float, 3>> out;
+  cnc_bridge::gcode::forEachMove(
+      in,
+      [&](const cnc_bridge::gcode::Move& m) {
+        out.push_back({static_cast<float>(m.end.x), static_cast<float>(m.end.y), static_cast<float>(m.end.z)});
+      });
+  return out;
+}
+
+void expectSameCoordinates(const std::vector<std::array<float, 3>>& got, size_t from,
+                           const std::vector<std::array<float, 3>>& expected)
+{
+  ASSERT_EQ(got.size() - from, expected.size());
+  for (size_t i = 0; i < expected.size(); ++i)
+  {
+    for (int a = 0; a < 3; ++a)
+    {
+      // The simulator logs 4 decimals of the float it received.
+      ASSERT_NEAR(got[from + i][a], expected[i][a], 1e-3) << "coordinate " << i << " axis " << a;
+    }
+  }
+}
+
+bool call(const std::string& service, std_srvs::Trigger::Response& res)
+{
+  std_srvs::Trigger srv;
+  const bool ok = ros::service::call(ns + "/ethernut_node/" + service, srv);
+  res = srv.response;
+  return ok;
+}
+
+bool linkUp(double seconds = 20.0)
+{
+  return watch->waitFor([] { return watch->have_state && watch->state.link == MachineState::LINK_UP; }, seconds);
+}
+
+// Board ready: link up and the session through its handshake (execution READY).
+bool boardReady(double seconds = 20.0)
+{
+  return watch->waitFor(
+      []
+      {
+        return watch->have_state && watch->state.link == MachineState::LINK_UP &&
+               watch->state.execution == MachineState::EXECUTION_READY;
+      },
+      seconds);
+}
+
+std::unique_ptr<Client> actionClient()
+{
+  auto client = std::make_unique<Client>(ns + "/ethernut_node/run_job", false);
+  EXPECT_TRUE(client->waitForServer(ros::Duration(20.0)));
+  return client;
+}
+
+RunJobGoal pointsGoal(const std::vector<std::array<double, 3>>& points_m)
+{
+  RunJobGoal goal;
+  for (const auto& p : points_m)
+  {
+    geometry_msgs::Point g;
+    g.x = p[0];
+    g.y = p[1];
+    g.z = p[2];
+    goal.points.push_back(g);
+  }
+  return goal;
+}
+}  // namespace
+
+TEST(EthernutJob, KillIsRefusedByDefault)
+{
+  ASSERT_TRUE(boardReady());
+  std_srvs::Trigger::Response res;
+  ASSERT_TRUE(call("kill", res));
+  EXPECT_FALSE(res.success);
+  EXPECT_NE(res.message.find(ns + "/ethernut_node/enable_kill"), std::string::npos) << res.message;
+  EXPECT_TRUE(boardReady(5.0));  // nothing was sent: the link stays up
+}
+
+TEST(EthernutJob, SeedProgramStreamsEveryCoordinateInOrderDespiteResends)
+{
+  ASSERT_TRUE(boardReady());
+  auto client = actionClient();
+  clearJob();
+  const size_t before = simLog().size();
+  RunJobGoal goal;
+  goal.file = "seed_hello.nc";
+  client->sendGoal(goal, Client::SimpleDoneCallback(), Client::SimpleActiveCallback(), &onFeedback);
+  ASSERT_TRUE(client->waitForResult(ros::Duration(30.0)));
+  ASSERT_EQ(client->getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client->getState().getText();
+  const auto result = client->getResult();
+  const auto expected = expectedFor("seed_hello.nc");
+  EXPECT_EQ(result->coordinate_count, expected.size());
+  EXPECT_EQ(result->coordinates_done, expected.size());
+  EXPECT_GE(result->resends, 1u);  // the simulator asks again for every 4th set
+  expectSameCoordinates(simLog(), before, expected);
+
+  // The preview came out before the job ran (before the first feedback) and matches the program.
+  ASSERT_TRUE(watch->waitFor(
+      [] { return watch->path_seq > 0 && !watch->feedback.empty() && watch->feedback.back().percent > 99.999f; }, 5.0));
+  std::lock_guard<std::mutex> lock(watch->mutex);
+  EXPECT_LT(watch->path_seq, watch->first_feedback_seq);
+  EXPECT_EQ(watch->path.header.frame_id, prefix + "machine");
+  ASSERT_EQ(watch->path.poses.size(), expected.size() + 1);            // the start point plus every move
+  EXPECT_NEAR(watch->path.poses.back().pose.position.z, 0.005, 1e-9);  // Z5 mm in metres
+  EXPECT_EQ(watch->feedback.back().line, 9u);                          // N70 Z5 is line 9 of the file
+}
+
+TEST(EthernutJob, HaasProgramPreviewStaysInsideThePartAndStreamsInOrder)
+{
+  ASSERT_TRUE(boardReady());
+  auto client = actionClient();
+  clearJob();
+  const size_t before = simLog().size();
+  RunJobGoal goal;
+  goal.file = "haas_O05555.nc";
+  client->sendGoal(goal, Client::SimpleDoneCallback(), Client::SimpleActiveCallback(), &onFeedback);
+  ASSERT_TRUE(client->waitForResult(ros::Duration(60.0)));
+  ASSERT_EQ(client->getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client->getState().getText();
+  const auto expected = expectedFor("haas_O05555.nc");
+  EXPECT_GT(expected.size(), 100u);  // the arcs are cut into chords
+  expectSameCoordinates(simLog(), before, expected);
+
+  std::lock_guard<std::mutex> lock(watch->mutex);
+  const double inch = 0.0254;
+  for (const auto& pose : watch->path.poses)
+  {
+    const auto& p = pose.pose.position;
+    // Part extent (the G53 retracts go to machine zero: Y0, Z0, inside these bounds too).
+    EXPECT_GE(p.x, -1.3 * inch - 1e-6);
+    EXPECT_LE(p.x, 5.675 * inch + 1e-6);
+    EXPECT_GE(p.y, -1e-6);
+    EXPECT_LE(p.y, 2.906 * inch + 1e-6);
+    EXPECT_GE(p.z, -0.125 * inch - 1e-6);
+    EXPECT_LE(p.z, 1.0 * inch + 1e-6);
+  }
+  size_t rapid_points = 0, feed_points = 0;
+  for (const auto& m : watch->markers.markers)
+  {
+    if (m.ns == "rapid")
+    {
+      rapid_points = m.points.size();
+    }
+    if (m.ns == "feed")
+    {
+      feed_points = m.points.size();
+      EXPECT_EQ(m.header.frame_id, prefix + "machine");
+    }
+  }
+  EXPECT_GT(rapid_points, 0u);
+  EXPECT_GT(feed_points, rapid_points);
+}
+
+TEST(EthernutJob, ReportedPositionEndsAtTheLastCoordinate)
+{
+  ASSERT_TRUE(boardReady());
+  auto client = actionClient();
+  RunJobGoal goal = pointsGoal({{0.01, 0.02, 0.003}, {0.012, -0.004, 0.001}});
+  client->sendGoal(goal);
+  ASSERT_TRUE(client->waitForResult(ros::Duration(30.0)));
+  ASSERT_EQ(client->getState(), actionlib::SimpleClientGoalState::SUCCEEDED);
+  // Status-4 reports are the machine position in mm; the state carries metres.
+  EXPECT_TRUE(watch->waitFor(
+      []
+      {
+        const auto& p = watch->state.position;
+        return watch->state.position_valid && std::fabs(p.x - 0.012) < 1e-6 && std::fabs(p.y + 0.004) < 1e-6 &&
+               std::fabs(p.z - 0.001) < 1e-6;
+      },
+      10.0));
+}
+
+TEST(EthernutJob, PauseHoldsTheJobAndResumeFinishesIt)
+{
+  ASSERT_TRUE(boardReady());
+  auto client = actionClient();
+  clearJob();
+  const size_t before = simLog().size();
+  // 0.2 m apart at 2000 mm/s: 100 ms per move.
+  std::vector<std::array<double, 3>> points;
+  for (int i = 0; i < 8; ++i)
+  {
+    points.push_back({(i % 2) * 0.2, 0.0, 0.0});
+  }
+  client->sendGoal(pointsGoal(points), Client::SimpleDoneCallback(), Client::SimpleActiveCallback(), &onFeedback);
+  ASSERT_TRUE(watch->waitFor([] { return !watch->feedback.empty() && watch->feedback.back().coordinate_index >= 1; }));
+  std_srvs::Trigger::Response res;
+  ASSERT_TRUE(call("pause", res));
+  ASSERT_TRUE(res.success) << res.message;
+  ASSERT_TRUE(watch->waitFor([] { return watch->state.execution == MachineState::EXECUTION_PAUSED; }, 5.0));
+  const size_t held = simLog().size();
+  // While paused nothing completes: wait longer than three moves would take.
+  EXPECT_FALSE(watch->waitFor([&] { return simLog().size() > held; }, 0.4));
+  EXPECT_FALSE(client->getState().isDone());
+  ASSERT_TRUE(call("resume", res));
+  ASSERT_TRUE(res.success) << res.message;
+  ASSERT_TRUE(client->waitForResult(ros::Duration(30.0)));
+  ASSERT_EQ(client->getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client->getState().getText();
+  std::vector<std::array<float, 3>> expected;
+  for (const auto& p : points)
+  {
+    expected.push_back({static_cast<float>(p[0] * 1000), 0.0f, 0.0f});
+  }
+  expectSameCoordinates(simLog(), before, expected);
+}
+
+TEST(EthernutJob, CancelStopsStreamingAndPausesTheBoard)
+{
+  ASSERT_TRUE(boardReady());
+  auto client = actionClient();
+  clearJob();
+  const size_t before = simLog().size();
+  std::vector<std::array<double, 3>> points;
+  for (int i = 0; i < 20; ++i)
+  {
+    points.push_back({(i % 2) * 0.2, 0.0, 0.0});
+  }
+  client->sendGoal(pointsGoal(points), Client::SimpleDoneCallback(), Client::SimpleActiveCallback(), &onFeedback);
+  ASSERT_TRUE(watch->waitFor([] { return !watch->feedback.empty(); }));
+  client->cancelGoal();
+  ASSERT_TRUE(client->waitForResult(ros::Duration(20.0)));
+  EXPECT_EQ(client->getState(), actionlib::SimpleClientGoalState::PREEMPTED);
+  ASSERT_TRUE(watch->waitFor([] { return watch->state.execution == MachineState::EXECUTION_PAUSED; }, 5.0));
+  EXPECT_LT(simLog().size() - before, points.size());
+  std_srvs::Trigger::Response res;
+  ASSERT_TRUE(call("resume", res));  // the held move completes; nothing more is sent
+  EXPECT_TRUE(res.success) << res.message;
+  EXPECT_TRUE(boardReady(10.0));
+}
+
+TEST(EthernutLink, DeadLinkIsDetectedWithinTheTimeoutAndTheNodeReconnects)
+{
+  ASSERT_TRUE(boardReady());
+  auto client = actionClient();
+  clearJob();
+  // The simulator goes silent when the 5th set arrives (INET_DEL 600 ms in the settings file).
+  std::vector<std::array<double, 3>> points;
+  for (int i = 0; i < 20; ++i)
+  {
+    points.push_back({0.001 * i, 0.0, 0.0});
+  }
+  size_t links_before;
+  {
+    std::lock_guard<std::mutex> lock(watch->mutex);
+    links_before = watch->links.size();
+  }
+  client->sendGoal(pointsGoal(points), Client::SimpleDoneCallback(), Client::SimpleActiveCallback(), &onFeedback);
+  ASSERT_TRUE(client->waitForResult(ros::Duration(20.0)));
+  EXPECT_EQ(client->getState(), actionlib::SimpleClientGoalState::ABORTED);
+  EXPECT_NE(client->getState().getText().find("silent"), std::string::npos) << client->getState().getText();
+  EXPECT_EQ(client->getResult()->coordinates_done, 4u);
+  ASSERT_TRUE(watch->waitFor(
+      [&]
+      {
+        for (size_t i = links_before; i < watch->links.size(); ++i)
+        {
+          if (watch->links[i].second == MachineState::LINK_DOWN)
+          {
+            return true;
+          }
+        }
+        return false;
+      }));
+  {
+    std::lock_guard<std::mutex> lock(watch->mutex);
+    ros::WallTime down;
+    for (size_t i = links_before; i < watch->links.size(); ++i)
+    {
+      if (watch->links[i].second != MachineState::LINK_UP)
+      {
+        down = watch->links[i].first;
+        break;
+      }
+    }
+    // Silence began when the 5th set went out, just after the 4th NEXT (last feedback, sent at
+    // most 50 ms later). Detection: the 600 ms timeout plus one poll and scheduling slack.
+    const double detect = (down - watch->last_feedback_time).toSec();
+    EXPECT_GT(detect, 0.45);
+    EXPECT_LT(detect, 1.5);
+  }
+  // The node reconnects (the simulator answers the new connection) and runs the next job.
+  ASSERT_TRUE(boardReady(20.0));
+  const size_t before = simLog().size();
+  client->sendGoal(pointsGoal({{0.001, 0.002, 0.003}, {0.004, 0.005, 0.006}}));
+  ASSERT_TRUE(client->waitForResult(ros::Duration(20.0)));
+  ASSERT_EQ(client->getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client->getState().getText();
+  expectSameCoordinates(simLog(), before, {{1, 2, 3}, {4, 5, 6}});
+}
+
+int main(int argc, char** argv)
+{
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_ethernut_node");
+  ros::NodeHandle pnh("~");
+  pnh.param<std::string>("namespace", ns, "");
+  pnh.param<std::string>("tf_prefix", prefix, "");
+  pnh.param<std::string>("sim_log", sim_log, "");
+  pnh.param<std::string>("program_dir", program_dir, "");
+  Watch w;
+  watch = &w;
+  ros::NodeHandle nh;
+  auto state_sub = nh.subscribe(ns + "/state", 100, &onState);
+  auto path_sub = nh.subscribe(ns + "/job/path", 10, &onPath);
+  auto markers_sub = nh.subscribe(ns + "/job/markers", 10, &onMarkers);
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+  const int result = RUN_ALL_TESTS();
+  spinner.stop();
+  return result;
+}
