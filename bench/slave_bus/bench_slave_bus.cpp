@@ -94,15 +94,16 @@ int main(int argc, char** argv)
     std::cout << "framing=" << framing << " slaves=" << slaves << " baud=" << (baud ? std::to_string(baud) : "pty")
               << " steps=" << steps << " missing=" << missing << "\n";
     std::cout << "  bytes per step: " << down << " down, " << up << " up\n";
-    std::cout << "  steps/s: " << rate << "   latency us: median " << latencies[latencies.size() / 2] << ", p99 "
-              << latencies[latencies.size() * 99 / 100] << "\n";
+    const double median = latencies[latencies.size() / 2];
+    std::cout << "  steps/s: " << rate << " (at the median latency: " << 1e6 / median << ")   latency us: median "
+              << median << ", p99 " << latencies[latencies.size() * 99 / 100] << "\n";
     if (baud > 0)
     {
       // Each step waits for the answers before the next frame: the line carries down + up bytes
       // one after the other, so the bound is the character rate over both.
       const double bound = cps / (down + up);
       std::cout << "  line-rate bound: " << bound << " steps/s   measured/bound = " << std::setprecision(3)
-                << rate / bound << "\n";
+                << rate / bound << " (at the median latency: " << 1e6 / median / bound << ")\n";
     }
     return missing == 0 ? 0 : 1;
   }
