@@ -76,7 +76,7 @@ void QueryScheduler::done(Clock::time_point now)
   {
     return;
   }
-  if (best->period.count() == 0)
+  if (best->period == kOnce)
   {
     best->finished = true;
     return;
@@ -261,9 +261,9 @@ QueryScheduler PollPlan::scheduler() const
   QueryScheduler scheduler;
   if (identity)
   {
-    scheduler.add(q(100), Milliseconds(0));
-    scheduler.add(q(101), Milliseconds(0));
-    scheduler.add(q(102), Milliseconds(0));
+    scheduler.add(q(100), QueryScheduler::kOnce);
+    scheduler.add(q(101), QueryScheduler::kOnce);
+    scheduler.add(q(102), QueryScheduler::kOnce);
   }
   scheduler.add(q(500), status_period);
   scheduler.add(q(104), status_period);

@@ -5,6 +5,7 @@
 // offers ~read_variable, ~write_variable (allow-list) and ~query (read-only raw queries).
 #include <ros/ros.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -42,6 +43,11 @@ std::vector<int> intList(const ros::NodeHandle& pnh, const std::string& name, co
     }
   }
   return values;
+}
+// A poll period: at least 1 ms, so a node never polls a real control back to back.
+Milliseconds period(const ros::NodeHandle& pnh, const std::string& name, double fallback_seconds)
+{
+  return std::max(params::seconds(pnh, name, fallback_seconds), Milliseconds(1));
 }
 }  // namespace
 
@@ -82,11 +88,11 @@ class HaasMdcNode
 
     mdc::PollPlan plan;
     // ~status_period: s between Q500 (program, status, parts) polls, and Q104 (mode).
-    plan.status_period = params::seconds(pnh, "status_period", 0.25);
+    plan.status_period = period(pnh, "status_period", 0.25);
     // ~variables_period: s between polls of each position variable and ~variables entry.
-    plan.variables_period = params::seconds(pnh, "variables_period", 0.25);
+    plan.variables_period = period(pnh, "variables_period", 0.25);
     // ~counters_period: s between polls of tool in use, cycle times, M30 counters and #4006.
-    plan.counters_period = params::seconds(pnh, "counters_period", 2.0);
+    plan.counters_period = period(pnh, "counters_period", 2.0);
     // ~position_variables: machine position X Y Z (Haas #5021-#5023); [] to not poll positions.
     position_vars_ = intList(pnh, "position_variables", {5021, 5022, 5023});
     // ~work_position_variables: work position X Y Z (#5041-#5043) giving the work offset; [] for none.

@@ -7,6 +7,7 @@
 // First line: "sim_haas_mdc tcp <host>:<port>" or "sim_haas_mdc pty <path>".
 #include <boost/asio.hpp>
 #include <boost/program_options.hpp>
+#include <chrono>
 #include <fstream>
 #include <iostream>
 #include <list>
@@ -58,6 +59,7 @@ class TcpSim
   }
 
   uint16_t port() const { return acceptor_.local_endpoint().port(); }
+  uint64_t answered() const { return answered_; }
 
   void start()
   {
@@ -116,6 +118,7 @@ class TcpSim
                              const std::string reply = machine_.answer(line, SimMachine::Clock::now());
                              if (!reply.empty())
                              {
+                               ++answered_;
                                // Every connection sees every reply.
                                for (auto& c : clients_)
                                  send(c, frame(reply, classic_));
@@ -185,6 +188,7 @@ class TcpSim
   asio::steady_timer timer_;
   bool classic_;
   std::list<ClientPtr> clients_;
+  uint64_t answered_ = 0;
 };
 
 // Serial mode: one peer on a pty; a `drop` phase discards what the host sent (a line outage).
@@ -273,6 +277,10 @@ int main(int argc, char** argv)
     }
     SimMachine machine = SimMachine::fromScript(*in, script.empty() ? "default script" : script);
     machine.start(SimMachine::Clock::now());
+    // The timeline's start on the wall clock, so a benchmark can tell when each phase began.
+    std::cerr << "sim_haas_mdc: timeline starts at " << std::fixed
+              << std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count() << " ("
+              << machine.timelineSeconds() << " s per loop)" << std::endl;
     const bool classic = vm.count("classic-framing") > 0;
     if (!link.empty())
       return runSerial(machine, link, classic);
@@ -285,7 +293,11 @@ int main(int argc, char** argv)
       return 0;  // a signal came before the callback was registered
     sim.start();
     cnc_bridge::sim::announce("sim_haas_mdc", "tcp " + host + ":" + std::to_string(sim.port()));
+    const auto started = std::chrono::steady_clock::now();
     io.run();
+    // For benchmarks: how many queries the clients got answered.
+    std::cerr << "sim_haas_mdc: answered " << sim.answered() << " queries in " << std::fixed
+              << std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count() << " s" << std::endl;
     return 0;
   }
   catch (const std::exception& e)

@@ -152,7 +152,7 @@ TEST(MdcWritePolicy, RefusalNamesTheParameter)
 TEST(MdcScheduler, EachQueryAtItsOwnPeriod)
 {
   QueryScheduler s;
-  s.add(q(100), 0ms);
+  s.add(q(100), QueryScheduler::kOnce);
   s.add(q(500), 100ms);
   s.add(q(201), 1000ms);
   const Clock::time_point t0{};

@@ -28,7 +28,10 @@ using Clock = std::chrono::steady_clock;
 class QueryScheduler
 {
  public:
-  /// \param period Milliseconds(0): once per connection (serial number, model).
+  /// \brief Period of a query sent once per connection (serial number, model).
+  static constexpr Milliseconds kOnce{-1};
+
+  /// \param period time between two sends (0: as often as possible), or kOnce.
   void add(const Query& query, Milliseconds period);
   /// \brief Everything due at \p now again, once-only queries included (after a reconnect).
   void reset(Clock::time_point now);
