@@ -1,0 +1,36 @@
+# DNC drip-feed and program backup (issue 4): the streaming sender, the backup receiver, the
+# simulated control (sim_haas_serial drip / punch), their tests, and their part of dnc_node and
+# cnc_dnc. Included after dnc.cmake (XModem), whose targets it extends when they exist.
+cnc_core_module(cnc_bridge_drip
+  src/dnc/dnc_codes.cpp
+  src/dnc/nc_program.cpp
+  src/dnc/drip_feed.cpp
+  src/dnc/backup.cpp)
+
+# The simulated control, shared by sim_haas_serial and the unit tests that run it in-process.
+add_library(cnc_bridge_dnc_sim STATIC
+  src/sim/haas_serial/dnc_drip_control.cpp
+  src/sim/haas_serial/dnc_punch.cpp)
+target_include_directories(cnc_bridge_dnc_sim PUBLIC ${PROJECT_SOURCE_DIR}/src/sim/haas_serial)
+target_link_libraries(cnc_bridge_dnc_sim PUBLIC cnc_bridge_drip)
+
+target_sources(sim_haas_serial PRIVATE
+  src/sim/haas_serial/drip_mode.cpp
+  src/sim/haas_serial/punch_mode.cpp)
+target_link_libraries(sim_haas_serial cnc_bridge_dnc_sim)
+
+if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
+  cnc_core_gtest(test_drip_program test/unit/test_drip_program.cpp)
+  target_link_libraries(test_drip_program cnc_bridge_drip)
+  cnc_core_gtest(test_drip_feed test/unit/test_drip_feed.cpp)
+  target_link_libraries(test_drip_feed cnc_bridge_dnc_sim)
+  cnc_core_gtest(test_backup test/unit/test_backup.cpp)
+  target_link_libraries(test_backup cnc_bridge_dnc_sim)
+endif()
+
+cnc_fuzz_target(fuzz_dnc_backup test/fuzz/fuzz_dnc_backup.cpp)
+cnc_fuzz_target(fuzz_dnc_program test/fuzz/fuzz_dnc_program.cpp)
+
+# Benchmark driver (bench/dnc/run_bench.sh runs it from a build directory).
+cnc_tool(dnc_drip_bench bench/dnc/drip_bench.cpp)
+target_link_libraries(dnc_drip_bench cnc_bridge_dnc_sim)

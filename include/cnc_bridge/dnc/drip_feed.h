@@ -1,0 +1,180 @@
+// DNC drip-feed: the host streams an NC program to a control that executes it while it reads, so
+// a program far larger than the control's memory can run (seed: pc_dnc_drip_feed_fanuc.md; DESIGN
+// section 6). The control paces the host with XON/XOFF (or RTS/CTS); the host must stop within 10
+// characters of an XOFF, so this sender writes a few characters at a time and looks for DC3
+// between writes instead of leaving flow control to the kernel.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "cnc_bridge/dnc/nc_program.h"
+#include "cnc_bridge/transport/transport.h"
+
+namespace cnc_bridge
+{
+namespace dnc
+{
+/// \brief Who paces the feed.
+enum class DripFlow
+{
+  kNone,     ///< nothing: only the line rate (pace_cps) limits the host
+  kXonXoff,  ///< DC3 stops, DC1 resumes, read in user space with the parity bit masked
+  kRtsCts    ///< the kernel holds output while CTS is low (open the port with rtscts)
+};
+
+/// \brief What to do when the control keeps us held longer than hold_timeout.
+enum class HoldTimeoutAction
+{
+  kFail,   ///< stop the feed with an error (the operator decides)
+  kResume  ///< assume the XON was lost on the line and carry on
+};
+
+DripFlow parseDripFlow(const std::string& text);  ///< none|xonxoff|rtscts; \throws ConfigError
+const char* toString(DripFlow flow);
+
+/// \brief Options of a drip-feed. Defaults suit a Fanuc on ISO code: LF end of block, XON/XOFF.
+struct DripOptions
+{
+  std::string eob = "\n";      ///< bytes sent at each end of block (parseEob())
+  bool add_percent = true;     ///< send '%' first and last when the file does not have them
+  size_t leader_length = 0;    ///< leader characters before the program (tape feed)
+  size_t trailer_length = 0;   ///< the same after it
+  uint8_t leader_char = 0x00;  ///< NUL (tape feed holes); some controls want LF or ' '
+  bool dc_codes = false;       ///< DC2 before and DC4 after the program (Haas setting 14)
+  DripFlow flow = DripFlow::kXonXoff;
+  CharacterRules rules;  ///< what the control cannot take, checked before sending
+  /// Characters per second the line carries (baud / bits per character). The sender writes no
+  /// faster, so that little is queued when XOFF arrives. 0: no pacing, drain after every write.
+  double pace_cps = 0;
+  size_t chunk = 4;  ///< characters per write (<= xoff_allowance)
+  /// Characters the control takes after its XOFF (Fanuc: 10). With pacing, a write goes out when
+  /// the line still holds xoff_allowance - chunk characters, so the line never runs dry while the
+  /// host wakes up, and what is queued plus one write never exceeds the allowance.
+  size_t xoff_allowance = 10;
+  Milliseconds hold_timeout{0};  ///< held longer than this -> on_hold_timeout; 0 = wait forever
+  HoldTimeoutAction on_hold_timeout = HoldTimeoutAction::kFail;
+  bool wait_for_dc1 = false;            ///< send nothing until the control asks with DC1 (reader start)
+  Milliseconds start_timeout{0};        ///< how long to wait for that DC1; 0 = forever
+  Milliseconds progress_interval{100};  ///< progress callback at most this often (and at the end)
+  size_t max_line_length = 4096;
+
+  /// \throws ConfigError for an empty EOB, a chunk of 0 or above the allowance, a negative rate.
+  void validate() const;
+};
+
+/// \brief What a feed will send: the file, where it starts, and what is restated before.
+struct DripPlan
+{
+  std::string path;
+  ProgramScan scan;      ///< counts, start line, computed preamble
+  std::string preamble;  ///< lines (separated by '\n') sent before the start line; "" for none
+  bool send_leading_percent = true;
+  bool send_trailing_percent = true;
+  uint64_t total_bytes = 0;  ///< everything that will go on the wire, framing included
+};
+
+/// \brief Checks the program and works out what to send.
+/// \param restart where to start (inactive: from the top).
+/// \param preamble the user's restart blocks; when empty and restarting, the computed ones are used.
+/// \throws ConfigError listing (with line numbers) the characters the control cannot take, or a
+///         restart point that is not in the file. Nothing is sent by this function.
+DripPlan planDrip(const std::string& path, const DripOptions& options, const RestartPoint& restart = {},
+                  const std::string& preamble = "");
+
+/// \brief Progress of a feed, given to the callback.
+struct DripProgress
+{
+  uint64_t line = 0;    ///< file line being sent (1-based; 0 while sending the framing/preamble)
+  std::string block;    ///< last sequence number sent ("N1234"), "" before any
+  uint64_t bytes = 0;   ///< bytes written to the link
+  uint64_t total = 0;   ///< bytes in all
+  bool held = false;    ///< the control holds us (XOFF, or waiting for its DC1)
+  bool paused = false;  ///< paused by the user
+  uint64_t xoff_events = 0;
+  double percent() const { return total == 0 ? 0.0 : 100.0 * static_cast<double>(bytes) / static_cast<double>(total); }
+};
+
+/// \brief How a feed ended.
+struct DripResult
+{
+  enum class Outcome
+  {
+    kCompleted,
+    kCancelled,
+    kFailed
+  };
+  Outcome outcome = Outcome::kFailed;
+  std::string message;           ///< plain words: what happened, where it stopped
+  uint64_t bytes = 0;            ///< bytes written to the link
+  uint64_t stopped_at_line = 0;  ///< last file line fully sent (restart after it); 0 = none
+  std::string stopped_at_block;  ///< last sequence number fully sent
+  uint64_t xoff_events = 0;
+  uint64_t max_queued_at_xoff = 0;  ///< largest kernel output queue seen when an XOFF arrived
+  bool completed() const { return outcome == Outcome::kCompleted; }
+};
+
+/// \brief Streams one plan to a control over a Transport.
+///
+/// Wire format (Fanuc/Haas tape format, DESIGN section 6): [DC2] [leader] ['%' EOB] [preamble
+/// blocks, each + EOB] [file lines from the start line to the last non-blank line, each + EOB]
+/// ['%' EOB] [trailer] [DC4]. The framing '%' lines are sent only when the file lacks them (or a
+/// restart skipped the file's first line). The control answers with DC3 (0x13, or 0x93 under 7E1
+/// read as 8 bits) to stop and DC1 (0x11/0x91) to resume; any other byte it sends is ignored.
+///
+/// Timing: writes of `chunk` characters (4 by default), input polled before each. With pacing
+/// (pace_cps), a write goes out when the line (as the sender models it) still has
+/// xoff_allowance - chunk characters to carry: the line stays busy across the host's wake-up
+/// latency and at most xoff_allowance characters (queued + one write) can follow an XOFF. Without
+/// pacing, each write is drained (tcdrain) before the next. Memory does not depend on the program
+/// size.
+///
+/// Thread-safety: send() runs in one thread; pause(), resume(), cancel() and held() may be called
+/// from any thread. The Transport must not be used by anyone else during send(). For software flow
+/// control the port must be opened WITHOUT kernel IXON, or the kernel would swallow DC3 itself.
+class DripSender
+{
+ public:
+  using ProgressCallback = std::function<void(const DripProgress&)>;
+
+  /// \throws ConfigError if the options are invalid.
+  DripSender(Transport& link, DripOptions options);
+
+  /// \brief Sends the plan. Returns when the program has been sent, cancelled or has failed; the
+  /// result tells which and where it stopped. Never throws for link or timeout errors (they are
+  /// in the result); the link stays usable after a cancel.
+  DripResult send(const DripPlan& plan, const ProgressCallback& progress = nullptr);
+
+  void pause() { paused_ = true; }
+  void resume() { paused_ = false; }
+  void cancel() { cancelled_ = true; }
+  bool held() const { return held_; }
+  bool paused() const { return paused_; }
+
+ private:
+  class Stopped;  // thrown inside send() to unwind on cancel
+  void emit(const char* data, size_t size);
+  void gate();
+  void pollInput(Milliseconds timeout);
+  void report(bool force);
+
+  Transport& link_;
+  DripOptions options_;
+  std::atomic<bool> paused_{false};
+  std::atomic<bool> cancelled_{false};
+  std::atomic<bool> held_{false};
+  bool waiting_for_dc1_ = false;
+  std::chrono::steady_clock::time_point held_since_;
+  std::chrono::steady_clock::time_point line_free_at_;
+  std::chrono::steady_clock::time_point last_report_;
+  std::string chunk_;
+  DripProgress progress_;
+  ProgressCallback callback_;
+  uint64_t max_queued_at_xoff_ = 0;
+};
+}  // namespace dnc
+}  // namespace cnc_bridge
