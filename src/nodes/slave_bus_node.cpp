@@ -237,8 +237,15 @@ class SlaveBusNode
       {
         throw ConfigError(where + ".name '" + slave.name + "' must be a unique, valid topic name part");
       }
-      slave.role = parseRole(member<std::string>(list[i], "role", "generic", where));
-      slave.encoding = slave_bus::parseEncoding(member<std::string>(list[i], "encoding", "bytes", where));
+      try
+      {
+        slave.role = parseRole(member<std::string>(list[i], "role", "generic", where));
+        slave.encoding = slave_bus::parseEncoding(member<std::string>(list[i], "encoding", "bytes", where));
+      }
+      catch (const ConfigError& e)
+      {
+        throw ConfigError(where + ": " + e.what());
+      }
       slave.scale = member<double>(list[i], "scale", 1.0, where);
       if (!(std::isfinite(slave.scale) && slave.scale != 0.0))
       {
@@ -719,9 +726,10 @@ int main(int argc, char** argv)
 {
   ros::init(argc, argv, "slave_bus_node");
   cnc_bridge::routeCoreLogToRosconsole();
+  ros::NodeHandle nh;  // held here so that a failing constructor does not shut ROS (and its log) down first
   try
   {
-    cnc_bridge::SlaveBusNode node(ros::NodeHandle(), ros::NodeHandle("~"));
+    cnc_bridge::SlaveBusNode node(nh, ros::NodeHandle("~"));
     ros::AsyncSpinner spinner(2);
     spinner.start();
     ros::waitForShutdown();
