@@ -7,6 +7,8 @@ cnc_core_module(cnc_bridge_ethernut
   src/ethernut/board.cpp)
 cnc_tool(sim_ethernut src/sim/sim_ethernut.cpp)
 target_link_libraries(sim_ethernut cnc_bridge_ethernut)
+cnc_tool(bench_ethernut bench/ethernut/bench_ethernut.cpp)
+target_link_libraries(bench_ethernut cnc_bridge_ethernut)
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   cnc_core_gtest(test_ethernut test/unit/test_ethernut_codec.cpp test/unit/test_ethernut_client.cpp)
   target_link_libraries(test_ethernut cnc_bridge_ethernut)
