@@ -1,0 +1,4 @@
+G20 G91 G2 X1 Y1 R-1 F10
+G18 G3 X0 Z-1 I-1 K0
+G19 G2 Y0 Z1 J-1 K0 (c)
+/N5 M30 ; end
