@@ -16,3 +16,25 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   cnc_core_gtest(test_dprnt test/unit/test_dprnt.cpp)
   target_link_libraries(test_dprnt cnc_bridge_dprnt)
 endif()
+
+target_sources(sim_haas_serial PRIVATE src/sim/haas_serial/dprnt_mode.cpp src/sim/haas_serial/dprnt_program.cpp)
+target_link_libraries(sim_haas_serial cnc_bridge_dprnt)
+
+cnc_fuzz_target(fuzz_dprnt_line test/fuzz/fuzz_dprnt_line.cpp)
+if(CNC_BRIDGE_FUZZ)
+  target_link_libraries(fuzz_dprnt_line cnc_bridge_dprnt)
+endif()
+
+# Parser throughput benchmark (bench/dprnt/run.sh runs it).
+add_executable(bench_dprnt_parser bench/dprnt/bench_dprnt_parser.cpp)
+target_link_libraries(bench_dprnt_parser cnc_bridge_dprnt)
+
+if(NOT CNC_BRIDGE_CORE_ONLY)
+  cnc_node(dprnt_node src/nodes/dprnt_node.cpp)
+  target_link_libraries(dprnt_node cnc_bridge_dprnt)
+  catkin_install_python(PROGRAMS scripts/surface_mapper DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
+  if(CATKIN_ENABLE_TESTING)
+    add_rostest(test/rostest/dprnt_pty.test DEPENDENCIES dprnt_node sim_haas_serial ${PROJECT_NAME}_generate_messages_cpp ${PROJECT_NAME}_generate_messages_py)
+    add_rostest(test/rostest/dprnt_tcp.test DEPENDENCIES dprnt_node sim_haas_serial ${PROJECT_NAME}_generate_messages_cpp ${PROJECT_NAME}_generate_messages_py)
+  endif()
+endif()

@@ -27,7 +27,8 @@ std::string formatValue(double value, int whole, int fraction)
   static constexpr double kPow10[] = {1, 10, 100, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8};
   // std::round rounds half away from zero; scaling first makes 0.0125 at 3 places 12.5 -> 13
   // as on the control, where printf("%.3f") would see the binary 0.01249999... and print 0.012.
-  const double scaled = std::round(std::fabs(value) * kPow10[fraction]);
+  // With f = 0 the manual's own example prints T 1 for 1.5436: the whole part, fraction dropped.
+  const double scaled = fraction == 0 ? std::trunc(std::fabs(value)) : std::round(std::fabs(value) * kPow10[fraction]);
   const bool negative = value < 0 && scaled > 0;
   char digits[48];
   if (fraction == 0)

@@ -216,6 +216,8 @@ RuleSet RuleSet::fromYaml(const std::string& text, const std::string& default_un
           rule.event = parseEvent(node["event"] ? node["event"].as<std::string>() : "", where);
           break;
       }
+      if (rule.units == "program")
+        rule.units = default_units;
       rule.scale = unitScale(rule.units);
       const auto check_group = [&](const ValueSource& source)
       {

@@ -66,13 +66,13 @@ TEST(DprntFormat, ManualExampleEachFormat)
   // N1 #1= 1.5436; N2 DPRNT[X#1[44]*Z#1[03]*T#1[40]];
   EXPECT_EQ(formatValue(1.5436, 4, 4), "   1.5436");  // 3 leading spaces fill 4 whole places
   EXPECT_EQ(formatValue(1.5436, 0, 3), "1.544");      // a whole digit is printed even for w = 0; rounded
-  EXPECT_EQ(formatValue(1.5436, 4, 0), "   2");       // f = 0: no decimal point, rounded to 2
+  EXPECT_EQ(formatValue(1.5436, 4, 0), "   1");       // f = 0: no decimal point, fraction dropped (manual: T 1)
 }
 
 TEST(DprntFormat, ManualExampleStatement)
 {
   EXPECT_EQ(formatStatement("X#1[44]*Z#1[03]*T#1[04]", manualVariables), "X   1.5436 Z1.544 T1.5436");
-  EXPECT_EQ(formatStatement("X#1[44]*Z#1[03]*T#1[40]", manualVariables), "X   1.5436 Z1.544 T   2");
+  EXPECT_EQ(formatStatement("X#1[44]*Z#1[03]*T#1[40]", manualVariables), "X   1.5436 Z1.544 T   1");
   // N3 DPRNT[***MEASURED*INSIDE*DIAMETER***]; asterisks print as spaces.
   EXPECT_EQ(formatStatement("***MEASURED*INSIDE*DIAMETER***", manualVariables), "   MEASURED INSIDE DIAMETER   ");
   // N4 DPRNT[]; only the line end.
@@ -96,7 +96,9 @@ TEST(DprntFormat, RoundsTheDecimalValueHalfAwayFromZero)
   EXPECT_EQ(formatValue(-0.0125, 1, 3), "-0.013");
   EXPECT_EQ(formatValue(1.99999, 1, 2), "2.00");
   EXPECT_EQ(formatValue(9.9996, 1, 3), "10.000");
-  EXPECT_EQ(formatValue(0.5, 1, 0), "1");
+  EXPECT_EQ(formatValue(0.5, 1, 0), "0");
+  EXPECT_EQ(formatValue(-1.7, 1, 0), "-1");
+  EXPECT_EQ(formatValue(-0.4, 1, 0), "0");
   EXPECT_EQ(formatValue(2.0, 2, 4), " 2.0000");  // trailing zeros are printed
 }
 

@@ -17,7 +17,8 @@ namespace dprnt
 /// Rules (Haas mill programming manual, "Formatted Output"; DESIGN section 6):
 ///   - w places are reserved for the whole part and f for the fraction; 1 <= w + f <= 8;
 ///   - the fraction is rounded to f places (half away from zero, on the decimal value), and printed
-///     with trailing zeros; no decimal point when f = 0;
+///     with trailing zeros; no decimal point when f = 0, and then the whole part is printed as is
+///     (the manual prints 1.5436 with [40] as "1": the fraction is dropped, not rounded);
 ///   - at least one whole digit is printed, even for w = 0 ("0.5" for [01]);
 ///   - a whole part shorter than w gets leading spaces; a longer one widens the field.
 /// The manual does not say where a minus sign goes; we print it right before the first digit and

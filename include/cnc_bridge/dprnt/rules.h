@@ -57,7 +57,7 @@ struct Rule
   ValueSource x, y, z, value, part_count, cycle_time;
   int program_group = -1;  ///< capture group holding a program name, for cycle events
   CycleEventKind event = CycleEventKind::kMarker;
-  std::string units;   ///< device unit of lengths: inch, mm, m; "none" for unitless values
+  std::string units;   ///< device unit of lengths: inch, mm, m ("program": the default); "none": unitless
   double scale = 1.0;  ///< device unit -> SI factor (inch: 0.0254 m, mm: 0.001 m)
 };
 

@@ -1,0 +1,386 @@
+// dprnt_node: DPRNT output of a CNC control as stamped, typed ROS data. Bytes come from the serial
+// port (Haas Classic), the NGC's DPRNT TCP port (setting 263) or a file the control appends to
+// (setting 262); every line goes to dprnt/raw, its numbers to dprnt/values, and YAML rules turn
+// matching lines into probe points, numbers and cycle events on their own topics.
+#include <diagnostic_updater/diagnostic_updater.h>
+#include <geometry_msgs/PointStamped.h>
+#include <ros/ros.h>
+#include <std_msgs/Float64.h>
+#include <std_srvs/Trigger.h>
+
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <mutex>
+
+#include "cnc_bridge/CycleEvent.h"
+#include "cnc_bridge/DprntLine.h"
+#include "cnc_bridge/DprntValues.h"
+#include "cnc_bridge/common/error.h"
+#include "cnc_bridge/dprnt/input.h"
+#include "cnc_bridge/dprnt/line_assembler.h"
+#include "cnc_bridge/dprnt/parser.h"
+#include "cnc_bridge/dprnt/rules.h"
+#include "cnc_bridge/ros/machine_state_publisher.h"
+#include "cnc_bridge/ros/params.h"
+#include "cnc_bridge/transport/serial_port.h"
+#include "cnc_bridge/transport/tcp.h"
+
+namespace cnc_bridge
+{
+namespace
+{
+// Builds the input named by ~input, from the link parameters of DESIGN section 3.
+std::unique_ptr<dprnt::DprntInput> makeInput(const ros::NodeHandle& pnh)
+{
+  // ~input: where DPRNT output arrives: serial (Haas Classic, NGC with RS-232), tcp (NGC setting 261
+  // = TCP, the control listens on setting 263) or file (NGC setting 261 = file, path in 262).
+  std::string input;
+  pnh.param<std::string>("input", input, "serial");
+  // ~reconnect_min, ~reconnect_max: s, backoff between attempts to (re)open the link.
+  const Backoff backoff(params::seconds(pnh, "reconnect_min", 0.25), params::seconds(pnh, "reconnect_max", 10.0));
+  if (input == "serial")
+  {
+    const SerialSettings settings = params::serialSettings(pnh, 9600);
+    return std::make_unique<dprnt::StreamInput>([settings] { return std::make_unique<SerialPort>(settings); },
+                                                settings.describe(), backoff);
+  }
+  if (input == "tcp")
+  {
+    // ~host: address or name of the control.
+    const std::string host = params::required<std::string>(pnh, "host");
+    // ~tcp_port: the control's DPRNT port (Haas NGC setting 263).
+    const int port = params::required<int>(pnh, "tcp_port");
+    if (port <= 0 || port > 65535)
+    {
+      throw ConfigError("Parameter " + pnh.resolveName("tcp_port") + " must be 1..65535.");
+    }
+    // ~connect_timeout: s to wait for a TCP connection.
+    const Milliseconds timeout = params::seconds(pnh, "connect_timeout", 3.0);
+    return std::make_unique<dprnt::StreamInput>(
+        [host, port, timeout] { return TcpConnection::connect(host, static_cast<uint16_t>(port), timeout); },
+        host + ":" + std::to_string(port), backoff);
+  }
+  if (input == "file")
+  {
+    // ~file: the file the control appends DPRNT output to (Haas NGC setting 262), e.g. on a share.
+    const std::string file = params::required<std::string>(pnh, "file");
+    // ~from_start: publish what the file already holds when the node starts (else only new lines).
+    bool from_start = false;
+    pnh.param("from_start", from_start, false);
+    // ~poll_period: s between looks at the file (inotify does not see writes over SMB).
+    return std::make_unique<dprnt::FileInput>(file, from_start, params::seconds(pnh, "poll_period", 0.05), backoff);
+  }
+  throw ConfigError("Parameter " + pnh.resolveName("input") + " is \"" + input + "\": use serial, tcp or file.");
+}
+}  // namespace
+
+/// \brief The ROS side of the DPRNT core: lines in, messages out. Thread-safe: the input thread
+/// processes lines while the spinner serves ~clear and diagnostics, all under one mutex.
+class DprntNode
+{
+ public:
+  DprntNode(ros::NodeHandle nh, ros::NodeHandle pnh);
+  ~DprntNode();
+
+ private:
+  struct RulePublishers
+  {
+    ros::Publisher live;
+    ros::Publisher last;  // latched dprnt/last/<rule>, for late subscribers
+    uint64_t matches = 0;
+  };
+
+  void onBytes(const uint8_t* data, size_t size);
+  void onLine(const dprnt::LineEvent& event, const ros::Time& stamp);
+  void publishRule(const dprnt::RuleOutput& output, const std::string& line, const ros::Time& stamp);
+  void onLinkState(LinkState state, const std::string& why);
+  bool clear(std_srvs::Trigger::Request& request, std_srvs::Trigger::Response& response);
+  void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
+
+  ros::NodeHandle nh_;
+  std::unique_ptr<dprnt::DprntInput> input_;
+  std::unique_ptr<MachineStatePublisher> state_;
+  dprnt::RuleSet rules_;
+  std::string rules_file_;
+
+  std::mutex mutex_;  // everything below; taken by the input thread per chunk
+  dprnt::LineAssembler assembler_;
+  std::vector<dprnt::LabeledValue> values_;
+  std::vector<dprnt::RuleOutput> outputs_;
+  std::vector<RulePublishers> rule_pubs_;
+  ros::Time chunk_stamp_;
+  uint64_t line_number_ = 0;
+  uint64_t value_lines_ = 0;
+  uint64_t link_failures_ = 0;
+  LinkState link_ = LinkState::kDown;
+
+  ros::Publisher raw_pub_;
+  ros::Publisher values_pub_;
+  ros::ServiceServer clear_srv_;
+};
+
+DprntNode::DprntNode(ros::NodeHandle nh, ros::NodeHandle pnh)
+    : nh_(nh),
+      assembler_(
+          [&]
+          {
+            // ~max_line_length: characters; longer lines are reported (diagnostics) and skipped.
+            int length = 256;
+            pnh.param("max_line_length", length, length);
+            if (length < 8)
+            {
+              ROS_WARN("~max_line_length %d is too short: using 256", length);
+              length = 256;
+            }
+            return static_cast<size_t>(length);
+          }(),
+          [&]
+          {
+            // ~mask_parity: clear bit 7 of every byte (7-bit even/odd parity lines read as 8N1).
+            bool mask = true;
+            pnh.param("mask_parity", mask, true);
+            return mask;
+          }())
+{
+  input_ = makeInput(pnh);
+  // ~program_units: length unit of the macro programs (inch under G20, mm under G21); rules
+  // without their own `units` convert point coordinates from it.
+  std::string units;
+  pnh.param<std::string>("program_units", units, "inch");
+  // ~rules: YAML file of rules (format in config/dprnt_rules.yaml); empty: raw and values only.
+  pnh.param<std::string>("rules", rules_file_, "");
+  if (!rules_file_.empty())
+  {
+    rules_ = dprnt::RuleSet::fromFile(rules_file_, units);
+  }
+  else
+  {
+    dprnt::RuleSet::unitScale(units);  // still validate the parameter
+  }
+
+  state_ = std::make_unique<MachineStatePublisher>(nh, pnh, input_->describe());
+  state_->diagnostics().add("dprnt", this, &DprntNode::diagnose);
+
+  // Publishers exist before the input thread can call into them.
+  std::lock_guard<std::mutex> lock(mutex_);
+  raw_pub_ = nh_.advertise<DprntLine>("dprnt/raw", 100);
+  values_pub_ = nh_.advertise<DprntValues>("dprnt/values", 100);
+  for (const auto& rule : rules_.rules())
+  {
+    RulePublishers pubs;
+    const std::string last = "dprnt/last/" + rule.name;
+    switch (rule.type)
+    {
+      case dprnt::OutputType::kPoint:
+        pubs.live = nh_.advertise<geometry_msgs::PointStamped>(rule.topic, 100);
+        pubs.last = nh_.advertise<geometry_msgs::PointStamped>(last, 1, true);
+        break;
+      case dprnt::OutputType::kFloat64:
+        pubs.live = nh_.advertise<std_msgs::Float64>(rule.topic, 100);
+        pubs.last = nh_.advertise<std_msgs::Float64>(last, 1, true);
+        break;
+      case dprnt::OutputType::kCycleEvent:
+        pubs.live = nh_.advertise<CycleEvent>(rule.topic, 100);
+        pubs.last = nh_.advertise<CycleEvent>(last, 1, true);
+        break;
+    }
+    rule_pubs_.push_back(pubs);
+  }
+  clear_srv_ = pnh.advertiseService("clear", &DprntNode::clear, this);
+  ROS_INFO("DPRNT from %s, %zu rules%s%s", input_->describe().c_str(), rules_.rules().size(),
+           rules_file_.empty() ? "" : " from ", rules_file_.c_str());
+  input_->start([this](const uint8_t* data, size_t size) { onBytes(data, size); },
+                [this](LinkState state, const std::string& why) { onLinkState(state, why); });
+}
+
+DprntNode::~DprntNode()
+{
+  input_->stop();
+}
+
+void DprntNode::onBytes(const uint8_t* data, size_t size)
+{
+  const ros::Time stamp = ros::Time::now();
+  std::lock_guard<std::mutex> lock(mutex_);
+  assembler_.feed(data, size, [&](const dprnt::LineEvent& event) { onLine(event, stamp); });
+}
+
+void DprntNode::onLine(const dprnt::LineEvent& event, const ros::Time& stamp)
+{
+  if (event.kind == dprnt::LineEvent::Kind::kOverlong)
+  {
+    ROS_WARN_THROTTLE(5.0, "DPRNT line longer than %zu characters skipped (starts \"%.40s\")", assembler_.maxLength(),
+                      std::string(event.text).c_str());
+    return;
+  }
+  const std::string text(event.text);
+  ++line_number_;
+  DprntLine raw;
+  raw.header.stamp = stamp;
+  raw.machine = state_->machineName();
+  raw.line_number = line_number_;
+  raw.text = text;
+  raw_pub_.publish(raw);
+
+  if (dprnt::LineParser::parse(event.text, values_) > 0)
+  {
+    ++value_lines_;
+    DprntValues values;
+    values.header.stamp = stamp;
+    values.machine = raw.machine;
+    values.line_number = line_number_;
+    values.text = text;
+    values.values.resize(values_.size());
+    for (size_t i = 0; i < values_.size(); ++i)
+    {
+      values.values[i].label = values_[i].label;
+      values.values[i].value = values_[i].value;
+    }
+    values_pub_.publish(values);
+  }
+  rules_.evaluate(event.text, values_, outputs_);
+  for (const auto& output : outputs_)
+  {
+    publishRule(output, text, stamp);
+  }
+}
+
+void DprntNode::publishRule(const dprnt::RuleOutput& output, const std::string& line, const ros::Time& stamp)
+{
+  const dprnt::Rule& rule = rules_.rules()[output.rule];
+  RulePublishers& pubs = rule_pubs_[output.rule];
+  ++pubs.matches;
+  switch (rule.type)
+  {
+    case dprnt::OutputType::kPoint:
+    {
+      geometry_msgs::PointStamped point;
+      point.header.stamp = stamp;
+      // "machine" and "work" are this machine's frames (DESIGN section 3); anything else is taken as is.
+      point.header.frame_id = rule.frame == "machine" || rule.frame == "work" ? state_->frame(rule.frame) : rule.frame;
+      point.point.x = output.x;  // m (the core converted from rule.units)
+      point.point.y = output.y;
+      point.point.z = output.z;
+      pubs.live.publish(point);
+      pubs.last.publish(point);
+      break;
+    }
+    case dprnt::OutputType::kFloat64:
+    {
+      std_msgs::Float64 value;
+      value.data = output.value;
+      pubs.live.publish(value);
+      pubs.last.publish(value);
+      break;
+    }
+    case dprnt::OutputType::kCycleEvent:
+    {
+      CycleEvent event;
+      event.header.stamp = stamp;
+      event.machine = state_->machineName();
+      event.event = static_cast<uint8_t>(rule.event);
+      event.program = output.program;
+      event.part_count = output.part_count;
+      event.cycle_time = output.cycle_time >= 0 ? output.cycle_time : std::numeric_limits<double>::quiet_NaN();
+      event.text = line;
+      pubs.live.publish(event);
+      pubs.last.publish(event);
+      state_->update(
+          [&](MachineState& s)
+          {
+            if (rule.event == dprnt::CycleEventKind::kStart)
+              s.execution = MachineState::EXECUTION_ACTIVE;
+            else if (rule.event == dprnt::CycleEventKind::kEnd)
+              s.execution = MachineState::EXECUTION_READY;
+            else if (rule.event == dprnt::CycleEventKind::kAlarm)
+              s.execution = MachineState::EXECUTION_ALARM;
+            if (output.part_count >= 0)
+              s.part_count = output.part_count;
+            if (!output.program.empty())
+              s.program = output.program;
+            s.message = line;
+          });
+      break;
+    }
+  }
+}
+
+void DprntNode::onLinkState(LinkState state, const std::string& why)
+{
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (state == LinkState::kDown && link_ == LinkState::kUp)
+    {
+      ++link_failures_;
+    }
+    if (state != LinkState::kUp)
+    {
+      // A line cut by the link going away is incomplete: drop it (counted), never publish half.
+      assembler_.reset();
+    }
+    link_ = state;
+  }
+  state_->setLink(state, why);
+}
+
+bool DprntNode::clear(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response)
+{
+  std::lock_guard<std::mutex> lock(mutex_);
+  assembler_.clearStats();
+  line_number_ = 0;
+  value_lines_ = 0;
+  link_failures_ = 0;
+  for (auto& pubs : rule_pubs_)
+  {
+    pubs.matches = 0;
+  }
+  response.success = true;
+  response.message = "DPRNT counters cleared";
+  return true;
+}
+
+void DprntNode::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status)
+{
+  std::lock_guard<std::mutex> lock(mutex_);
+  const dprnt::AssemblerStats& stats = assembler_.stats();
+  if (link_ != LinkState::kUp)
+    status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "no DPRNT link");
+  else if (stats.overlong > 0 || stats.garbage_bytes > 0)
+    status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "over-long lines or line noise seen");
+  else
+    status.summary(diagnostic_msgs::DiagnosticStatus::OK, "receiving");
+  status.add("input", input_->describe());
+  status.add("lines", stats.lines);
+  status.add("lines with values", value_lines_);
+  status.add("overlong", stats.overlong);
+  status.add("garbage bytes", stats.garbage_bytes);
+  status.add("control bytes", stats.control_bytes);
+  status.add("empty lines", stats.empty_lines);
+  status.add("partial lines dropped", stats.partial_dropped);
+  status.add("bytes", stats.bytes);
+  status.add("link failures", link_failures_);
+  status.add("reconnects", input_->reconnects());
+  for (size_t i = 0; i < rule_pubs_.size(); ++i)
+  {
+    status.add("rule " + rules_.rules()[i].name, rule_pubs_[i].matches);
+  }
+}
+}  // namespace cnc_bridge
+
+int main(int argc, char** argv)
+{
+  ros::init(argc, argv, "dprnt_node");
+  cnc_bridge::routeCoreLogToRosconsole();
+  try
+  {
+    cnc_bridge::DprntNode node(ros::NodeHandle(), ros::NodeHandle("~"));
+    ros::spin();
+  }
+  catch (const cnc_bridge::Error& e)
+  {
+    ROS_FATAL("%s", e.what());
+    return 1;
+  }
+  return 0;
+}

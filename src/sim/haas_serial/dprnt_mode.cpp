@@ -1,0 +1,275 @@
+// sim_haas_serial dprnt: a Haas control printing DPRNT output. It runs a macro program file (see
+// dprnt_program.h) over a synthetic surface and sends every DPRNT line, Haas-formatted and ended
+// with CR, to a pty (the RS-232 port of a Classic control) or to a TCP client (NGC setting 261 =
+// TCP: the control listens on the port of setting 263). Fault injection (parity bits, line noise,
+// over-long lines, a dropped connection) exercises the reader's robustness.
+#include <boost/program_options.hpp>
+
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <mutex>
+#include <sstream>
+
+#include "cnc_bridge/common/error.h"
+#include "cnc_bridge/sim/haas_serial_modes.h"
+#include "cnc_bridge/sim/sim_support.h"
+#include "cnc_bridge/transport/pty.h"
+#include "cnc_bridge/transport/tcp.h"
+#include "dprnt_program.h"
+
+namespace po = boost::program_options;
+
+namespace cnc_bridge
+{
+namespace sim
+{
+namespace
+{
+uint8_t withParity(uint8_t c, const std::string& parity)
+{
+  if (parity == "none")
+    return c;
+  const bool odd_ones = __builtin_popcount(c & 0x7F) % 2 == 1;
+  // Even parity: bit 7 makes the count of ones even; odd parity: odd.
+  const bool set = parity == "even" ? odd_ones : !odd_ones;
+  return static_cast<uint8_t>((c & 0x7F) | (set ? 0x80 : 0));
+}
+
+int runDprnt(const std::vector<std::string>& args)
+{
+  po::options_description options("sim_haas_serial dprnt [options]");
+  std::string program_file, link, eol, parity, surface_text, bind;
+  std::vector<std::string> var_args;
+  int tcp_port = -1;
+  double rate = 0;
+  unsigned repeat = 1, garbage_every = 0, overlong_every = 0, drop_after = 0;
+  bool popen = false;
+  options.add_options()("help,h", "this help")  //
+      ("program", po::value(&program_file)->required(), "macro program file to run")(
+          "link", po::value(&link)->default_value(""), "symbolic link to create to the pty (serial port)")(
+          "tcp", po::value(&tcp_port), "listen on this TCP port instead of a pty (NGC setting 263); 0 = any")(
+          "bind", po::value(&bind)->default_value("127.0.0.1"), "address to listen on with --tcp")(
+          "var", po::value(&var_args)->composing(), "N=VALUE: macro variable #N before the run (repeatable)")(
+          "surface", po::value(&surface_text)->default_value("0,0,0"),
+          "Z0,AX,AY[,AMP,PERIOD]: probed height z = Z0 + AX*x + AY*y + AMP*sin(2 pi x/PERIOD)*sin(2 pi y/PERIOD), "
+          "program units")("rate", po::value(&rate)->default_value(0),
+                           "lines per second (0: as fast as the link takes them)")(
+          "repeat", po::value(&repeat)->default_value(1), "run the program this many times (0: until stopped)")(
+          "eol", po::value(&eol)->default_value("cr"), "line end: cr (Haas), lf, crlf")(
+          "parity", po::value(&parity)->default_value("none"), "set bit 7 as none/even/odd parity (7E1 seen as 8N1)")(
+          "popen", po::bool_switch(&popen), "wrap each run in DC2 + NUL leader ... DC4, as Fanuc POPEN/PCLOS")(
+          "garbage-every", po::value(&garbage_every)->default_value(0), "line noise inside every Nth line")(
+          "overlong-every", po::value(&overlong_every)->default_value(0),
+          "a 1000-character line before every Nth line")("drop-after", po::value(&drop_after)->default_value(0),
+                                                         "with --tcp: close the client after N lines, once");
+  po::variables_map vm;
+  try
+  {
+    po::store(po::command_line_parser(args).options(options).run(), vm);
+    if (vm.count("help"))
+    {
+      std::cout << options << "\n#3001 reads as wall-clock milliseconds modulo 100000 (for latency checks).\n";
+      return 0;
+    }
+    po::notify(vm);
+  }
+  catch (const po::error& e)
+  {
+    std::cerr << "sim_haas_serial dprnt: " << e.what() << "\n" << options;
+    return 2;
+  }
+
+  MacroMachine machine;
+  MacroProgram program;
+  std::string line_end;
+  try
+  {
+    std::ifstream file(program_file);
+    if (!file)
+      throw ConfigError("cannot read " + program_file);
+    std::ostringstream text;
+    text << file.rdbuf();
+    program = MacroProgram::parse(text.str());
+    for (const auto& var : var_args)
+    {
+      const size_t eq = var.find('=');
+      if (eq == std::string::npos)
+        throw ConfigError("--var " + var + ": expected N=VALUE");
+      machine.variables[std::stoi(var.substr(var[0] == '#' ? 1 : 0, eq))] = std::stod(var.substr(eq + 1));
+    }
+    double s[5] = {0, 0, 0, 0, 1};
+    std::istringstream surface(surface_text);
+    std::string item;
+    for (int i = 0; i < 5 && std::getline(surface, item, ','); ++i)
+      s[i] = std::stod(item);
+    if (s[4] == 0)
+      throw ConfigError("--surface: PERIOD must not be 0");
+    machine.surface = [s](double x, double y)
+    { return s[0] + s[1] * x + s[2] * y + s[3] * std::sin(2 * M_PI * x / s[4]) * std::sin(2 * M_PI * y / s[4]); };
+    if (eol == "cr")
+      line_end = "\r";
+    else if (eol == "lf")
+      line_end = "\n";
+    else if (eol == "crlf")
+      line_end = "\r\n";
+    else
+      throw ConfigError("--eol must be cr, lf or crlf");
+    if (parity != "none" && parity != "even" && parity != "odd")
+      throw ConfigError("--parity must be none, even or odd");
+  }
+  catch (const std::exception& e)
+  {
+    std::cerr << "sim_haas_serial dprnt: " << e.what() << "\n";
+    return 2;
+  }
+
+  StopSignal& stop = installStopHandler();
+  std::unique_ptr<PtyMaster> pty;
+  std::unique_ptr<TcpServer> server;
+  std::unique_ptr<Transport> client;
+  try
+  {
+    if (vm.count("tcp"))
+    {
+      server = std::make_unique<TcpServer>(static_cast<uint16_t>(tcp_port), bind);
+      onStop([&] { server->interrupt(); });
+      announce("sim_haas_serial", "tcp " + bind + ":" + std::to_string(server->port()));
+    }
+    else
+    {
+      pty = std::make_unique<PtyMaster>(link);
+      onStop([&] { pty->interrupt(); });
+      announce("sim_haas_serial", "pty " + pty->slavePath());
+    }
+  }
+  catch (const Error& e)
+  {
+    std::cerr << "sim_haas_serial dprnt: " << e.what() << "\n";
+    return 1;
+  }
+
+  // The link a line goes to: the pty, or the current TCP client (waiting for one if none).
+  bool dropped = false;
+  std::mutex client_mutex;
+  onStop(
+      [&]
+      {
+        std::lock_guard<std::mutex> lock(client_mutex);
+        if (client)
+          client->interrupt();
+      });
+  const auto sink = [&]() -> Transport*
+  {
+    if (pty)
+      return pty.get();
+    while (!client && !stop.stopped())
+    {
+      auto accepted = server->accept(Milliseconds(500));
+      std::lock_guard<std::mutex> lock(client_mutex);
+      client = std::move(accepted);
+    }
+    return client.get();
+  };
+  const auto send = [&](const std::string& bytes) -> bool
+  {
+    std::vector<uint8_t> out(bytes.begin(), bytes.end());
+    for (auto& b : out)
+      b = withParity(b, parity);
+    for (;;)
+    {
+      Transport* link_out = sink();
+      if (!link_out)
+        return false;
+      try
+      {
+        link_out->write(out, Milliseconds(5000));
+        return true;
+      }
+      catch (const LinkError& e)
+      {
+        if (pty)
+          throw;
+        std::cerr << "sim_haas_serial dprnt: client gone (" << e.what() << "), waiting for the next\n";
+        std::lock_guard<std::mutex> lock(client_mutex);
+        client.reset();
+      }
+    }
+  };
+
+  const auto period = rate > 0 ? std::chrono::duration<double>(1.0 / rate) : std::chrono::duration<double>(0);
+  auto next_time = std::chrono::steady_clock::now();
+  uint64_t lines = 0;
+  machine.before_print = [&](MacroMachine& m)
+  {
+    // Pace first, then read the clock: #3001 is the moment the line is built and written.
+    if (period.count() > 0)
+    {
+      next_time += std::chrono::duration_cast<std::chrono::steady_clock::duration>(period);
+      const auto wait = next_time - std::chrono::steady_clock::now();
+      if (wait.count() > 0)
+        stop.waitFor(std::chrono::duration_cast<Milliseconds>(wait));
+    }
+    // Haas #3001 is a millisecond timer; here it is wall-clock ms modulo 100000 so that a reader on
+    // the same host can compute the latency of each line from its text.
+    const auto now = std::chrono::system_clock::now().time_since_epoch();
+    m.variables[3001] = std::fmod(std::chrono::duration<double, std::milli>(now).count(), 100000.0);
+  };
+  try
+  {
+    for (unsigned run = 0; (repeat == 0 || run < repeat) && !stop.stopped(); ++run)
+    {
+      // Variables persist from run to run as on the control (#3901 counts parts); the axes start at 0.
+      machine.position[0] = machine.position[1] = machine.position[2] = 0;
+      machine.incremental = false;
+      if (popen && !send(std::string("\x12\0\0\0\0", 5)))
+        break;
+      program.run(machine,
+                  [&](const std::string& text)
+                  {
+                    if (stop.stopped())
+                      return false;
+                    ++lines;
+                    if (overlong_every > 0 && lines % overlong_every == 0 && !send(std::string(1000, 'A') + line_end))
+                      return false;
+                    std::string out = text;
+                    if (garbage_every > 0 && lines % garbage_every == 0)
+                      out.insert(out.size() / 2, "\x01\x07\x1b\x08\x15");  // noise of a plugged cable
+                    // Before the line is built, #3001 was refreshed, so this is the moment it leaves.
+                    if (!send(out + line_end))
+                      return false;
+                    if (server && drop_after > 0 && !dropped && lines == drop_after)
+                    {
+                      dropped = true;
+                      std::lock_guard<std::mutex> lock(client_mutex);
+                      client.reset();  // the machine closes the socket (power cycle, network glitch)
+                    }
+                    return true;
+                  });
+      if (popen && !send("\x14"))
+        break;
+    }
+    if (pty)
+      pty->drain();
+    // Keep the link open after the last run so the reader sees every byte; stop with a signal.
+    while (!stop.stopped())
+      stop.waitFor(Milliseconds(1000));
+  }
+  catch (const CancelledError&)
+  {
+  }
+  catch (const Error& e)
+  {
+    std::cerr << "sim_haas_serial dprnt: " << e.what() << "\n";
+    return 1;
+  }
+  return 0;
+}
+
+const SimMode kDprntMode("dprnt", "Haas control printing DPRNT output of a macro program (pty or --tcp PORT)",
+                         &runDprnt);
+}  // namespace
+}  // namespace sim
+}  // namespace cnc_bridge

@@ -1,0 +1,56 @@
+// A small Haas macro interpreter for the DPRNT mode of sim_haas_serial: enough of the language to
+// run the probing programs DPRNT exists for (the seed's grid probing: G65 P9995 ...;
+// DPRNT[#5223[44]]; G00 G91 X.5;) against a synthetic surface, and print with real Haas formatting.
+#pragma once
+
+#include <functional>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace cnc_bridge
+{
+namespace sim
+{
+/// \brief The simulated machine a program runs on.
+struct MacroMachine
+{
+  std::map<int, double> variables;  ///< macro variables; unset ones read as 0 (Haas #0 "null" prints 0)
+  double position[3] = {0, 0, 0};   ///< X Y Z, work coordinates, program units
+  bool incremental = false;         ///< G91 in effect
+  /// Height of the part surface under (x, y), program units: what a G65 P9995 Z probe finds.
+  std::function<double(double x, double y)> surface = [](double, double) { return 0.0; };
+  /// Called before each DPRNT statement (the simulator refreshes #3001, the millisecond timer).
+  std::function<void(MacroMachine&)> before_print;
+};
+
+/// \brief A parsed macro program. Not thread-safe while running.
+///
+/// Supported (Haas mill programming manual, "Macros"): blocks separated by ';' or new lines;
+/// (comments); N numbers; '%' and O-number lines ignored; `#n = expr`; `DPRNT[...]`;
+/// `WHILE [expr] DOn` ... `ENDn`; `IF [expr] GOTOn` with `Nn` targets; G00/G01 X Y Z moves under
+/// G90/G91; `G65 P9995` single-surface Z probe (sets #5223, the G54 Z offset the seed prints, and
+/// #5061..#5063, the probe trigger position); M30/M02/M99 end the program. Expressions: numbers,
+/// #n, #[expr], + - * /, [ ], EQ NE GT GE LT LE, AND OR, ABS SQRT SIN COS TAN ROUND FIX FUP.
+class MacroProgram
+{
+ public:
+  /// \throws ConfigError with the line number for anything it cannot run.
+  static MacroProgram parse(const std::string& text);
+  /// \brief Runs the program once; \p print gets every DPRNT line (without its line end) and
+  /// returns false to stop early.
+  /// \throws ConfigError on a run-time error (a loop without its END, a bad expression).
+  void run(MacroMachine& machine, const std::function<bool(const std::string&)>& print) const;
+  size_t blocks() const { return blocks_.size(); }
+
+ private:
+  struct Block
+  {
+    std::string text;  // upper case, spaces removed except inside DPRNT[...]
+    int line;
+    int n = -1;  // N number, for GOTO
+  };
+  std::vector<Block> blocks_;
+};
+}  // namespace sim
+}  // namespace cnc_bridge
