@@ -34,3 +34,9 @@ cnc_fuzz_target(fuzz_dnc_program test/fuzz/fuzz_dnc_program.cpp)
 # Benchmark driver (bench/dnc/run_bench.sh runs it from a build directory).
 cnc_tool(dnc_drip_bench bench/dnc/drip_bench.cpp)
 target_link_libraries(dnc_drip_bench cnc_bridge_dnc_sim)
+
+# dnc_node's drip and backup protocols (dnc.cmake declares the node).
+if(NOT CNC_BRIDGE_CORE_ONLY AND TARGET dnc_node)
+  target_sources(dnc_node PRIVATE src/nodes/dnc_drip_handlers.cpp)
+  target_link_libraries(dnc_node cnc_bridge_drip)
+endif()

@@ -95,7 +95,7 @@ BackupResult BackupReceiver::receive(const std::string& path, const ProgressCall
   }
   while (parser.state() != BackupParser::State::kDone)
   {
-    if (cancelled_)
+    if (cancelled_ || (options_.cancel != nullptr && *options_.cancel))
     {
       throw CancelledError(link_.describe() + ": backup cancelled after " + std::to_string(file.bytesWritten()) +
                            " bytes; nothing was stored");

@@ -242,7 +242,7 @@ void DripSender::gate()
   bool reported_hold = false;
   while (held_ || paused_ || waiting_for_dc1_)
   {
-    if (cancelled_)
+    if (cancelRequested())
     {
       throw Stopped();
     }
@@ -280,7 +280,7 @@ void DripSender::gate()
   {
     report(true);
   }
-  if (cancelled_)
+  if (cancelRequested())
   {
     throw Stopped();
   }
@@ -320,7 +320,7 @@ void DripSender::emit(const char* data, size_t size)
   }
 }
 
-DripResult DripSender::send(const DripPlan& plan, const ProgressCallback& progress)
+DripResult DripSender::send(const DripPlan& plan, const ProgressCallback& progress, const LineCallback& line_sent)
 {
   callback_ = progress;
   progress_ = DripProgress{};
@@ -375,9 +375,15 @@ DripResult DripSender::send(const DripPlan& plan, const ProgressCallback& progre
       {
         progress_.block = sequence;
       }
+      const size_t text_size = line.size();
       line += options_.eob;
       emit(line.data(), line.size());
       last_line = n;
+      if (line_sent)
+      {
+        line.resize(text_size);
+        line_sent(n, line);
+      }
       if (!sequence.empty())
       {
         last_block = sequence;
@@ -409,17 +415,11 @@ DripResult DripSender::send(const DripPlan& plan, const ProgressCallback& progre
   catch (const Stopped&)
   {
     result.outcome = DripResult::Outcome::kCancelled;
-    std::ostringstream out;
-    out << "cancelled after " << progress_.bytes << " bytes; last complete line " << last_line;
-    if (!last_block.empty())
-    {
-      out << " (" << last_block << ")";
-    }
-    if (progress_.line > last_line)
-    {
-      out << "; line " << progress_.line << " was sent in part: restart from it";
-    }
-    result.message = out.str();
+  }
+  catch (const CancelledError&)
+  {
+    // The link was interrupted (a preempt that also interrupts the port): a cancel as well.
+    result.outcome = DripResult::Outcome::kCancelled;
   }
   catch (const Error& e)
   {
@@ -431,6 +431,20 @@ DripResult DripSender::send(const DripPlan& plan, const ProgressCallback& progre
       out << " " << last_block;
     }
     out << ")";
+    result.message = out.str();
+  }
+  if (result.outcome == DripResult::Outcome::kCancelled)
+  {
+    std::ostringstream out;
+    out << "cancelled after " << progress_.bytes << " bytes; last complete line " << last_line;
+    if (!last_block.empty())
+    {
+      out << " (" << last_block << ")";
+    }
+    if (progress_.line > last_line)
+    {
+      out << "; line " << progress_.line << " was sent in part: restart from it";
+    }
     result.message = out.str();
   }
   held_ = false;

@@ -5,6 +5,7 @@
 #include "cnc_bridge/ros/dnc_node.h"
 
 #include "cnc_bridge/common/error.h"
+#include "cnc_bridge/ros/dnc_drip_handlers.h"
 #include "cnc_bridge/ros/params.h"
 
 namespace cnc_bridge
@@ -74,6 +75,9 @@ DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh)
       });
   state_->setLink(LinkState::kDown, "port opened on demand");
   state_->diagnostics().add("Transfers", this, &DncNode::transferDiagnostics);
+  // DNC drip-feed (drip) and program backup (backup): ~drip_* and ~backup_* parameters,
+  // dnc/current_line (docs/dnc_drip_feed.md).
+  registerDripProtocols(*this, nh, pnh, serial_, *state_, feedback_period_);
 
   if (keep_open_)
   {

@@ -60,6 +60,8 @@ struct BackupOptions
   bool send_dc1 = true;              ///< send DC1 when ready: "go on" to a control waiting to punch
   uint64_t max_bytes = 64ull << 30;  ///< refuse a stream longer than this (a babbling line)
   Milliseconds progress_interval{100};
+  /// Optional flag another thread sets to cancel (a ROS action preempt); cancel() works as well.
+  const std::atomic<bool>* cancel = nullptr;
 };
 
 struct BackupProgress

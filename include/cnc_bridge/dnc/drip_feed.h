@@ -62,6 +62,8 @@ struct DripOptions
   Milliseconds start_timeout{0};        ///< how long to wait for that DC1; 0 = forever
   Milliseconds progress_interval{100};  ///< progress callback at most this often (and at the end)
   size_t max_line_length = 4096;
+  /// Optional flag another thread sets to cancel (a ROS action preempt); cancel() works as well.
+  const std::atomic<bool>* cancel = nullptr;
 
   /// \throws ConfigError for an empty EOB, a chunk of 0 or above the allowance, a negative rate.
   void validate() const;
@@ -140,6 +142,8 @@ class DripSender
 {
  public:
   using ProgressCallback = std::function<void(const DripProgress&)>;
+  /// Called after each file line has been written whole: its 1-based number and its text.
+  using LineCallback = std::function<void(uint64_t line, const std::string& text)>;
 
   /// \throws ConfigError if the options are invalid.
   DripSender(Transport& link, DripOptions options);
@@ -147,7 +151,8 @@ class DripSender
   /// \brief Sends the plan. Returns when the program has been sent, cancelled or has failed; the
   /// result tells which and where it stopped. Never throws for link or timeout errors (they are
   /// in the result); the link stays usable after a cancel.
-  DripResult send(const DripPlan& plan, const ProgressCallback& progress = nullptr);
+  DripResult send(const DripPlan& plan, const ProgressCallback& progress = nullptr,
+                  const LineCallback& line_sent = nullptr);
 
   void pause() { paused_ = true; }
   void resume() { paused_ = false; }
@@ -159,6 +164,7 @@ class DripSender
   class Stopped;  // thrown inside send() to unwind on cancel
   void emit(const char* data, size_t size);
   void gate();
+  bool cancelRequested() const { return cancelled_ || (options_.cancel != nullptr && *options_.cancel); }
   void pollInput(Milliseconds timeout);
   void report(bool force);
 

@@ -1,0 +1,248 @@
+// The drip and backup protocol handlers of dnc_node: ROS parameters to core options, core
+// progress to action feedback, state and dnc/current_line. One transfer at a time (dnc_node
+// serialises them), so the handlers hold no lock of their own.
+#include "cnc_bridge/ros/dnc_drip_handlers.h"
+
+#include <termios.h>
+
+#include <memory>
+
+#include "cnc_bridge/DncLine.h"
+#include "cnc_bridge/common/error.h"
+#include "cnc_bridge/dnc/backup.h"
+#include "cnc_bridge/dnc/dnc_codes.h"
+#include "cnc_bridge/dnc/drip_feed.h"
+#include "cnc_bridge/ros/params.h"
+#include "cnc_bridge/transport/paced_transport.h"
+
+namespace cnc_bridge
+{
+namespace
+{
+/// Sets the port's termios for the drip-feed's flow control for the length of one transfer:
+/// XON/XOFF is read in user space (so the kernel must not act on DC1/DC3 itself), RTS/CTS is the
+/// kernel's. The node's own settings come back afterwards.
+class FlowControlGuard
+{
+ public:
+  FlowControlGuard(Transport& link, dnc::DripFlow flow)
+  {
+    auto* port = dynamic_cast<SerialPort*>(&link);
+    if (port == nullptr || ::tcgetattr(port->nativeHandle(), &saved_) != 0)
+    {
+      return;  // not a serial port (tests): nothing to set
+    }
+    fd_ = port->nativeHandle();
+    struct termios tio = saved_;
+    tio.c_iflag &= ~(IXON | IXOFF | IXANY);
+    if (flow == dnc::DripFlow::kRtsCts)
+    {
+      tio.c_cflag |= CRTSCTS;
+    }
+    else
+    {
+      tio.c_cflag &= ~CRTSCTS;
+    }
+    ::tcsetattr(fd_, TCSANOW, &tio);
+  }
+  ~FlowControlGuard()
+  {
+    if (fd_ >= 0)
+    {
+      ::tcsetattr(fd_, TCSANOW, &saved_);
+    }
+  }
+  FlowControlGuard(const FlowControlGuard&) = delete;
+  FlowControlGuard& operator=(const FlowControlGuard&) = delete;
+
+ private:
+  int fd_ = -1;
+  struct termios saved_
+  {
+  };
+};
+
+class DripHandlers
+{
+ public:
+  DripHandlers(ros::NodeHandle nh, ros::NodeHandle pnh, const SerialSettings& serial, MachineStatePublisher& state,
+               ros::Duration feedback_period)
+      : state_(state)
+  {
+    // ~drip_eob (string, default "lf"): end of block sent after each line: lf (ISO, Fanuc), cr
+    // (EIA), crlf (Haas), lfcr, lfcrcr.
+    drip_.eob = dnc::parseEob(pnh.param<std::string>("drip_eob", "lf"));
+    // ~drip_flow (string, default "xonxoff"): xonxoff (DC3/DC1 read by the node, parity bit
+    // masked), rtscts (the port's hardware handshake), none.
+    drip_.flow = dnc::parseDripFlow(pnh.param<std::string>("drip_flow", "xonxoff"));
+    // ~drip_pace (bool, default true): write no faster than the line carries (baud / bits per
+    // character), so at most ~drip_xoff_allowance characters can follow an XOFF.
+    if (pnh.param("drip_pace", true))
+    {
+      drip_.pace_cps = static_cast<double>(serial.baud) /
+                       bitsPerCharacter(serial.data_bits, serial.parity != Parity::kNone, serial.stop_bits);
+    }
+    // ~drip_chunk (int, default 4): characters per write.
+    drip_.chunk = static_cast<size_t>(std::max(1, pnh.param("drip_chunk", 4)));
+    // ~drip_xoff_allowance (int, default 10): characters the control takes after its XOFF (Fanuc: 10).
+    drip_.xoff_allowance = static_cast<size_t>(std::max(1, pnh.param("drip_xoff_allowance", 10)));
+    // ~drip_add_percent (bool, default true): frame with '%' when the file does not.
+    pnh.param("drip_add_percent", drip_.add_percent, true);
+    // ~drip_leader, ~drip_trailer (int, default 0): leader/trailer characters (tape feed).
+    drip_.leader_length = static_cast<size_t>(std::max(0, pnh.param("drip_leader", 0)));
+    drip_.trailer_length = static_cast<size_t>(std::max(0, pnh.param("drip_trailer", 0)));
+    // ~drip_leader_char (string, default "nul"): nul, lf or space.
+    const std::string leader_char = pnh.param<std::string>("drip_leader_char", "nul");
+    if (leader_char == "nul")
+      drip_.leader_char = 0;
+    else if (leader_char == "lf")
+      drip_.leader_char = '\n';
+    else if (leader_char == "space")
+      drip_.leader_char = ' ';
+    else
+      throw ConfigError(pnh.resolveName("drip_leader_char") + " must be nul, lf or space, not '" + leader_char + "'");
+    // ~dc_codes (bool, default false): DC2 before and DC4 after the program (Haas setting 14).
+    pnh.param("dc_codes", drip_.dc_codes, false);
+    // ~drip_allow_lowercase (bool, default false): lowercase passes the check (8N1 controls that
+    // take it in comments); under ISO (7E1) leave it off.
+    drip_.rules.reject_lowercase = !pnh.param("drip_allow_lowercase", false);
+    // ~drip_hold_timeout (s, default 0 = wait forever): longest XOFF before ~drip_hold_action.
+    drip_.hold_timeout = params::seconds(pnh, "drip_hold_timeout", 0.0);
+    // ~drip_hold_action (string, default "fail"): fail, or resume (assume the XON was lost).
+    const std::string hold_action = pnh.param<std::string>("drip_hold_action", "fail");
+    if (hold_action != "fail" && hold_action != "resume")
+      throw ConfigError(pnh.resolveName("drip_hold_action") + " must be fail or resume, not '" + hold_action + "'");
+    drip_.on_hold_timeout = hold_action == "resume" ? dnc::HoldTimeoutAction::kResume : dnc::HoldTimeoutAction::kFail;
+    // ~drip_wait_for_dc1 (bool, default false): send nothing until the control asks (DC1);
+    // ~drip_start_timeout (s, default 0 = forever) bounds that wait.
+    pnh.param("drip_wait_for_dc1", drip_.wait_for_dc1, false);
+    drip_.start_timeout = params::seconds(pnh, "drip_start_timeout", 0.0);
+    drip_.progress_interval = Milliseconds(static_cast<int64_t>(feedback_period.toSec() * 1000));
+    drip_.validate();
+
+    // ~backup_start_timeout (s, default 120; 0 = forever): wait for the control to start punching.
+    backup_.start_timeout = params::seconds(pnh, "backup_start_timeout", 120.0);
+    // ~backup_quiet_timeout (s, default 5): silence that ends a program punched without closing '%'.
+    backup_.quiet_timeout = params::seconds(pnh, "backup_quiet_timeout", 5.0);
+    // ~backup_send_dc1 (bool, default true): send DC1 when ready to receive.
+    pnh.param("backup_send_dc1", backup_.send_dc1, true);
+    backup_.progress_interval = drip_.progress_interval;
+
+    line_pub_ = nh.advertise<DncLine>("dnc/current_line", 100);
+  }
+
+  TransferResult drip(Transport& link, const TransferJob& job,
+                      const std::function<void(const TransferFeedback&)>& feedback, const std::atomic<bool>& cancel)
+  {
+    if (!job.send)
+      throw ConfigError("drip sends a program to the control; to store one from it use protocol backup");
+    dnc::RestartPoint restart;
+    restart.line = job.goal.start_line;
+    restart.block = job.goal.start_block;
+    dnc::DripOptions options = drip_;
+    options.cancel = &cancel;
+    const dnc::DripPlan plan = dnc::planDrip(job.path, options, restart, job.goal.restart_preamble);
+    if (restart.active())
+    {
+      ROS_INFO("restart at line %lu of %s; sent before it:\n%s", static_cast<unsigned long>(plan.scan.start_line),
+               job.goal.file.c_str(), plan.preamble.c_str());
+      for (const auto& warning : plan.scan.warnings)
+        ROS_WARN("%s", warning.c_str());
+    }
+    FlowControlGuard guard(link, options.flow);
+    dnc::DripSender sender(link, options);
+    bool was_held = false;
+    const auto progress = [&](const dnc::DripProgress& p)
+    {
+      TransferFeedback f;
+      f.bytes = p.bytes;
+      f.total = p.total;
+      f.line = static_cast<uint32_t>(p.line);
+      f.block_number = p.block;
+      f.percent = static_cast<float>(p.percent());
+      f.held = p.held;
+      if (feedback)
+        feedback(f);
+      const bool paused = p.held || p.paused;
+      state_.update(
+          [&](MachineState& s)
+          {
+            s.block = static_cast<uint32_t>(p.line);
+            if (paused != was_held)
+            {
+              s.execution = paused ? MachineState::EXECUTION_PAUSED : MachineState::EXECUTION_ACTIVE;
+              s.message = paused ? "drip-feed held by the control (XOFF)" : "drip-feeding " + job.goal.file;
+            }
+          });
+      was_held = paused;
+    };
+    const auto line_sent = [&](uint64_t line, const std::string& text)
+    {
+      if (line_pub_.getNumSubscribers() == 0)
+        return;
+      DncLine msg;
+      msg.header.stamp = ros::Time::now();
+      msg.program = job.goal.file;
+      msg.line = static_cast<uint32_t>(line);
+      std::string block;
+      if (!text.empty())
+        block = dnc::sequenceNumber(text);
+      msg.block_number = block;
+      msg.text = text;
+      line_pub_.publish(msg);
+    };
+    const dnc::DripResult r = sender.send(plan, progress, line_sent);
+    TransferResult result;
+    result.success = r.completed();
+    result.message = r.message;
+    result.bytes = r.bytes;
+    result.stopped_at_line = static_cast<uint32_t>(r.stopped_at_line);
+    result.stopped_at_block = r.stopped_at_block;
+    return result;
+  }
+
+  TransferResult backup(Transport& link, const TransferJob& job,
+                        const std::function<void(const TransferFeedback&)>& feedback, const std::atomic<bool>& cancel)
+  {
+    if (job.send)
+      throw ConfigError("backup stores a program the control punches; to send one use protocol drip or xmodem");
+    dnc::BackupOptions options = backup_;
+    options.cancel = &cancel;
+    dnc::BackupReceiver receiver(link, options);
+    const auto progress = [&](const dnc::BackupProgress& p)
+    {
+      TransferFeedback f;
+      f.bytes = p.bytes;
+      f.line = static_cast<uint32_t>(p.line);
+      if (feedback)
+        feedback(f);
+      state_.update([&](MachineState& s) { s.block = static_cast<uint32_t>(p.line); });
+    };
+    const dnc::BackupResult r = receiver.receive(job.path, progress);
+    TransferResult result;
+    result.success = true;
+    result.message = r.message;
+    result.bytes = r.bytes;
+    result.stopped_at_line = static_cast<uint32_t>(r.lines);
+    return result;
+  }
+
+ private:
+  MachineStatePublisher& state_;
+  dnc::DripOptions drip_;
+  dnc::BackupOptions backup_;
+  ros::Publisher line_pub_;
+};
+}  // namespace
+
+void registerDripProtocols(DncNode& node, ros::NodeHandle nh, ros::NodeHandle pnh, const SerialSettings& serial,
+                           MachineStatePublisher& state, ros::Duration feedback_period)
+{
+  auto handlers = std::make_shared<DripHandlers>(nh, pnh, serial, state, feedback_period);
+  node.registerProtocol("drip", [handlers](Transport& link, const TransferJob& job, const auto& feedback,
+                                           const auto& cancel) { return handlers->drip(link, job, feedback, cancel); });
+  node.registerProtocol("backup",
+                        [handlers](Transport& link, const TransferJob& job, const auto& feedback, const auto& cancel)
+                        { return handlers->backup(link, job, feedback, cancel); });
+}
+}  // namespace cnc_bridge
