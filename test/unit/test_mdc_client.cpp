@@ -13,6 +13,8 @@
 #include "cnc_bridge/mdc/mdc_client.h"
 #include "cnc_bridge/mdc/mdc_monitor.h"
 #include "cnc_bridge/transport/fake_transport.h"
+#include "cnc_bridge/transport/pty.h"
+#include "cnc_bridge/transport/serial_port.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::mdc;
@@ -367,4 +369,37 @@ TEST(MdcMonitor, WorkOffsetOnlyFromReadsWhileTheAxisStoodStill)
   macro(5021, 2.5);
   EXPECT_DOUBLE_EQ(*monitor.status().work_offset[0], 5.0);
   EXPECT_FALSE(monitor.status().work_offset[1]);
+}
+
+TEST(MdcClient, ClassicSerialLineWithSevenDataBitsAndFramedReplies)
+{
+  // The test is the control: it owns the pty master; the client opens the slave as a 7E1 port,
+  // as on a Classic control with settings 37 = 7 and 12 = even.
+  PtyMaster control;
+  SerialSettings settings;
+  settings.device = control.slavePath();
+  settings.baud = 9600;
+  settings.data_bits = 7;
+  settings.parity = Parity::kEven;
+  SerialPort port(settings);
+  std::thread machine(
+      [&]
+      {
+        std::string received;
+        uint8_t buffer[64];
+        while (received.find('\n') == std::string::npos)
+        {
+          const size_t n = control.read(buffer, sizeof buffer, 2000ms);
+          if (n == 0)
+            return;
+          received.append(reinterpret_cast<const char*>(buffer), n);
+        }
+        if (received == "?Q500\r\n")
+          control.write(std::string("\x02STATUS, BUSY\x17\r\n>"));
+      });
+  MdcClient client(port);
+  const Reply reply = client.request(q(500), 2000ms);
+  machine.join();
+  EXPECT_EQ(toProgramStatus(reply).status, "BUSY");
+  EXPECT_EQ(client.stats().answered, 1u);
 }
