@@ -16,3 +16,18 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   target_link_libraries(test_at_protocol cnc_bridge_at_protocol)
 endif()
 
+cnc_tool(sim_at_controller src/sim/sim_at_controller.cpp)
+
+if(NOT CNC_BRIDGE_CORE_ONLY)
+  cnc_node(at_controller_node src/nodes/at_controller_node.cpp)
+  target_link_libraries(at_controller_node cnc_bridge_at_protocol cnc_bridge_gcode)
+endif()
+
+if(NOT CNC_BRIDGE_CORE_ONLY AND CATKIN_ENABLE_TESTING)
+  find_package(rostest REQUIRED)
+  foreach(test at_controller at_controller_disabled)
+    add_rostest_gtest(test_${test} test/rostest/${test}.test test/rostest/test_${test}.cpp)
+    target_link_libraries(test_${test} ${catkin_LIBRARIES})
+    add_dependencies(test_${test} at_controller_node sim_at_controller ${PROJECT_NAME}_generate_messages_cpp)
+  endforeach()
+endif()

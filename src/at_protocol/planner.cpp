@@ -43,16 +43,34 @@ void PlannerLimits::validate() const
 }
 
 Trajectory::Trajectory(const std::vector<Vec3>& points, double feed, const PlannerLimits& limits, double entry_speed)
-    : limits_(limits), feed_mm_(feed), feed_(feed * kPulsesPerMm)
+    : Trajectory(points, std::vector<double>(points.empty() ? 0 : points.size() - 1, feed), limits, entry_speed)
+{
+  if (!(feed > 0.0) || std::isnan(feed))
+  {
+    throw ConfigError("planner: the feed must be a positive number of mm/s");
+  }
+}
+
+Trajectory::Trajectory(const std::vector<Vec3>& points, const std::vector<double>& feeds, const PlannerLimits& limits,
+                       double entry_speed)
+    : limits_(limits)
 {
   limits_.validate();
   if (points.empty())
   {
     throw ConfigError("planner: a path needs at least one point");
   }
-  if (!(feed > 0.0) || !std::isfinite(feed))
+  if (feeds.size() + 1 != points.size())
   {
-    throw ConfigError("planner: the feed must be a positive number of mm/s");
+    throw ConfigError("planner: " + std::to_string(feeds.size()) + " feeds for " + std::to_string(points.size()) +
+                      " points (one per segment needed)");
+  }
+  for (double feed : feeds)
+  {
+    if (!(feed > 0.0) || std::isnan(feed))
+    {
+      throw ConfigError("planner: the feed must be a positive number of mm/s");
+    }
   }
   for (const auto& point : points)
   {
@@ -64,10 +82,10 @@ Trajectory::Trajectory(const std::vector<Vec3>& points, double feed, const Plann
       }
     }
   }
-  plan(points, std::max(0.0, entry_speed));
+  plan(points, feeds, std::max(0.0, entry_speed));
 }
 
-void Trajectory::plan(const std::vector<Vec3>& points, double entry_speed)
+void Trajectory::plan(const std::vector<Vec3>& points, const std::vector<double>& feeds, double entry_speed)
 {
   start_ = points.front();
   end_ = points.back();
@@ -91,7 +109,7 @@ void Trajectory::plan(const std::vector<Vec3>& points, double entry_speed)
     Segment segment;
     segment.start = from;
     segment.length = length;
-    double v_max = feed_;
+    double v_max = feeds[p - 1] * kPulsesPerMm;
     double accel = kInf;
     for (int i = 0; i < 3; ++i)
     {
@@ -254,7 +272,7 @@ Trajectory Trajectory::stopFrom(const Sample& from) const
   const double v = from.path_speed;
   if (segments_.empty() || v <= 1e-9 || from.distance >= length_)
   {
-    return Trajectory({from.position}, feed_mm_, limits_);
+    return Trajectory({from.position}, 1.0, limits_);
   }
   // The rest of the path from the current point.
   auto it = std::upper_bound(segments_.begin(), segments_.end(), from.distance,

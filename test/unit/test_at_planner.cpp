@@ -212,3 +212,14 @@ TEST(AtPlanner, InvalidInputIsRefused)
   EXPECT_EQ(point.steps(), 0u);
   EXPECT_EQ(point.length(), 0.0);
 }
+
+TEST(AtPlanner, FeedPerSegmentAsAProgramsFWordsChange)
+{
+  PlannerLimits limits;
+  const Trajectory t({mm(0, 0, 0), mm(20, 0, 0), mm(20, 20, 0)}, std::vector<double>{10.0, 40.0}, limits);
+  EXPECT_NEAR(t.segments()[0].v_cruise, 10000.0, 1e-6);
+  EXPECT_NEAR(t.segments()[1].v_cruise, 40000.0, 1e-6);
+  expectWithinLimits(samples(t), limits);
+  EXPECT_THROW(Trajectory({mm(0, 0, 0), mm(1, 0, 0)}, std::vector<double>{10.0, 10.0}, limits), ConfigError);
+  EXPECT_THROW(Trajectory({mm(0, 0, 0), mm(1, 0, 0)}, std::vector<double>{-1.0}, limits), ConfigError);
+}

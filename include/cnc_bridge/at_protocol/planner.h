@@ -63,6 +63,12 @@ class Trajectory
   /// Consecutive identical points are merged; a path of one point is a trajectory of zero length.
   Trajectory(const std::vector<Vec3>& points, double feed, const PlannerLimits& limits, double entry_speed = 0.0);
 
+  /// \brief As above with a feed per segment: \p feeds[i] (mm/s) from points[i] to points[i + 1]
+  /// (G-code F words change along a program; a rapid may pass a very large feed: the axis limits cap it).
+  /// \throws ConfigError if feeds.size() != points.size() - 1 or a feed is not positive.
+  Trajectory(const std::vector<Vec3>& points, const std::vector<double>& feeds, const PlannerLimits& limits,
+             double entry_speed = 0.0);
+
   /// \returns false if \p entry_speed was too high to stop within the path (the profile then
   /// starts slower than asked); true for every path planned from rest.
   bool entryFeasible() const { return entry_feasible_; }
@@ -104,12 +110,10 @@ class Trajectory
   const std::vector<Segment>& segments() const { return segments_; }
 
  private:
-  void plan(const std::vector<Vec3>& points, double entry_speed);
+  void plan(const std::vector<Vec3>& points, const std::vector<double>& feeds, double entry_speed);
   Sample sampleSegment(const Segment& segment, double tau) const;
 
   PlannerLimits limits_;
-  double feed_mm_ = 0.0;
-  double feed_ = 0.0;  // pulses/s
   std::vector<Segment> segments_;
   Vec3 start_{};
   Vec3 end_{};

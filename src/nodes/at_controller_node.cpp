@@ -1,0 +1,854 @@
+// at_controller_node: ROS in the place of the seed's CAM add-in (esprit_at_protocol_controller.md),
+// driving a real-time controller over the '@'-protocol. Commands go out on one TCP socket (we are
+// the client of the controller's receive server); reports come back on another (we are its client,
+// or a server it connects to). Services change mode, spindle, tool and home; the ~follow_path action
+// plans a G-code program or a nav_msgs/Path into 1 ms setpoints that a dedicated sender thread
+// streams; reports become state, joint_states and tf.
+#include <actionlib/server/simple_action_server.h>
+#include <ros/ros.h>
+#include <std_srvs/SetBool.h>
+#include <std_srvs/Trigger.h>
+
+#include <cmath>
+#include <fstream>
+#include <memory>
+
+#include "cnc_bridge/AtFollowPathAction.h"
+#include "cnc_bridge/AtJog.h"
+#include "cnc_bridge/AtSpindle.h"
+#include "cnc_bridge/AtToolChange.h"
+#include "cnc_bridge/at_protocol/codec.h"
+#include "cnc_bridge/at_protocol/planner.h"
+#include "cnc_bridge/at_protocol/sender.h"
+#include "cnc_bridge/common/error.h"
+#include "cnc_bridge/common/program_dir.h"
+#include "cnc_bridge/gcode/gcode.h"
+#include "cnc_bridge/ros/machine_state_publisher.h"
+#include "cnc_bridge/ros/params.h"
+#include "cnc_bridge/transport/backoff.h"
+#include "cnc_bridge/transport/tcp.h"
+
+namespace cnc_bridge
+{
+namespace ap = at_protocol;
+
+class AtControllerNode
+{
+ public:
+  AtControllerNode(ros::NodeHandle nh, ros::NodeHandle pnh)
+      : nh_(nh),
+        pnh_(pnh),
+        follow_path_(
+            pnh, "follow_path", [this](const AtFollowPathGoalConstPtr& goal) { followPath(goal); }, false)
+  {
+    // ~host: address of the controller (both sockets in client mode).
+    pnh.param<std::string>("host", host_, "127.0.0.1");
+    // ~tcp_port: the controller's command server (the seed's server_recv).
+    command_port_ = port(pnh, "tcp_port", 5000);
+    // ~report_mode: "client" connects to the controller's report server (the seed's server_send,
+    // like the add-in's ReceiveClient); "server" listens on ~listen_port for the controller.
+    pnh.param<std::string>("report_mode", report_mode_, "client");
+    if (report_mode_ != "client" && report_mode_ != "server")
+    {
+      throw ConfigError(pnh.resolveName("report_mode") + " must be \"client\" or \"server\", not \"" + report_mode_ +
+                        "\"");
+    }
+    // ~report_port: the controller's report server (client mode).
+    report_port_ = port(pnh, "report_port", 5001);
+    // ~listen_port: our report server (server mode); 0 picks a free port (logged).
+    listen_port_ = port(pnh, "listen_port", 5001);
+    // ~connect_timeout: s allowed for one TCP connect.
+    connect_timeout_ = params::seconds(pnh, "connect_timeout", 2.0);
+    // ~enable_motion: nothing that moves axes or turns the spindle is sent unless this is true.
+    pnh.param("enable_motion", enable_motion_, false);
+    // ~program_dir: directory G-code goals are read from; empty refuses G-code goals.
+    std::string program_dir;
+    pnh.param<std::string>("program_dir", program_dir, "");
+    if (!program_dir.empty())
+    {
+      program_dir_ = std::make_unique<ProgramDirectory>(program_dir);
+    }
+    // ~period: s, the controller's time loop (seed: 1 ms).
+    limits_.period = params::positive(pnh, "period", 0.001);
+    // ~max_speed_x/y/z: m/s per axis; also the speed a feed value of 255 stands for.
+    // ~max_accel_x/y/z: m/s^2 per axis.
+    const char* axes[] = {"x", "y", "z"};
+    const double default_speed[] = {0.05, 0.05, 0.025}, default_accel[] = {0.5, 0.5, 0.25};
+    for (int i = 0; i < 3; ++i)
+    {
+      // The planner works in mm (the machinist's unit): m * 1000.
+      limits_.max_speed[i] = params::positive(pnh, std::string("max_speed_") + axes[i], default_speed[i]) * 1000.0;
+      limits_.max_accel[i] = params::positive(pnh, std::string("max_accel_") + axes[i], default_accel[i]) * 1000.0;
+    }
+    // ~corner_share: share of the acceleration kept for changes of direction at corners (0..1).
+    pnh.param("corner_share", limits_.corner_share, 0.2);
+    limits_.validate();
+    // ~default_feed_rate: m/s along the path when neither the goal nor the program gives one.
+    default_feed_ = params::positive(pnh, "default_feed_rate", 0.01);
+    // ~spindle_max_rpm: rev/min that the spindle value 255 stands for.
+    spindle_max_rpm_ = params::positive(pnh, "spindle_max_rpm", 24000.0);
+    // ~coolant: whether operations use coolant (P1@) unless a goal says otherwise; ~coolant service.
+    coolant_ = pnh.param("coolant", false);
+    // ~realtime_priority: SCHED_FIFO priority of the sender thread; 0 keeps the normal scheduler.
+    int priority = 0;
+    pnh.param("realtime_priority", priority, 0);
+
+    const std::string hardware_id = host_ + ":" + std::to_string(command_port_);
+    state_ = std::make_unique<MachineStatePublisher>(nh, pnh, hardware_id);
+    state_->diagnostics().add("streaming", this, &AtControllerNode::streamingDiagnostics);
+    state_->update(
+        [&](MachineState& s)
+        {
+          s.spindle_speed = 0.0;
+          s.coolant = false;
+          s.execution = MachineState::EXECUTION_UNKNOWN;
+        });
+
+    ap::SetpointSender::Options options;
+    options.period = limits_.period;
+    options.realtime_priority = priority;
+    options.write_timeout = params::seconds(pnh, "write_timeout", 0.2);
+    options.on_link_error = [this](const std::string& why) { commandLinkFailed(why); };
+    sender_ = std::make_unique<ap::SetpointSender>(options);
+
+    if (report_mode_ == "server")
+    {
+      report_server_ = std::make_unique<TcpServer>(listen_port_);
+      ROS_INFO_STREAM("at_controller_node: waiting for the controller's reports on " << report_server_->describe());
+    }
+    startLinks();
+
+    set_auto_srv_ = pnh.advertiseService("set_auto", &AtControllerNode::setAuto, this);
+    jog_srv_ = pnh.advertiseService("jog", &AtControllerNode::jog, this);
+    spindle_srv_ = pnh.advertiseService("spindle", &AtControllerNode::spindle, this);
+    coolant_srv_ = pnh.advertiseService("coolant", &AtControllerNode::coolant, this);
+    tool_srv_ = pnh.advertiseService("tool_change", &AtControllerNode::toolChange, this);
+    home_srv_ = pnh.advertiseService("home", &AtControllerNode::home, this);
+    follow_path_.start();
+  }
+
+  ~AtControllerNode()
+  {
+    stopping_ = true;
+    command_cv_.notify_all();
+    if (report_server_)
+    {
+      report_server_->interrupt();
+    }
+    report_link_->stop();
+    command_link_->stop();
+    sender_.reset();
+  }
+
+ private:
+  static uint16_t port(const ros::NodeHandle& pnh, const std::string& name, int fallback)
+  {
+    int value = fallback;
+    pnh.param(name, value, fallback);
+    if (value < 0 || value > 65535)
+    {
+      throw ConfigError(pnh.resolveName(name) + " must be a TCP port (0..65535), not " + std::to_string(value));
+    }
+    return static_cast<uint16_t>(value);
+  }
+
+  // ---- links ------------------------------------------------------------------------------------
+
+  void startLinks()
+  {
+    Reconnector::Callbacks command;
+    command.connect = [this]
+    {
+      auto link = std::shared_ptr<TcpConnection>(TcpConnection::connect(host_, command_port_, connect_timeout_));
+      {
+        std::lock_guard<std::mutex> lock(command_mutex_);
+        command_failed_ = false;
+        command_conn_ = link;
+      }
+      sender_->setLink(link);
+    };
+    command.session = [this]
+    {
+      std::unique_lock<std::mutex> lock(command_mutex_);
+      command_cv_.wait(lock, [this] { return command_failed_ || stopping_; });
+      if (command_failed_ && !stopping_)
+      {
+        throw LinkError(command_error_);
+      }
+    };
+    command.disconnect = [this]
+    {
+      sender_->setLink(nullptr);
+      std::shared_ptr<TcpConnection> link;
+      {
+        std::lock_guard<std::mutex> lock(command_mutex_);
+        link.swap(command_conn_);
+        command_failed_ = true;
+      }
+      command_cv_.notify_all();
+      if (link)
+      {
+        link->interrupt();  // the sender may still hold it for one write
+      }
+    };
+    command.on_state = [this](LinkState state, const std::string& why) { linkChanged(0, state, why); };
+    command_link_ = std::make_unique<Reconnector>(
+        "at_controller command link " + host_ + ":" + std::to_string(command_port_), command);
+
+    Reconnector::Callbacks report;
+    report.connect = [this]
+    {
+      std::shared_ptr<TcpConnection> link;
+      if (report_server_)
+      {
+        while (!link && !stopping_)
+        {
+          link = report_server_->accept(Milliseconds(500));
+        }
+        if (!link)
+        {
+          throw CancelledError("stopping");
+        }
+      }
+      else
+      {
+        link = TcpConnection::connect(host_, report_port_, connect_timeout_);
+      }
+      std::lock_guard<std::mutex> lock(report_mutex_);
+      report_conn_ = link;
+    };
+    report.session = [this] { readReports(); };
+    report.disconnect = [this]
+    {
+      std::lock_guard<std::mutex> lock(report_mutex_);
+      if (report_conn_)
+      {
+        report_conn_->interrupt();
+      }
+    };
+    report.on_state = [this](LinkState state, const std::string& why) { linkChanged(1, state, why); };
+    const std::string where = report_server_ ? report_server_->describe() : host_ + ":" + std::to_string(report_port_);
+    report_link_ = std::make_unique<Reconnector>("at_controller report link " + where, report);
+    command_link_->start();
+    report_link_->start();
+  }
+
+  void commandLinkFailed(const std::string& why)
+  {
+    {
+      std::lock_guard<std::mutex> lock(command_mutex_);
+      command_failed_ = true;
+      command_error_ = why;
+    }
+    command_cv_.notify_all();
+  }
+
+  /// \param which 0: command link, 1: report link. The state's link is the worse of the two.
+  void linkChanged(int which, LinkState state, const std::string& why)
+  {
+    LinkState combined;
+    {
+      std::lock_guard<std::mutex> lock(report_mutex_);
+      links_[which] = state;
+      combined = links_[0] == LinkState::kUp && links_[1] == LinkState::kUp       ? LinkState::kUp
+                 : links_[0] == LinkState::kDown || links_[1] == LinkState::kDown ? LinkState::kDown
+                                                                                  : LinkState::kConnecting;
+    }
+    state_->setLink(combined, why.empty() ? "" : (which == 0 ? "command link: " : "report link: ") + why);
+  }
+
+  void readReports()
+  {
+    std::shared_ptr<TcpConnection> link;
+    {
+      std::lock_guard<std::mutex> lock(report_mutex_);
+      link = report_conn_;
+    }
+    ap::LineReassembler lines;
+    uint8_t buffer[4096];
+    while (!stopping_)
+    {
+      const size_t n = link->read(buffer, sizeof(buffer), Milliseconds(500));
+      if (n == 0)
+      {
+        continue;
+      }
+      const auto result = lines.feed(buffer, n);
+      for (const auto& error : result.errors)
+      {
+        ++report_errors_;
+        ROS_WARN_STREAM_THROTTLE(5.0, "at_controller_node: " << error);
+      }
+      for (const auto& line : result.messages)
+      {
+        try
+        {
+          onReport(ap::parseReport(line));
+        }
+        catch (const ProtocolError& e)
+        {
+          ++report_errors_;
+          ROS_WARN_STREAM_THROTTLE(5.0, "at_controller_node: " << e.what());
+        }
+      }
+    }
+  }
+
+  void onReport(const ap::Report& report)
+  {
+    if (const auto* estop = std::get_if<ap::EStopReport>(&report))
+    {
+      estop_ = estop->active;
+      if (estop->active)
+      {
+        sender_->abortRunning("emergency stop reported by the controller (E1)");
+      }
+      state_->update(
+          [&](MachineState& s)
+          {
+            s.estop = estop->active;
+            s.execution = estop->active ? MachineState::EXECUTION_ALARM : MachineState::EXECUTION_READY;
+            s.message = estop->active ? "emergency stop (E1)" : "emergency stop released (E0)";
+          });
+    }
+    else if (std::holds_alternative<ap::AutoModeReport>(report))
+    {
+      jog_axis_ = -1;
+      state_->update(
+          [&](MachineState& s)
+          {
+            s.mode = MachineState::MODE_AUTO;
+            s.message = "auto mode";
+          });
+    }
+    else if (const auto* jog = std::get_if<ap::JogModeReport>(&report))
+    {
+      jog_axis_ = static_cast<int>(jog->axis);
+      state_->update(
+          [&](MachineState& s)
+          {
+            s.mode = MachineState::MODE_MANUAL;
+            s.message = std::string("jog mode, axis ") + ap::toChar(jog->axis);
+          });
+    }
+    else if (const auto* position = std::get_if<ap::PositionReport>(&report))
+    {
+      std::array<int32_t, 3> previous;
+      {
+        std::lock_guard<std::mutex> lock(report_mutex_);
+        previous = reported_;
+        reported_ = position->position;
+        position_valid_ = true;
+      }
+      if (at_home_ && previous != position->position)
+      {
+        at_home_ = false;
+      }
+      // Pulses of 1/1000 mm to metres.
+      state_->setPosition(position->position[0] / ap::kPulsesPerMetre, position->position[1] / ap::kPulsesPerMetre,
+                          position->position[2] / ap::kPulsesPerMetre);
+    }
+    else if (std::holds_alternative<ap::HomeReport>(report))
+    {
+      at_home_ = true;
+      state_->update([&](MachineState& s) { s.message = "at home"; });
+    }
+  }
+
+  // ---- services ---------------------------------------------------------------------------------
+
+  /// Refuses motion unless enabled and the e-stop is released. \returns the refusal or "".
+  std::string motionRefusal(const std::string& what) const
+  {
+    if (!enable_motion_)
+    {
+      return what + " refused: motion is disabled; set the parameter " + pnh_.resolveName("enable_motion") +
+             " to true to allow it";
+    }
+    if (estop_)
+    {
+      return what + " refused: the controller reports an emergency stop (E1)";
+    }
+    return "";
+  }
+
+  /// Queues the commands and waits until they are written. \returns false with the reason.
+  bool sendAll(const std::vector<ap::Command>& commands, std::string& message)
+  {
+    try
+    {
+      std::vector<std::future<void>> written;
+      for (const auto& command : commands)
+      {
+        written.push_back(sender_->send(command));
+      }
+      std::string sent;
+      for (size_t i = 0; i < written.size(); ++i)
+      {
+        if (written[i].wait_for(std::chrono::seconds(2)) != std::future_status::ready)
+        {
+          message = "the command link did not take " + ap::describe(commands[i]) + " within 2 s";
+          return false;
+        }
+        written[i].get();
+        sent += ap::encode(commands[i]);
+      }
+      message = "sent " + sent;
+      return true;
+    }
+    catch (const Error& e)
+    {
+      message = e.what();
+      return false;
+    }
+  }
+
+  bool setAuto(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res)
+  {
+    res.success = sendAll({ap::AutoMode{}}, res.message);
+    return true;
+  }
+
+  bool jog(AtJog::Request& req, AtJog::Response& res)
+  {
+    res.message = motionRefusal("jog");
+    if (!res.message.empty())
+    {
+      return true;
+    }
+    try
+    {
+      if (req.axis.size() != 1)
+      {
+        throw ProtocolError("axis must be x, y or z, not \"" + req.axis + "\"");
+      }
+      const ap::Axis axis = ap::axisFromChar(req.axis[0]);
+      // m/s to the F value: a fraction of the axis' top speed (mm/s), 0..255.
+      const double mm_per_s = req.feed_rate * 1000.0;
+      const long feed = std::lround(mm_per_s / limits_.max_speed[static_cast<int>(axis)] * ap::kMaxFeed);
+      if (!(req.feed_rate >= 0.0) || feed > ap::kMaxFeed)
+      {
+        throw ProtocolError("jog feed_rate " + std::to_string(req.feed_rate) + " m/s is outside 0.." +
+                            std::to_string(limits_.max_speed[static_cast<int>(axis)] / 1000.0) + " m/s (~max_speed_" +
+                            static_cast<char>(std::tolower(ap::toChar(axis))) + ")");
+      }
+      res.success = sendAll({ap::JogMode{axis}, ap::JogFeed{static_cast<int>(feed)}}, res.message);
+    }
+    catch (const Error& e)
+    {
+      res.message = e.what();
+    }
+    return true;
+  }
+
+  bool spindle(AtSpindle::Request& req, AtSpindle::Response& res)
+  {
+    // rev/min to the S value 0..255 (clockwise only).
+    const long value = std::lround(req.speed / spindle_max_rpm_ * ap::kMaxFeed);
+    if (!(req.speed >= 0.0) || value > ap::kMaxFeed)
+    {
+      res.message = "spindle speed " + std::to_string(req.speed) + " rev/min is outside 0.." +
+                    std::to_string(spindle_max_rpm_) + " (~spindle_max_rpm; clockwise only)";
+      return true;
+    }
+    if (value > 0)  // stopping the spindle is always allowed
+    {
+      res.message = motionRefusal("spindle start");
+      if (!res.message.empty())
+      {
+        return true;
+      }
+    }
+    res.success = sendAll({ap::Spindle{static_cast<int>(value)}}, res.message);
+    if (res.success)
+    {
+      state_->update([&](MachineState& s) { s.spindle_speed = value * spindle_max_rpm_ / ap::kMaxFeed; });
+    }
+    return true;
+  }
+
+  bool coolant(std_srvs::SetBool::Request& req, std_srvs::SetBool::Response& res)
+  {
+    // The protocol switches coolant only with an operation (P1@ / P0@, seed 6 steps 5-6 and 16).
+    coolant_ = req.data;
+    res.success = true;
+    res.message = std::string("coolant ") + (req.data ? "on (P1@)" : "off (P0@)") +
+                  " for the next operations; the protocol has no coolant command outside an operation";
+    return true;
+  }
+
+  bool toolChange(AtToolChange::Request& req, AtToolChange::Response& res)
+  {
+    res.message = motionRefusal("tool change");
+    if (!res.message.empty())
+    {
+      return true;
+    }
+    // The seed sends the tool length in whole millimetres.
+    const long length_mm = std::lround(req.length * 1000.0);
+    res.success = sendAll({ap::ToolChange{req.tool, static_cast<int>(length_mm)}}, res.message);
+    if (res.success)
+    {
+      state_->update([&](MachineState& s) { s.tool = req.tool; });
+    }
+    return true;
+  }
+
+  bool home(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res)
+  {
+    res.message = motionRefusal("go home");
+    if (res.message.empty())
+    {
+      res.success = sendAll({ap::Home{}}, res.message);
+    }
+    return true;
+  }
+
+  // ---- follow_path --------------------------------------------------------------------------------
+
+  struct Plan
+  {
+    std::vector<ap::Vec3> points;  // pulses
+    std::vector<double> feeds;     // mm/s per segment
+    bool coolant = false;
+    double spindle_rpm = 0.0;
+  };
+
+  /// The goal as points in pulses starting at the reported position. \throws Error with the reason.
+  Plan planFromGoal(const AtFollowPathGoal& goal, const std::array<int32_t, 3>& start)
+  {
+    Plan plan;
+    plan.points.push_back({double(start[0]), double(start[1]), double(start[2])});
+    plan.coolant =
+        goal.coolant == AtFollowPathGoal::COOLANT_ON || (goal.coolant == AtFollowPathGoal::COOLANT_DEFAULT && coolant_);
+    const double goal_feed = goal.feed_rate * 1000.0;  // m/s to mm/s
+    const double fallback_feed = goal_feed > 0.0 ? goal_feed : default_feed_ * 1000.0;
+    const bool has_file = !goal.gcode_file.empty();
+    if (has_file == !goal.path.poses.empty())
+    {
+      throw ConfigError("give exactly one of gcode_file and path");
+    }
+    if (has_file)
+    {
+      if (!program_dir_)
+      {
+        throw ConfigError("G-code goals need the parameter " + pnh_.resolveName("program_dir"));
+      }
+      const std::string file = program_dir_->resolveExisting(goal.gcode_file);
+      std::ifstream in(file);
+      if (!in)
+      {
+        throw ConfigError("cannot read " + file);
+      }
+      bool coolant_in_program = false;
+      gcode::forEachMove(in,
+                         [&](const gcode::Move& move)
+                         {
+                           // Program millimetres are machine millimetres: 1000 pulses each.
+                           plan.points.push_back({move.end.x * ap::kPulsesPerMm, move.end.y * ap::kPulsesPerMm,
+                                                  move.end.z * ap::kPulsesPerMm});
+                           double feed = fallback_feed;
+                           if (move.motion == gcode::Motion::kRapid)
+                           {
+                             feed = 1e9;  // as fast as the axes allow
+                           }
+                           else if (goal_feed <= 0.0 && move.feed_mm_per_min > 0.0)
+                           {
+                             feed = move.feed_mm_per_min / 60.0;
+                           }
+                           plan.feeds.push_back(feed);
+                           coolant_in_program = coolant_in_program || move.coolant;
+                           if (move.spindle == gcode::Spindle::kClockwise)
+                           {
+                             plan.spindle_rpm = move.spindle_rpm;
+                           }
+                         });
+      if (goal.coolant == AtFollowPathGoal::COOLANT_DEFAULT && coolant_in_program)
+      {
+        plan.coolant = true;
+      }
+    }
+    else
+    {
+      const std::string machine = state_->frame("machine");
+      if (!goal.path.header.frame_id.empty() && goal.path.header.frame_id != machine)
+      {
+        throw ConfigError("path frame \"" + goal.path.header.frame_id + "\" is not \"" + machine + "\"");
+      }
+      for (const auto& pose : goal.path.poses)
+      {
+        if (!pose.header.frame_id.empty() && pose.header.frame_id != machine)
+        {
+          throw ConfigError("pose frame \"" + pose.header.frame_id + "\" is not \"" + machine + "\"");
+        }
+        const auto& p = pose.pose.position;
+        // Metres to pulses, rounded so that the end point is a whole pulse.
+        plan.points.push_back({std::round(p.x * ap::kPulsesPerMetre), std::round(p.y * ap::kPulsesPerMetre),
+                               std::round(p.z * ap::kPulsesPerMetre)});
+        plan.feeds.push_back(fallback_feed);
+      }
+    }
+    for (auto& point : plan.points)
+    {
+      for (double& c : point)
+      {
+        if (!(std::fabs(c) < 2.0e9))
+        {
+          throw ConfigError("a path point is outside the protocol's range (+-2147 m)");
+        }
+        c = std::round(c);  // whole pulses: the end point is exact
+      }
+    }
+    if (goal.spindle_speed > 0.0)
+    {
+      plan.spindle_rpm = goal.spindle_speed;
+    }
+    return plan;
+  }
+
+  static geometry_msgs::Point toPoint(const std::array<int32_t, 3>& pulses)
+  {
+    geometry_msgs::Point p;
+    p.x = pulses[0] / ap::kPulsesPerMetre;
+    p.y = pulses[1] / ap::kPulsesPerMetre;
+    p.z = pulses[2] / ap::kPulsesPerMetre;
+    return p;
+  }
+
+  std::array<int32_t, 3> reported(bool& valid)
+  {
+    std::lock_guard<std::mutex> lock(report_mutex_);
+    valid = position_valid_;
+    return reported_;
+  }
+
+  void followPath(const AtFollowPathGoalConstPtr& goal)
+  {
+    AtFollowPathResult result;
+    const auto abort = [&](const std::string& why)
+    {
+      result.success = false;
+      result.message = why;
+      ROS_WARN_STREAM("at_controller_node: follow_path: " << why);
+      follow_path_.setAborted(result, why);
+    };
+    std::string refusal = motionRefusal("follow_path");
+    if (!refusal.empty())
+    {
+      return abort(refusal);
+    }
+    bool valid = false;
+    const auto start = reported(valid);
+    if (!valid)
+    {
+      return abort("the controller has not reported its position yet (is the report link up?)");
+    }
+    std::shared_ptr<ap::Job> job;
+    try
+    {
+      Plan plan = planFromGoal(*goal, start);
+      ap::Operation operation;
+      operation.coolant = plan.coolant;
+      if (goal->tool >= 0)
+      {
+        operation.tool = ap::ToolChange{goal->tool, static_cast<int>(std::lround(goal->tool_length * 1000.0))};
+      }
+      if (plan.spindle_rpm > 0.0)
+      {
+        const long value = std::lround(plan.spindle_rpm / spindle_max_rpm_ * ap::kMaxFeed);
+        if (value > ap::kMaxFeed)
+        {
+          throw ConfigError("spindle speed " + std::to_string(plan.spindle_rpm) + " rev/min is above ~spindle_max_rpm");
+        }
+        operation.spindle = static_cast<int>(value);
+      }
+      operation.trajectory = std::make_shared<ap::Trajectory>(plan.points, plan.feeds, limits_);
+      ROS_INFO_STREAM("at_controller_node: follow_path: " << plan.points.size() - 1 << " segments, "
+                                                          << operation.trajectory->length() / ap::kPulsesPerMm
+                                                          << " mm in " << operation.trajectory->duration() << " s ("
+                                                          << operation.trajectory->steps() << " setpoints)");
+      const uint64_t underruns_before = sender_->stats().underruns;
+      job = sender_->start(operation);
+      state_->update(
+          [&](MachineState& s)
+          {
+            s.execution = MachineState::EXECUTION_ACTIVE;
+            s.mode = MachineState::MODE_DNC;
+            s.coolant = operation.coolant;
+            s.program = has(goal->gcode_file) ? goal->gcode_file : "nav_msgs/Path";
+            if (operation.tool)
+            {
+              s.tool = operation.tool->tool;
+            }
+            if (operation.spindle)
+            {
+              s.spindle_speed = *operation.spindle * spindle_max_rpm_ / ap::kMaxFeed;
+            }
+          });
+      bool cancelled = false;
+      ros::WallRate feedback_rate(10.0);
+      while (!job->waitFor(Milliseconds(100)))
+      {
+        if (!cancelled && (follow_path_.isPreemptRequested() || !ros::ok()))
+        {
+          job->cancel();
+          cancelled = true;
+        }
+        publishFeedback(*job, cancelled);
+      }
+      publishFeedback(*job, cancelled);
+      result.setpoints = job->sent();
+      result.underruns = static_cast<uint32_t>(sender_->stats().underruns - underruns_before);
+      bool ignored;
+      result.final_position = toPoint(reported(ignored));
+      result.message = job->message();
+      state_->update(
+          [&](MachineState& s)
+          {
+            s.execution = estop_                                       ? MachineState::EXECUTION_ALARM
+                          : job->state() == ap::Job::State::kSucceeded ? MachineState::EXECUTION_READY
+                                                                       : MachineState::EXECUTION_STOPPED;
+            s.mode = jog_axis_ >= 0 ? MachineState::MODE_MANUAL : MachineState::MODE_AUTO;
+            s.coolant = false;
+            s.spindle_speed = 0.0;  // M0@ stops the spindle (seed 6 step 18)
+            s.message = "follow_path " + std::string(ap::Job::toString(job->state())) + ": " + job->message();
+          });
+      switch (job->state())
+      {
+        case ap::Job::State::kSucceeded:
+          result.success = true;
+          follow_path_.setSucceeded(result, result.message);
+          break;
+        case ap::Job::State::kCancelled:
+          follow_path_.setPreempted(result, result.message);
+          break;
+        default:
+          ROS_WARN_STREAM("at_controller_node: follow_path: " << result.message);
+          follow_path_.setAborted(result, result.message);
+          break;
+      }
+    }
+    catch (const std::exception& e)
+    {
+      abort(e.what());
+    }
+  }
+
+  static bool has(const std::string& text) { return !text.empty(); }
+
+  void publishFeedback(const ap::Job& job, bool stopping)
+  {
+    AtFollowPathFeedback feedback;
+    feedback.setpoint = job.sent();
+    feedback.setpoints_total = job.total();
+    feedback.progress =
+        feedback.setpoints_total > 0 ? static_cast<float>(feedback.setpoint) / feedback.setpoints_total : 0.0f;
+    const ap::Setpoint current = job.current();
+    bool valid;
+    const auto reported_now = reported(valid);
+    feedback.commanded = toPoint(current.position);
+    feedback.reported = toPoint(reported_now);
+    feedback.following_error.x = feedback.commanded.x - feedback.reported.x;
+    feedback.following_error.y = feedback.commanded.y - feedback.reported.y;
+    feedback.following_error.z = feedback.commanded.z - feedback.reported.z;
+    feedback.stopping = stopping;
+    if (feedback.setpoint > 0)
+    {
+      follow_path_.publishFeedback(feedback);
+    }
+  }
+
+  // ---- diagnostics --------------------------------------------------------------------------------
+
+  void streamingDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& status)
+  {
+    const auto stats = sender_->stats();
+    const auto sequencer = sender_->sequencer();
+    if (estop_)
+    {
+      status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "emergency stop (E1)");
+    }
+    else if (stats.underruns > underruns_seen_)
+    {
+      status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "setpoint underruns since the last update");
+    }
+    else
+    {
+      status.summary(diagnostic_msgs::DiagnosticStatus::OK, std::string("phase: ") + ap::toString(sequencer.phase()));
+    }
+    underruns_seen_ = stats.underruns;
+    status.add("setpoints sent", stats.setpoints);
+    status.add("underruns (setpoint later than one period)", stats.underruns);
+    status.add("latency mean (ms)", stats.mean_lateness * 1e3);
+    status.add("latency max (ms)", stats.max_lateness * 1e3);
+    status.add("interval p50 (ms)", stats.interval_p50 * 1e3);
+    status.add("interval p99 (ms)", stats.interval_p99 * 1e3);
+    status.add("interval max (ms)", stats.interval_max * 1e3);
+    status.add("commands sent", stats.commands);
+    status.add("command link reconnects", command_link_ ? command_link_->reconnects() : 0u);
+    status.add("report link reconnects", report_link_ ? report_link_->reconnects() : 0u);
+    status.add("report errors", report_errors_.load());
+    status.add("motion enabled", enable_motion_);
+    status.add("mode", jog_axis_ >= 0 ? std::string("jog ") + "XYZ"[jog_axis_] : std::string("auto or unknown"));
+    status.add("at home", at_home_.load());
+    status.add("spindle value (0..255)", sequencer.spindle());
+    status.add("report mode", report_mode_);
+  }
+
+  ros::NodeHandle nh_, pnh_;
+  std::string host_;
+  uint16_t command_port_ = 0, report_port_ = 0, listen_port_ = 0;
+  std::string report_mode_;
+  Milliseconds connect_timeout_{2000};
+  bool enable_motion_ = false;
+  std::unique_ptr<ProgramDirectory> program_dir_;
+  ap::PlannerLimits limits_;
+  double default_feed_ = 0.01;
+  double spindle_max_rpm_ = 24000.0;
+  std::atomic<bool> coolant_{false};
+
+  std::unique_ptr<MachineStatePublisher> state_;
+  std::unique_ptr<ap::SetpointSender> sender_;
+  std::unique_ptr<TcpServer> report_server_;
+  std::unique_ptr<Reconnector> command_link_, report_link_;
+
+  std::mutex command_mutex_;
+  std::condition_variable command_cv_;
+  std::shared_ptr<TcpConnection> command_conn_;
+  bool command_failed_ = false;
+  std::string command_error_;
+  std::atomic<bool> stopping_{false};
+
+  std::mutex report_mutex_;  // guards report_conn_, reported_, position_valid_, links_
+  std::shared_ptr<TcpConnection> report_conn_;
+  std::array<int32_t, 3> reported_{};
+  bool position_valid_ = false;
+  LinkState links_[2] = {LinkState::kDown, LinkState::kDown};
+
+  std::atomic<bool> estop_{false};
+  std::atomic<bool> at_home_{false};
+  std::atomic<int> jog_axis_{-1};
+  std::atomic<uint64_t> report_errors_{0};
+  uint64_t underruns_seen_ = 0;
+
+  actionlib::SimpleActionServer<AtFollowPathAction> follow_path_;
+  ros::ServiceServer set_auto_srv_, jog_srv_, spindle_srv_, coolant_srv_, tool_srv_, home_srv_;
+};
+}  // namespace cnc_bridge
+
+int main(int argc, char** argv)
+{
+  ros::init(argc, argv, "at_controller_node");
+  cnc_bridge::routeCoreLogToRosconsole();
+  try
+  {
+    cnc_bridge::AtControllerNode node(ros::NodeHandle(), ros::NodeHandle("~"));
+    ros::spin();
+  }
+  catch (const cnc_bridge::Error& e)
+  {
+    ROS_FATAL_STREAM("at_controller_node: " << e.what());
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,97 @@
+// Helpers of the at_controller rostests: wait for a state that satisfies a condition, call a
+// service, and follow a path goal. Every wait is on a message or a result, with a deadline.
+#pragma once
+
+#include <actionlib/client/simple_action_client.h>
+#include <gtest/gtest.h>
+#include <ros/ros.h>
+#include <std_srvs/SetBool.h>
+#include <std_srvs/Trigger.h>
+
+#include <condition_variable>
+#include <functional>
+#include <mutex>
+
+#include "cnc_bridge/AtFollowPathAction.h"
+#include "cnc_bridge/AtJog.h"
+#include "cnc_bridge/AtSpindle.h"
+#include "cnc_bridge/AtToolChange.h"
+#include "cnc_bridge/MachineState.h"
+
+namespace at_test
+{
+using FollowPathClient = actionlib::SimpleActionClient<cnc_bridge::AtFollowPathAction>;
+
+/// The latest state, and a wait for a state that satisfies a predicate.
+class StateWatch
+{
+ public:
+  explicit StateWatch(const std::string& topic)
+  {
+    ros::NodeHandle nh;
+    sub_ = nh.subscribe<cnc_bridge::MachineState>(topic, 100,
+                                                  [this](const cnc_bridge::MachineState::ConstPtr& state)
+                                                  {
+                                                    {
+                                                      std::lock_guard<std::mutex> lock(mutex_);
+                                                      last_ = *state;
+                                                      ++count_;
+                                                    }
+                                                    cv_.notify_all();
+                                                  });
+  }
+  /// \returns true if a state satisfying \p predicate arrived within \p seconds.
+  bool waitFor(const std::function<bool(const cnc_bridge::MachineState&)>& predicate, double seconds = 10.0)
+  {
+    std::unique_lock<std::mutex> lock(mutex_);
+    return cv_.wait_for(lock, std::chrono::duration<double>(seconds), [&] { return count_ > 0 && predicate(last_); });
+  }
+  cnc_bridge::MachineState last()
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return last_;
+  }
+
+ private:
+  ros::Subscriber sub_;
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  cnc_bridge::MachineState last_;
+  uint64_t count_ = 0;
+};
+
+template <class Service>
+typename Service::Response call(const std::string& name, typename Service::Request request = {})
+{
+  EXPECT_TRUE(ros::service::waitForService(name, ros::Duration(10.0))) << name;
+  Service service;
+  service.request = request;
+  EXPECT_TRUE(ros::service::call(name, service)) << name;
+  return service.response;
+}
+
+inline cnc_bridge::AtJog::Request jogRequest(const std::string& axis, double feed)
+{
+  cnc_bridge::AtJog::Request request;
+  request.axis = axis;
+  request.feed_rate = feed;
+  return request;
+}
+
+/// A straight nav_msgs/Path goal to (x, y, z) metres at \p feed m/s.
+inline cnc_bridge::AtFollowPathGoal lineGoal(double x, double y, double z, double feed, const std::string& frame)
+{
+  cnc_bridge::AtFollowPathGoal goal;
+  goal.path.header.frame_id = frame;
+  geometry_msgs::PoseStamped pose;
+  pose.pose.position.x = x;
+  pose.pose.position.y = y;
+  pose.pose.position.z = z;
+  pose.pose.orientation.w = 1.0;
+  goal.path.poses.push_back(pose);
+  goal.feed_rate = feed;
+  goal.coolant = cnc_bridge::AtFollowPathGoal::COOLANT_DEFAULT;
+  goal.tool = -1;
+  return goal;
+}
+}  // namespace at_test

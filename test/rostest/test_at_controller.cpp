@@ -1,0 +1,157 @@
+// at_controller_node on sim_at_controller with motion enabled: a G-code program is followed to
+// its end point, jog is refused while machining, cancel decelerates to a stop, an emergency stop
+// mid-path aborts the goal with the reason, and home returns to the home position.
+#include <signal.h>
+
+#include <atomic>
+#include <fstream>
+
+#include "at_test_support.h"
+
+using namespace at_test;
+
+namespace
+{
+std::string node, ns, prefix, pid_file;
+
+pid_t simulatorPid()
+{
+  std::ifstream in(pid_file);
+  pid_t pid = 0;
+  in >> pid;
+  return pid;
+}
+
+bool near(const geometry_msgs::Point& p, double x, double y, double z, double tolerance)
+{
+  return std::fabs(p.x - x) <= tolerance && std::fabs(p.y - y) <= tolerance && std::fabs(p.z - z) <= tolerance;
+}
+
+struct AtController : ::testing::Test
+{
+  StateWatch state{ns + "/state"};
+  FollowPathClient client{node + "/follow_path", false};
+  void SetUp() override
+  {
+    ASSERT_TRUE(client.waitForServer(ros::Duration(10.0)));
+    ASSERT_TRUE(state.waitFor([](const auto& s)
+                              { return s.link == cnc_bridge::MachineState::LINK_UP && s.position_valid && !s.estop; }))
+        << "link " << int(state.last().link);
+  }
+};
+}  // namespace
+
+TEST_F(AtController, FollowsAGcodeProgramToItsEndPoint)
+{
+  cnc_bridge::AtFollowPathGoal goal;
+  goal.gcode_file = "square.nc";
+  goal.coolant = cnc_bridge::AtFollowPathGoal::COOLANT_DEFAULT;
+  goal.tool = 3;
+  goal.tool_length = 0.034;
+  std::atomic<int> feedback_count{0};
+  std::atomic<double> worst_error{0.0};
+  client.sendGoal(goal, FollowPathClient::SimpleDoneCallback(), FollowPathClient::SimpleActiveCallback(),
+                  [&](const cnc_bridge::AtFollowPathFeedbackConstPtr& f)
+                  {
+                    ++feedback_count;
+                    const double e = std::hypot(f->following_error.x, f->following_error.y, f->following_error.z);
+                    worst_error = std::max(worst_error.load(), e);
+                  });
+  ASSERT_TRUE(state.waitFor([](const auto& s) { return s.execution == cnc_bridge::MachineState::EXECUTION_ACTIVE; }));
+  const auto running = state.last();
+  EXPECT_TRUE(running.coolant);                   // M08 in the program: P1@
+  EXPECT_NEAR(running.spindle_speed, 12000, 50);  // S12000 M03 -> S128@ of 24000 rev/min
+  EXPECT_EQ(running.tool, 3);
+  ASSERT_TRUE(client.waitForResult(ros::Duration(40.0)));
+  EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client.getState().getText();
+  const auto result = client.getResult();
+  EXPECT_TRUE(result->success);
+  EXPECT_GT(result->setpoints, 3000u);  // some 110 mm at 20 mm/s: several seconds of 1 ms steps
+  EXPECT_GT(feedback_count.load(), 10);
+  // Feedback carries a real following error (the simulated axes lag behind the setpoints), in
+  // metres: far below the 0.02 m side of the square (pulses or mm would be orders larger).
+  EXPECT_GT(worst_error.load(), 0.0);
+  EXPECT_LT(worst_error.load(), 0.02);
+  // Reported position converges to the program's end point X5 Y5 Z-1 (mm), to the pulse.
+  EXPECT_TRUE(state.waitFor([](const auto& s) { return near(s.position, 0.005, 0.005, -0.001, 1.5e-6); }))
+      << state.last().position;
+  EXPECT_FALSE(state.last().coolant);
+  EXPECT_EQ(state.last().spindle_speed, 0.0);  // M0@ stops the spindle
+}
+
+TEST_F(AtController, JogIsRefusedWhileMachiningAndCancelDecelerates)
+{
+  const auto start = state.last().position;
+  client.sendGoal(lineGoal(start.x + 0.1, start.y, start.z, 0.02, prefix + "machine"));
+  ASSERT_TRUE(state.waitFor([](const auto& s) { return s.execution == cnc_bridge::MachineState::EXECUTION_ACTIVE; }));
+  const auto jog = call<cnc_bridge::AtJog>(node + "/jog", jogRequest("x", 0.01));
+  EXPECT_FALSE(jog.success);
+  EXPECT_NE(jog.message.find("refused while machining"), std::string::npos) << jog.message;
+  // Moving: at 20 mm/s, past 10 mm.
+  ASSERT_TRUE(state.waitFor([&](const auto& s) { return s.position.x > start.x + 0.01; }));
+  client.cancelGoal();
+  ASSERT_TRUE(client.waitForResult(ros::Duration(10.0)));
+  EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::PREEMPTED) << client.getState().getText();
+  const auto result = client.getResult();
+  // Stopped short of the end, after a ramp: v^2 / 2a = 0.02^2 / (2 * 0.4) = 0.5 mm beyond the cancel.
+  EXPECT_LT(result->setpoints, 5000u);
+  ASSERT_TRUE(state.waitFor([](const auto& s) { return s.execution == cnc_bridge::MachineState::EXECUTION_STOPPED; }));
+  const double stopped_at = state.last().position.x;
+  EXPECT_LT(stopped_at, start.x + 0.09);
+  // Jog is allowed again now that machining has ended.
+  EXPECT_TRUE(call<cnc_bridge::AtJog>(node + "/jog", jogRequest("y", 0.01)).success);
+  EXPECT_TRUE(state.waitFor([](const auto& s) { return s.mode == cnc_bridge::MachineState::MODE_MANUAL; }));
+  EXPECT_TRUE(call<std_srvs::Trigger>(node + "/set_auto").success);
+  EXPECT_TRUE(state.waitFor([](const auto& s) { return s.mode == cnc_bridge::MachineState::MODE_AUTO; }));
+}
+
+TEST_F(AtController, EmergencyStopMidPathStopsMotionAndAbortsWithTheReason)
+{
+  const auto start = state.last().position;
+  client.sendGoal(lineGoal(start.x - 0.1, start.y, start.z, 0.02, prefix + "machine"));
+  ASSERT_TRUE(state.waitFor([&](const auto& s) { return s.position.x < start.x - 0.01; }));
+  const pid_t pid = simulatorPid();
+  ASSERT_GT(pid, 0);
+  ASSERT_EQ(kill(pid, SIGUSR1), 0);  // the simulator's emergency stop button
+  ASSERT_TRUE(client.waitForResult(ros::Duration(10.0)));
+  EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::ABORTED);
+  EXPECT_NE(client.getResult()->message.find("emergency stop"), std::string::npos) << client.getResult()->message;
+  ASSERT_TRUE(state.waitFor([](const auto& s) { return s.estop; }));
+  EXPECT_EQ(state.last().execution, cnc_bridge::MachineState::EXECUTION_ALARM);
+  // Motion stopped: the controller's next report (at least a heartbeat 1 s later) is the same place.
+  const double stopped_x = state.last().position.x;
+  EXPECT_GT(stopped_x, start.x - 0.09);
+  // Motion is refused during the emergency stop, and says why.
+  client.sendGoal(lineGoal(start.x, start.y, start.z, 0.02, prefix + "machine"));
+  ASSERT_TRUE(client.waitForResult(ros::Duration(10.0)));
+  EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::ABORTED);
+  EXPECT_NE(client.getResult()->message.find("emergency stop"), std::string::npos);
+  const auto home = call<std_srvs::Trigger>(node + "/home");
+  EXPECT_FALSE(home.success);
+  EXPECT_NE(home.message.find("emergency stop"), std::string::npos);
+  EXPECT_NEAR(state.last().position.x, stopped_x, 1e-6);
+  ASSERT_EQ(kill(pid, SIGUSR2), 0);  // released
+  ASSERT_TRUE(state.waitFor([](const auto& s) { return !s.estop; }));
+}
+
+TEST_F(AtController, HomeReturnsToTheHomePosition)
+{
+  const auto home = call<std_srvs::Trigger>(node + "/home");
+  EXPECT_TRUE(home.success) << home.message;
+  EXPECT_TRUE(state.waitFor([](const auto& s) { return s.message == "at home"; }, 20.0)) << state.last().message;
+  EXPECT_TRUE(near(state.last().position, 0.0, 0.0, 0.0, 1e-9)) << state.last().position;
+}
+
+int main(int argc, char** argv)
+{
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_at_controller");
+  ros::NodeHandle pnh("~");
+  pnh.getParam("node", node);
+  pnh.getParam("namespace", ns);
+  pnh.getParam("tf_prefix", prefix);
+  pnh.getParam("pid_file", pid_file);
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+  return RUN_ALL_TESTS();
+}

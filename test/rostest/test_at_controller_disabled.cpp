@@ -1,0 +1,81 @@
+// at_controller_node with ~enable_motion false (the default): every request that moves an axis or
+// starts the spindle is refused and the refusal names the parameter; harmless ones go through.
+// The report link runs in server mode here (the simulator connects to the node).
+#include "at_test_support.h"
+
+using namespace at_test;
+
+namespace
+{
+std::string node, ns;
+
+void expectRefusedNamingTheParameter(bool success, const std::string& message)
+{
+  EXPECT_FALSE(success);
+  EXPECT_NE(message.find("enable_motion"), std::string::npos) << message;
+}
+
+struct AtControllerDisabled : ::testing::Test
+{
+  StateWatch state{ns + "/state"};
+  void SetUp() override
+  {
+    ASSERT_TRUE(
+        state.waitFor([](const auto& s) { return s.link == cnc_bridge::MachineState::LINK_UP && s.position_valid; }));
+  }
+};
+}  // namespace
+
+TEST_F(AtControllerDisabled, MotionServicesAreRefused)
+{
+  const auto jog = call<cnc_bridge::AtJog>(node + "/jog", jogRequest("x", 0.01));
+  expectRefusedNamingTheParameter(jog.success, jog.message);
+  const auto home = call<std_srvs::Trigger>(node + "/home");
+  expectRefusedNamingTheParameter(home.success, home.message);
+  cnc_bridge::AtSpindle::Request spin;
+  spin.speed = 6000;
+  const auto spindle = call<cnc_bridge::AtSpindle>(node + "/spindle", spin);
+  expectRefusedNamingTheParameter(spindle.success, spindle.message);
+  cnc_bridge::AtToolChange::Request tool;
+  tool.tool = 2;
+  tool.length = 0.05;
+  const auto change = call<cnc_bridge::AtToolChange>(node + "/tool_change", tool);
+  expectRefusedNamingTheParameter(change.success, change.message);
+}
+
+TEST_F(AtControllerDisabled, FollowPathIsRefused)
+{
+  FollowPathClient client(node + "/follow_path", true);
+  ASSERT_TRUE(client.waitForServer(ros::Duration(10.0)));
+  client.sendGoal(lineGoal(0.01, 0, 0, 0.01, ""));
+  ASSERT_TRUE(client.waitForResult(ros::Duration(10.0)));
+  EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::ABORTED);
+  expectRefusedNamingTheParameter(client.getResult()->success, client.getResult()->message);
+}
+
+TEST_F(AtControllerDisabled, HarmlessRequestsGoThrough)
+{
+  cnc_bridge::AtSpindle::Request stop;
+  stop.speed = 0;  // stopping the spindle is always allowed
+  const auto spindle = call<cnc_bridge::AtSpindle>(node + "/spindle", stop);
+  EXPECT_TRUE(spindle.success) << spindle.message;
+  EXPECT_EQ(spindle.message, "sent S0@");
+  const auto mode = call<std_srvs::Trigger>(node + "/set_auto");
+  EXPECT_TRUE(mode.success) << mode.message;
+  EXPECT_TRUE(state.waitFor([](const auto& s) { return s.mode == cnc_bridge::MachineState::MODE_AUTO; }));
+  std_srvs::SetBool::Request coolant;
+  coolant.data = true;
+  EXPECT_TRUE(call<std_srvs::SetBool>(node + "/coolant", coolant).success);
+}
+
+int main(int argc, char** argv)
+{
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_at_controller_disabled");
+  ros::NodeHandle pnh("~");
+  pnh.getParam("node", node);
+  pnh.getParam("namespace", ns);
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+  return RUN_ALL_TESTS();
+}
