@@ -423,7 +423,9 @@ int main(int argc, char** argv)
   try
   {
     cnc_bridge::HaasMdcNode node(ros::NodeHandle(), ros::NodeHandle("~"));
-    ros::spin();
+    // Two threads: a service call waiting for its reply must not hold up the state timer.
+    ros::MultiThreadedSpinner spinner(2);
+    spinner.spin();
   }
   catch (const cnc_bridge::Error& e)
   {
