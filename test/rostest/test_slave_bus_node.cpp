@@ -224,6 +224,28 @@ TEST(SlaveBusNode, MotionDisabledRefusesAxesButGenericSlavesAnswerOverTheFramedL
   EXPECT_TRUE(responses.of("x").empty());  // the axis never got a payload, so it never answered
 }
 
+TEST(SlaveBusNode, CorruptedAnswersAreCountedAsCrcErrorsAndTimeoutsPerSlave)
+{
+  // sim_laser3 changes one byte of every second uplink write: of four one-slave steps, two answers
+  // arrive and two fail the CRC, so slave aux5 times out twice.
+  Responses responses("/cell/laser3", {"aux5"});
+  auto pub = advertiseAndWait<cnc_bridge::BusFrame>("/cell/laser3/bus/frame");
+  cnc_bridge::BusFrame frame;
+  for (uint8_t i = 0; i < 4; ++i)
+  {
+    frame.payloads = {payload(5, {i})};
+    pub.publish(frame);
+  }
+  const std::string status = "laser3/slave_bus_node: slave bus";
+  EXPECT_TRUE(waitForDiagnostic(status, "uplink CRC errors", [](double v) { return v >= 2; }));
+  EXPECT_TRUE(waitForDiagnostic(status, "timeouts", [](double v) { return v >= 2; }));
+  ASSERT_TRUE(responses.waitFor([](auto& r) { return r["aux5"].size() >= 2; }));
+  const auto got = responses.of("aux5");
+  EXPECT_EQ(got.size(), 2u);
+  EXPECT_EQ(got[0].data, std::vector<uint8_t>{0});  // steps 0 and 2 got through; 1 and 3 were corrupted
+  EXPECT_EQ(got[1].data, std::vector<uint8_t>{2});
+}
+
 int main(int argc, char** argv)
 {
   testing::InitGoogleTest(&argc, argv);
