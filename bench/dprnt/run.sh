@@ -10,6 +10,7 @@ root=$(cd "$(dirname "$0")/../.." && pwd)
 build=${BUILD_DIR:-$root/.build}
 lines=${1:-2000000}
 samples=${2:-2000}
+set +u  # ROS setup scripts read unset variables
 source "$root/scripts/env.sh"
 bin=$build/devel/lib/cnc_bridge
 [[ -x $bin/bench_dprnt_parser ]] || bin=$build/bin
@@ -38,6 +39,7 @@ printf "%-28s %14.0f %14.1f %14.2f\n" "python re (peer)" "$peer" 1 "$(echo "$pee
 
 echo "== latency at 100 lines/s over a pty ($samples samples)"
 source "$build/devel/setup.bash"
+set -u
 export ROS_MASTER_URI=http://127.0.0.1:$((20000 + RANDOM % 20000))
 port=${ROS_MASTER_URI##*:}
 link=/tmp/bench_dprnt_$$

@@ -15,6 +15,8 @@ endif()
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   cnc_core_gtest(test_dprnt test/unit/test_dprnt.cpp)
   target_link_libraries(test_dprnt cnc_bridge_dprnt)
+  cnc_core_gtest(test_dprnt_sim test/unit/test_dprnt_sim.cpp src/sim/haas_serial/dprnt_program.cpp)
+  target_link_libraries(test_dprnt_sim cnc_bridge_dprnt)
 endif()
 
 target_sources(sim_haas_serial PRIVATE src/sim/haas_serial/dprnt_mode.cpp src/sim/haas_serial/dprnt_program.cpp)

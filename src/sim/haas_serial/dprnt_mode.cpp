@@ -202,6 +202,7 @@ int runDprnt(const std::vector<std::string>& args)
   const auto period = rate > 0 ? std::chrono::duration<double>(1.0 / rate) : std::chrono::duration<double>(0);
   auto next_time = std::chrono::steady_clock::now();
   uint64_t lines = 0;
+  machine.max_blocks = rate > 0 ? 0 : machine.max_blocks;  // a paced program may loop for hours
   machine.before_print = [&](MacroMachine& m)
   {
     // Pace first, then read the clock: #3001 is the moment the line is built and written.

@@ -275,13 +275,13 @@ void MacroProgram::run(MacroMachine& m, const std::function<bool(const std::stri
   const auto error = [](const Block& b, const std::string& what)
   { return ConfigError("line " + std::to_string(b.line) + " (" + b.text + "): " + what); };
   size_t pc = 0;
-  size_t steps = 0;
+  uint64_t steps = 0;
   while (pc < blocks_.size())
   {
     const Block& b = blocks_[pc];
     const std::string& t = b.text;
-    if (++steps > 10000000)
-      throw error(b, "more than 10 million blocks: endless loop?");
+    if (m.max_blocks > 0 && ++steps > m.max_blocks)
+      throw error(b, "more than " + std::to_string(m.max_blocks) + " blocks: endless loop?");
     size_t next = pc + 1;
     try
     {

@@ -3,6 +3,7 @@
 // DPRNT[#5223[44]]; G00 G91 X.5;) against a synthetic surface, and print with real Haas formatting.
 #pragma once
 
+#include <cstdint>
 #include <functional>
 #include <map>
 #include <string>
@@ -20,6 +21,8 @@ struct MacroMachine
   bool incremental = false;         ///< G91 in effect
   /// Height of the part surface under (x, y), program units: what a G65 P9995 Z probe finds.
   std::function<double(double x, double y)> surface = [](double, double) { return 0.0; };
+  /// Blocks a run may execute before it is taken for an endless loop; 0: no limit (a paced program).
+  uint64_t max_blocks = 10000000;
   /// Called before each DPRNT statement (the simulator refreshes #3001, the millisecond timer).
   std::function<void(MacroMachine&)> before_print;
 };

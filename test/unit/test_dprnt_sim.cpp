@@ -1,0 +1,98 @@
+// The macro interpreter behind `sim_haas_serial dprnt`: the rostests trust it to print what a Haas
+// control would, so its loops, moves, probe cycle and DPRNT output are checked here on their own.
+#include <gtest/gtest.h>
+
+#include "../../src/sim/haas_serial/dprnt_program.h"
+#include "cnc_bridge/common/error.h"
+
+using cnc_bridge::ConfigError;
+using cnc_bridge::sim::MacroMachine;
+using cnc_bridge::sim::MacroProgram;
+
+namespace
+{
+std::vector<std::string> run(const std::string& text, MacroMachine& machine)
+{
+  std::vector<std::string> lines;
+  MacroProgram::parse(text).run(machine,
+                                [&](const std::string& line)
+                                {
+                                  lines.push_back(line);
+                                  return true;
+                                });
+  return lines;
+}
+
+std::vector<std::string> run(const std::string& text)
+{
+  MacroMachine machine;
+  machine.max_blocks = 10000;
+  return run(text, machine);
+}
+}  // namespace
+
+TEST(DprntSim, ManualExampleProgram)
+{
+  // N1 #1= 1.5436 ; N2 DPRNT[X#1[44]*Z#1[03]*T#1[40]] ; N4 DPRNT[] ;
+  EXPECT_EQ(run("%\nO0001\nN1 #1= 1.5436 ;\nN2 DPRNT[X#1[44]*Z#1[03]*T#1[40]] ;\nN4 DPRNT[] ;\n%\n"),
+            (std::vector<std::string>{"X   1.5436 Z1.544 T   1", ""}));
+}
+
+TEST(DprntSim, ExpressionsAndComments)
+{
+  MacroMachine machine;
+  run("#1 = [2 + 3] * 4 - 6 / 3 (EIGHTEEN)\n#2 = ABS[-2.5] + SQRT[16] + ROUND[1.5] + FIX[1.9] + FUP[1.1]\n"
+      "#3 = #[1 + 1] ; #4 = SIN[90] + COS[0]\n#5 = [1 LT 2] AND [3 GE 3] ; #6 = [1 EQ 2] OR [2 NE 2]",
+      machine);
+  EXPECT_DOUBLE_EQ(machine.variables[1], 18.0);
+  EXPECT_DOUBLE_EQ(machine.variables[2], 2.5 + 4 + 2 + 1 + 2);
+  EXPECT_DOUBLE_EQ(machine.variables[3], machine.variables[2]);
+  EXPECT_NEAR(machine.variables[4], 2.0, 1e-12);
+  EXPECT_EQ(machine.variables[5], 1.0);
+  EXPECT_EQ(machine.variables[6], 0.0);
+}
+
+TEST(DprntSim, SeedGridProbingOverAPlane)
+{
+  // The seed's cycle: G65 P9995 ...; DPRNT[#5223[44]]; G00 G91 X.5; three points in a row.
+  MacroMachine machine;
+  machine.surface = [](double x, double y) { return -0.01 + 0.002 * x + 0.001 * y; };
+  const auto lines =
+      run("G90 G00 X0 Y1.\n#1 = 0\nWHILE [#1 LT 3] DO1\nG65 P9995 W54. A20. H-1.\nDPRNT[#5223[44]]\nG00 G91 X.5\nG90\n"
+          "#1 = #1 + 1\nEND1\nM30\nDPRNT[NEVER]",
+          machine);
+  // z = -0.01 + 0.002 x + 0.001 at x = 0, 0.5, 1.0: -0.009, -0.008, -0.007.
+  EXPECT_EQ(lines, (std::vector<std::string>{"  -0.0090", "  -0.0080", "  -0.0070"}));
+  EXPECT_DOUBLE_EQ(machine.position[0], 1.5);
+  EXPECT_DOUBLE_EQ(machine.variables[5061], 1.0);  // trigger position of the last probe
+  EXPECT_DOUBLE_EQ(machine.variables[5062], 1.0);
+}
+
+TEST(DprntSim, NestedLoopsAndGoto)
+{
+  const auto lines =
+      run("#1 = 0\nWHILE [#1 LT 2] DO1\n#2 = 0\nWHILE [#2 LT 2] DO2\nDPRNT[R#1[10]*C#2[10]]\n#2 = #2 + 1\nEND2\n"
+          "#1 = #1 + 1\nEND1\nIF [#1 EQ 2] GOTO10\nDPRNT[SKIPPED]\nN10 DPRNT[DONE]");
+  EXPECT_EQ(lines, (std::vector<std::string>{"R0 C0", "R0 C1", "R1 C0", "R1 C1", "DONE"}));
+}
+
+TEST(DprntSim, ErrorsNameTheLine)
+{
+  const auto message = [](const std::string& text)
+  {
+    try
+    {
+      run(text);
+    }
+    catch (const ConfigError& e)
+    {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(message("#1 = 5\nWHILE [#1 LT 2] DO1\n").find("line 2"), std::string::npos);
+  EXPECT_NE(message("DPRNT[X#1[4]]").find("line 1"), std::string::npos);
+  EXPECT_NE(message("#1 = 1 / 0").find("division"), std::string::npos);
+  EXPECT_NE(message("IF [1 EQ 1] GOTO99").find("N99"), std::string::npos);
+  EXPECT_NE(message("WHILE [1 EQ 1] DO1\nEND1").find("endless"), std::string::npos);
+}
