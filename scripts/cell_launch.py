@@ -36,14 +36,26 @@ def machine_group(cell, machine, simulate_all):
     if machine.get("simulate", simulate_all):
         for index, sim in enumerate(machine.get("simulators", [])):
             lines.append(f'    <node name={attr(sim.get("name", "sim%d" % index))} pkg="cnc_bridge" type="run_sim.sh" '
-                         f'args={attr(sim["command"])} required="false" output="log"/>')
+                         f'args={attr(sim["command"])} respawn="true" respawn_delay="1" output="log"/>')
     for node in machine.get("nodes", []):
-        lines.append(f'    <include file="$(find cnc_bridge)/launch/{node["launch"]}.launch">')
+        # Several nodes of one machine share its namespace; `remap` moves the topics that only
+        # one of them should own (e.g. state: dnc/state), scoped by a group around the include.
+        remaps = node.get("remap", {})
+        indent = "      " if remaps else "    "
+        if remaps:
+            lines.append("    <group>")
+            for source, target in remaps.items():
+                lines.append(f"      <remap from={attr(source)} to={attr(target)}/>")
+        lines.append(f'{indent}<include file="$(find cnc_bridge)/launch/{node["launch"]}.launch">')
         args = {"machine": name, "tf_prefix": prefix}
+        if node.get("no_machine_args"):
+            args = {}
         args.update(node.get("args", {}))
         for key, value in args.items():
-            lines.append(f"      <arg name={attr(key)} value={attr(value)}/>")
-        lines.append("    </include>")
+            lines.append(f"{indent}  <arg name={attr(key)} value={attr(value)}/>")
+        lines.append(f"{indent}</include>")
+        if remaps:
+            lines.append("    </group>")
     if machine.get("model", True):
         place = machine.get("position", [0.0, 0.0, 0.0])
         lines.append('    <include file="$(find cnc_bridge)/launch/machine_model.launch">')

@@ -1,7 +1,10 @@
 #!/usr/bin/env bash
-# The simulated cell: starts a roscore if none is running, the machines of the cell with their
-# simulators and models, and prints what they do. Ctrl-C stops everything.
-# GUI=1 also opens rviz with rviz/cell.rviz.
+# The simulated cell (`make demo`): the machines of config/cell.yaml with their simulators, nodes
+# and models (launch/cell.launch), a rosbag of the run, and the scripted scenario of
+# scripts/cell_demo.py printing what happens. Ctrl-C stops everything.
+#   GUI=1          also open rviz with rviz/cell.rviz
+#   DEMO_ONCE=1    stop after the scenario (exit status: the scenario's)
+#   DEMO_OUTPUT=D  output folder (default output/demo-<time>)
 set -eo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 source "$root/scripts/env.sh"
@@ -9,6 +12,28 @@ source "$root/.build/devel/setup.bash"
 gui=false
 [[ "${GUI:-0}" == "1" ]] && gui=true
 out=${DEMO_OUTPUT:-$root/output/demo-$(date +%Y%m%d-%H%M%S)}
-mkdir -p "$out"
-echo "demo: output in $out"
-exec roslaunch --screen cnc_bridge demo_machine.launch gui:=$gui
+mkdir -p "$out/programs" "$out/haas_vf2_memory"
+out=$(cd "$out" && pwd)
+export CNC_DEMO_DIR=$out
+echo "demo: output folder $out (rosbag, surface map, logs)"
+
+export ROS_LOG_DIR=$out/logs
+roslaunch cnc_bridge cell.launch gui:=$gui record:=true bag:="$out/cell.bag" >"$out/roslaunch.log" 2>&1 &
+launch_pid=$!
+stop() {
+  kill -INT "$launch_pid" 2>/dev/null || true
+  wait "$launch_pid" 2>/dev/null || true
+}
+trap stop EXIT
+trap 'exit 130' INT TERM
+
+once=()
+[[ "${DEMO_ONCE:-0}" == "1" ]] && once=(--once)
+set +e
+python3 "$root/scripts/cell_demo.py" --cell "$root/config/cell.yaml" --output "$out" --programs "$out/programs" \
+  --program "$root/config/demo/O05555.nc" --job "$root/config/demo/ethernut_job.nc" \
+  --path-program "$root/config/demo/at_path.nc" "${once[@]}"
+status=$?
+set -e
+echo "demo: rosbag $out/cell.bag, surface map $(ls "$out"/*.png 2>/dev/null | head -1)"
+exit $status

@@ -40,6 +40,18 @@ def check_launch_args(path):
     return f"<arg> without doc: {', '.join(missing)}" if missing else None
 
 
+def check_cell_launch_generated(path):
+    """launch/cell.launch must be what scripts/cell_launch.py makes of config/cell.yaml."""
+    result = subprocess.run([sys.executable, "scripts/cell_launch.py", "config/cell.yaml"], cwd=ROOT,
+                            capture_output=True, text=True)
+    if result.returncode != 0:
+        return "scripts/cell_launch.py failed: " + result.stderr.strip()
+    with open(os.path.join(ROOT, path)) as f:
+        if f.read() != result.stdout:
+            return "out of date: run scripts/cell_launch.py config/cell.yaml -o launch/cell.launch"
+    return None
+
+
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--junit", required=True)
@@ -51,6 +63,8 @@ def main():
         cases.append(("ros_free_core", path, check_core_is_ros_free(path)))
     for path in tracked("launch/*.launch"):
         cases.append(("launch_args_documented", path, check_launch_args(path)))
+    if os.path.exists(os.path.join(ROOT, "config/cell.yaml")):
+        cases.append(("cell_launch_generated", "launch/cell.launch", check_cell_launch_generated("launch/cell.launch")))
     suite = ET.Element("testsuite", name="lint", tests=str(len(cases)))
     failed = 0
     for check, path, problem in cases:

@@ -1,0 +1,286 @@
+#!/usr/bin/env python3
+"""The scripted scenario of the simulated cell: what a robot cell's orchestration code would do.
+
+Waits for every machine of the cell description, then, for each node a machine runs:
+  dnc_node         sends a program to the control by XModem (~transfer action)
+  dprnt_node       waits for the probe grid the macro program prints; surface_mapper saves the map
+  ethernut_node    streams a G-code job to the board (~run_job action)
+  at_controller    follows a G-code path with 1 ms setpoints (~follow_path action)
+  slave_bus_node   steps the bus: axes move, the tool toggles
+  haas_mdc_node    reports the cycle events it saw (a robot waits for CYCLE_END to unload)
+and prints a readable line for everything that happens, with numbers. Exit status 0 only if
+every step succeeded. Then, unless --once, keeps printing the cell's state until Ctrl-C.
+
+  cell_demo.py --cell config/cell.yaml --output DIR --programs DIR
+"""
+import argparse
+import os
+import shutil
+import sys
+import threading
+import time
+
+import actionlib
+import rospy
+import yaml
+from sensor_msgs.msg import PointCloud2
+
+from cnc_bridge.msg import (AtFollowPathAction, AtFollowPathGoal, CycleEvent, MachineState,
+                            RunJobAction, RunJobGoal, SlaveCommand, SlaveResponse, TransferAction,
+                            TransferGoal)
+from cnc_bridge.srv import DprntSaveSurface
+
+MODES = {v: k[5:] for k, v in vars(MachineState).items() if k.startswith("MODE_")}
+EXECUTION = {v: k[10:] for k, v in vars(MachineState).items() if k.startswith("EXECUTION_")}
+LINK = {v: k[5:] for k, v in vars(MachineState).items() if k.startswith("LINK_")}
+EVENTS = {v: k for k, v in vars(CycleEvent).items() if k.isupper() and isinstance(v, int)}
+
+
+def say(text):
+    print("[%7.2f s] %s" % (time.time() - START, text), flush=True)
+
+
+def describe(state):
+    position = ""
+    if state.position_valid:
+        p = state.position
+        position = " at (%.1f, %.1f, %.1f) mm" % (p.x * 1e3, p.y * 1e3, p.z * 1e3)
+    extra = []
+    if state.program:
+        extra.append("program %s" % state.program)
+    if state.part_count >= 0:
+        extra.append("parts %d" % state.part_count)
+    if state.message:
+        extra.append(state.message)
+    return "link %s, %s, %s%s%s" % (LINK.get(state.link, "?"), MODES.get(state.mode, "?"),
+                                    EXECUTION.get(state.execution, "?"), position,
+                                    ("; " + "; ".join(extra)) if extra else "")
+
+
+class Machine:
+    """One machine of the cell: its namespace, nodes and last states."""
+
+    def __init__(self, cell, entry):
+        self.name = entry["name"]
+        self.ns = "/%s/%s" % (cell, self.name)
+        self.nodes = {node["launch"]: node for node in entry.get("nodes", [])}
+        self.states = {}
+        self.events = []
+        self.lock = threading.Lock()
+        self.subscribers = []
+        for node in entry.get("nodes", []):
+            topic = node.get("remap", {}).get("state", "state")
+            if node["launch"] == "surface_mapper":
+                continue
+            self.subscribers.append(rospy.Subscriber(self.ns + "/" + topic, MachineState, self._on_state,
+                                                     callback_args=node["launch"]))
+        if "haas_mdc_node" in self.nodes:
+            self.subscribers.append(rospy.Subscriber(self.ns + "/events", CycleEvent, self._on_event))
+
+    def _on_state(self, state, node):
+        with self.lock:
+            self.states[node] = state
+
+    def _on_event(self, event):
+        with self.lock:
+            self.events.append(event)
+        say("%s: %s %s%s" % (self.name, EVENTS.get(event.event, "?"), event.program,
+                             (", parts %d" % event.part_count) if event.part_count >= 0 else ""))
+
+    def wait_up(self, timeout):
+        deadline = time.time() + timeout
+        while time.time() < deadline and not rospy.is_shutdown():
+            with self.lock:
+                up = [n for n, s in self.states.items() if s.link == MachineState.LINK_UP]
+                missing = [n for n in self.nodes if n != "surface_mapper" and n not in self.states]
+            if not missing and (up or not self.states):
+                return True
+            time.sleep(0.2)
+        return False
+
+
+def action(ns, name, action_type, goal, timeout, feedback=None):
+    client = actionlib.SimpleActionClient(ns + "/" + name, action_type)
+    if not client.wait_for_server(rospy.Duration(20)):
+        raise RuntimeError("no action server %s/%s" % (ns, name))
+    client.send_goal(goal, feedback_cb=feedback)
+    if not client.wait_for_result(rospy.Duration(timeout)):
+        client.cancel_goal()
+        raise RuntimeError("%s/%s did not finish within %d s" % (ns, name, timeout))
+    return client.get_result()
+
+
+class Progress:
+    """Prints feedback at 25 % steps, not every message."""
+
+    def __init__(self, label, percent_of):
+        self.label, self.percent_of, self.next = label, percent_of, 25
+
+    def __call__(self, feedback):
+        percent = self.percent_of(feedback)
+        if percent >= self.next:
+            say("%s %3.0f %%" % (self.label, percent))
+            while self.next <= percent:
+                self.next += 25
+
+
+def send_program(machine, args):
+    program = args.program
+    shutil.copy(program, os.path.join(args.programs, os.path.basename(program)))
+    goal = TransferGoal(direction="send", protocol="xmodem", file=os.path.basename(program))
+    started = time.time()
+    result = action(machine.ns + "/dnc_node", "transfer", TransferAction, goal, 300,
+                    Progress("%s: XModem send" % machine.name, lambda f: f.percent))
+    elapsed = time.time() - started
+    if not result.success:
+        raise RuntimeError(result.message)
+    say("%s: sent %s by XModem: %d bytes, %d blocks, %d retries in %.1f s (%s)" % (
+        machine.name, goal.file, result.bytes, result.blocks, result.retries, elapsed, result.message))
+
+
+def probe_surface(machine, args):
+    output = args.output
+    points = {"n": 0}
+    done = threading.Event()
+
+    def on_cloud(cloud):
+        points["n"] = cloud.width * cloud.height
+        if points["n"] >= args.grid_points:
+            done.set()
+
+    sub = rospy.Subscriber(machine.ns + "/surface/cloud", PointCloud2, on_cloud)
+    say("%s: waiting for the probe grid printed by DPRNT (%d points)" % (machine.name, args.grid_points))
+    if not done.wait(args.timeout):
+        sub.unregister()
+        raise RuntimeError("only %d of %d probe points arrived" % (points["n"], args.grid_points))
+    sub.unregister()
+    service = machine.ns + "/surface_mapper/save"
+    rospy.wait_for_service(service, 10)
+    result = rospy.ServiceProxy(service, DprntSaveSurface)(name=machine.name + "_surface")
+    if not result.success:
+        raise RuntimeError(result.message)
+    for path in (result.png_path, result.csv_path):
+        if os.path.dirname(os.path.abspath(path)) != os.path.abspath(output):
+            shutil.copy(path, output)
+    say("%s: surface map of %d points: z %.4f .. %.4f mm, flatness %.4f mm (rms %.4f mm) -> %s" % (
+        machine.name, result.points, result.min_z * 1e3, result.max_z * 1e3, result.flatness * 1e3,
+        result.rms_deviation * 1e3, os.path.join(output, os.path.basename(result.png_path))))
+
+
+def run_job(machine, args):
+    shutil.copy(args.job, os.path.join(args.programs, os.path.basename(args.job)))
+    goal = RunJobGoal(file=os.path.basename(args.job))
+    started = time.time()
+    result = action(machine.ns + "/ethernut_node", "run_job", RunJobAction, goal, 300,
+                    Progress("%s: job" % machine.name, lambda f: f.percent))
+    if not result.success:
+        raise RuntimeError(result.message)
+    say("%s: job %s streamed: %d/%d coordinates, %d resends in %.1f s" % (
+        machine.name, goal.file, result.coordinates_done, result.coordinate_count, result.resends,
+        time.time() - started))
+
+
+def follow_path(machine, args):
+    shutil.copy(args.path_program, os.path.join(args.programs, os.path.basename(args.path_program)))
+    goal = AtFollowPathGoal(gcode_file=os.path.basename(args.path_program), coolant=-1, tool=-1)
+    started = time.time()
+    result = action(machine.ns + "/at_controller_node", "follow_path", AtFollowPathAction, goal, 300,
+                    Progress("%s: path" % machine.name, lambda f: 100.0 * f.progress))
+    if not result.success:
+        raise RuntimeError(result.message)
+    p = result.final_position
+    say("%s: path followed: %d setpoints at 1 kHz, %d late, in %.1f s; ends at (%.3f, %.3f, %.3f) mm" % (
+        machine.name, result.setpoints, result.underruns, time.time() - started, p.x * 1e3, p.y * 1e3, p.z * 1e3))
+
+
+def step_bus(machine, args):
+    responses = []
+    sub = rospy.Subscriber(machine.ns + "/slaves/x/response", SlaveResponse, responses.append)
+    pub_x = rospy.Publisher(machine.ns + "/slaves/x/command", SlaveCommand, queue_size=10)
+    pub_y = rospy.Publisher(machine.ns + "/slaves/y/command", SlaveCommand, queue_size=10)
+    time.sleep(1.0)  # let the node connect to the new publishers
+    corners = [(0.02, 0.0), (0.02, 0.02), (0.0, 0.02), (0.0, 0.0)]
+    for x, y in corners:
+        pub_x.publish(SlaveCommand(values=[x]))
+        pub_y.publish(SlaveCommand(values=[y]))
+        deadline = time.time() + 10
+        while time.time() < deadline:
+            state = machine.states.get("slave_bus_node")
+            if state and state.position_valid and abs(state.position.x - x) < 1e-3 and abs(state.position.y - y) < 1e-3:
+                break
+            time.sleep(0.05)
+        else:
+            raise RuntimeError("axes did not reach (%.0f, %.0f) mm" % (x * 1e3, y * 1e3))
+    sub.unregister()
+    say("%s: bus stepped the axes around a 20 mm square; %d responses from slave x" % (machine.name, len(responses)))
+
+
+STEPS = [("dnc_node", send_program), ("dprnt_node", probe_surface), ("ethernut_node", run_job),
+         ("at_controller_node", follow_path), ("slave_bus_node", step_bus)]
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--cell", required=True, help="cell description (YAML)")
+    parser.add_argument("--output", required=True, help="folder for the surface map and the summary")
+    parser.add_argument("--programs", required=True, help="the nodes' ~program_dir")
+    parser.add_argument("--program", required=True, help="NC program sent by XModem")
+    parser.add_argument("--job", required=True, help="G-code job streamed to the ethernut")
+    parser.add_argument("--path-program", required=True, help="G-code path for the '@' controller")
+    parser.add_argument("--grid-points", type=int, default=100)
+    parser.add_argument("--timeout", type=float, default=120.0)
+    parser.add_argument("--once", action="store_true", help="exit after the scenario")
+    args = parser.parse_args(rospy.myargv()[1:])
+    with open(args.cell) as f:
+        description = yaml.safe_load(f)
+    rospy.init_node("cell_demo", disable_signals=False)
+    cell = description.get("cell", "cell")
+    machines = [Machine(cell, entry) for entry in description.get("machines", [])]
+
+    say("cell '%s': %d machines: %s" % (cell, len(machines), ", ".join(m.name for m in machines)))
+    for machine in machines:
+        if not machine.wait_up(60):
+            say("%s: not up after 60 s: %s" % (machine.name, {n: describe(s) for n, s in machine.states.items()}))
+            return 1
+        for node, state in sorted(machine.states.items()):
+            say("%s/%s: %s" % (machine.name, node, describe(state)))
+
+    failures = []
+    threads = []
+    for machine in machines:
+        for node, step in STEPS:
+            if node in machine.nodes:
+                def run(machine=machine, step=step, node=node):
+                    try:
+                        step(machine, args)
+                    except Exception as error:  # report every failure, keep the others running
+                        failures.append("%s/%s: %s" % (machine.name, node, error))
+                        say("%s/%s FAILED: %s" % (machine.name, node, error))
+                threads.append(threading.Thread(target=run))
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+
+    for machine in machines:
+        if "haas_mdc_node" in machine.nodes:
+            ends = [e for e in machine.events if e.event == CycleEvent.CYCLE_END]
+            say("%s: %d cycle events seen, %d cycle ends (a robot unloads on each)" % (
+                machine.name, len(machine.events), len(ends)))
+    say("scenario %s: %d steps, %d failed" % ("done" if not failures else "FAILED", len(threads), len(failures)))
+    for failure in failures:
+        say("  " + failure)
+    if args.once or rospy.is_shutdown():
+        return 1 if failures else 0
+    say("the cell keeps running; Ctrl-C stops it")
+    while not rospy.is_shutdown():
+        rospy.sleep(10.0)
+        for machine in machines:
+            for node, state in sorted(machine.states.items()):
+                say("%s/%s: %s" % (machine.name, node, describe(state)))
+    return 1 if failures else 0
+
+
+START = time.time()
+if __name__ == "__main__":
+    sys.exit(main())
