@@ -157,7 +157,10 @@ void Board::serve(Transport& link, StopSignal& stop)
               reply(Opcode::kAck);
               break;
             case Opcode::kAliveRequest:
-              reply(Opcode::kAliveResponse);
+              if (options_.mute_keepalive_after == 0 || accepted_ < options_.mute_keepalive_after)
+              {
+                reply(Opcode::kAliveResponse);
+              }
               break;
             case Opcode::kAck:
               break;  // the PC acknowledging a position report

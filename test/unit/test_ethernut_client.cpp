@@ -646,3 +646,57 @@ TEST(EthernutBoard, JobOverTcpWithInjectedResends)
   }
   EXPECT_EQ(i, xs.size());
 }
+
+// The simulated board stops answering alive requests (and nothing else) after two sets: once the
+// job is done and the link is quiet, the client must declare it dead within the timeout.
+TEST(EthernutBoard, UnansweredKeepalivesEndTheSession)
+{
+  BoardOptions bo;
+  bo.speed_mm_per_s = 0;
+  bo.report_period = milliseconds(0);
+  bo.mute_keepalive_after = 2;
+  Board board(bo);
+  TcpServer server(0, "127.0.0.1");
+  StopSignal stop;
+  std::thread board_thread(
+      [&]
+      {
+        auto peer = server.accept(kWait);
+        if (peer)
+        {
+          board.serve(*peer, stop);
+        }
+      });
+  auto link = TcpConnection::connect("127.0.0.1", server.port(), kWait);
+  Recorder recorder;
+  ClientOptions o;
+  o.keepalive_period = milliseconds(30);
+  o.dead_link_timeout = milliseconds(300);
+  Client client(*link, o, &recorder);
+  std::string failure;
+  std::atomic<bool> finished{false};
+  std::thread client_thread(
+      [&]
+      {
+        try
+        {
+          client.run();
+        }
+        catch (const Error& e)
+        {
+          recorder.record([&] { failure = e.what(); });
+        }
+        finished = true;
+      });
+  ASSERT_TRUE(recorder.waitFor([&] { return client.mode() == BoardMode::kFile; }));
+  client.startJob(Session::points({1, 2, 3}));
+  ASSERT_TRUE(recorder.waitFor([&] { return !recorder.outcomes.empty(); }));
+  EXPECT_EQ(recorder.outcomes[0], JobOutcome::kCompleted);
+  ASSERT_TRUE(recorder.waitFor([&] { return finished.load(); }));
+  EXPECT_NE(failure.find("no answer to alive requests"), std::string::npos) << failure;
+  EXPECT_GE(client.stats().keepalive_misses, 1u);
+  client_thread.join();
+  link->close();
+  stop.stop();
+  board_thread.join();
+}

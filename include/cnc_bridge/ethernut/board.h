@@ -28,7 +28,9 @@ struct BoardOptions
   uint32_t seed = 1;                ///< for resend_probability
   uint64_t drop_after = 0;          ///< close the connection after the Nth coordinate (once); 0: never
   uint64_t silent_after = 0;        ///< go silent (answer nothing, keep the socket) after the Nth (once)
-  std::string log_path;             ///< append every accepted coordinate as "x y z" (mm)
+  /// Stop answering alive requests (only those) once this many coordinates were accepted; 0: never.
+  uint64_t mute_keepalive_after = 0;
+  std::string log_path;  ///< append every accepted coordinate as "x y z" (mm)
 };
 
 /// \brief Simulated ethernut board. serve() runs one connection on the calling thread; the
