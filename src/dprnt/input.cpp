@@ -141,18 +141,19 @@ void FileInput::closeFile()
 void FileInput::openFile()
 {
   closeFile();
+  // Only a file that exists at the very first attempt has history to skip; a file created later,
+  // or reopened after a failure, holds only what was written while we waited: read it all.
+  const bool skip_history = first_attempt_ && !from_start_;
+  first_attempt_ = false;
   fd_ = ::open(path_.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd_ < 0)
   {
     throw LinkError("file " + path_ + ": " + std::strerror(errno));
   }
-  // The first open may skip history; a reopen after a failure reads the (new) file from its start,
-  // since whatever it holds was written while we were away.
-  if (!opened_once_ && !from_start_)
+  if (skip_history)
   {
     ::lseek(fd_, 0, SEEK_END);
   }
-  opened_once_ = true;
 }
 
 void FileInput::session()

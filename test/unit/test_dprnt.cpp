@@ -539,7 +539,8 @@ TEST(DprntInput, MissingFileIsWaitedFor)
 {
   const std::string path = "/tmp/test_dprnt_missing_" + std::to_string(getpid()) + ".txt";
   std::remove(path.c_str());
-  FileInput input(path, true, Milliseconds(2), Backoff(Milliseconds(1), Milliseconds(5)));
+  // from_start false: a file created after start holds only new output and is read from its start.
+  FileInput input(path, false, Milliseconds(2), Backoff(Milliseconds(1), Milliseconds(5)));
   Sink sink;
   input.start(sink.bytesHandler(), sink.stateHandler());
   {

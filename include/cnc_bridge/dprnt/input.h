@@ -80,7 +80,8 @@ class StreamInput : public DprntInput
 class FileInput : public DprntInput
 {
  public:
-  /// \param from_start read what the file already holds (else start at its current end).
+  /// \param from_start read what the file already holds when start() finds it (else start at its
+  ///        end); a file that appears later is always read from its start.
   /// \param poll how often to look for new data.
   FileInput(std::string path, bool from_start, Milliseconds poll = Milliseconds(50), Backoff backoff = Backoff());
   ~FileInput() override;
@@ -104,7 +105,7 @@ class FileInput : public DprntInput
   BytesHandler on_bytes_;
   StateHandler on_state_;
   int fd_ = -1;
-  bool opened_once_ = false;
+  bool first_attempt_ = true;
   StopSignal stop_;
   std::atomic<unsigned> restarts_{0};
   std::unique_ptr<Reconnector> reconnector_;

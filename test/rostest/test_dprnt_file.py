@@ -1,0 +1,83 @@
+#!/usr/bin/env python3
+"""dprnt_node with ~input file: the test is the control appending DPRNT output to a file (NGC
+setting 262). The file does not exist when the node starts; lines appended later arrive; a
+truncated file is read again from its start; a rotated file is read to its end, then the new one.
+Lengths are millimetres here (~program_units mm). Every wait is on a message, with a timeout.
+"""
+import os
+import threading
+import unittest
+
+import rospy
+import rostest
+from geometry_msgs.msg import PointStamped
+
+from cnc_bridge.msg import DprntLine, MachineState
+
+
+class Collector:
+    def __init__(self, topic, msg_type):
+        self.cv = threading.Condition()
+        self.messages = []
+        rospy.Subscriber(topic, msg_type, self.on_message, queue_size=1000)
+
+    def on_message(self, msg):
+        with self.cv:
+            self.messages.append(msg)
+            self.cv.notify_all()
+
+    def wait(self, predicate, timeout=20.0):
+        with self.cv:
+            ok = self.cv.wait_for(lambda: any(predicate(m) for m in self.messages), timeout)
+            return next((m for m in self.messages if predicate(m)), None) if ok else None
+
+
+class TestDprntFile(unittest.TestCase):
+    def test_file_followed_through_creation_truncation_and_rotation(self):
+        rospy.init_node("test_dprnt_file")
+        ns = rospy.get_param("~namespace")
+        path = rospy.get_param("~file")
+        raw = Collector(ns + "/dprnt/raw", DprntLine)
+        points = Collector(ns + "/dprnt/probe_hit", PointStamped)
+        state = Collector(ns + "/state", MachineState)
+
+        # The node waits for the file: the link is not up before the control creates it.
+        self.assertIsNotNone(state.wait(lambda m: m.link != MachineState.LINK_UP))
+        with open(path, "w") as f:
+            f.write("CYCLE START O02000\r")
+        self.assertIsNotNone(state.wait(lambda m: m.link == MachineState.LINK_UP), "link UP once the file exists")
+        self.assertIsNotNone(raw.wait(lambda m: m.text == "CYCLE START O02000"))
+
+        # Appended in two writes, the second finishing the line: one whole line.
+        with open(path, "a") as f:
+            f.write("PROBE X  12.500 Y")
+        with open(path, "a") as f:
+            f.write("   3.000 Z  -0.125\r")
+        point = points.wait(lambda m: True)
+        self.assertIsNotNone(point)
+        self.assertAlmostEqual(point.point.x, 0.0125, delta=1e-12)  # mm -> m
+        self.assertAlmostEqual(point.point.z, -0.000125, delta=1e-12)
+
+        # Truncation: the control starts the file again; wait until the node noticed (state message).
+        open(path, "w").close()
+        self.assertIsNotNone(state.wait(lambda m: "truncated" in m.message), "truncation noticed")
+        with open(path, "a") as f:
+            f.write("AFTER TRUNCATION 1\r")
+        self.assertIsNotNone(raw.wait(lambda m: m.text == "AFTER TRUNCATION 1"))
+
+        # Rotation: a last line, the file renamed away, a new file under the old name.
+        with open(path, "a") as f:
+            f.write("LAST OF OLD 2\r")
+        os.rename(path, path + ".1")
+        with open(path, "w") as f:
+            f.write("FIRST OF NEW 3\r")
+        self.assertIsNotNone(raw.wait(lambda m: m.text == "FIRST OF NEW 3"))
+        texts = [m.text for m in raw.messages]
+        self.assertLess(texts.index("LAST OF OLD 2"), texts.index("FIRST OF NEW 3"))
+        self.assertEqual(texts.count("CYCLE START O02000"), 1, "nothing read twice")
+        os.remove(path + ".1")
+        os.remove(path)
+
+
+if __name__ == "__main__":
+    rostest.rosrun("cnc_bridge", "test_dprnt_file", TestDprntFile)
