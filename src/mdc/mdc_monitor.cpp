@@ -327,6 +327,7 @@ void MdcPoller::run(Transport& transport, StopSignal& stop)
   } detach{*this, client};
 
   scheduler.reset(Clock::now());
+  unsigned unanswered_in_a_row = 0;
   while (!stop.stopped())
   {
     const auto next = scheduler.next();
@@ -351,11 +352,18 @@ void MdcPoller::run(Transport& transport, StopSignal& stop)
     try
     {
       const Reply reply = client.request(next->first, reply_timeout_);
+      unanswered_in_a_row = 0;
       notify(reply);
     }
     catch (const TimeoutError& e)
     {
       CNC_LOG_DEBUG(e.what());
+      if (plan_.max_unanswered > 0 && ++unanswered_in_a_row >= plan_.max_unanswered)
+      {
+        stats_ = sum(base_stats_, client.stats());
+        throw LinkError("MDC " + transport.describe() + ": no reply to " + std::to_string(unanswered_in_a_row) +
+                        " queries in a row");
+      }
     }
     scheduler.done(Clock::now());
     stats_ = sum(base_stats_, client.stats());

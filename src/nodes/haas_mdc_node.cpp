@@ -93,6 +93,10 @@ class HaasMdcNode
     plan.variables_period = period(pnh, "variables_period", 0.25);
     // ~counters_period: s between polls of tool in use, cycle times, M30 counters and #4006.
     plan.counters_period = period(pnh, "counters_period", 2.0);
+    // ~max_unanswered: queries unanswered in a row before the link is reopened (0: never).
+    int max_unanswered = 5;
+    pnh.param("max_unanswered", max_unanswered, max_unanswered);
+    plan.max_unanswered = static_cast<unsigned>(std::max(0, max_unanswered));
     // ~position_variables: machine position X Y Z (Haas #5021-#5023); [] to not poll positions.
     position_vars_ = intList(pnh, "position_variables", {5021, 5022, 5023});
     // ~work_position_variables: work position X Y Z (#5041-#5043) giving the work offset; [] for none.

@@ -403,3 +403,24 @@ TEST(MdcClient, ClassicSerialLineWithSevenDataBitsAndFramedReplies)
   EXPECT_EQ(toProgramStatus(reply).status, "BUSY");
   EXPECT_EQ(client.stats().answered, 1u);
 }
+
+TEST(MdcPoller, AControlThatStopsAnsweringEndsThePollWithALinkError)
+{
+  FakeTransport fake;  // a serial control switched off: writes go out, nothing comes back
+  PollPlan plan;
+  plan.identity = false;
+  plan.status_period = 1ms;
+  plan.max_unanswered = 3;
+  MdcPoller poller(plan, 20ms);
+  StopSignal stop;
+  try
+  {
+    poller.run(fake, stop);
+    FAIL() << "run() returned";
+  }
+  catch (const LinkError& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("3 queries in a row"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(poller.stats().unanswered, 3u);
+}

@@ -146,6 +146,9 @@ struct PollPlan
   std::vector<int> variables;          ///< Q600 list (positions, spindle, counters, #100s)
   std::vector<int> slow_variables;     ///< Q600 list polled at counters_period (#4006 units)
   bool identity = true;                ///< Q100, Q101, Q102 once per connection
+  /// Queries left unanswered in a row before the link is declared dead (a serial control switched
+  /// off, a half-open TCP connection); the poller then ends with LinkError so it is reopened.
+  unsigned max_unanswered = 5;
 
   /// \brief The scheduler for this plan.
   QueryScheduler scheduler() const;
@@ -169,7 +172,8 @@ class MdcPoller
   void setListener(UpdateListener listener) { listener_ = std::move(listener); }
 
   /// \brief Polls over \p transport until \p stop is stopped (returns) or the link fails (throws
-  /// LinkError / CancelledError). A query left unanswered is counted and the poll goes on.
+  /// LinkError / CancelledError). A query left unanswered is counted and the poll goes on, up to
+  /// PollPlan::max_unanswered in a row (then LinkError).
   void run(Transport& transport, StopSignal& stop);
 
   /// \brief Runs \p action with the live client, between two polls.
