@@ -17,6 +17,7 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
 endif()
 
 cnc_tool(sim_at_controller src/sim/sim_at_controller.cpp)
+cnc_tool(at_stream_bench bench/at_controller/at_stream_bench.cpp)
 
 if(NOT CNC_BRIDGE_CORE_ONLY)
   cnc_node(at_controller_node src/nodes/at_controller_node.cpp)
@@ -31,3 +32,6 @@ if(NOT CNC_BRIDGE_CORE_ONLY AND CATKIN_ENABLE_TESTING)
     add_dependencies(test_${test} at_controller_node sim_at_controller ${PROJECT_NAME}_generate_messages_cpp)
   endforeach()
 endif()
+
+cnc_fuzz_target(fuzz_at_report test/fuzz/fuzz_at_report.cpp)
+cnc_fuzz_target(fuzz_at_command test/fuzz/fuzz_at_command.cpp)

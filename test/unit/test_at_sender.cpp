@@ -97,7 +97,7 @@ TEST_F(Fixture, CommandsAreCheckedAndWrittenInOrder)
 TEST_F(Fixture, JogIsRefusedWhileAnOperationRunsButSpindleChangesGoBetweenSetpoints)
 {
   Operation operation;
-  operation.trajectory = line(20.0);
+  operation.trajectory = line(200.0);  // 10 s: still running whatever the machine's load
   auto job = sender.start(operation);
   ASSERT_TRUE(link->waitForWritten(200, kWait));  // streaming
   try
@@ -130,7 +130,7 @@ TEST_F(Fixture, JogIsRefusedWhileAnOperationRunsButSpindleChangesGoBetweenSetpoi
 TEST_F(Fixture, CancelDeceleratesThenEndsTheOperation)
 {
   Operation operation;
-  operation.trajectory = line(50.0, 40.0);
+  operation.trajectory = line(500.0, 40.0);  // 12.5 s: cancelled long before the end
   auto job = sender.start(operation);
   ASSERT_TRUE(link->waitForWritten(6000, kWait));  // some 300 setpoints: at cruise speed
   job->cancel();
@@ -148,7 +148,7 @@ TEST_F(Fixture, CancelDeceleratesThenEndsTheOperation)
   }
   EXPECT_LT(setpoints.size(), operation.trajectory->steps());
   EXPECT_EQ(setpoints.back().feed[0], 0);
-  EXPECT_LT(setpoints.back().position[0], 50000);
+  EXPECT_LT(setpoints.back().position[0], 500000);
   // Never a jump: 40 mm/s is 40 pulses per period.
   for (size_t k = 1; k < setpoints.size(); ++k)
   {
@@ -159,7 +159,7 @@ TEST_F(Fixture, CancelDeceleratesThenEndsTheOperation)
 TEST_F(Fixture, AbortStopsStreamingAtOnceWithTheReason)
 {
   Operation operation;
-  operation.trajectory = line(50.0, 40.0);
+  operation.trajectory = line(500.0, 40.0);
   auto job = sender.start(operation);
   ASSERT_TRUE(link->waitForWritten(1000, kWait));
   sender.abortRunning("emergency stop (E1) reported by the controller");
@@ -175,7 +175,7 @@ TEST_F(Fixture, AbortStopsStreamingAtOnceWithTheReason)
 TEST_F(Fixture, ALinkFailureFailsTheJobAndTellsTheOwner)
 {
   Operation operation;
-  operation.trajectory = line(50.0);
+  operation.trajectory = line(500.0);
   auto job = sender.start(operation);
   ASSERT_TRUE(link->waitForWritten(500, kWait));
   link->disconnect();

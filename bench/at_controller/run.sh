@@ -1,0 +1,52 @@
+#!/usr/bin/env bash
+# 1 kHz setpoint streaming to sim_at_controller: SECONDS (default 60) of a planned path, once with
+# the machine otherwise idle and once under competing CPU load (one busy loop per core, started
+# here). Prints the sender's setpoint interval p50/p99/max, underruns and lateness, the simulator's
+# arrival intervals, and each as a ratio to the 1 ms period the controller expects.
+# REALTIME_PRIORITY=N gives the sender thread SCHED_FIFO priority N (needs CAP_SYS_NICE / root).
+# usage: BUILD_DIR=/work/main/.build [REALTIME_PRIORITY=50] bench/at_controller/run.sh [SECONDS]
+set -euo pipefail
+build=${BUILD_DIR:-/work/main/.build}
+seconds=${1:-60}
+bin=$(dirname "$(find "$build" -type f -name at_stream_bench -perm -u+x | head -1)")
+[[ -x "$bin/at_stream_bench" && -x "$bin/sim_at_controller" ]] || { echo "build at_stream_bench and sim_at_controller in $build first" >&2; exit 1; }
+work=$(mktemp -d)
+pids=()
+cleanup() { for pid in "${pids[@]}"; do kill "$pid" 2>/dev/null || true; done; rm -rf "$work"; }
+trap cleanup EXIT
+
+run_once() {  # $1: label
+  "$bin/sim_at_controller" --command-port 0 >"$work/sim.out" 2>"$work/sim.err" &
+  local sim=$!
+  for _ in $(seq 100); do grep -q '^sim_at_controller tcp' "$work/sim.out" 2>/dev/null && break; sleep 0.05; done
+  local port
+  port=$(head -1 "$work/sim.out" | sed 's/.*://')
+  local result
+  result=$("$bin/at_stream_bench" --command-port "$port" --seconds "$seconds" --realtime-priority "${REALTIME_PRIORITY:-0}")
+  kill -INT "$sim"
+  wait "$sim" || true
+  local arrival
+  arrival=$(grep -o 'arrival interval.*' "$work/sim.err" | sed 's/arrival interval //')
+  echo "$1 | load $(cut -d' ' -f1-3 /proc/loadavg) | $result | sim arrival: $arrival"
+}
+
+echo "at_controller streaming benchmark: $seconds s at 1 kHz, $(nproc) cores, sender SCHED_FIFO priority ${REALTIME_PRIORITY:-0} (0: normal scheduler)"
+idle=$(run_once idle)
+echo "$idle"
+for _ in $(seq "$(nproc)"); do (while :; do :; done) & pids+=($!); done
+loaded=$(run_once "busy loops x$(nproc)")
+echo "$loaded"
+for pid in "${pids[@]}"; do kill "$pid" 2>/dev/null || true; done
+pids=()
+
+ratio() {  # value / 1 ms
+  awk -v v="$1" 'BEGIN { printf "%.3f", v / 1.0 }'
+}
+field() { echo "$1" | grep -o "$2=[^ ]*" | cut -d= -f2; }
+printf '\n%-22s %12s %12s %14s %14s\n' "" "idle" "loaded" "idle/1ms" "loaded/1ms"
+for key in interval_p50_ms interval_p99_ms interval_max_ms late_max_ms; do
+  a=$(field "$idle" $key); b=$(field "$loaded" $key)
+  printf '%-22s %12s %12s %14s %14s\n' "$key" "$a" "$b" "$(ratio "$a")" "$(ratio "$b")"
+done
+printf '%-22s %12s %12s\n' "underruns" "$(field "$idle" underruns)" "$(field "$loaded" underruns)"
+printf '%-22s %12s %12s\n' "setpoints" "$(field "$idle" setpoints)" "$(field "$loaded" setpoints)"
