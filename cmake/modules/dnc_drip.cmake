@@ -40,3 +40,10 @@ if(NOT CNC_BRIDGE_CORE_ONLY AND TARGET dnc_node)
   target_sources(dnc_node PRIVATE src/nodes/dnc_drip_handlers.cpp)
   target_link_libraries(dnc_node cnc_bridge_drip)
 endif()
+
+if(NOT CNC_BRIDGE_CORE_ONLY AND CATKIN_ENABLE_TESTING AND TARGET dnc_node)
+  find_package(rostest REQUIRED)  # the top level finds it only after the fragments
+  add_rostest_gtest(test_dnc_drip test/rostest/dnc_drip.test test/rostest/test_dnc_drip.cpp)
+  target_link_libraries(test_dnc_drip ${catkin_LIBRARIES} ${GTEST_LIBRARIES})
+  add_dependencies(test_dnc_drip dnc_node sim_haas_serial ${PROJECT_NAME}_generate_messages_cpp)
+endif()

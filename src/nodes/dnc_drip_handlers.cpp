@@ -19,6 +19,18 @@ namespace cnc_bridge
 {
 namespace
 {
+/// A duration parameter in seconds where 0 means "no limit" (params::seconds() wants > 0).
+Milliseconds secondsOrZero(const ros::NodeHandle& pnh, const std::string& name, double fallback)
+{
+  double value = pnh.param(name, fallback);
+  if (!(value >= 0))
+  {
+    ROS_WARN("%s must be >= 0 seconds, not %g; using %g", pnh.resolveName(name).c_str(), value, fallback);
+    value = fallback;
+  }
+  return Milliseconds(static_cast<int64_t>(value * 1000.0));
+}
+
 /// Sets the port's termios for the drip-feed's flow control for the length of one transfer:
 /// XON/XOFF is read in user space (so the kernel must not act on DC1/DC3 itself), RTS/CTS is the
 /// kernel's. The node's own settings come back afterwards.
@@ -107,7 +119,7 @@ class DripHandlers
     // take it in comments); under ISO (7E1) leave it off.
     drip_.rules.reject_lowercase = !pnh.param("drip_allow_lowercase", false);
     // ~drip_hold_timeout (s, default 0 = wait forever): longest XOFF before ~drip_hold_action.
-    drip_.hold_timeout = params::seconds(pnh, "drip_hold_timeout", 0.0);
+    drip_.hold_timeout = secondsOrZero(pnh, "drip_hold_timeout", 0.0);
     // ~drip_hold_action (string, default "fail"): fail, or resume (assume the XON was lost).
     const std::string hold_action = pnh.param<std::string>("drip_hold_action", "fail");
     if (hold_action != "fail" && hold_action != "resume")
@@ -116,12 +128,12 @@ class DripHandlers
     // ~drip_wait_for_dc1 (bool, default false): send nothing until the control asks (DC1);
     // ~drip_start_timeout (s, default 0 = forever) bounds that wait.
     pnh.param("drip_wait_for_dc1", drip_.wait_for_dc1, false);
-    drip_.start_timeout = params::seconds(pnh, "drip_start_timeout", 0.0);
+    drip_.start_timeout = secondsOrZero(pnh, "drip_start_timeout", 0.0);
     drip_.progress_interval = Milliseconds(static_cast<int64_t>(feedback_period.toSec() * 1000));
     drip_.validate();
 
     // ~backup_start_timeout (s, default 120; 0 = forever): wait for the control to start punching.
-    backup_.start_timeout = params::seconds(pnh, "backup_start_timeout", 120.0);
+    backup_.start_timeout = secondsOrZero(pnh, "backup_start_timeout", 120.0);
     // ~backup_quiet_timeout (s, default 5): silence that ends a program punched without closing '%'.
     backup_.quiet_timeout = params::seconds(pnh, "backup_quiet_timeout", 5.0);
     // ~backup_send_dc1 (bool, default true): send DC1 when ready to receive.
