@@ -47,3 +47,9 @@ if(NOT CNC_BRIDGE_CORE_ONLY AND CATKIN_ENABLE_TESTING AND TARGET dnc_node)
   target_link_libraries(test_dnc_drip ${catkin_LIBRARIES} ${GTEST_LIBRARIES})
   add_dependencies(test_dnc_drip dnc_node sim_haas_serial ${PROJECT_NAME}_generate_messages_cpp)
 endif()
+
+# cnc_dnc drip / backup subcommands (dnc.cmake declares the tool).
+if(TARGET cnc_dnc)
+  target_sources(cnc_dnc PRIVATE src/cli/cnc_dnc_drip.cpp)
+  target_link_libraries(cnc_dnc cnc_bridge_drip)
+endif()

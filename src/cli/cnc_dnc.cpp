@@ -5,6 +5,8 @@
 //
 //   cnc_dnc send    --port DEV [serial options] [--mode checksum|crc|1k] FILE
 //   cnc_dnc receive --port DEV [serial options] [--mode checksum|crc] [--timeout S] FILE
+//   cnc_dnc drip    --port DEV [serial options] [--start-line N] FILE   (cnc_dnc_drip.cpp)
+//   cnc_dnc backup  --port DEV [serial options] FILE                    (cnc_dnc_drip.cpp)
 #include <unistd.h>
 
 #include <boost/program_options.hpp>
@@ -22,6 +24,15 @@
 
 namespace po = boost::program_options;
 using namespace cnc_bridge;
+
+namespace cnc_bridge
+{
+namespace cli
+{
+int runDrip(const std::vector<std::string>& args);    // cnc_dnc_drip.cpp
+int runBackup(const std::vector<std::string>& args);  // cnc_dnc_drip.cpp
+}  // namespace cli
+}  // namespace cnc_bridge
 
 namespace
 {
@@ -236,6 +247,8 @@ struct Command
 const Command kCommands[] = {
     {"send", "send a program by XModem (the control receives)", &runSend},
     {"receive", "receive a program by XModem (the control sends)", &runReceive},
+    {"drip", "drip-feed a program while the control runs it (DNC, XON/XOFF)", &cli::runDrip},
+    {"backup", "store a program the control punches (from '%' to '%')", &cli::runBackup},
 };
 
 void usage(std::ostream& out)

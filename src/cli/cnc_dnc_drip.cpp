@@ -1,0 +1,277 @@
+// cnc_dnc's drip-feed and backup subcommands (the table in cnc_dnc.cpp lists them):
+//
+//   cnc_dnc drip   --port DEV [serial options] [--start-line N | --start-block N1234]
+//                  [--show-preamble | --preamble-file F] [drip options] FILE
+//   cnc_dnc backup --port DEV [serial options] [--timeout S] [--quiet S] FILE
+//
+// Ctrl-C cancels cleanly; drip then says which line it stopped at, for a restart.
+#include <unistd.h>
+
+#include <atomic>
+#include <boost/program_options.hpp>
+#include <chrono>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "cnc_bridge/common/error.h"
+#include "cnc_bridge/dnc/backup.h"
+#include "cnc_bridge/dnc/dnc_codes.h"
+#include "cnc_bridge/dnc/drip_feed.h"
+#include "cnc_bridge/sim/sim_support.h"
+#include "cnc_bridge/transport/paced_transport.h"
+#include "cnc_bridge/transport/serial_port.h"
+
+namespace po = boost::program_options;
+
+namespace cnc_bridge
+{
+namespace cli
+{
+namespace
+{
+po::options_description serialOptions()
+{
+  po::options_description options("serial port");
+  options.add_options()("help,h", "this help")("port,p", po::value<std::string>(), "serial device, e.g. /dev/ttyUSB0")(
+      "baud,b", po::value<unsigned>()->default_value(9600), "baud rate")(
+      "parity", po::value<std::string>()->default_value("none"), "none|even|odd (ISO tape code: even with 7 bits)")(
+      "data-bits", po::value<unsigned>()->default_value(8), "7|8")("stop-bits", po::value<unsigned>()->default_value(1),
+                                                                   "1|2");
+  return options;
+}
+
+// Parses; prints usage and returns false on --help or an error (status in \p status).
+bool parse(const std::string& command, const std::vector<std::string>& args, const po::options_description& options,
+           po::variables_map& vm, int& status)
+{
+  po::options_description all(options);
+  all.add_options()("file", po::value<std::string>(), "program file");
+  po::positional_options_description positional;
+  positional.add("file", 1);
+  const std::string usage = "usage: cnc_dnc " + command + " --port DEV [options] FILE\n";
+  try
+  {
+    po::store(po::command_line_parser(args).options(all).positional(positional).run(), vm);
+    po::notify(vm);
+  }
+  catch (const po::error& e)
+  {
+    std::cerr << "cnc_dnc " << command << ": " << e.what() << "\n" << usage << options;
+    status = 2;
+    return false;
+  }
+  if (vm.count("help"))
+  {
+    std::cout << usage << options;
+    status = 0;
+    return false;
+  }
+  if (!vm.count("port") || !vm.count("file"))
+  {
+    std::cerr << "cnc_dnc " << command << ": --port and FILE are required\n" << usage << options;
+    status = 2;
+    return false;
+  }
+  return true;
+}
+
+SerialSettings serialSettings(const po::variables_map& vm)
+{
+  SerialSettings s;
+  s.device = vm["port"].as<std::string>();
+  s.baud = vm["baud"].as<unsigned>();
+  s.parity = parseParity(vm["parity"].as<std::string>());
+  s.data_bits = vm["data-bits"].as<unsigned>();
+  s.stop_bits = vm["stop-bits"].as<unsigned>();
+  // Drip-feed reads DC1/DC3 itself (kernel IXON would swallow them); RTS/CTS is the kernel's.
+  s.flow_control =
+      vm.count("flow") && vm["flow"].as<std::string>() == "rtscts" ? FlowControl::kRtsCts : FlowControl::kNone;
+  s.validate();
+  return s;
+}
+
+Milliseconds seconds(double value)
+{
+  return Milliseconds(static_cast<int64_t>(value * 1000.0));
+}
+
+// A progress line on stderr: redrawn in place on a terminal, a plain line each second otherwise.
+class Bar
+{
+ public:
+  explicit Bar(std::string what) : what_(std::move(what)), tty_(::isatty(STDERR_FILENO) == 1) {}
+  void draw(uint64_t bytes, uint64_t total, uint64_t line, const std::string& block, bool held, bool force = false)
+  {
+    const auto now = std::chrono::steady_clock::now();
+    if (!force && now - last_ < (tty_ ? std::chrono::milliseconds(100) : std::chrono::milliseconds(1000)))
+      return;
+    last_ = now;
+    std::ostringstream out;
+    out << what_;
+    if (total > 0)
+    {
+      const double fraction = static_cast<double>(bytes) / static_cast<double>(total);
+      std::string bar(30, ' ');
+      for (int i = 0; i < static_cast<int>(fraction * 30); ++i)
+        bar[i] = '#';
+      char percent[16];
+      std::snprintf(percent, sizeof(percent), "%3.0f%%", 100 * fraction);
+      out << " [" << bar << "] " << percent << " " << bytes << "/" << total << " bytes";
+    }
+    else
+    {
+      out << " " << bytes << " bytes";
+    }
+    out << ", line " << line;
+    if (!block.empty())
+      out << " " << block;
+    if (held)
+      out << " HELD (XOFF)";
+    if (tty_)
+    {
+      std::fprintf(stderr, "\r%s   ", out.str().c_str());
+      drawn_ = true;
+    }
+    else
+    {
+      std::fprintf(stderr, "%s\n", out.str().c_str());
+    }
+  }
+  void finish()
+  {
+    if (drawn_)
+      std::fputc('\n', stderr);
+    drawn_ = false;
+  }
+
+ private:
+  std::string what_;
+  bool tty_;
+  bool drawn_ = false;
+  std::chrono::steady_clock::time_point last_{};
+};
+}  // namespace
+
+int runDrip(const std::vector<std::string>& args)
+{
+  po::options_description options = serialOptions();
+  options.add_options()("eob", po::value<std::string>()->default_value("lf"),
+                        "end of block sent: lf (ISO, Fanuc)|cr|crlf (Haas)|lfcr|lfcrcr")(
+      "flow", po::value<std::string>()->default_value("xonxoff"), "xonxoff (DC3/DC1, parity masked)|rtscts|none")(
+      "no-pace", po::bool_switch(), "do not pace writes to the line rate (drain after each instead)")(
+      "chunk", po::value<size_t>()->default_value(4), "characters per write")(
+      "dc-codes", po::bool_switch(), "DC2 before and DC4 after the program (Haas setting 14)")(
+      "leader", po::value<size_t>()->default_value(0), "NUL characters before and after the program")(
+      "no-percent", po::bool_switch(), "do not add '%' framing when the file lacks it")(
+      "allow-lowercase", po::bool_switch(), "let lowercase pass the pre-send check (8N1 controls)")(
+      "start-line", po::value<uint64_t>()->default_value(0), "restart at this line of the file (1-based)")(
+      "start-block", po::value<std::string>()->default_value(""), "restart at this sequence number, e.g. N1234")(
+      "show-preamble", po::bool_switch(), "print the modal blocks a restart would send first, and stop")(
+      "preamble-file", po::value<std::string>(), "send these blocks before the restart point instead")(
+      "wait-dc1", po::bool_switch(), "send nothing until the control asks with DC1")(
+      "hold-timeout", po::value<double>()->default_value(0), "seconds held by XOFF before --hold-action (0: forever)")(
+      "hold-action", po::value<std::string>()->default_value("fail"), "fail|resume (assume the XON was lost)");
+  po::variables_map vm;
+  int status = 0;
+  if (!parse("drip", args, options, vm, status))
+    return status;
+  const SerialSettings settings = serialSettings(vm);
+  dnc::DripOptions drip;
+  drip.eob = dnc::parseEob(vm["eob"].as<std::string>());
+  drip.flow = dnc::parseDripFlow(vm["flow"].as<std::string>());
+  if (!vm["no-pace"].as<bool>())
+    drip.pace_cps = static_cast<double>(settings.baud) /
+                    bitsPerCharacter(settings.data_bits, settings.parity != Parity::kNone, settings.stop_bits);
+  drip.chunk = vm["chunk"].as<size_t>();
+  drip.dc_codes = vm["dc-codes"].as<bool>();
+  drip.leader_length = drip.trailer_length = vm["leader"].as<size_t>();
+  drip.add_percent = !vm["no-percent"].as<bool>();
+  drip.rules.reject_lowercase = !vm["allow-lowercase"].as<bool>();
+  drip.wait_for_dc1 = vm["wait-dc1"].as<bool>();
+  drip.hold_timeout = seconds(vm["hold-timeout"].as<double>());
+  const std::string hold_action = vm["hold-action"].as<std::string>();
+  if (hold_action != "fail" && hold_action != "resume")
+    throw ConfigError("--hold-action must be fail or resume");
+  drip.on_hold_timeout = hold_action == "resume" ? dnc::HoldTimeoutAction::kResume : dnc::HoldTimeoutAction::kFail;
+
+  dnc::RestartPoint restart;
+  restart.line = vm["start-line"].as<uint64_t>();
+  restart.block = vm["start-block"].as<std::string>();
+  std::string preamble;
+  if (vm.count("preamble-file"))
+  {
+    std::ifstream in(vm["preamble-file"].as<std::string>());
+    if (!in)
+      throw ConfigError("cannot read " + vm["preamble-file"].as<std::string>());
+    std::ostringstream text;
+    text << in.rdbuf();
+    preamble = text.str();
+  }
+  const std::string file = vm["file"].as<std::string>();
+  const dnc::DripPlan plan = dnc::planDrip(file, drip, restart, preamble);
+  for (const auto& warning : plan.scan.warnings)
+    std::cerr << "cnc_dnc drip: warning: " << warning << "\n";
+  if (vm["show-preamble"].as<bool>())
+  {
+    std::cout << plan.preamble;
+    return 0;
+  }
+
+  static std::atomic<bool> cancel{false};
+  sim::installStopHandler();
+  sim::onStop([] { cancel = true; });
+  drip.cancel = &cancel;
+  SerialPort port(settings);
+  dnc::DripSender sender(port, drip);
+  Bar bar("drip " + file);
+  const auto result =
+      sender.send(plan, [&](const dnc::DripProgress& p) { bar.draw(p.bytes, p.total, p.line, p.block, p.held); });
+  bar.finish();
+  if (result.completed())
+  {
+    std::cout << result.message << std::endl;
+    return 0;
+  }
+  std::cerr << "cnc_dnc drip: " << result.message << "\n";
+  if (result.stopped_at_line > 0)
+    std::cerr << "cnc_dnc drip: to restart: --start-line " << result.stopped_at_line + 1 << "\n";
+  return 1;
+}
+
+int runBackup(const std::vector<std::string>& args)
+{
+  po::options_description options = serialOptions();
+  options.add_options()("timeout,t", po::value<double>()->default_value(120),
+                        "seconds to wait for the control to start punching (0: forever)")(
+      "quiet", po::value<double>()->default_value(5),
+      "seconds of silence that end a program punched without its closing '%'")("no-dc1", po::bool_switch(),
+                                                                               "do not send DC1 when ready");
+  po::variables_map vm;
+  int status = 0;
+  if (!parse("backup", args, options, vm, status))
+    return status;
+  dnc::BackupOptions backup;
+  backup.start_timeout = seconds(vm["timeout"].as<double>());
+  backup.quiet_timeout = seconds(vm["quiet"].as<double>());
+  backup.send_dc1 = !vm["no-dc1"].as<bool>();
+  static std::atomic<bool> cancel{false};
+  sim::installStopHandler();
+  sim::onStop([] { cancel = true; });
+  backup.cancel = &cancel;
+  SerialPort port(serialSettings(vm));
+  const std::string file = vm["file"].as<std::string>();
+  dnc::BackupReceiver receiver(port, backup);
+  Bar bar("backup " + file);
+  std::cerr << "waiting for the control to punch (PUNCH / SEND RS-232 on the control)...\n";
+  const auto result =
+      receiver.receive(file, [&](const dnc::BackupProgress& p) { bar.draw(p.bytes, 0, p.line, "", false); });
+  bar.finish();
+  std::cout << result.message << std::endl;
+  return 0;
+}
+}  // namespace cli
+}  // namespace cnc_bridge
