@@ -7,7 +7,9 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <deque>
 #include <map>
 #include <memory>
@@ -173,8 +175,8 @@ class SlaveBusNode
 
   ~SlaveBusNode()
   {
-    stopping_ = true;
-    reconnector_->stop();
+    shutting_down_ = true;
+    reconnector_->stop();  // stops its loop, then calls disconnect(), which ends ioLoop()
   }
 
  private:
@@ -197,7 +199,7 @@ class SlaveBusNode
   {
     StepPayloads payloads;
     bool from_commands = false;
-    ros::WallTime first_command;
+    std::chrono::steady_clock::time_point first_command;
   };
 
   void loadSlaves(ros::NodeHandle& pnh)
@@ -421,7 +423,7 @@ class SlaveBusNode
         break;
       }
       step.from_commands = true;
-      step.first_command = ros::WallTime::now();
+      step.first_command = std::chrono::steady_clock::now();
     }
     if (queue_.size() >= max_queued_)
     {
@@ -432,25 +434,41 @@ class SlaveBusNode
       return;
     }
     queue_.push_back(std::move(step));
+    queue_cv_.notify_all();
   }
 
-  /// The next step that may leave now, if any.
-  bool takeStep(Step& step)
+  /// Waits up to \p idle for a step that may leave now (woken at once by enqueue() and by
+  /// disconnect()). \returns false if there is none yet.
+  bool takeStep(Step& step, Milliseconds idle)
   {
-    std::lock_guard<std::mutex> lock(queue_mutex_);
-    if (queue_.empty())
+    std::unique_lock<std::mutex> lock(queue_mutex_);
+    const auto deadline = std::chrono::steady_clock::now() + idle;
+    for (;;)
     {
-      return false;
+      if (stopping_)
+      {
+        return false;
+      }
+      auto wait_until = deadline;
+      if (!queue_.empty())
+      {
+        Step& front = queue_.front();
+        const auto age = std::chrono::steady_clock::now() - front.first_command;
+        if (!front.from_commands || queue_.size() > 1 || age >= command_delay_)
+        {
+          step = std::move(front);
+          queue_.pop_front();
+          return true;
+        }
+        // A step of commands: more commands may still join it until command_delay has passed.
+        wait_until = std::min(deadline, front.first_command + command_delay_);
+      }
+      if (std::chrono::steady_clock::now() >= deadline)
+      {
+        return false;
+      }
+      queue_cv_.wait_until(lock, wait_until);
     }
-    Step& front = queue_.front();
-    if (front.from_commands && queue_.size() == 1 &&
-        ros::WallTime::now() - front.first_command < ros::WallDuration(command_delay_.count() / 1000.0))
-    {
-      return false;  // more commands may still join it
-    }
-    step = std::move(front);
-    queue_.pop_front();
-    return true;
   }
 
   // ---- link -------------------------------------------------------------------------------------
@@ -466,6 +484,12 @@ class SlaveBusNode
 
   void disconnect()
   {
+    if (shutting_down_)
+    {
+      std::lock_guard<std::mutex> lock(queue_mutex_);
+      stopping_ = true;
+      queue_cv_.notify_all();
+    }
     std::lock_guard<std::mutex> lock(link_mutex_);
     if (port_)
     {
@@ -481,7 +505,9 @@ class SlaveBusNode
       while (!stopping_)
       {
         Step step;
-        if (takeStep(step))
+        // Idle, the thread waits on the queue, not on the link: a new step leaves at once. What the
+        // master writes meanwhile (late answers, status) waits in the port and is read right after.
+        if (takeStep(step, Milliseconds(20)))
         {
           state_.update([](MachineState& s) { s.execution = MachineState::EXECUTION_ACTIVE; });
           slave_bus::BusSession::StepResult result;
@@ -505,9 +531,7 @@ class SlaveBusNode
           }
           continue;
         }
-        // Idle: the master may still write (late answers, status). A short timeout keeps a new step
-        // from waiting long; interrupting the read instead could cut a frame being written.
-        handle(session_->poll(Milliseconds(5)));
+        handle(session_->poll(Milliseconds(0)));
         snapshotStats();
       }
     }
@@ -704,8 +728,10 @@ class SlaveBusNode
   ros::Subscriber frame_sub_;
 
   std::mutex queue_mutex_;
+  std::condition_variable queue_cv_;
   std::deque<Step> queue_;
-  std::atomic<bool> stopping_{false};
+  std::atomic<bool> shutting_down_{false};
+  std::atomic<bool> stopping_{false};  // set under queue_mutex_ so that a waiting takeStep() sees it
 
   std::mutex link_mutex_;  // guards port_ against disconnect() from another thread
   std::unique_ptr<SerialPort> port_;

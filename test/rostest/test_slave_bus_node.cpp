@@ -82,33 +82,62 @@ cnc_bridge::BusPayload payload(uint8_t address, std::vector<uint8_t> data)
   return p;
 }
 
-/// Waits for a diagnostics status named like \p name whose key \p key satisfies \p pred.
+/// The latest value of every key of every diagnostics status, from one subscription kept for the
+/// whole test (three nodes publish on /diagnostics; a fresh subscription per check could keep
+/// catching the others' messages).
+class DiagnosticsWatch
+{
+ public:
+  DiagnosticsWatch()
+  {
+    sub_ = ros::NodeHandle().subscribe<diagnostic_msgs::DiagnosticArray>(
+        "/diagnostics", 100,
+        [this](const diagnostic_msgs::DiagnosticArray::ConstPtr& msg)
+        {
+          std::lock_guard<std::mutex> lock(mutex_);
+          for (const auto& status : msg->status)
+          {
+            for (const auto& kv : status.values)
+            {
+              values_[status.name][kv.key] = kv.value;
+            }
+          }
+          cv_.notify_all();
+        });
+  }
+  /// Waits until a status whose name contains \p name has key \p key with a numeric value satisfying \p pred.
+  bool waitFor(const std::string& name, const std::string& key, const std::function<bool(double)>& pred)
+  {
+    std::unique_lock<std::mutex> lock(mutex_);
+    return cv_.wait_for(lock, std::chrono::duration<double>(kWait.toSec()),
+                        [&]
+                        {
+                          // Status names carry the node's namespace: "cell/laser1/slave_bus_node: slave bus".
+                          for (const auto& status : values_)
+                          {
+                            const auto value = status.second.find(key);
+                            if (status.first.find(name) != std::string::npos && value != status.second.end() &&
+                                pred(std::stod(value->second)))
+                            {
+                              return true;
+                            }
+                          }
+                          return false;
+                        });
+  }
+
+ private:
+  ros::Subscriber sub_;
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  std::map<std::string, std::map<std::string, std::string>> values_;
+};
+
+DiagnosticsWatch* diagnostics = nullptr;
+
 bool waitForDiagnostic(const std::string& name, const std::string& key, const std::function<bool(double)>& pred)
 {
-  const auto deadline = ros::WallTime::now() + kWait;
-  while (ros::WallTime::now() < deadline)
-  {
-    const auto diag = ros::topic::waitForMessage<diagnostic_msgs::DiagnosticArray>("/diagnostics", ros::Duration(5.0));
-    if (!diag)
-    {
-      continue;
-    }
-    for (const auto& status : diag->status)
-    {
-      if (status.name.find(name) == std::string::npos)
-      {
-        continue;
-      }
-      for (const auto& kv : status.values)
-      {
-        if (kv.key == key && pred(std::stod(kv.value)))
-        {
-          return true;
-        }
-      }
-    }
-  }
-  return false;
+  return diagnostics->waitFor(name, key, pred);
 }
 }  // namespace
 
@@ -252,5 +281,7 @@ int main(int argc, char** argv)
   ros::init(argc, argv, "test_slave_bus_node");
   ros::AsyncSpinner spinner(2);
   spinner.start();
+  DiagnosticsWatch watch;
+  diagnostics = &watch;
   return RUN_ALL_TESTS();
 }
