@@ -130,6 +130,9 @@ class AtControllerNode
   ~AtControllerNode()
   {
     stopping_ = true;
+    // A goal in progress is cancelled (decelerates to a stop) and its thread joined while the
+    // sender and the links it uses still exist.
+    follow_path_.shutdown();
     command_cv_.notify_all();
     if (report_server_)
     {
@@ -689,7 +692,7 @@ class AtControllerNode
       ros::WallRate feedback_rate(10.0);
       while (!job->waitFor(Milliseconds(100)))
       {
-        if (!cancelled && (follow_path_.isPreemptRequested() || !ros::ok()))
+        if (!cancelled && (follow_path_.isPreemptRequested() || !ros::ok() || stopping_))
         {
           job->cancel();
           cancelled = true;
