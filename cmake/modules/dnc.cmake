@@ -10,6 +10,16 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   cnc_core_gtest(test_xmodem test/unit/test_xmodem.cpp)
   target_link_libraries(test_xmodem cnc_bridge_xmodem yaml-cpp)
   target_compile_definitions(test_xmodem PRIVATE XMODEM_TEST_DATA="${PROJECT_SOURCE_DIR}/test/data/xmodem")
+  # Interop with lrzsz (sx/rx) and python3-xmodem over pty pairs.
+  cnc_core_gtest(test_xmodem_interop test/unit/test_xmodem_interop.cpp)
+  target_link_libraries(test_xmodem_interop cnc_bridge_xmodem)
+  target_compile_definitions(test_xmodem_interop PRIVATE XMODEM_TEST_DATA="${PROJECT_SOURCE_DIR}/test/data/xmodem")
+endif()
+
+# libFuzzer target: the receiver's packet parser and the receiver on arbitrary input.
+cnc_fuzz_target(fuzz_xmodem_receiver test/fuzz/fuzz_xmodem_receiver.cpp)
+if(CNC_BRIDGE_FUZZ)
+  target_link_libraries(fuzz_xmodem_receiver cnc_bridge_xmodem)
 endif()
 
 # cnc_dnc: the ROS-free transfer tool (subcommands in a table in src/cli/cnc_dnc.cpp).
@@ -23,4 +33,10 @@ target_link_libraries(sim_haas_serial cnc_bridge_xmodem)
 if(NOT CNC_BRIDGE_CORE_ONLY)
   cnc_node(dnc_node src/nodes/dnc_node.cpp)
   target_link_libraries(dnc_node cnc_bridge_xmodem)
+  if(CATKIN_ENABLE_TESTING)
+    find_package(rostest REQUIRED)
+    add_rostest_gtest(test_dnc_node test/rostest/dnc_node.test test/rostest/test_dnc_node.cpp)
+    target_link_libraries(test_dnc_node ${catkin_LIBRARIES} ${GTEST_LIBRARIES})
+    add_dependencies(test_dnc_node dnc_node sim_haas_serial ${PROJECT_NAME}_generate_messages_cpp)
+  endif()
 endif()

@@ -4,6 +4,8 @@
 // library cnc_bridge_xmodem.
 #include "cnc_bridge/ros/dnc_node.h"
 
+#include <filesystem>
+
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/ros/dnc_drip_handlers.h"
 #include "cnc_bridge/ros/params.h"
@@ -13,8 +15,12 @@ namespace cnc_bridge
 DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh)
     : nh_(nh), pnh_(pnh), serial_(params::serialSettings(pnh, 115200)), port_lock_(serial_.device)
 {
-  // ~program_dir (string, required): the only directory files are read from and written to.
-  programs_ = std::make_unique<ProgramDirectory>(params::required<std::string>(pnh, "program_dir"));
+  // ~program_dir (string, required): the only directory files are read from and written to;
+  // created if it does not exist.
+  const std::string program_dir = params::required<std::string>(pnh, "program_dir");
+  std::error_code ignored;
+  std::filesystem::create_directories(program_dir, ignored);  // ProgramDirectory reports what fails
+  programs_ = std::make_unique<ProgramDirectory>(program_dir);
   // ~xmodem_mode (string, default "xmodem"): protocol when a request leaves it empty. A Haas
   // speaks XModem checksum only (xmodem); xmodem-crc and xmodem-1k suit PC-based controls.
   pnh.param<std::string>("xmodem_mode", default_protocol_, "xmodem");

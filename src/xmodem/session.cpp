@@ -161,9 +161,9 @@ uint8_t Sender::waitForStart()
   }
 }
 
-Sender::Reply Sender::waitForReply(bool first_block)
+Sender::Reply Sender::waitForReply(bool first_block, Milliseconds timeout)
 {
-  const auto deadline = Clock::now() + config_.ack_timeout;
+  const auto deadline = Clock::now() + timeout;
   for (;;)
   {
     checkCancel();
@@ -222,6 +222,7 @@ Stats Sender::send(const std::vector<uint8_t>& payload, const ProgressCallback& 
     // NAKs (or 'C's) the receiver repeated while it waited are still queued: drop them so that
     // none of them is read as the answer to block 1 (the capture's PC sent block 1 twice for this).
     link_.discardInput();
+    link_.purge(config_.turnaround, config_.turnaround * 10);
     const bool crc = start == kCrcStart;
     stats_.check = crc ? CheckType::kCrc16 : CheckType::kChecksum;
     // XModem-1K needs CRC (Forsberg): a receiver that asks for checksum mode gets 128-byte blocks.
@@ -246,13 +247,15 @@ Stats Sender::send(const std::vector<uint8_t>& payload, const ProgressCallback& 
       {
         checkCancel();
         link_.write(packet);
-        const Reply reply = waitForReply(block == 1);
+        const Reply reply = waitForReply(block == 1, config_.ack_timeout);
         if (reply == Reply::kAck)
           break;
         if (reply == Reply::kCancel)
           abort("the receiver cancelled (CAN CAN) at block " + std::to_string(block), false, false);
         if (reply == Reply::kTimeout)
           ++stats_.timeouts;
+        else
+          link_.purge(config_.turnaround, config_.turnaround * 10);
         ++stats_.retries;
         ++state.retries;
         if (++errors > config_.max_retries)
@@ -278,7 +281,7 @@ Stats Sender::send(const std::vector<uint8_t>& payload, const ProgressCallback& 
     {
       checkCancel();
       link_.writeByte(kEot);
-      const Reply reply = waitForReply(false);
+      const Reply reply = waitForReply(false, config_.eot_timeout);
       if (reply == Reply::kAck)
         break;
       if (reply == Reply::kCancel)
@@ -290,6 +293,8 @@ Stats Sender::send(const std::vector<uint8_t>& payload, const ProgressCallback& 
       }
       if (reply == Reply::kTimeout)
         ++stats_.timeouts;
+      else
+        link_.purge(config_.turnaround, config_.turnaround * 10);
       if (attempt >= config_.eot_retries)
       {
         abort("every block was acknowledged but EOT was not (sent " + std::to_string(attempt) + " times)", false, true);

@@ -105,6 +105,7 @@ Config fastConfig()
   c.start_wait = Milliseconds(3000);
   c.ack_timeout = Milliseconds(300);
   c.stale_nak_settle = Milliseconds(50);
+  c.turnaround = Milliseconds(2);
   return c;
 }
 
@@ -640,6 +641,7 @@ TEST(XmodemFaults, EveryTransferIsExactOrAClearErrorWithNoFile)
   config.purge_quiet = Milliseconds(5);
   config.eot_quiet = Milliseconds(5);
   config.stale_nak_settle = Milliseconds(5);
+  config.turnaround = Milliseconds(1);
   config.start_wait = Milliseconds(500);
   config.start_timeout = Milliseconds(500);
   config.eot_retries = 4;

@@ -53,8 +53,14 @@ struct Config
   /// Sender, block 1 only: a NAK is answered only after this long without an ACK, because the NAKs a
   /// receiver repeats while it waits may still be queued when block 1 goes out (see the capture).
   Milliseconds stale_nak_settle{100};
+  /// Sender: after a NAK or the start request, wait until the line has been quiet this long before
+  /// sending (what arrives meanwhile is dropped). lrzsz `rx` flushes its input right after it
+  /// writes NAK, so a packet sent the instant the NAK arrives can be thrown away by the receiver.
+  Milliseconds turnaround{30};
   /// Both: errors in a row on one block (NAKs, timeouts, garbled packets) before the transfer aborts.
   unsigned max_retries = 10;
+  /// Sender: wait this long for the answer to EOT (lrzsz `rx` answers after 1 s of silence).
+  Milliseconds eot_timeout{5000};
   /// Sender: EOT sent at most this many times.
   unsigned eot_retries = 10;
   /// Receiver: do not send the first NAK/'C' (the caller saw the sender start already; the simulator).
@@ -115,7 +121,7 @@ class Sender
     kTimeout
   };
   uint8_t waitForStart();
-  Reply waitForReply(bool first_block);
+  Reply waitForReply(bool first_block, Milliseconds timeout);
   void checkCancel();
   [[noreturn]] void abort(const std::string& why, bool send_can, bool timeout);
 

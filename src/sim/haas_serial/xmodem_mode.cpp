@@ -9,6 +9,7 @@
 //                          [--pace-baud N] [--faults flip=..,drop=..,dup=..,lose=..,seed=..] [--eob lf]
 #include <boost/program_options.hpp>
 #include <deque>
+#include <filesystem>
 #include <iostream>
 #include <memory>
 #include <regex>
@@ -78,8 +79,12 @@ std::string programName(const std::string& text, unsigned counter)
   return "received_" + std::to_string(counter) + ".nc";
 }
 
-int runXmodem(const std::vector<std::string>& args)
+int runXmodem(const std::vector<std::string>& all_args)
 {
+  // roslaunch appends __name:= and __log:= when a test launches the simulator as a node.
+  std::vector<std::string> args;
+  std::copy_if(all_args.begin(), all_args.end(), std::back_inserter(args),
+               [](const std::string& a) { return a.rfind("__", 0) != 0; });
   po::options_description options("sim_haas_serial xmodem options");
   options.add_options()("help,h", "this help")("link", po::value<std::string>()->default_value(""),
                                                "make this symbolic link to the pty (a stable device name)")(
@@ -144,6 +149,8 @@ int runXmodem(const std::vector<std::string>& args)
     xmodem::TextOptions text;
     text.control_eob = xmodem::parseEob(vm["eob"].as<std::string>());
     const std::string dir = vm["dir"].as<std::string>();
+    std::error_code ignored;
+    std::filesystem::create_directories(dir, ignored);  // a failure shows when a program is stored
     const std::string program = vm["program"].as<std::string>();
     const Milliseconds nak_interval(static_cast<int64_t>(vm["nak-interval"].as<double>() * 1000));
 

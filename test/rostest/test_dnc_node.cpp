@@ -1,0 +1,254 @@
+// dnc_node against sim_haas_serial xmodem (test/rostest/dnc_node.test): programs sent and received
+// by service and by the ~transfer action, feedback, cancel, the one-transfer-at-a-time refusal,
+// path escapes refused, and the state topic. Every wait is on a message, a service reply or an
+// inotify event with a deadline; nothing sleeps.
+#include <actionlib/client/simple_action_client.h>
+#include <gtest/gtest.h>
+#include <poll.h>
+#include <ros/ros.h>
+#include <sys/inotify.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <fstream>
+#include <mutex>
+
+#include "cnc_bridge/MachineState.h"
+#include "cnc_bridge/ReceiveProgram.h"
+#include "cnc_bridge/SendProgram.h"
+#include "cnc_bridge/TransferAction.h"
+
+using cnc_bridge::MachineState;
+
+namespace
+{
+std::string param(const std::string& name)
+{
+  std::string value;
+  ros::NodeHandle("~").getParam(name, value);
+  return value;
+}
+
+std::string readFile(const std::string& path)
+{
+  std::ifstream in(path, std::ios::binary);
+  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+bool exists(const std::string& path)
+{
+  struct stat st;
+  return ::stat(path.c_str(), &st) == 0;
+}
+
+/// Waits until \p path exists (created, or renamed into place), by inotify on its directory.
+bool waitForFile(const std::string& path, double seconds)
+{
+  const std::string dir = path.substr(0, path.rfind('/'));
+  const int fd = ::inotify_init1(IN_NONBLOCK);
+  ::inotify_add_watch(fd, dir.c_str(), IN_CREATE | IN_MOVED_TO | IN_CLOSE_WRITE);
+  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(seconds);
+  bool found = exists(path);
+  while (!found && ros::WallTime::now() < deadline)
+  {
+    pollfd p{fd, POLLIN, 0};
+    ::poll(&p, 1, static_cast<int>((deadline - ros::WallTime::now()).toSec() * 1000) + 1);
+    char buffer[4096];
+    while (::read(fd, buffer, sizeof(buffer)) > 0)
+    {
+    }
+    found = exists(path);
+  }
+  ::close(fd);
+  return found;
+}
+
+/// A text program of about \p size bytes with LF line ends.
+std::string program(size_t size)
+{
+  std::string out = "%\nO01234 (DNC TEST)\n";
+  for (unsigned n = 10; out.size() < size; n += 5)
+    out += "N" + std::to_string(n) + "G01X" + std::to_string(n % 977) + ".25Y-" + std::to_string(n % 311) + "F50.\n";
+  return out + "M30\n%\n";
+}
+
+class DncNodeTest : public ::testing::Test
+{
+ protected:
+  void SetUp() override
+  {
+    ns_ = param("namespace");
+    program_dir_ = param("program_dir");
+    control_dir_ = param("control_dir");
+    nh_ = ros::NodeHandle(ns_);
+    send_ = nh_.serviceClient<cnc_bridge::SendProgram>("dnc_node/send_program");
+    receive_ = nh_.serviceClient<cnc_bridge::ReceiveProgram>("dnc_node/receive_program");
+    ASSERT_TRUE(send_.waitForExistence(ros::Duration(30)));
+    ASSERT_TRUE(receive_.waitForExistence(ros::Duration(30)));
+    ASSERT_TRUE(waitForFile(param("link"), 30)) << "the simulator's pty link never appeared";
+    state_sub_ = nh_.subscribe<MachineState>("state", 50,
+                                             [this](const cnc_bridge::MachineStateConstPtr& s)
+                                             {
+                                               std::lock_guard<std::mutex> lock(mutex_);
+                                               states_.push_back(*s);
+                                             });
+  }
+
+  void writeProgram(const std::string& name, const std::string& contents)
+  {
+    std::ofstream(program_dir_ + "/" + name, std::ios::binary) << contents;
+  }
+
+  std::vector<MachineState> states()
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return states_;
+  }
+
+  std::string ns_, program_dir_, control_dir_;
+  ros::NodeHandle nh_;
+  ros::ServiceClient send_, receive_;
+  ros::Subscriber state_sub_;
+  std::mutex mutex_;
+  std::vector<MachineState> states_;
+};
+}  // namespace
+
+TEST_F(DncNodeTest, SendsAProgramByServiceAndTheControlStoresIt)
+{
+  const std::string contents = readFile(param("program"));
+  writeProgram("O05555.nc", contents);
+  cnc_bridge::SendProgram srv;
+  srv.request.file = "O05555.nc";
+  ASSERT_TRUE(send_.call(srv));
+  EXPECT_TRUE(srv.response.success) << srv.response.message;
+  EXPECT_EQ(srv.response.bytes, contents.size());
+  EXPECT_EQ(srv.response.blocks, 8u);
+  // The simulated Haas answers EOT with CAN CAN CAN, which the result reports as complete.
+  EXPECT_NE(srv.response.message.find("CAN"), std::string::npos) << srv.response.message;
+  ASSERT_TRUE(waitForFile(control_dir_ + "/O05555.nc", 10));
+  EXPECT_EQ(readFile(control_dir_ + "/O05555.nc"), contents);
+}
+
+TEST_F(DncNodeTest, ReceivesAProgramByServiceInChecksumAndCrcFallbackModes)
+{
+  for (const std::string protocol : {"", "xmodem-crc"})
+  {
+    cnc_bridge::ReceiveProgram srv;
+    srv.request.file = "from_haas" + protocol + ".nc";
+    srv.request.protocol = protocol;
+    ASSERT_TRUE(receive_.call(srv));
+    EXPECT_TRUE(srv.response.success) << srv.response.message;
+    EXPECT_EQ(readFile(program_dir_ + "/" + srv.request.file), readFile(param("program")));
+    EXPECT_EQ(srv.response.blocks, 8u);
+  }
+}
+
+TEST_F(DncNodeTest, TransferActionGivesFeedbackAndAResult)
+{
+  const std::string contents = program(20000);
+  writeProgram("O01234.nc", contents);
+  actionlib::SimpleActionClient<cnc_bridge::TransferAction> client(nh_, "dnc_node/transfer", true);
+  ASSERT_TRUE(client.waitForServer(ros::Duration(30)));
+  cnc_bridge::TransferGoal goal;
+  goal.direction = cnc_bridge::TransferGoal::DIRECTION_SEND;
+  goal.file = "O01234.nc";
+  std::vector<cnc_bridge::TransferFeedback> feedback;
+  client.sendGoal(goal, {}, {}, [&](const cnc_bridge::TransferFeedbackConstPtr& f) { feedback.push_back(*f); });
+  ASSERT_TRUE(client.waitForResult(ros::Duration(60)));
+  EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client.getState().getText();
+  const auto result = client.getResult();
+  EXPECT_TRUE(result->success);
+  EXPECT_EQ(result->bytes, contents.size());
+  ASSERT_FALSE(feedback.empty());
+  EXPECT_EQ(feedback.back().bytes, feedback.back().total);
+  EXPECT_FLOAT_EQ(feedback.back().percent, 100.0f);
+  EXPECT_GT(feedback.back().block, 100u);
+  ASSERT_TRUE(waitForFile(control_dir_ + "/O01234.nc", 10));
+  EXPECT_EQ(readFile(control_dir_ + "/O01234.nc"), contents);
+}
+
+TEST_F(DncNodeTest, CancelStopsATransferAndASecondRequestMeanwhileIsRefused)
+{
+  writeProgram("O04321.nc", program(200000));  // ~18 s at 115200 baud: plenty of time to cancel
+  writeProgram("small.nc", "%\nO1\nM30\n%\n");
+  actionlib::SimpleActionClient<cnc_bridge::TransferAction> client(nh_, "dnc_node/transfer", true);
+  ASSERT_TRUE(client.waitForServer(ros::Duration(30)));
+  cnc_bridge::TransferGoal goal;
+  goal.direction = cnc_bridge::TransferGoal::DIRECTION_SEND;
+  goal.file = "O04321.nc";
+  std::mutex m;
+  std::condition_variable cv;
+  bool got_feedback = false;
+  client.sendGoal(goal, {}, {},
+                  [&](const cnc_bridge::TransferFeedbackConstPtr&)
+                  {
+                    std::lock_guard<std::mutex> lock(m);
+                    got_feedback = true;
+                    cv.notify_all();
+                  });
+  {
+    std::unique_lock<std::mutex> lock(m);
+    ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(30), [&] { return got_feedback; }));
+  }
+  cnc_bridge::SendProgram busy;
+  busy.request.file = "small.nc";
+  ASSERT_TRUE(send_.call(busy));
+  EXPECT_FALSE(busy.response.success);
+  EXPECT_NE(busy.response.message.find("another transfer"), std::string::npos) << busy.response.message;
+
+  client.cancelGoal();
+  ASSERT_TRUE(client.waitForResult(ros::Duration(20)));
+  EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::PREEMPTED) << client.getState().getText();
+  EXPECT_NE(client.getResult()->message.find("cancelled"), std::string::npos) << client.getResult()->message;
+  EXPECT_FALSE(exists(control_dir_ + "/O04321.nc"));  // the control got CANs and stored nothing
+
+  // The state showed the transfer as active with the program's name while it ran.
+  bool saw_active = false;
+  for (const auto& s : states())
+    saw_active = saw_active || (s.execution == MachineState::EXECUTION_ACTIVE && s.program == "O04321.nc" &&
+                                s.mode == MachineState::MODE_DNC);
+  EXPECT_TRUE(saw_active);
+
+  // The link is usable again at once.
+  cnc_bridge::SendProgram again;
+  again.request.file = "small.nc";
+  ASSERT_TRUE(send_.call(again));
+  EXPECT_TRUE(again.response.success) << again.response.message;
+}
+
+TEST_F(DncNodeTest, FilesOutsideTheProgramDirectoryAreRefused)
+{
+  ASSERT_EQ(::symlink("/etc/hostname", (program_dir_ + "/escape.nc").c_str()), 0);
+  for (const std::string name : {"../../etc/passwd", "/etc/hostname", "escape.nc", "missing.nc"})
+  {
+    cnc_bridge::SendProgram srv;
+    srv.request.file = name;
+    ASSERT_TRUE(send_.call(srv));
+    EXPECT_FALSE(srv.response.success) << name;
+    EXPECT_EQ(srv.response.message.rfind("refused", 0), 0u) << srv.response.message;
+  }
+  for (const std::string name : {"../outside.nc", "/tmp/outside.nc", "escape.nc"})
+  {
+    cnc_bridge::ReceiveProgram srv;
+    srv.request.file = name;
+    ASSERT_TRUE(receive_.call(srv));
+    EXPECT_FALSE(srv.response.success) << name;
+    EXPECT_EQ(srv.response.message.rfind("refused", 0), 0u) << srv.response.message;
+  }
+  cnc_bridge::SendProgram bad_protocol;
+  bad_protocol.request.file = "small.nc";
+  bad_protocol.request.protocol = "zmodem";
+  ASSERT_TRUE(send_.call(bad_protocol));
+  EXPECT_FALSE(bad_protocol.response.success);
+  EXPECT_NE(bad_protocol.response.message.find("unknown protocol"), std::string::npos);
+}
+
+int main(int argc, char** argv)
+{
+  ::testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_dnc_node");
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+  return RUN_ALL_TESTS();
+}
