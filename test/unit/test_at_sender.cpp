@@ -78,7 +78,9 @@ TEST_F(Fixture, AnOperationIsWrittenInTheSeedsOrder)
   EXPECT_EQ(sender.sequencer().phase(), Phase::kIdle);
   EXPECT_EQ(sender.sequencer().spindle(), 0);
   EXPECT_EQ(sender.stats().setpoints, steps);
-  EXPECT_EQ(sender.stats().underruns + 0, sender.stats().underruns);  // counted, not asserted (timing)
+  // Intervals were measured (their values depend on the machine's load: the benchmark reports them).
+  EXPECT_GT(sender.stats().interval_max, 0.0);
+  EXPECT_LE(sender.stats().underruns, steps);
 }
 
 TEST_F(Fixture, CommandsAreCheckedAndWrittenInOrder)
