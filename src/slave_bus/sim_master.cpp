@@ -219,41 +219,46 @@ void SimMaster::run(StopSignal& stop)
   auto last_byte = std::chrono::steady_clock::now();
   while (!stop.stopped())
   {
-    size_t n = 0;
     try
     {
-      n = link_.read(buffer.data(), buffer.size(), Milliseconds(20));
+      serveOnce(buffer, last_byte);
     }
     catch (const CancelledError&)
     {
-      continue;  // the stop handler interrupted us: the loop condition decides
+      // The stop handler interrupted a read or a write: the loop condition decides. (A write can
+      // see the interrupt after its bytes went out; on stop nothing more is owed to the PC.)
     }
-    const auto now = std::chrono::steady_clock::now();
-    if (n > 0)
+  }
+}
+
+void SimMaster::serveOnce(std::vector<uint8_t>& buffer, std::chrono::steady_clock::time_point& last_byte)
+{
+  const size_t n = link_.read(buffer.data(), buffer.size(), Milliseconds(20));
+  const auto now = std::chrono::steady_clock::now();
+  if (n > 0)
+  {
+    last_byte = now;
+    processInput(buffer.data(), n);
+  }
+  else if (options_.resync_gap.count() > 0 && now - last_byte >= options_.resync_gap)
+  {
+    if (options_.framing == Framing::kRaw && receiver_.reset())
     {
-      last_byte = now;
-      processInput(buffer.data(), n);
+      ++stats_.resyncs;
     }
-    else if (options_.resync_gap.count() > 0 && now - last_byte >= options_.resync_gap)
+    else if (options_.framing == Framing::kFramed && unpacker_.pending() > 0)
     {
-      if (options_.framing == Framing::kRaw && receiver_.reset())
-      {
-        ++stats_.resyncs;
-      }
-      else if (options_.framing == Framing::kFramed && unpacker_.pending() > 0)
-      {
-        ++stats_.resyncs;
-        const auto before = unpacker_.stats();
-        const auto frames = unpacker_.resync();
-        processFrames(frames, before);
-        flushUplink();
-      }
+      ++stats_.resyncs;
+      const auto before = unpacker_.stats();
+      const auto frames = unpacker_.resync();
+      processFrames(frames, before);
+      flushUplink();
     }
-    // The seed's master polls its slaves only between frames.
-    if (receiver_.idle())
-    {
-      pollSlaves();
-    }
+  }
+  // The seed's master polls its slaves only between frames.
+  if (receiver_.idle())
+  {
+    pollSlaves();
   }
 }
 }  // namespace slave_bus

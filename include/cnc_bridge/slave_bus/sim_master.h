@@ -98,6 +98,7 @@ class SimMaster
   const Stats& stats() const { return stats_; }
 
  private:
+  void serveOnce(std::vector<uint8_t>& buffer, std::chrono::steady_clock::time_point& last_byte);
   void deliver(const StepReceiver::Delivery& delivery);
   void processFrames(const std::vector<std::vector<uint8_t>>& frames, const WireStreamUnpacker::Stats& before);
   void sendStatus(MasterStatus status, int address = -1);
