@@ -196,13 +196,17 @@ def follow_path(machine, args):
 def step_bus(machine, args):
     responses = []
     sub = rospy.Subscriber(machine.ns + "/slaves/x/response", SlaveResponse, responses.append)
-    pub_x = rospy.Publisher(machine.ns + "/slaves/x/command", SlaveCommand, queue_size=10)
-    pub_y = rospy.Publisher(machine.ns + "/slaves/y/command", SlaveCommand, queue_size=10)
+    axes = {axis: rospy.Publisher(machine.ns + "/slaves/%s/command" % axis, SlaveCommand, queue_size=10)
+            for axis in ("x", "y", "z", "laser")}
     time.sleep(1.0)  # let the node connect to the new publishers
     corners = [(0.02, 0.0), (0.02, 0.02), (0.0, 0.02), (0.0, 0.0)]
-    for x, y in corners:
-        pub_x.publish(SlaveCommand(values=[x]))
-        pub_y.publish(SlaveCommand(values=[y]))
+    for number, (x, y) in enumerate(corners):
+        # One step: every axis and the laser in the same frame (the node queues commands
+        # published together into one frame), the laser on while cutting the square's sides.
+        axes["x"].publish(SlaveCommand(values=[x]))
+        axes["y"].publish(SlaveCommand(values=[y]))
+        axes["z"].publish(SlaveCommand(values=[0.0]))
+        axes["laser"].publish(SlaveCommand(values=[1 if number < len(corners) - 1 else 0]))
         deadline = time.time() + 10
         while time.time() < deadline:
             state = machine.states.get("slave_bus_node")
@@ -212,7 +216,8 @@ def step_bus(machine, args):
         else:
             raise RuntimeError("axes did not reach (%.0f, %.0f) mm" % (x * 1e3, y * 1e3))
     sub.unregister()
-    say("%s: bus stepped the axes around a 20 mm square; %d responses from slave x" % (machine.name, len(responses)))
+    say("%s: bus stepped x, y, z and the laser around a 20 mm square; %d answers from slave x" % (
+        machine.name, len(responses)))
 
 
 STEPS = [("dnc_node", send_program), ("dprnt_node", probe_surface), ("ethernut_node", run_job),
