@@ -26,7 +26,8 @@ export ASAN_OPTIONS=detect_leaks=1:abort_on_error=0 UBSAN_OPTIONS=print_stacktra
 for test in "$build"/bin/test_*; do
   [[ -x "$test" ]] || continue
   name=$(basename "$test")
-  "$test" --gtest_output="xml:$results/asan_$name.xml" >"$build/$name.log" 2>&1 \
+  # A hung test must not hold up the whole run: it fails after SANITIZER_TEST_TIMEOUT seconds.
+  timeout -k 10 "${SANITIZER_TEST_TIMEOUT:-600}" "$test" --gtest_output="xml:$results/asan_$name.xml" >"$build/$name.log" 2>&1 \
     || { status=1; echo "sanitizer run failed: $name (log: $build/$name.log)"; tail -20 "$build/$name.log"; }
   # A sanitizer abort leaves no XML: count it as a failure.
   [[ -f "$results/asan_$name.xml" ]] || echo "<testsuite name=\"asan_$name\" errors=\"1\"></testsuite>" >"$results/asan_$name.xml"
