@@ -249,7 +249,11 @@ Stats Sender::send(const std::vector<uint8_t>& payload, const ProgressCallback& 
         link_.write(packet);
         const Reply reply = waitForReply(block == 1, config_.ack_timeout);
         if (reply == Reply::kAck)
+        {
+          if (config_.ack_turnaround.count() > 0)
+            link_.purge(config_.ack_turnaround, config_.ack_turnaround * 4);
           break;
+        }
         if (reply == Reply::kCancel)
           abort("the receiver cancelled (CAN CAN) at block " + std::to_string(block), false, false);
         if (reply == Reply::kTimeout)

@@ -140,6 +140,10 @@ void sendTo(const std::vector<std::string>& peer_argv, bool peer_on_stdio, Mode 
   Peer peer(argv, dir.path, peer_on_stdio ? pty.slavePath() : "");
   Config config;
   config.eot_timeout = Milliseconds(1500);  // rx answers EOT after 1 s of silence
+  // rx writes NAK and then flushes its tty input; a packet that crosses before that flush is lost.
+  // A generous quiet time before answering keeps this deterministic on a loaded machine.
+  config.turnaround = Milliseconds(250);
+  config.ack_turnaround = Milliseconds(5);  // rx flushes its input after every ACK as well
   config.eot_retries = 1;
   Sender sender(pty, mode, config);
   try

@@ -57,6 +57,10 @@ struct Config
   /// sending (what arrives meanwhile is dropped). lrzsz `rx` flushes its input right after it
   /// writes NAK, so a packet sent the instant the NAK arrives can be thrown away by the receiver.
   Milliseconds turnaround{30};
+  /// Sender: pause this long after each ACK before the next packet (0: none). lrzsz `rx` also
+  /// flushes its input right after every ACK; on a pty (no line delay) a packet sent the instant
+  /// the ACK arrives can be lost to that flush and cost a 10 s timeout. A real serial line needs 0.
+  Milliseconds ack_turnaround{0};
   /// Both: errors in a row on one block (NAKs, timeouts, garbled packets) before the transfer aborts.
   unsigned max_retries = 10;
   /// Sender: wait this long for the answer to EOT (lrzsz `rx` answers after 1 s of silence).
