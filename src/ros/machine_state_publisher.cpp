@@ -146,13 +146,14 @@ void MachineStatePublisher::publishLocked(const ros::Time& now)
   {
     return;
   }
+  // Joints and tf are stamped "now": a machine standing still reports nothing new, yet its frames
+  // must stay fresh for tf buffers (robot_state_publisher stamps the links with this stamp).
   sensor_msgs::JointState joints;
-  joints.header.stamp = state_.header.stamp;
+  joints.header.stamp = now;
   joints.name = {frame("x_axis"), frame("y_axis"), frame("z_axis")};
   joints.position = {state_.position.x, state_.position.y, state_.position.z};
   joint_pub_.publish(joints);
 
-  // tf stamps are "now" so that the frames stay fresh between device reports.
   tf_broadcaster_.sendTransform(translation(now, frame("machine"), frame("tool"), state_.position));
   if (state_.work_offset_valid)
   {
