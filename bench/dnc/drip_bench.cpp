@@ -71,6 +71,7 @@ int main(int argc, char** argv)
   std::string dir = "/tmp";
   sim::DripControlOptions control;
   control.execution_cps = 0;
+  control.realtime = true;  // as a control's UART: see DripControlOptions::realtime
   po::options_description options("dnc_drip_bench");
   options.add_options()("bytes", po::value(&bytes)->default_value(bytes), "program size")(
       "baud", po::value(&baud)->default_value(baud), "host pacing (0 = none)")(
@@ -121,13 +122,15 @@ int main(int argc, char** argv)
     const double cps = static_cast<double>(result.bytes) / elapsed;
     std::printf(
         "bytes_file=%llu bytes_sent=%llu seconds=%.3f chars_per_s=%.0f line_cps=%.0f line_fraction=%.4f "
-        "xoff=%llu max_after_xoff=%llu max_in_flight=%llu overruns=%llu rss_start_kb=%ld rss_after_scan_kb=%ld "
+        "xoff=%llu max_after_xoff=%llu max_in_flight=%llu overruns=%llu overflow=%llu rss_start_kb=%ld "
+        "rss_after_scan_kb=%ld "
         "rss_end_kb=%ld hwm_kb=%ld outcome=%s\n",
         static_cast<unsigned long long>(bytes), static_cast<unsigned long long>(result.bytes), elapsed, cps,
         drip.pace_cps, drip.pace_cps > 0 ? cps / drip.pace_cps : 0.0,
         static_cast<unsigned long long>(stats.xoff_events), static_cast<unsigned long long>(stats.max_after_xoff),
         static_cast<unsigned long long>(stats.max_in_flight), static_cast<unsigned long long>(stats.overruns),
-        rss_before, rss_planned, statusKb("VmRSS:"), statusKb("VmHWM:"),
+        static_cast<unsigned long long>(stats.overflow), rss_before, rss_planned, statusKb("VmRSS:"),
+        statusKb("VmHWM:"),
         result.completed() ? "completed"
                            : (result.outcome == dnc::DripResult::Outcome::kCancelled ? "cancelled" : "failed"));
     if (result.outcome == dnc::DripResult::Outcome::kFailed)

@@ -29,7 +29,7 @@ awk -v s="$hwm_small" -v l="$hwm_large" 'BEGIN { g = (l - s) / 1024.0;
   printf "peak RSS 1 MB: %.1f MB, 1 GB: %.1f MB, growth %.2f MB vs target < 5 MB: ratio %.3f\n", s / 1024.0, l / 1024.0, g, g / 5.0 }'
 
 echo "--- 2. characters after XOFF at 115200, worst case"
-xoff=$("$bench" --bytes 60000 --baud 115200 --buffer 64 --high 40 --low 20 --exec-rate 6000)
+xoff=$("$bench" --bytes 90000 --baud 115200 --buffer 64 --high 40 --low 20 --exec-rate 6000)
 echo "$xoff"
 events=$(field xoff "$xoff")
 after=$(field max_after_xoff "$xoff")

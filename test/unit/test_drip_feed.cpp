@@ -310,10 +310,12 @@ EndToEnd runEndToEnd(const DripPlan& plan, const DripOptions& options, const sim
   PtyMaster pty;
   StopSignal stop;
   EndToEnd out;
+  sim::DripControlOptions rt_control = control;
+  rt_control.realtime = true;
   std::thread control_thread(
       [&]
       {
-        out.stats = sim::runDripControl(pty, control, stop,
+        out.stats = sim::runDripControl(pty, rt_control, stop,
                                         [&](const uint8_t* data, size_t size)
                                         { out.received.append(reinterpret_cast<const char*>(data), size); });
       });
@@ -348,12 +350,16 @@ TEST_P(DripEndToEnd, ProgramSeveralTimesTheBufferArrivesWholeInOrderWithoutOverr
   const unsigned baud = GetParam();
   TempDir dir;
   // A few kilobytes (a few seconds at 9600), several times the control's buffer.
-  const std::string program = generateProgram(baud <= 9600 ? 70 : 110);
+  const std::string program = generateProgram(baud <= 9600 ? 70 : 150);
   const auto path = dir.write("p.nc", program);
   DripOptions options;
   options.pace_cps = baud / 10.0;
   sim::DripControlOptions control;
-  control.buffer_size = 256;
+  // The control holds the host at 192 characters. Above that there is room for all a pty can
+  // queue (4 KiB) while this test's control thread waits for a CPU on a loaded machine: a real
+  // control's UART takes characters as they arrive whatever the load, so what the pty queued
+  // meanwhile is not the host's doing and must not be lost.
+  control.buffer_size = 192 + 4096 + 64;
   control.high_mark = 192;
   control.low_mark = 64;
   // The control executes slower than the line carries, and slower than even a host starved of CPU
@@ -363,7 +369,7 @@ TEST_P(DripEndToEnd, ProgramSeveralTimesTheBufferArrivesWholeInOrderWithoutOverr
   settings.baud = baud;
   const auto run = runEndToEnd(planDrip(path, options), options, control, settings);
   ASSERT_TRUE(run.result.completed()) << run.result.message;
-  EXPECT_GT(program.size(), 4 * control.buffer_size);
+  EXPECT_GT(program.size(), 9 * control.high_mark);
   EXPECT_EQ(program, run.received);
   EXPECT_TRUE(run.stats.program_complete);
   EXPECT_GE(run.stats.xoff_events, 3u) << run.stats.summary();
@@ -371,7 +377,8 @@ TEST_P(DripEndToEnd, ProgramSeveralTimesTheBufferArrivesWholeInOrderWithoutOverr
   EXPECT_EQ(0u, run.stats.overflow) << run.stats.summary();
   EXPECT_LE(run.stats.max_after_xoff, options.chunk) << run.stats.summary();  // poll, then one write
   EXPECT_TRUE(run.ever_held);
-  EXPECT_EQ(run.stats.xoff_events, run.result.xoff_events);
+  EXPECT_LE(run.result.xoff_events, run.stats.xoff_events);  // the last XOFF may follow the last byte
+  EXPECT_GE(run.result.xoff_events + 1, run.stats.xoff_events);
 }
 
 INSTANTIATE_TEST_SUITE_P(Pacing, DripEndToEnd, ::testing::Values(9600u, 115200u),
@@ -381,12 +388,12 @@ INSTANTIATE_TEST_SUITE_P(Pacing, DripEndToEnd, ::testing::Values(9600u, 115200u)
 TEST(DripEndToEnd7E1, ParityMaskedXoffIsHonouredOnA7E1Link)
 {
   TempDir dir;
-  const std::string program = generateProgram(80);
+  const std::string program = generateProgram(100);  // 3 KB, 4 times the buffer
   const auto path = dir.write("p.nc", program);
   DripOptions options;
   options.pace_cps = 115200 / 10.0;  // 1 start + 7 data + parity + 1 stop
   sim::DripControlOptions control;
-  control.buffer_size = 256;
+  control.buffer_size = 192 + 4096 + 64;  // room above the XOFF mark, as in the test above
   control.high_mark = 192;
   control.low_mark = 64;
   control.execution_cps = 1000;  // well below what the host sends, even on a loaded machine
@@ -399,7 +406,9 @@ TEST(DripEndToEnd7E1, ParityMaskedXoffIsHonouredOnA7E1Link)
   ASSERT_TRUE(run.result.completed()) << run.result.message;
   EXPECT_EQ(program, run.received);
   EXPECT_GE(run.stats.xoff_events, 3u);
-  EXPECT_EQ(run.stats.xoff_events, run.result.xoff_events);  // every 0x93 was seen as XOFF
+  // Every 0x93 was taken as XOFF, but the last may come after the host has sent its last byte.
+  EXPECT_LE(run.result.xoff_events, run.stats.xoff_events);
+  EXPECT_GE(run.result.xoff_events + 1, run.stats.xoff_events);
   EXPECT_EQ(0u, run.stats.overruns) << run.stats.summary();
   EXPECT_EQ(0u, run.stats.parity_errors);
 }

@@ -1,4 +1,7 @@
 // The simulated control of a drip-feed: buffer, execution rate, XON/XOFF marks, overrun counting.
+#include <pthread.h>
+#include <sched.h>
+
 #include <cmath>
 #include <sstream>
 #include <vector>
@@ -24,6 +27,12 @@ DripControlStats runDripControl(Transport& link, const DripControlOptions& optio
 {
   using Clock = std::chrono::steady_clock;
   DripControlStats stats;
+  if (options.realtime)
+  {
+    sched_param param{};
+    param.sched_priority = 10;
+    pthread_setschedparam(pthread_self(), SCHED_FIFO, &param);  // best effort: EPERM keeps the default
+  }
   const auto code = [&](uint8_t c) { return options.seven_e1 ? dnc::withEvenParity(c) : c; };
   if (options.send_dc1_at_start)
   {

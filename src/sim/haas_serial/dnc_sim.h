@@ -31,6 +31,11 @@ struct DripControlOptions
   bool seven_e1 = false;           ///< send DC1/DC3 with the even-parity bit set, mask it on input
   bool stop_at_end = true;         ///< return after the second '%'
   bool send_dc1_at_start = false;  ///< send DC1 ("reader start") once ready, as a Fanuc in DNC mode does
+  /// Run the receiving thread at real-time priority (SCHED_FIFO) when the system allows it: a
+  /// control's UART takes every character as it arrives, while a thread of a loaded machine can
+  /// wait long enough for the pty to queue hundreds of characters, which would then count as
+  /// overflow. Ignored (the normal priority kept) when not permitted.
+  bool realtime = false;
 };
 
 struct DripControlStats

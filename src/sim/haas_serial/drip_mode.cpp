@@ -42,6 +42,7 @@ int runDripMode(const std::vector<std::string>& args)
                                                         po::value(&control.allowance)->default_value(control.allowance),
                                                         "characters accepted after XOFF before they count as overruns")(
       "dc1-at-start", po::bool_switch(&control.send_dc1_at_start), "send DC1 (reader start) when ready")(
+      "realtime", po::bool_switch(&control.realtime), "receive at real-time priority when permitted")(
       "output", po::value(&output_path), "write every character received (parity masked) to this file")(
       "stats", po::value(&stats_path), "write the exit report to this file (atomically) after each program")(
       "repeat", po::bool_switch(&repeat), "take program after program instead of exiting after the first");
