@@ -1,0 +1,203 @@
+#!/usr/bin/env python3
+"""Reliability campaign on the running demo cell: kill a simulator at random (SIGKILL, as a
+machine losing power or a cable pulled), again and again, while the cell works.
+
+For every kill: the machine's node must report the link loss in `state` (link not UP) and come
+back UP after the simulator is respawned, and no node process may die. Meanwhile XModem transfers
+run against the Haas's RS-232 simulator, which is killed too: every transfer that reports success
+must have delivered exactly the file (checked byte for byte in the simulated control's memory).
+
+  cell_chaos.py --kills 50 --seed 7 --programs DIR --memory DIR      (rostest: ~kills, ~seed, ...)
+"""
+import argparse
+import os
+import random
+import signal
+import subprocess
+import sys
+import threading
+import time
+import unittest
+
+import actionlib
+import rosnode
+import rospy
+
+from cnc_bridge.msg import MachineState, TransferAction, TransferGoal
+
+# Simulator command line (as the cell launches it) -> the state topic that must show its loss.
+TARGETS = [
+    ("sim_haas_mdc --port 25051", "/cell/haas_vf2/state"),
+    ("sim_haas_serial dprnt --tcp 25052", "/cell/haas_vf2/dprnt/state"),
+    ("sim_ethernut --port 26666", "/cell/ethernut_mill/state"),
+    ("sim_at_controller --command-port 25000", "/cell/at_router/state"),
+    ("sim_slave_bus --link /tmp/cnc_cell_laser_bus", "/cell/laser/state"),
+    ("sim_haas_serial xmodem", None),  # the transfer loop checks this one
+]
+NODES = ["/cell/haas_vf2/haas_mdc_node", "/cell/haas_vf2/dnc_node", "/cell/haas_vf2/dprnt_node",
+         "/cell/ethernut_mill/ethernut_node", "/cell/at_router/at_controller_node", "/cell/laser/slave_bus_node"]
+
+
+class LinkWatch:
+    """Every link value a state topic carried, with its arrival time."""
+
+    def __init__(self, topic):
+        self.history = []
+        self.lock = threading.Lock()
+        self.sub = rospy.Subscriber(topic, MachineState, self._on_state, queue_size=100)
+
+    def _on_state(self, state):
+        with self.lock:
+            self.history.append((time.time(), state.link))
+
+    def down_then_up_after(self, since, timeout):
+        """(seconds to DOWN, seconds to UP again) after `since`, or None where not seen in time."""
+        deadline = since + timeout
+        down = up = None
+        while time.time() < deadline:
+            with self.lock:
+                for stamp, link in self.history:
+                    if stamp < since:
+                        continue
+                    if down is None and link != MachineState.LINK_UP:
+                        down = stamp - since
+                    elif down is not None and link == MachineState.LINK_UP:
+                        up = stamp - since
+                        break
+            if up is not None:
+                break
+            time.sleep(0.05)
+        return down, up
+
+
+def pids_of(pattern):
+    out = subprocess.run(["pgrep", "-f", pattern], capture_output=True, text=True).stdout
+    return [int(p) for p in out.split() if int(p) != os.getpid()]
+
+
+class TransferLoop(threading.Thread):
+    """Sends a program again and again; checks each reported success against what arrived."""
+
+    def __init__(self, programs, memory):
+        super().__init__(daemon=True)
+        self.programs, self.memory = programs, memory
+        self.successes = self.failures = 0
+        self.false_successes = []
+        self.stop = threading.Event()
+
+    def run(self):
+        client = actionlib.SimpleActionClient("/cell/haas_vf2/dnc_node/transfer", TransferAction)
+        if not client.wait_for_server(rospy.Duration(30)):
+            self.false_successes.append("no transfer action server")
+            return
+        number = 0
+        while not self.stop.is_set():
+            number += 1
+            name = "O%05d.nc" % (7000 + number % 1000)
+            body = "%%\nO%05d (chaos %d)\n" % (7000 + number % 1000, number) + "".join(
+                "N%d G01 X%.3f Y%.3f F100.\n" % (10 * i, random.uniform(-5, 5), random.uniform(-5, 5)) for i in range(60)) + "M30\n%\n"
+            with open(os.path.join(self.programs, name), "w") as f:
+                f.write(body)
+            stored = os.path.join(self.memory, name)
+            if os.path.exists(stored):
+                os.unlink(stored)
+            client.send_goal(TransferGoal(direction="send", protocol="xmodem", file=name))
+            if not client.wait_for_result(rospy.Duration(120)):
+                client.cancel_goal()
+                self.failures += 1
+                continue
+            result = client.get_result()
+            if result.success:
+                self.successes += 1
+                # The control files a program once the transfer has ended: give it a moment.
+                arrived = None
+                deadline = time.time() + 5.0
+                while time.time() < deadline:
+                    arrived = open(stored).read() if os.path.exists(stored) else None
+                    if arrived == body:
+                        break
+                    time.sleep(0.05)
+                if arrived != body:
+                    self.false_successes.append("%s reported sent but %s" % (
+                        name, "never arrived" if arrived is None else "arrived different (%d of %d bytes)" % (len(arrived), len(body))))
+            else:
+                self.failures += 1
+
+
+class CellChaos(unittest.TestCase):
+    def test_nodes_survive_simulator_kills(self):
+        kills = rospy.get_param("~kills", ARGS.kills)
+        seed = rospy.get_param("~seed", ARGS.seed)
+        recover = rospy.get_param("~recover_timeout", ARGS.recover_timeout)
+        rng = random.Random(seed)
+        watches = {topic: LinkWatch(topic) for _, topic in TARGETS if topic}
+        for topic in watches:
+            rospy.wait_for_message(topic, MachineState, timeout=60)
+        for _, topic in TARGETS:
+            if topic:
+                self.wait_up(topic, 60)
+        node_pids = {}
+        for node in NODES:
+            self.assertTrue(rosnode.rosnode_ping(node, max_count=1), "%s is not running at the start" % node)
+        transfers = TransferLoop(ARGS.programs, ARGS.memory)
+        transfers.start()
+        problems = []
+        for kill in range(kills):
+            pattern, topic = rng.choice(TARGETS)
+            pids = pids_of(pattern)
+            if not pids:
+                problems.append("kill %d: %s not running (not respawned?)" % (kill, pattern))
+                time.sleep(2.0)
+                continue
+            since = time.time()
+            for pid in pids:
+                os.kill(pid, signal.SIGKILL)
+            if topic:
+                down, up = watches[topic].down_then_up_after(since, recover)
+                rospy.loginfo("kill %d: %s: link down after %s s, up again after %s s", kill, pattern,
+                              "%.2f" % down if down is not None else "-", "%.2f" % up if up is not None else "-")
+                if down is None:
+                    problems.append("kill %d: %s: %s never showed the link down" % (kill, pattern, topic))
+                elif up is None:
+                    problems.append("kill %d: %s: %s did not come back UP within %d s" % (kill, pattern, topic, recover))
+            else:
+                rospy.loginfo("kill %d: %s (transfers: %d ok, %d failed)", kill, pattern, transfers.successes, transfers.failures)
+                time.sleep(rng.uniform(0.5, 2.0))
+            for node in NODES:
+                if not rosnode.rosnode_ping(node, max_count=1):
+                    problems.append("kill %d: node %s died" % (kill, node))
+        transfers.stop.set()
+        transfers.join(150)
+        rospy.loginfo("%d kills; transfers: %d succeeded (all verified), %d failed as they should when cut",
+                      kills, transfers.successes, transfers.failures)
+        self.assertEqual(transfers.false_successes, [], "a transfer reported success for data that did not arrive")
+        self.assertEqual(problems, [])
+        self.assertGreater(transfers.successes, 0, "no transfer succeeded at all between kills")
+
+    def wait_up(self, topic, timeout):
+        deadline = time.time() + timeout
+        while time.time() < deadline:
+            state = rospy.wait_for_message(topic, MachineState, timeout=timeout)
+            if state.link == MachineState.LINK_UP:
+                return
+            time.sleep(0.2)
+        self.fail("%s not UP at the start" % topic)
+
+
+def parse():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--kills", type=int, default=5)
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--recover-timeout", type=float, default=30.0)
+    parser.add_argument("--programs", default=os.path.join(os.environ.get("CNC_DEMO_DIR", "/tmp/cnc_cell"), "programs"))
+    parser.add_argument("--memory", default=os.path.join(os.environ.get("CNC_DEMO_DIR", "/tmp/cnc_cell"), "haas_vf2_memory"))
+    args, _ = parser.parse_known_args(rospy.myargv()[1:])
+    return args
+
+
+ARGS = None
+if __name__ == "__main__":
+    import rostest
+    rospy.init_node("cell_chaos")
+    ARGS = parse()
+    rostest.rosrun("cnc_bridge", "cell_chaos", CellChaos, sys.argv)
