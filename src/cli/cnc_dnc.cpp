@@ -21,6 +21,7 @@
 #include "cnc_bridge/sim/sim_support.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
+#include "progress_line.h"
 
 namespace po = boost::program_options;
 using namespace cnc_bridge;
@@ -94,57 +95,15 @@ po::variables_map parse(const std::string& command, const std::vector<std::strin
   return vm;
 }
 
-/// Progress on stderr: a bar redrawn in place on a terminal, a plain line now and then otherwise
-/// (a log or a pipe should not fill with carriage returns).
-class ProgressPrinter
+/// The progress of an XModem transfer on a ProgressLine.
+std::function<void(const xmodem::Progress&)> showOn(cli::ProgressLine& line)
 {
- public:
-  explicit ProgressPrinter(const std::string& what) : what_(what), tty_(::isatty(STDERR_FILENO) == 1) {}
-  ~ProgressPrinter() { finish(); }
-
-  void operator()(const xmodem::Progress& p)
+  return [&line](const xmodem::Progress& p)
   {
-    const auto now = std::chrono::steady_clock::now();
-    const bool last = p.total > 0 && p.bytes >= p.total;
-    if (!last && now - last_ < (tty_ ? std::chrono::milliseconds(100) : std::chrono::milliseconds(1000)))
-      return;
-    last_ = now;
-    if (tty_)
-    {
-      const int width = 30;
-      const double fraction = p.total > 0 ? static_cast<double>(p.bytes) / p.total : 0.0;
-      std::string bar(width, ' ');
-      for (int i = 0; i < static_cast<int>(fraction * width); ++i)
-        bar[i] = '#';
-      if (p.total > 0)
-        std::fprintf(stderr, "\r%s [%s] %3.0f%% %llu/%llu bytes, block %u, %u retries ", what_.c_str(), bar.c_str(),
-                     100 * fraction, static_cast<unsigned long long>(p.bytes), static_cast<unsigned long long>(p.total),
-                     p.block, p.retries);
-      else
-        std::fprintf(stderr, "\r%s %llu bytes, block %u, %u retries ", what_.c_str(),
-                     static_cast<unsigned long long>(p.bytes), p.block, p.retries);
-      drawn_ = true;
-    }
-    else
-    {
-      std::fprintf(stderr, "%s: %llu bytes, block %u, %u retries\n", what_.c_str(),
-                   static_cast<unsigned long long>(p.bytes), p.block, p.retries);
-    }
-  }
-
-  void finish()
-  {
-    if (drawn_)
-      std::fputc('\n', stderr);
-    drawn_ = false;
-  }
-
- private:
-  std::string what_;
-  bool tty_;
-  bool drawn_ = false;
-  std::chrono::steady_clock::time_point last_{};
-};
+    line.show(p.bytes, p.total, "block " + std::to_string(p.block) + ", " + std::to_string(p.retries) + " retries",
+              p.total > 0 && p.bytes >= p.total);
+  };
+}
 
 /// Options shared by send and receive: mode, EOB, binary, timing.
 void addTransferOptions(po::options_description& options, const std::string& default_mode)
@@ -199,9 +158,9 @@ int runSend(const std::vector<std::string>& args)
   return withPort(vm,
                   [&](Transport& port, std::atomic<bool>& cancel)
                   {
-                    ProgressPrinter progress("send " + file);
+                    cli::ProgressLine progress("send " + file);
                     const xmodem::FileResult result =
-                        xmodem::sendFile(port, file, mode, config, text, std::ref(progress), &cancel);
+                        xmodem::sendFile(port, file, mode, config, text, showOn(progress), &cancel);
                     progress.finish();
                     return result.message;
                   });
@@ -229,9 +188,9 @@ int runReceive(const std::vector<std::string>& args)
   return withPort(vm,
                   [&](Transport& port, std::atomic<bool>& cancel)
                   {
-                    ProgressPrinter progress("receive " + file);
+                    cli::ProgressLine progress("receive " + file);
                     const xmodem::FileResult result =
-                        xmodem::receiveFile(port, file, mode, config, text, std::ref(progress), &cancel);
+                        xmodem::receiveFile(port, file, mode, config, text, showOn(progress), &cancel);
                     progress.finish();
                     return result.message;
                   });

@@ -24,6 +24,7 @@
 #include "cnc_bridge/sim/sim_support.h"
 #include "cnc_bridge/transport/paced_transport.h"
 #include "cnc_bridge/transport/serial_port.h"
+#include "progress_line.h"
 
 namespace po = boost::program_options;
 
@@ -99,61 +100,16 @@ Milliseconds seconds(double value)
   return Milliseconds(static_cast<int64_t>(value * 1000.0));
 }
 
-// A progress line on stderr: redrawn in place on a terminal, a plain line each second otherwise.
-class Bar
+/// Drip-feed and backup detail: the line being moved, its N number, whether the control holds us.
+std::string dripDetail(uint64_t line, const std::string& block, bool held)
 {
- public:
-  explicit Bar(std::string what) : what_(std::move(what)), tty_(::isatty(STDERR_FILENO) == 1) {}
-  void draw(uint64_t bytes, uint64_t total, uint64_t line, const std::string& block, bool held, bool force = false)
-  {
-    const auto now = std::chrono::steady_clock::now();
-    if (!force && now - last_ < (tty_ ? std::chrono::milliseconds(100) : std::chrono::milliseconds(1000)))
-      return;
-    last_ = now;
-    std::ostringstream out;
-    out << what_;
-    if (total > 0)
-    {
-      const double fraction = static_cast<double>(bytes) / static_cast<double>(total);
-      std::string bar(30, ' ');
-      for (int i = 0; i < static_cast<int>(fraction * 30); ++i)
-        bar[i] = '#';
-      char percent[16];
-      std::snprintf(percent, sizeof(percent), "%3.0f%%", 100 * fraction);
-      out << " [" << bar << "] " << percent << " " << bytes << "/" << total << " bytes";
-    }
-    else
-    {
-      out << " " << bytes << " bytes";
-    }
-    out << ", line " << line;
-    if (!block.empty())
-      out << " " << block;
-    if (held)
-      out << " HELD (XOFF)";
-    if (tty_)
-    {
-      std::fprintf(stderr, "\r%s   ", out.str().c_str());
-      drawn_ = true;
-    }
-    else
-    {
-      std::fprintf(stderr, "%s\n", out.str().c_str());
-    }
-  }
-  void finish()
-  {
-    if (drawn_)
-      std::fputc('\n', stderr);
-    drawn_ = false;
-  }
-
- private:
-  std::string what_;
-  bool tty_;
-  bool drawn_ = false;
-  std::chrono::steady_clock::time_point last_{};
-};
+  std::string detail = "line " + std::to_string(line);
+  if (!block.empty())
+    detail += " " + block;
+  if (held)
+    detail += " HELD (XOFF)";
+  return detail;
+}
 }  // namespace
 
 int runDrip(const std::vector<std::string>& args)
@@ -227,9 +183,9 @@ int runDrip(const std::vector<std::string>& args)
   drip.cancel = &cancel;
   SerialPort port(settings);
   dnc::DripSender sender(port, drip);
-  Bar bar("drip " + file);
-  const auto result =
-      sender.send(plan, [&](const dnc::DripProgress& p) { bar.draw(p.bytes, p.total, p.line, p.block, p.held); });
+  cli::ProgressLine bar("drip " + file);
+  const auto result = sender.send(
+      plan, [&](const dnc::DripProgress& p) { bar.show(p.bytes, p.total, dripDetail(p.line, p.block, p.held)); });
   bar.finish();
   if (result.completed())
   {
@@ -265,10 +221,10 @@ int runBackup(const std::vector<std::string>& args)
   SerialPort port(serialSettings(vm));
   const std::string file = vm["file"].as<std::string>();
   dnc::BackupReceiver receiver(port, backup);
-  Bar bar("backup " + file);
+  cli::ProgressLine bar("backup " + file);
   std::cerr << "waiting for the control to punch (PUNCH / SEND RS-232 on the control)...\n";
-  const auto result =
-      receiver.receive(file, [&](const dnc::BackupProgress& p) { bar.draw(p.bytes, 0, p.line, "", false); });
+  const auto result = receiver.receive(
+      file, [&](const dnc::BackupProgress& p) { bar.show(p.bytes, 0, dripDetail(p.line, "", false)); });
   bar.finish();
   std::cout << result.message << std::endl;
   return 0;
