@@ -6,7 +6,9 @@ set -uo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 root=$(cd "$here/../.." && pwd)
 source "$root/scripts/env.sh"
+set +u  # ROS setup scripts read unset variables
 source "${BUILD_DIR:-$root/.build}/devel/setup.bash"
+set -u
 count=${1:-10}
 seconds=${2:-30}
 work=$(mktemp -d /tmp/cnc_scale.XXXXXX)
