@@ -38,9 +38,7 @@ printf "%-28s %14.0f %14.1f %14.2f\n" "cnc_bridge assemble+parse" "$full" "$(ech
 printf "%-28s %14.0f %14.1f %14.2f\n" "python re (peer)" "$peer" 1 "$(echo "$peer / 1000000" | bc -l)"
 
 echo "== latency at 100 lines/s over a pty ($samples samples)"
-set +u  # ROS setup scripts read unset variables
 source "$build/devel/setup.bash"
-set -u
 set -u
 export ROS_MASTER_URI=http://127.0.0.1:$((20000 + RANDOM % 20000))
 port=${ROS_MASTER_URI##*:}

@@ -11,9 +11,7 @@ set -eo pipefail
 root=$(cd "$(dirname "$0")/../.." && pwd)
 source "$root/scripts/env.sh"
 build=${BUILD_DIR:-$root/.build}
-set +u  # ROS setup scripts read unset variables
 source "$build/devel/setup.bash"
-set -u
 set -u
 bin="$build/devel/lib/cnc_bridge"
 seconds=${MDC_BENCH_SECONDS:-10}
