@@ -81,7 +81,6 @@ int runDripMode(const std::vector<std::string>& args)
     {
       output.open(output_path, std::ios::binary | std::ios::trunc);
     }
-    DripControlStats total;
     bool bad = false;
     do
     {
