@@ -36,6 +36,8 @@ const char* toString(MasterStatus status)
       return "no such slave";
     case MasterStatus::kSlaveNoAnswer:
       return "slave did not answer";
+    case MasterStatus::kPayloadTooLong:
+      return "payload too long for one I2C frame (not delivered)";
   }
   return "unknown master status";
 }

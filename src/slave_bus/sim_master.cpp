@@ -108,6 +108,14 @@ void SimMaster::deliver(const StepReceiver::Delivery& delivery)
     sendStatus(MasterStatus::kNoSuchSlave, delivery.address);
     return;
   }
+  if (delivery.payload.size() > WirePacker::kMaxData)
+  {
+    // A raw step frame's length byte allows 255, one WirePacker frame carries 251: the master
+    // cannot forward it, so it says so rather than sending a torn I2C write.
+    ++stats_.oversize_payloads;
+    sendStatus(MasterStatus::kPayloadTooLong, delivery.address);
+    return;
+  }
   CNC_LOG_DEBUG("slave " << int(delivery.address) << " <- " << delivery.payload.size() << " bytes");
   // The real bytes of the I2C write, as I2C_send_packed() sends them.
   slaves_[delivery.address - 1].receive(WirePacker::pack(delivery.payload));

@@ -166,6 +166,23 @@ TEST(SimMaster, LongEchoIsCutToWhatTheMasterReads)
   }
 }
 
+TEST(SimMaster, PayloadLongerThanAnI2cFrameIsReportedNotDelivered)
+{
+  // Found by fuzzing: a raw length byte of 252..255 is valid on the serial link but does not fit
+  // in one WirePacker frame.
+  FakeTransport link;
+  SimMaster master(link, eightSlaves(), {});
+  Bytes frame = {5, 0, 0, 0, 0, 255};
+  frame.insert(frame.end(), 255, 0x44);
+  master.processInput(frame.data(), frame.size());
+  const auto records = parseAll(link.written(), Framing::kRaw);
+  ASSERT_EQ(records.size(), 1u);
+  EXPECT_EQ(records[0].address, 0);
+  EXPECT_EQ(records[0].payload, (Bytes{static_cast<uint8_t>(MasterStatus::kPayloadTooLong), 5}));
+  EXPECT_EQ(master.stats().oversize_payloads, 1u);
+  EXPECT_EQ(master.stats().deliveries, 0u);
+}
+
 TEST(SimMaster, SlaveIgnoresAPayloadItCannotDecode)
 {
   FakeTransport link;

@@ -127,9 +127,10 @@ struct UplinkRecord
 /// \brief Codes of master status records (address 0).
 enum class MasterStatus : uint8_t
 {
-  kBadFrame = 1,       ///< framed mode: a downlink frame failed its CRC or framing; the step was dropped
-  kNoSuchSlave = 2,    ///< payload[1] = address: a payload for a slave the master does not have
-  kSlaveNoAnswer = 3,  ///< payload[1] = address: the slave did not acknowledge its I2C write
+  kBadFrame = 1,        ///< framed mode: a downlink frame failed its CRC or framing; the step was dropped
+  kNoSuchSlave = 2,     ///< payload[1] = address: a payload for a slave the master does not have
+  kSlaveNoAnswer = 3,   ///< payload[1] = address: the slave did not acknowledge its I2C write
+  kPayloadTooLong = 4,  ///< payload[1] = address: more bytes than one I2C frame carries; not delivered
 };
 const char* toString(MasterStatus status);
 

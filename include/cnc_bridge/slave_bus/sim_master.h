@@ -77,11 +77,12 @@ class SimMaster
   };
   struct Stats
   {
-    uint64_t frames = 0;          ///< step frames completed
-    uint64_t deliveries = 0;      ///< payloads handed to slaves
-    uint64_t bad_frames = 0;      ///< framed mode: bursts of corrupted or malformed step frames
-    uint64_t unknown_slaves = 0;  ///< payloads for addresses the master does not have
-    uint64_t resyncs = 0;         ///< raw mode: partial frames dropped after a silence
+    uint64_t frames = 0;             ///< step frames completed
+    uint64_t deliveries = 0;         ///< payloads handed to slaves
+    uint64_t bad_frames = 0;         ///< framed mode: bursts of corrupted or malformed step frames
+    uint64_t unknown_slaves = 0;     ///< payloads for addresses the master does not have
+    uint64_t oversize_payloads = 0;  ///< payloads longer than one I2C frame carries (not delivered)
+    uint64_t resyncs = 0;            ///< raw mode: partial frames dropped after a silence
     uint64_t uplink_records = 0;
   };
 
