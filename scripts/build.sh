@@ -8,9 +8,7 @@ build=${BUILD_DIR:-$root/.build}
 mkdir -p "$build"
 launcher=()
 command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
-fresh=0
 if [[ ! -f "$build/CMakeCache.txt" ]]; then
-  fresh=1
   cmake -S "$root" -B "$build" -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCATKIN_DEVEL_PREFIX="$build/devel" \
     -DCMAKE_BUILD_TYPE=RelWithDebInfo "${launcher[@]}" ${CMAKE_ARGS:-} >"$build/configure.log" \
     || { cat "$build/configure.log"; exit 1; }
@@ -19,6 +17,6 @@ jobs=${JOBS:-$(nproc)}
 cmake --build "$build" -- -j"$jobs" ${TARGETS:-all}
 # catkin snapshots the environment for `make run_tests` when it configures; on a fresh build the
 # devel space (its Python messages, its libraries) did not exist yet, so configure once more.
-if [[ $fresh == 1 ]]; then
+if ! grep -q "PYTHONPATH='$build/devel" "$build/catkin_generated/setup_cached.sh" 2>/dev/null; then
   cmake "$build" >>"$build/configure.log"
 fi
