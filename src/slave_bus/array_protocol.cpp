@@ -241,9 +241,11 @@ std::vector<UplinkRecord> UplinkParser::toRecords(std::vector<std::vector<uint8_
   std::vector<UplinkRecord> records;
   for (auto& frame : frames)
   {
-    if (frame.empty() || frame[0] > max_address_)
+    // A valid frame that is no record (no address, an impossible address, or a master status
+    // without its code): count it, deliver nothing.
+    if (frame.empty() || frame[0] > max_address_ || (frame[0] == 0 && frame.size() == 1))
     {
-      ++framed_empty_;  // a valid frame that is no record: count it, deliver nothing
+      ++framed_empty_;
       continue;
     }
     UplinkRecord record;

@@ -424,6 +424,19 @@ TEST(Uplink, RawParserInChunks)
   }
 }
 
+TEST(Uplink, FramedParserSkipsAMasterStatusWithoutItsCode)
+{
+  // Found by fuzz_slave_bus_uplink: a well-formed frame carrying only address 0.
+  UplinkParser parser(Framing::kFramed, 8);
+  Bytes stream = WirePacker::pack(Bytes{0});
+  const Bytes good = WirePacker::pack(Bytes{3, 7});
+  stream.insert(stream.end(), good.begin(), good.end());
+  const auto records = parser.feed(stream.data(), stream.size());
+  ASSERT_EQ(records.size(), 1u);
+  EXPECT_EQ(records[0].address, 3);
+  EXPECT_EQ(records[0].payload, Bytes{7});
+}
+
 TEST(Uplink, RawParserSkipsImpossibleAddressesAndEmptyStatus)
 {
   UplinkParser parser(Framing::kRaw, 8);
