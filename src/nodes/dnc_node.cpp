@@ -140,7 +140,8 @@ Transport& DncNode::openLink()
       state_->setLink(LinkState::kDown, e.what());
       throw;
     }
-    state_->setLink(LinkState::kUp, "");
+    // An empty message would leave "opening ..." in state (setLink keeps the previous one).
+    state_->setLink(LinkState::kUp, "port open");
   }
   return *link_;
 }
@@ -197,13 +198,14 @@ TransferResult DncNode::run(TransferGoal goal, const std::function<void(const Tr
     std::lock_guard<std::mutex> lock(stats_mutex_);
     ++counters_.transfers;
   }
+  const std::string transfer_message = (job.send ? "sending " : "receiving ") + goal.file + " (" + goal.protocol + ")";
   state_->update(
       [&](MachineState& s)
       {
         s.execution = MachineState::EXECUTION_ACTIVE;
         s.program = goal.file;
         s.block = 0;
-        s.message = (job.send ? "sending " : "receiving ") + goal.file + " (" + goal.protocol + ")";
+        s.message = transfer_message;
       });
   ROS_INFO("%s %s by %s", job.send ? "sending" : "receiving", job.path.c_str(), goal.protocol.c_str());
 
@@ -214,6 +216,8 @@ TransferResult DncNode::run(TransferGoal goal, const std::function<void(const Tr
     if (!port_lock_.tryLock())
       throw LinkError(serial_.device + " is in use by another process (port lock " + port_lock_.lockFile() + ")");
     Transport& link = openLink();
+    // Opening the port set its own message: while the transfer runs, state says what it is.
+    state_->update([&](MachineState& s) { s.message = transfer_message; });
     result = handler->second(link, job, feedback, cancel_);
   }
   catch (const CancelledError& e)

@@ -209,6 +209,16 @@ TEST_F(DncNodeTest, CancelStopsATransferAndASecondRequestMeanwhileIsRefused)
     saw_active = saw_active || (s.execution == MachineState::EXECUTION_ACTIVE && s.program == "O04321.nc" &&
                                 s.mode == MachineState::MODE_DNC);
   EXPECT_TRUE(saw_active);
+  // Once the port is open, state no longer says it is being opened, and says what runs on it.
+  bool saw_sending = false;
+  for (const auto& s : states())
+  {
+    if (s.link != MachineState::LINK_UP)
+      continue;
+    EXPECT_NE(s.message.rfind("opening ", 0), 0u) << "link UP but state says: " << s.message;
+    saw_sending = saw_sending || s.message.rfind("sending O04321.nc", 0) == 0;
+  }
+  EXPECT_TRUE(saw_sending);
 
   // The link is usable again at once.
   cnc_bridge::SendProgram again;
