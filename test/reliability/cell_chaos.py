@@ -70,9 +70,20 @@ class LinkWatch:
         return down, up
 
 
+def same_master(pid):
+    """True if the process runs under this test's ROS master: a simulator of another cell or test
+    on the same machine (another rostest, a CI run) is not ours to kill."""
+    try:
+        with open("/proc/%d/environ" % pid, "rb") as f:
+            env = dict(e.split(b"=", 1) for e in f.read().split(b"\0") if b"=" in e)
+    except OSError:
+        return False
+    return env.get(b"ROS_MASTER_URI", b"").decode() == os.environ.get("ROS_MASTER_URI", "")
+
+
 def pids_of(pattern):
     out = subprocess.run(["pgrep", "-f", pattern], capture_output=True, text=True).stdout
-    return [int(p) for p in out.split() if int(p) != os.getpid()]
+    return [int(p) for p in out.split() if int(p) != os.getpid() and same_master(int(p))]
 
 
 class TransferLoop(threading.Thread):
@@ -144,14 +155,23 @@ class CellChaos(unittest.TestCase):
         problems = []
         for kill in range(kills):
             pattern, topic = rng.choice(TARGETS)
+            # A simulator killed a moment ago may still be waiting for its respawn (respawn_delay):
+            # wait for it instead of counting it as lost.
             pids = pids_of(pattern)
+            deadline = time.time() + recover
+            while not pids and time.time() < deadline:
+                time.sleep(0.1)
+                pids = pids_of(pattern)
             if not pids:
                 problems.append("kill %d: %s not running (not respawned?)" % (kill, pattern))
                 time.sleep(2.0)
                 continue
             since = time.time()
             for pid in pids:
-                os.kill(pid, signal.SIGKILL)
+                try:
+                    os.kill(pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass  # it ended between pgrep and now
             if topic:
                 down, up = watches[topic].down_then_up_after(since, recover)
                 rospy.loginfo("kill %d: %s: link down after %s s, up again after %s s", kill, pattern,

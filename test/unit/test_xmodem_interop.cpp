@@ -8,11 +8,16 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <condition_variable>
 #include <fstream>
+#include <memory>
+#include <mutex>
 #include <random>
+#include <thread>
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/transport/pty.h"
+#include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
 #include "cnc_bridge/xmodem/session.h"
 
@@ -245,3 +250,103 @@ TEST_P(PythonInterop, PythonToOurChecksumReceiver)
 
 // python3-xmodem 0.4.5 cannot receive an empty file (it wants a packet before EOT): sizes from 1.
 INSTANTIATE_TEST_SUITE_P(Sizes, PythonInterop, ::testing::Values(1, 127, 128, 129, 1024, 1025, kLarge));
+
+namespace
+{
+/// Counts the bytes a session writes, so a test can wait for "n NAKs sent" on a condition.
+class CountingTransport : public Transport
+{
+ public:
+  explicit CountingTransport(Transport& inner) : inner_(inner) {}
+  using Transport::write;
+  size_t read(uint8_t* buffer, size_t size, Milliseconds timeout) override
+  {
+    return inner_.read(buffer, size, timeout);
+  }
+  void write(const uint8_t* data, size_t size, Milliseconds timeout = kWaitForever) override
+  {
+    inner_.write(data, size, timeout);
+    std::lock_guard<std::mutex> lock(mutex_);
+    written_ += size;
+    changed_.notify_all();
+  }
+  bool waitForWritten(size_t count, Milliseconds timeout)
+  {
+    std::unique_lock<std::mutex> lock(mutex_);
+    return changed_.wait_for(lock, timeout, [&] { return written_ >= count; });
+  }
+  void discardInput() override { inner_.discardInput(); }
+  void interrupt() override { inner_.interrupt(); }
+  void close() override { inner_.close(); }
+  bool isOpen() const override { return inner_.isOpen(); }
+  std::string describe() const override { return inner_.describe(); }
+
+ private:
+  Transport& inner_;
+  std::mutex mutex_;
+  std::condition_variable changed_;
+  size_t written_ = 0;
+};
+}  // namespace
+
+// The cell case (dnc_node -> sim_haas_serial xmodem): a control waiting to receive NAKs on a fixed
+// schedule, so a dozen NAKs are queued when the host starts to send: in the pty while no host has
+// the device open (dnc_node opens the port per transfer; the open discards them), or in the host's
+// open port (~keep_open). The sender takes a NAK as the start and must not take a queued or
+// in-flight NAK as a NAK of block 1: every block goes once and the control gets exactly the file.
+void sendAfterQueuedNaks(bool port_open_while_queued)
+{
+  PtyMaster pty;
+  CountingTransport control_side(pty);
+  Config control_config;
+  control_config.nak_interval = Milliseconds(50);  // a Haas: ~1 s; the sender's turnaround is 30 ms
+  control_config.start_timeout = Milliseconds(30000);
+  Receiver control(control_side, Mode::kChecksum, control_config);
+  SerialSettings settings;
+  settings.device = pty.slavePath();
+  settings.baud = 115200;
+  std::unique_ptr<SerialPort> port;
+  if (port_open_while_queued)
+    port = std::make_unique<SerialPort>(settings);
+  Bytes received;
+  std::string control_error;
+  std::thread control_thread(
+      [&]
+      {
+        try
+        {
+          received = control.receive();
+        }
+        catch (const std::exception& e)
+        {
+          control_error = e.what();
+        }
+      });
+  // Wait until 12 NAKs are queued on the host's side.
+  ASSERT_TRUE(control_side.waitForWritten(12, Milliseconds(20000)));
+  if (!port)
+    port = std::make_unique<SerialPort>(settings);
+
+  const Bytes payload = randomBytes(3 * kBlockSize + 17, 12);
+  Config config;
+  config.stale_nak_settle = Milliseconds(1000);  // as dnc_node: min(char_timeout, 1 s)
+  Sender sender(*port, Mode::kChecksum, config);
+  const Stats stats = sender.send(payload);
+  control_thread.join();
+  EXPECT_EQ(control_error, "");
+  ASSERT_GE(received.size(), payload.size());
+  EXPECT_TRUE(std::equal(payload.begin(), payload.end(), received.begin()));
+  EXPECT_EQ(stats.blocks, 4u);
+  EXPECT_EQ(stats.retries, 0u) << "a queued NAK was taken for a NAK of a block";
+  EXPECT_EQ(control.stats().duplicates, 0u) << "a block went twice";
+}
+
+TEST(HaasCell, SendAfterNaksQueuedWhileThePortWasClosed)
+{
+  sendAfterQueuedNaks(false);
+}
+
+TEST(HaasCell, SendAfterNaksQueuedInTheOpenPort)
+{
+  sendAfterQueuedNaks(true);
+}
