@@ -114,7 +114,8 @@ void MachineStatePublisher::setLink(LinkState link, const std::string& message)
       [&](MachineState& s)
       {
         s.link = toMessage(link);
-        if (!message.empty())
+        // A link that comes up ends the error that took it down; otherwise keep the last words.
+        if (!message.empty() || link == LinkState::kUp)
         {
           s.message = message;
         }

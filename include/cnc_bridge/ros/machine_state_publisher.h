@@ -31,7 +31,8 @@ class MachineStatePublisher
   /// \brief Changes the state under the lock; publishes at once if anything changed.
   /// The header stamp is set to now unless the mutator sets it.
   void update(const std::function<void(MachineState&)>& mutate);
-  /// \brief Sets the link state and its message (empty keeps the current message).
+  /// \brief Sets the link state and its message. An empty message keeps the current one while the
+  /// link is down or connecting, and clears it when the link is up (the error no longer holds).
   void setLink(LinkState link, const std::string& message = "");
   /// \brief Sets the tool position in metres (machine frame) and marks it valid.
   void setPosition(double x, double y, double z);
