@@ -335,13 +335,17 @@ void DncNode::onPreempt()
     link_->interrupt();
 }
 
-bool DncNode::onSend(SendProgram::Request& request, SendProgram::Response& response)
+namespace
+{
+// SendProgram and ReceiveProgram carry the same fields: one translation to and from the action.
+template <class Request, class Response, class Run>
+bool answerTransfer(const std::string& direction, const Request& request, Response& response, Run run)
 {
   TransferGoal goal;
-  goal.direction = TransferGoal::DIRECTION_SEND;
+  goal.direction = direction;
   goal.file = request.file;
   goal.protocol = request.protocol;
-  const TransferResult result = run(goal, nullptr);
+  const TransferResult result = run(goal);
   response.success = result.success;
   response.message = result.message;
   response.bytes = result.bytes;
@@ -349,20 +353,18 @@ bool DncNode::onSend(SendProgram::Request& request, SendProgram::Response& respo
   response.retries = result.retries;
   return true;
 }
+}  // namespace
+
+bool DncNode::onSend(SendProgram::Request& request, SendProgram::Response& response)
+{
+  return answerTransfer(TransferGoal::DIRECTION_SEND, request, response,
+                        [this](const TransferGoal& goal) { return run(goal, nullptr); });
+}
 
 bool DncNode::onReceive(ReceiveProgram::Request& request, ReceiveProgram::Response& response)
 {
-  TransferGoal goal;
-  goal.direction = TransferGoal::DIRECTION_RECEIVE;
-  goal.file = request.file;
-  goal.protocol = request.protocol;
-  const TransferResult result = run(goal, nullptr);
-  response.success = result.success;
-  response.message = result.message;
-  response.bytes = result.bytes;
-  response.blocks = result.blocks;
-  response.retries = result.retries;
-  return true;
+  return answerTransfer(TransferGoal::DIRECTION_RECEIVE, request, response,
+                        [this](const TransferGoal& goal) { return run(goal, nullptr); });
 }
 
 void DncNode::transferDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& status)
