@@ -22,6 +22,7 @@
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
 #include "progress_line.h"
+#include "serial_options.h"
 
 namespace po = boost::program_options;
 using namespace cnc_bridge;
@@ -57,12 +58,7 @@ po::options_description serialOptions()
 
 SerialSettings serialSettings(const po::variables_map& vm)
 {
-  SerialSettings s;
-  s.device = vm["port"].as<std::string>();
-  s.baud = vm["baud"].as<unsigned>();
-  s.parity = parseParity(vm["parity"].as<std::string>());
-  s.data_bits = vm["data-bits"].as<unsigned>();
-  s.stop_bits = vm["stop-bits"].as<unsigned>();
+  SerialSettings s = cli::serialSettingsFrom(vm);
   s.validate();
   return s;
 }

@@ -25,6 +25,7 @@
 #include "cnc_bridge/transport/paced_transport.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "progress_line.h"
+#include "serial_options.h"
 
 namespace po = boost::program_options;
 
@@ -82,12 +83,7 @@ bool parse(const std::string& command, const std::vector<std::string>& args, con
 
 SerialSettings serialSettings(const po::variables_map& vm)
 {
-  SerialSettings s;
-  s.device = vm["port"].as<std::string>();
-  s.baud = vm["baud"].as<unsigned>();
-  s.parity = parseParity(vm["parity"].as<std::string>());
-  s.data_bits = vm["data-bits"].as<unsigned>();
-  s.stop_bits = vm["stop-bits"].as<unsigned>();
+  SerialSettings s = cli::serialSettingsFrom(vm);
   // Drip-feed reads DC1/DC3 itself (kernel IXON would swallow them); RTS/CTS is the kernel's.
   s.flow_control =
       vm.count("flow") && vm["flow"].as<std::string>() == "rtscts" ? FlowControl::kRtsCts : FlowControl::kNone;
