@@ -10,6 +10,14 @@ import sys
 import xml.etree.ElementTree as ET
 
 
+def summary(problem, limit=400):
+    """The failure's message and text on one line, cut to `limit` characters: enough to tell from
+    the last lines of a run's output why a test failed."""
+    text = " ".join(filter(None, [problem.get("message", ""), problem.text or ""]))
+    text = " ".join(text.split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
 def count(directory):
     passed, failed, failures = 0, 0, []
     for dirpath, _, files in os.walk(directory):
@@ -29,9 +37,12 @@ def count(directory):
                 failures.append(f"{path}: the test did not run")
             for case in cases:
                 label = f"{case.get('classname', '')}.{case.get('name', '')}"
-                if case.find("failure") is not None or case.find("error") is not None:
+                problem = case.find("failure")
+                if problem is None:
+                    problem = case.find("error")
+                if problem is not None:
                     failed += 1
-                    failures.append(label)
+                    failures.append(f"{label}: {summary(problem)}")
                 elif case.find("skipped") is not None or case.get("status") == "notrun":
                     continue
                 else:

@@ -42,7 +42,9 @@ for fuzzer in "$build"/bin/fuzz_*; do
   mkdir -p "$corpus"
   seeds="$root/test/fuzz/corpus/$name"
   [[ -d "$seeds" ]] || seeds=""
-  if "$fuzzer" -max_total_time="$seconds" -timeout=5 -rss_limit_mb=2048 -print_final_stats=1 "$corpus" $seeds \
+  # Crash inputs go to the build directory, never into the source tree.
+  if "$fuzzer" -max_total_time="$seconds" -timeout=5 -rss_limit_mb=2048 -print_final_stats=1 \
+      -artifact_prefix="$build/$name-" "$corpus" $seeds \
       >"$build/$name.log" 2>&1; then
     runs=$(grep -oE 'stat::number_of_executed_units: *[0-9]+' "$build/$name.log" | grep -oE '[0-9]+$')
     echo "fuzz $name: ${runs:-?} inputs in ${seconds}s, no crash"
@@ -50,7 +52,9 @@ for fuzzer in "$build"/bin/fuzz_*; do
   else
     status=1
     echo "fuzz $name: FAILED (log: $build/$name.log)"
-    grep -A15 'ERROR:' "$build/$name.log" | head -30
+    # Sanitizer reports start with "ERROR:", UndefinedBehaviorSanitizer's with "runtime error:".
+    grep -E -A15 'ERROR:|runtime error:' "$build/$name.log" | head -30
+    echo "reproduce: $fuzzer $(ls -t "$build/$name"-crash-* "$build/$name"-timeout-* "$build/$name"-oom-* 2>/dev/null | head -1)"
     echo "<testsuite name=\"fuzz\"><testcase classname=\"fuzz\" name=\"$name\"><failure message=\"crash, see $build/$name.log\"/></testcase></testsuite>" >"$results/fuzz_$name.xml"
   fi
 done

@@ -4,6 +4,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <cctype>
+#include <cmath>
 #include <fstream>
 #include <set>
 #include <sstream>
@@ -69,6 +70,15 @@ bool validName(const std::string& name)
 
 // Resolves a source on one line. Capture groups are parsed with the tolerant line parser, so
 // "$1" may hold "- 1.5" or "1.5000" alike.
+/// A part count is a whole, non-negative number a double holds exactly (below 2^53). Anything else
+/// (a negative count, a fraction, a garbled line's 1e37) leaves the count unknown rather than
+/// publishing a wrapped or truncated one.
+bool isPartCount(double number)
+{
+  constexpr double kLargestExact = 9007199254740992.0;  // 2^53
+  return number >= 0 && number <= kLargestExact && std::floor(number) == number;
+}
+
 bool resolve(const ValueSource& source, const std::vector<LabeledValue>& values, const std::smatch* match,
              double& value)
 {
@@ -308,9 +318,10 @@ size_t RuleSet::evaluate(std::string_view line, const std::vector<LabeledValue>&
       case OutputType::kCycleEvent:
       {
         double number = 0;
-        if (!rule.part_count.empty() && resolve(rule.part_count, values, groups, number))
+        if (!rule.part_count.empty() && resolve(rule.part_count, values, groups, number) && isPartCount(number))
           output.part_count = static_cast<int64_t>(number);
-        if (!rule.cycle_time.empty() && resolve(rule.cycle_time, values, groups, number))
+        if (!rule.cycle_time.empty() && resolve(rule.cycle_time, values, groups, number) && std::isfinite(number) &&
+            number >= 0)
           output.cycle_time = number;
         if (rule.program_group > 0 && groups && static_cast<size_t>(rule.program_group) < groups->size())
           output.program = (*groups)[rule.program_group].str();

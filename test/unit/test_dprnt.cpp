@@ -377,6 +377,23 @@ TEST(DprntRules, CycleEventCarriesCountTimeAndProgram)
   EXPECT_LT(out[0].cycle_time, 0);
 }
 
+TEST(DprntRules, CountsOutsideTheCountableRangeStayUnknown)
+{
+  const RuleSet rules = RuleSet::fromYaml(kRules);
+  // A garbled line can carry a number no counter holds; the event still goes out, without a count.
+  for (const char* line : {"CYCLE END O1 PARTS 55555555555555555555555555555555555555", "CYCLE END O1 PARTS -3",
+                           "CYCLE END O1 PARTS 2.5 TIME -4"})
+  {
+    const auto out = run(rules, line);
+    ASSERT_EQ(out.size(), 1u) << line;
+    EXPECT_EQ(out[0].part_count, -1) << line;
+    EXPECT_LT(out[0].cycle_time, 0) << line;
+  }
+  const auto largest = run(rules, "CYCLE END O1 PARTS 9007199254740992");
+  ASSERT_EQ(largest.size(), 1u);
+  EXPECT_EQ(largest[0].part_count, 9007199254740992LL);
+}
+
 TEST(DprntRules, InvalidRulesAreRejectedWithTheirName)
 {
   const auto message = [](const std::string& yaml)
