@@ -26,9 +26,13 @@ PtyMaster::PtyMaster(const std::string& link_path)
   stream_.assign(master_fd);
   if (!link_path.empty())
   {
-    ::unlink(link_path.c_str());
-    if (::symlink(slave_path_.c_str(), link_path.c_str()) != 0)
+    // Made beside the link and renamed over it: the path never stops naming a device, and
+    // whoever opens it gets the old pty or the new one, never a missing file.
+    const std::string temporary = link_path + ".new" + std::to_string(::getpid());
+    ::unlink(temporary.c_str());
+    if (::symlink(slave_path_.c_str(), temporary.c_str()) != 0 || ::rename(temporary.c_str(), link_path.c_str()) != 0)
     {
+      ::unlink(temporary.c_str());
       const std::string reason = std::strerror(errno);
       close();
       ::close(slave_fd_);

@@ -3,6 +3,7 @@
 #include "cnc_bridge/transport/serial_port.h"
 
 #include <sys/ioctl.h>
+#include <sys/stat.h>
 #include <termios.h>
 
 #include <cerrno>
@@ -14,6 +15,11 @@
 namespace cnc_bridge
 {
 namespace asio = boost::asio;
+namespace
+{
+// A stat() twice a second: cheap, and soon enough to follow a re-plugged adapter.
+constexpr auto kDeviceCheckInterval = std::chrono::milliseconds(500);
+}  // namespace
 
 std::string SerialSettings::describe() const
 {
@@ -189,8 +195,35 @@ SerialPort::SerialPort(SerialSettings settings) : settings_(std::move(settings))
     close();
     throw LinkError(settings_.describe() + ": cannot configure: " + reason);
   }
+  struct stat opened;
+  if (::fstat(fd, &opened) == 0)
+  {
+    device_number_ = opened.st_rdev;
+  }
+  next_device_check_ = std::chrono::steady_clock::now() + kDeviceCheckInterval;
   // Bytes left in the driver from before we opened belong to nobody.
   discardInput();
+}
+
+size_t SerialPort::read(uint8_t* buffer, size_t size, Milliseconds timeout)
+{
+  // Checked before reading, so no byte is taken from the port and then dropped with the error.
+  const auto now = std::chrono::steady_clock::now();
+  if (now >= next_device_check_)
+  {
+    next_device_check_ = now + kDeviceCheckInterval;
+    if (deviceReplaced())
+    {
+      throw LinkError(settings_.describe() + ": the path now names another device (re-plugged, or the peer restarted)");
+    }
+  }
+  return AsioStreamTransport::read(buffer, size, timeout);
+}
+
+bool SerialPort::deviceReplaced() const
+{
+  struct stat now;
+  return ::stat(settings_.device.c_str(), &now) != 0 || now.st_rdev != device_number_;
 }
 
 SerialPort::~SerialPort()

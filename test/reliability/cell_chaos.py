@@ -31,7 +31,7 @@ TARGETS = [
     ("sim_haas_serial dprnt --tcp 25052", "/cell/haas_vf2/dprnt/state"),
     ("sim_ethernut --port 26666", "/cell/ethernut_mill/state"),
     ("sim_at_controller --command-port 25000", "/cell/at_router/state"),
-    ("sim_slave_bus --link /tmp/cnc_cell_laser_bus", "/cell/laser/state"),
+    ("sim_slave_bus --link", "/cell/laser/state"),
     ("sim_haas_serial xmodem", None),  # the transfer loop checks this one
 ]
 NODES = ["/cell/haas_vf2/haas_mdc_node", "/cell/haas_vf2/dnc_node", "/cell/haas_vf2/dprnt_node",
@@ -53,21 +53,22 @@ class LinkWatch:
     def down_then_up_after(self, since, timeout):
         """(seconds to DOWN, seconds to UP again) after `since`, or None where not seen in time."""
         deadline = since + timeout
-        down = up = None
-        while time.time() < deadline:
+        while True:
+            down = up = None
             with self.lock:
+                # In arrival order: the first state not UP, then the first UP after it.
                 for stamp, link in self.history:
                     if stamp < since:
                         continue
-                    if down is None and link != MachineState.LINK_UP:
-                        down = stamp - since
-                    elif down is not None and link == MachineState.LINK_UP:
+                    if down is None:
+                        if link != MachineState.LINK_UP:
+                            down = stamp - since
+                    elif link == MachineState.LINK_UP:
                         up = stamp - since
                         break
-            if up is not None:
-                break
+            if up is not None or time.time() >= deadline:
+                return down, up
             time.sleep(0.05)
-        return down, up
 
 
 def same_master(pid):

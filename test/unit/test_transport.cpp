@@ -3,7 +3,10 @@
 // for an event: every wait is a blocking read with a timeout or a condition variable.
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
 #include <future>
+#include <memory>
 #include <thread>
 
 #include "cnc_bridge/common/error.h"
@@ -139,6 +142,36 @@ TEST(SerialPort, MissingDeviceIsALinkErrorNamingIt)
   {
     EXPECT_NE(std::string(e.what()).find("/dev/does-not-exist@9600 8N1"), std::string::npos) << e.what();
   }
+}
+
+TEST(SerialPort, APathThatNowNamesAnotherDeviceIsALinkError)
+{
+  // A simulator killed and restarted on a new pty (or a USB adapter re-plugged): the link path
+  // moves to the new device while the old port is still open.
+  const std::string link = ::testing::TempDir() + "serial_replaced_" + std::to_string(::getpid());
+  auto first = std::make_unique<PtyMaster>(link);
+  SerialPort port(ptySettings(*first));
+  EXPECT_FALSE(port.deviceReplaced());
+  first->write(reinterpret_cast<const uint8_t*>("ok"), 2, Milliseconds(1000));
+  EXPECT_EQ(readString(port, 2), "ok");
+
+  PtyMaster second(link);  // takes the link over
+  EXPECT_TRUE(port.deviceReplaced());
+  // The next read that comes after the check interval (half a second) says so.
+  uint8_t byte;
+  try
+  {
+    port.read(&byte, 1, Milliseconds(600));
+    port.read(&byte, 1, Milliseconds(0));
+    FAIL() << "no error for a replaced device";
+  }
+  catch (const LinkError& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("another device"), std::string::npos) << e.what();
+  }
+  // Opened anew, the port is on the new device.
+  SerialPort reopened(ptySettings(second));
+  EXPECT_FALSE(reopened.deviceReplaced());
 }
 
 TEST(SerialPort, InterruptCancelsABlockedReadFromAnotherThread)

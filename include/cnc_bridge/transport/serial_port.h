@@ -2,7 +2,10 @@
 // 12 (parity), 13 (stop bits), 37 (data bits) and the flow control of DNC drip-feed.
 #pragma once
 
+#include <sys/types.h>
+
 #include <boost/asio/serial_port.hpp>
+#include <chrono>
 #include <string>
 
 #include "cnc_bridge/transport/asio_stream.h"
@@ -53,6 +56,13 @@ class SerialPort : public AsioStreamTransport<boost::asio::serial_port>
   explicit SerialPort(SerialSettings settings);
   ~SerialPort() override;
 
+  /// \brief Reads as every transport does; about twice a second it also checks that the
+  /// configured path still names the open device. \throws LinkError when it does not.
+  size_t read(uint8_t* buffer, size_t size, Milliseconds timeout) override;
+  /// \returns true when settings().device now names another device than the open one, or none:
+  /// a USB adapter re-plugged and given another ttyUSB behind the same /dev/serial/by-id link, a
+  /// simulator restarted on a new pty. The open port then leads nowhere, or to someone else's pty.
+  bool deviceReplaced() const;
   void drain() override;
   size_t pendingOutput() const override;
   void discardInput() override;
@@ -64,5 +74,7 @@ class SerialPort : public AsioStreamTransport<boost::asio::serial_port>
 
  private:
   SerialSettings settings_;
+  dev_t device_number_ = 0;  ///< of the device opened
+  std::chrono::steady_clock::time_point next_device_check_;
 };
 }  // namespace cnc_bridge
