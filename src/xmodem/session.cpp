@@ -107,8 +107,11 @@ void sendCancel(Transport& link) noexcept
 }
 
 // ------------------------------------------------------------------------------------------------
+// Replies are single bytes; a few queued start requests (a Haas repeats NAK) fit in one read.
+constexpr size_t kReplyReadSize = 64;
+
 Sender::Sender(Transport& link, Mode mode, Config config, const std::atomic<bool>* cancel)
-    : link_(link), mode_(mode), config_(config), cancel_(cancel)
+    : link_(link), input_(link, kReplyReadSize), mode_(mode), config_(config), cancel_(cancel)
 {
 }
 
@@ -140,7 +143,7 @@ uint8_t Sender::waitForStart()
   {
     checkCancel();
     const Milliseconds left = remainingUntil(deadline);
-    const int c = left.count() > 0 ? link_.readByte(left) : -1;
+    const int c = left.count() > 0 ? input_.readByte(left) : -1;
     if (c < 0)
     {
       ++stats_.timeouts;
@@ -168,7 +171,7 @@ Sender::Reply Sender::waitForReply(bool first_block, Milliseconds timeout)
   {
     checkCancel();
     const Milliseconds left = remainingUntil(deadline);
-    const int c = left.count() > 0 ? link_.readByte(left) : -1;
+    const int c = left.count() > 0 ? input_.readByte(left) : -1;
     if (c < 0)
     {
       return Reply::kTimeout;
@@ -189,18 +192,18 @@ Sender::Reply Sender::waitForReply(bool first_block, Milliseconds timeout)
       for (;;)
       {
         const Milliseconds wait = remainingUntil(settle);
-        const int next = wait.count() > 0 ? link_.readByte(wait) : -1;
+        const int next = wait.count() > 0 ? input_.readByte(wait) : -1;
         if (next < 0)
           return Reply::kNak;
         if (next == kAck)
           return Reply::kAck;
-        if (next == kCan && link_.readByte(config_.char_timeout) == kCan)
+        if (next == kCan && input_.readByte(config_.char_timeout) == kCan)
           return Reply::kCancel;
       }
     }
     if (c == kCan)
     {
-      const int next = link_.readByte(config_.char_timeout);
+      const int next = input_.readByte(config_.char_timeout);
       if (next == kCan)
         return Reply::kCancel;
       if (next == kAck)
@@ -221,8 +224,8 @@ Stats Sender::send(const std::vector<uint8_t>& payload, const ProgressCallback& 
     const uint8_t start = waitForStart();
     // NAKs (or 'C's) the receiver repeated while it waited are still queued: drop them so that
     // none of them is read as the answer to block 1 (the capture's PC sent block 1 twice for this).
-    link_.discardInput();
-    link_.purge(config_.turnaround, config_.turnaround * 10);
+    input_.discard();
+    input_.purge(config_.turnaround, config_.turnaround * 10);
     const bool crc = start == kCrcStart;
     stats_.check = crc ? CheckType::kCrc16 : CheckType::kChecksum;
     // XModem-1K needs CRC (Forsberg): a receiver that asks for checksum mode gets 128-byte blocks.
@@ -234,6 +237,7 @@ Stats Sender::send(const std::vector<uint8_t>& payload, const ProgressCallback& 
     state.total = payload.size();
     size_t offset = 0;
     uint32_t block = 1;
+    const auto blocks_start = Clock::now();
     while (offset < payload.size())
     {
       const size_t left = payload.size() - offset;
@@ -250,8 +254,9 @@ Stats Sender::send(const std::vector<uint8_t>& payload, const ProgressCallback& 
         const Reply reply = waitForReply(block == 1, config_.ack_timeout);
         if (reply == Reply::kAck)
         {
+          stats_.block_time = std::chrono::duration_cast<std::chrono::microseconds>(Clock::now() - blocks_start);
           if (config_.ack_turnaround.count() > 0)
-            link_.purge(config_.ack_turnaround, config_.ack_turnaround * 4);
+            input_.purge(config_.ack_turnaround, config_.ack_turnaround * 4);
           break;
         }
         if (reply == Reply::kCancel)
@@ -259,7 +264,7 @@ Stats Sender::send(const std::vector<uint8_t>& payload, const ProgressCallback& 
         if (reply == Reply::kTimeout)
           ++stats_.timeouts;
         else
-          link_.purge(config_.turnaround, config_.turnaround * 10);
+          input_.purge(config_.turnaround, config_.turnaround * 10);
         ++stats_.retries;
         ++state.retries;
         if (++errors > config_.max_retries)
@@ -292,13 +297,13 @@ Stats Sender::send(const std::vector<uint8_t>& payload, const ProgressCallback& 
       {
         // A Haas answers EOT with CAN CAN CAN. Every block was ACKed, so the data is there.
         stats_.eot_answered_with_can = true;
-        link_.purge(std::min(config_.char_timeout, Milliseconds(100)), Milliseconds(500));
+        input_.purge(std::min(config_.char_timeout, Milliseconds(100)), Milliseconds(500));
         break;
       }
       if (reply == Reply::kTimeout)
         ++stats_.timeouts;
       else
-        link_.purge(config_.turnaround, config_.turnaround * 10);
+        input_.purge(config_.turnaround, config_.turnaround * 10);
       if (attempt >= config_.eot_retries)
       {
         abort("every block was acknowledged but EOT was not (sent " + std::to_string(attempt) + " times)", false, true);
@@ -316,7 +321,11 @@ Stats Sender::send(const std::vector<uint8_t>& payload, const ProgressCallback& 
 
 // ------------------------------------------------------------------------------------------------
 Receiver::Receiver(Transport& link, Mode mode, Config config, const std::atomic<bool>* cancel)
-    : link_(link), mode_(mode), config_(config), cancel_(cancel)
+    : link_(link),
+      input_(link, packetSize(kBlockSize1K, CheckType::kCrc16)),
+      mode_(mode),
+      config_(config),
+      cancel_(cancel)
 {
 }
 
@@ -343,7 +352,7 @@ void Receiver::abort(const std::string& why, bool send_can, bool timeout)
 void Receiver::nak(uint8_t request)
 {
   // Whatever is left of a garbled packet must not be read as the start of the next one.
-  link_.purge(config_.purge_quiet);
+  input_.purge(config_.purge_quiet);
   link_.writeByte(request);
 }
 
@@ -368,7 +377,8 @@ std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
     Progress state;
     unsigned errors = 0;
     std::vector<uint8_t> buffer(packetSize(kBlockSize1K, CheckType::kCrc16));
-    int pending = -1;  // a byte read ahead (after a lone CAN) that starts the next round
+    int pending = -1;                     // a byte read ahead (after a lone CAN) that starts the next round
+    Clock::time_point first_block_start;  // when the first byte of block 1 arrived
 
     auto error = [&](const std::string& what)
     {
@@ -394,7 +404,7 @@ std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
       int c = pending;
       pending = -1;
       if (c < 0)
-        c = wait.count() > 0 ? link_.readByte(wait) : -1;
+        c = wait.count() > 0 ? input_.readByte(wait) : -1;
       if (c < 0)
       {
         ++stats_.timeouts;
@@ -426,11 +436,12 @@ std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
 
       if (c == kSoh || c == kStx)
       {
+        const auto packet_start = Clock::now();
         const CheckType check = crc ? CheckType::kCrc16 : CheckType::kChecksum;
         const size_t data_size = c == kSoh ? kBlockSize : kBlockSize1K;
         const size_t need = packetSize(data_size, check);
         buffer[0] = static_cast<uint8_t>(c);
-        const size_t got = link_.readExactly(buffer.data() + 1, need - 1, config_.char_timeout);
+        const size_t got = input_.readExactly(buffer.data() + 1, need - 1, config_.char_timeout);
         if (got < need - 1)
         {
           ++stats_.garbled;
@@ -447,11 +458,14 @@ std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
         }
         if (packet.block == expected)
         {
+          if (!started)
+            first_block_start = packet_start;
           started = true;
           stats_.check = check;
           stats_.used_1k = stats_.used_1k || data_size == kBlockSize1K;
           data.insert(data.end(), packet.data, packet.data + packet.data_size);
           link_.writeByte(kAck);
+          stats_.block_time = std::chrono::duration_cast<std::chrono::microseconds>(Clock::now() - first_block_start);
           errors = 0;
           ++expected;
           ++state.block;
@@ -476,7 +490,7 @@ std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
       if (c == kEot)
       {
         // A real EOT is followed by silence; a garbled SOH is followed by the rest of its packet.
-        if (link_.readByte(config_.eot_quiet) >= 0)
+        if (input_.readByte(config_.eot_quiet) >= 0)
         {
           ++stats_.garbled;
           error("EOT followed by more data (line noise)");
@@ -496,7 +510,7 @@ std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
       }
       if (c == kCan)
       {
-        const int next = link_.readByte(config_.char_timeout);
+        const int next = input_.readByte(config_.char_timeout);
         if (next == kCan)
           abort("the sender cancelled (CAN CAN) after " + std::to_string(state.block) + " blocks", false, false);
         pending = next;  // a lone CAN is line noise; what follows it is looked at as usual

@@ -15,6 +15,7 @@
 #include <thread>
 
 #include "cnc_bridge/common/error.h"
+#include "cnc_bridge/transport/buffered_input.h"
 #include "cnc_bridge/transport/fake_transport.h"
 #include "cnc_bridge/transport/faulty_transport.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
@@ -586,6 +587,138 @@ TEST(XmodemSender, CancelFromAnotherThreadSendsCan)
   EXPECT_THROW(result.get(), CancelledError);
   const Bytes written = rx.written();
   EXPECT_EQ(Bytes(written.end() - 3, written.end()), (Bytes{kCan, kCan, kCan}));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Bulk reads: the sessions read whatever has arrived (up to one packet) into a buffer. Packets
+// split over many reads and several packets in one read must give the same bytes and replies.
+namespace
+{
+/// A FakeTransport that counts the read() calls made on it.
+class CountingTransport : public FakeTransport
+{
+ public:
+  size_t read(uint8_t* buffer, size_t size, Milliseconds timeout) override
+  {
+    ++reads;
+    return FakeTransport::read(buffer, size, timeout);
+  }
+  size_t reads = 0;
+};
+
+/// \p payload as packets of \p block_size numbered from \p first_block, one after another.
+Bytes packetsOf(const Bytes& payload, size_t block_size, CheckType check, uint32_t first_block = 1)
+{
+  Bytes out;
+  for (size_t offset = 0, block = first_block; offset < payload.size(); offset += block_size, ++block)
+  {
+    const size_t n = std::min(block_size, payload.size() - offset);
+    const Bytes packet = encodePacket(static_cast<uint32_t>(block), payload.data() + offset, n, block_size, check);
+    out.insert(out.end(), packet.begin(), packet.end());
+  }
+  return out;
+}
+}  // namespace
+
+TEST(BufferedInput, PurgeAndDiscardDropBufferedBytesToo)
+{
+  FakeTransport link;
+  BufferedInput input(link, 8);
+  link.feed("abcdefghij");
+  EXPECT_EQ(input.readByte(Milliseconds(100)), 'a');
+  EXPECT_EQ(input.buffered(), 7u);  // one read took what fits, the rest is still in the link
+  EXPECT_EQ(input.purge(Milliseconds(5)), 9u);
+  EXPECT_EQ(input.readByte(Milliseconds(5)), -1);
+  link.feed("xyz");
+  EXPECT_EQ(input.readByte(Milliseconds(100)), 'x');
+  input.discard();
+  EXPECT_EQ(input.buffered(), 0u);
+  EXPECT_EQ(input.readByte(Milliseconds(5)), -1);
+}
+
+TEST(BufferedInput, ReadExactlyJoinsPiecesAndStopsAtATimeout)
+{
+  FakeTransport link;
+  link.setMaxReadChunk(3);
+  BufferedInput input(link, 16);
+  link.feed("0123456789");
+  uint8_t out[16] = {};
+  EXPECT_EQ(input.readExactly(out, 7, Milliseconds(100)), 7u);
+  EXPECT_EQ(std::string(out, out + 7), "0123456");
+  EXPECT_EQ(input.readByte(Milliseconds(100)), '7');
+  EXPECT_EQ(input.readExactly(out, 5, Milliseconds(20)), 2u);  // "89", then nothing more came
+  EXPECT_EQ(std::string(out, out + 2), "89");
+}
+
+TEST(XmodemReceiver, PacketsSplitOverManyReadsAreReassembled)
+{
+  const Bytes payload = randomBytes(3 * 1024 + 2 * 128, 11);
+  for (const size_t chunk : {size_t(1), size_t(7), size_t(1000)})
+  {
+    FakeTransport tx;
+    tx.setMaxReadChunk(chunk);
+    // Three 1K packets, then two 128-byte ones (a receiver accepts mixed sizes), then EOT.
+    const Bytes head(payload.begin(), payload.begin() + 3 * 1024);
+    const Bytes tail(payload.begin() + 3 * 1024, payload.end());
+    Bytes packets = packetsOf(head, kBlockSize1K, CheckType::kCrc16);
+    const Bytes small = packetsOf(tail, kBlockSize, CheckType::kCrc16, 4);
+    packets.insert(packets.end(), small.begin(), small.end());
+    std::vector<Bytes> script;
+    for (size_t at = 0, size; at < packets.size(); at += size)
+    {
+      size = packets[at] == kStx ? 1029 : 133;
+      script.emplace_back(packets.begin() + at, packets.begin() + at + size);
+    }
+    script.push_back({kEot});
+    size_t next = 0;
+    tx.onWrite(
+        [&](FakeTransport& t, const Bytes&)
+        {
+          if (next < script.size())
+            t.feed(script[next++]);
+        });
+    Receiver receiver(tx, Mode::kCrc, fastConfig());
+    EXPECT_EQ(receiver.receive(), payload) << "read chunk " << chunk;
+    EXPECT_EQ(receiver.stats().garbled, 0u) << "read chunk " << chunk;
+    EXPECT_EQ(tx.written(), (Bytes{'C', kAck, kAck, kAck, kAck, kAck, kAck})) << "read chunk " << chunk;
+  }
+}
+
+TEST(XmodemReceiver, SeveralPacketsInOneReadAreAllTaken)
+{
+  // A sender that does not wait for ACKs: every packet and the EOT are there before the first read.
+  CountingTransport tx;
+  const Bytes payload = randomBytes(3 * 128, 12);
+  Bytes everything = packetsOf(payload, kBlockSize, CheckType::kChecksum);
+  everything.push_back(kEot);
+  tx.feed(everything);
+  Receiver receiver(tx, Mode::kChecksum, fastConfig());
+  EXPECT_EQ(receiver.receive(), payload);
+  EXPECT_EQ(tx.written(), (Bytes{kNak, kAck, kAck, kAck, kAck}));
+  // One read took all three packets and the EOT; the second is the silence that confirms the EOT.
+  EXPECT_EQ(tx.reads, 2u);
+}
+
+TEST(XmodemSender, RepliesQueuedTogetherAreTakenOneByOne)
+{
+  // Replies arrive in one burst with line noise between them: each is still one answer.
+  FakeTransport rx;
+  const Bytes payload = randomBytes(3 * 128, 13);
+  size_t packets = 0;
+  rx.onWrite(
+      [&](FakeTransport& t, const Bytes& bytes)
+      {
+        if (bytes.size() > 1 && ++packets == 1)
+          t.feed(Bytes{kAck, 'x', kAck, 'y', kAck});  // the ACKs of blocks 1 to 3 at once
+        else if (bytes == Bytes{kEot})
+          t.feed(Bytes{kAck});
+      });
+  rx.feed(Bytes{kNak});
+  Sender sender(rx, Mode::kChecksum, fastConfig());
+  const Stats stats = sender.send(payload);
+  EXPECT_EQ(stats.blocks, 3u);
+  EXPECT_EQ(stats.retries, 0u);
+  EXPECT_EQ(packets, 3u);
 }
 
 // ---------------------------------------------------------------------------------------------

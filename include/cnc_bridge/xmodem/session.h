@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "cnc_bridge/transport/buffered_input.h"
 #include "cnc_bridge/transport/transport.h"
 #include "cnc_bridge/xmodem/packet.h"
 
@@ -96,6 +97,9 @@ struct Stats
   bool used_1k = false;                    ///< at least one 1024-byte block went across
   /// The peer answered our EOT with CANs after every block was ACKed (a Haas does): complete.
   bool eot_answered_with_can = false;
+  /// From the first block (sent, or its first byte received) to the last block's ACK: the time
+  /// the data took, without the start handshake and the EOT exchange.
+  std::chrono::microseconds block_time{0};
   std::string summary() const;
 };
 
@@ -130,6 +134,7 @@ class Sender
   [[noreturn]] void abort(const std::string& why, bool send_can, bool timeout);
 
   Transport& link_;
+  BufferedInput input_;  ///< replies are read through this, never from link_ directly
   Mode mode_;
   Config config_;
   const std::atomic<bool>* cancel_;
@@ -156,6 +161,7 @@ class Receiver
   [[noreturn]] void abort(const std::string& why, bool send_can, bool timeout);
 
   Transport& link_;
+  BufferedInput input_;  ///< packets are read through this (a whole packet per read when it is there)
   Mode mode_;
   Config config_;
   const std::atomic<bool>* cancel_;
