@@ -4,6 +4,7 @@
 
 #include <sys/ioctl.h>
 #include <sys/stat.h>
+#include <sys/sysmacros.h>
 #include <termios.h>
 
 #include <cerrno>
@@ -19,6 +20,38 @@ namespace
 {
 // A stat() twice a second: cheap, and soon enough to follow a re-plugged adapter.
 constexpr auto kDeviceCheckInterval = std::chrono::milliseconds(500);
+
+bool isPtySlave(dev_t device)
+{
+  constexpr unsigned kFirstPtySlaveMajor = 136, kLastPtySlaveMajor = 143;  // UNIX98 ptys
+  return major(device) >= kFirstPtySlaveMajor && major(device) <= kLastPtySlaveMajor;
+}
+
+bool before(const timespec& a, const timespec& b)
+{
+  return a.tv_sec < b.tv_sec || (a.tv_sec == b.tv_sec && a.tv_nsec < b.tv_nsec);
+}
+
+/// A simulator's link to its pty outlives the simulator when it is killed, and the kernel gives
+/// the pty's number to the next program that asks for one. Opening the link then would take
+/// another program's pty (and its bytes). Such a link is older than the pty it names: a pty's
+/// inode change time is its creation (I/O and termios changes leave it), and a live simulator
+/// makes its link after its pty.
+void refuseStaleLinkToPty(const SerialSettings& settings)
+{
+  struct stat link, device;
+  if (::lstat(settings.device.c_str(), &link) != 0 || !S_ISLNK(link.st_mode) ||
+      ::stat(settings.device.c_str(), &device) != 0 || !isPtySlave(device.st_rdev))
+  {
+    return;
+  }
+  if (before(link.st_mtim, device.st_ctim))
+  {
+    throw LinkError(settings.describe() +
+                    ": cannot open: the link is older than the pty it names, so the program that made it has "
+                    "ended and the pty belongs to another program");
+  }
+}
 }  // namespace
 
 std::string SerialSettings::describe() const
@@ -147,6 +180,7 @@ SerialPort::SerialPort(SerialSettings settings) : settings_(std::move(settings))
 {
   settings_.validate();
   const speed_t speed = speedConstant(settings_.baud);
+  refuseStaleLinkToPty(settings_);
   boost::system::error_code error;
   stream_.open(settings_.device, error);
   if (error)

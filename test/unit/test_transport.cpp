@@ -3,11 +3,16 @@
 // for an event: every wait is a blocking read with a timeout or a condition variable.
 #include <gtest/gtest.h>
 
+#include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
+
+#include <ctime>
 
 #include <future>
 #include <memory>
 #include <thread>
+#include <vector>
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/transport/backoff.h"
@@ -172,6 +177,34 @@ TEST(SerialPort, APathThatNowNamesAnotherDeviceIsALinkError)
   // Opened anew, the port is on the new device.
   SerialPort reopened(ptySettings(second));
   EXPECT_FALSE(reopened.deviceReplaced());
+}
+
+TEST(SerialPort, ALinkLeftByAnEndedSimulatorIsNotFollowedToAnotherProgramsPty)
+{
+  // A simulator killed without removing its link: the kernel hands the pty's number to the next
+  // program, whose pty is then newer than the link that names it. Made here by dating the link back
+  // (rather than by waiting for the kernel to reuse a number, which other programs can take first).
+  const std::string link = ::testing::TempDir() + "serial_stale_" + std::to_string(::getpid());
+  PtyMaster someone_elses;
+  ::unlink(link.c_str());
+  ASSERT_EQ(::symlink(someone_elses.slavePath().c_str(), link.c_str()), 0);
+  const timespec an_hour_ago[2] = {{::time(nullptr) - 3600, 0}, {::time(nullptr) - 3600, 0}};
+  ASSERT_EQ(::utimensat(AT_FDCWD, link.c_str(), an_hour_ago, AT_SYMLINK_NOFOLLOW), 0);
+  SerialSettings settings;
+  settings.device = link;
+  try
+  {
+    SerialPort port(settings);
+    FAIL() << "opened another program's pty through a stale link";
+  }
+  catch (const LinkError& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("older than the pty"), std::string::npos) << e.what();
+  }
+  // A link made after its pty (a live simulator's) opens.
+  PtyMaster live(link);
+  EXPECT_NO_THROW(SerialPort{ptySettings(live)});
+  ::unlink(link.c_str());
 }
 
 TEST(SerialPort, InterruptCancelsABlockedReadFromAnotherThread)
