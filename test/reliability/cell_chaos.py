@@ -94,6 +94,7 @@ class TransferLoop(threading.Thread):
         super().__init__(daemon=True)
         self.programs, self.memory = programs, memory
         self.successes = self.failures = 0
+        self.reasons = {}
         self.false_successes = []
         self.stop = threading.Event()
 
@@ -134,6 +135,11 @@ class TransferLoop(threading.Thread):
                         name, "never arrived" if arrived is None else "arrived different (%d of %d bytes)" % (len(arrived), len(body))))
             else:
                 self.failures += 1
+                # Why, in a few words (the file name and numbers vary): shown at the end.
+                reason = " ".join(w for w in result.message.split()[:8] if not any(c.isdigit() for c in w))
+                self.reasons[reason] = self.reasons.get(reason, 0) + 1
+                # A link that is down fails at once: do not spin on it.
+                self.stop.wait(0.2)
 
 
 class CellChaos(unittest.TestCase):
@@ -191,6 +197,8 @@ class CellChaos(unittest.TestCase):
         transfers.join(150)
         rospy.loginfo("%d kills; transfers: %d succeeded (all verified), %d failed as they should when cut",
                       kills, transfers.successes, transfers.failures)
+        for reason, count in sorted(transfers.reasons.items(), key=lambda item: -item[1]):
+            rospy.loginfo("  %5d failed: %s", count, reason)
         self.assertEqual(transfers.false_successes, [], "a transfer reported success for data that did not arrive")
         self.assertEqual(problems, [])
         self.assertGreater(transfers.successes, 0, "no transfer succeeded at all between kills")
