@@ -7,9 +7,35 @@
 
 #include <cerrno>
 #include <cstring>
+#include <filesystem>
 
 namespace cnc_bridge
 {
+namespace
+{
+/// Points \p link at \p target, making its folder if needed. The link is made beside its final
+/// name and renamed over it, so the path never stops naming a device: whoever opens it gets the
+/// old pty or the new one, never a missing file. \returns the reason of a failure, or "".
+std::string linkAtomically(const std::string& target, const std::string& link)
+{
+  std::error_code ignored;  // a folder that cannot be made shows as the symlink's failure
+  std::filesystem::create_directories(std::filesystem::path(link).parent_path(), ignored);
+  const std::string temporary = link + ".new" + std::to_string(::getpid());
+  ::unlink(temporary.c_str());
+  if (::symlink(target.c_str(), temporary.c_str()) != 0)
+  {
+    return std::strerror(errno);
+  }
+  if (::rename(temporary.c_str(), link.c_str()) != 0)
+  {
+    const std::string reason = std::strerror(errno);
+    ::unlink(temporary.c_str());
+    return reason;
+  }
+  return "";
+}
+}  // namespace
+
 PtyMaster::PtyMaster(const std::string& link_path)
 {
   int master_fd = -1;
@@ -26,17 +52,12 @@ PtyMaster::PtyMaster(const std::string& link_path)
   stream_.assign(master_fd);
   if (!link_path.empty())
   {
-    // Made beside the link and renamed over it: the path never stops naming a device, and
-    // whoever opens it gets the old pty or the new one, never a missing file.
-    const std::string temporary = link_path + ".new" + std::to_string(::getpid());
-    ::unlink(temporary.c_str());
-    if (::symlink(slave_path_.c_str(), temporary.c_str()) != 0 || ::rename(temporary.c_str(), link_path.c_str()) != 0)
+    const std::string error = linkAtomically(slave_path_, link_path);
+    if (!error.empty())
     {
-      ::unlink(temporary.c_str());
-      const std::string reason = std::strerror(errno);
       close();
       ::close(slave_fd_);
-      throw LinkError("cannot link " + link_path + " to " + slave_path_ + ": " + reason);
+      throw LinkError("cannot link " + link_path + " to " + slave_path_ + ": " + error);
     }
     link_path_ = link_path;
   }

@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include <ctime>
+#include <filesystem>
 
 #include <future>
 #include <memory>
@@ -205,6 +206,21 @@ TEST(SerialPort, ALinkLeftByAnEndedSimulatorIsNotFollowedToAnotherProgramsPty)
   PtyMaster live(link);
   EXPECT_NO_THROW(SerialPort{ptySettings(live)});
   ::unlink(link.c_str());
+}
+
+TEST(PtyMaster, MakesTheFolderOfItsLinkAndRemovesTheLinkWhenDone)
+{
+  const std::string folder = ::testing::TempDir() + "pty_folder_" + std::to_string(::getpid());
+  const std::string link = folder + "/cell/laser_bus.pty";
+  {
+    PtyMaster pty(link);
+    SerialPort port(ptySettings(pty));
+    pty.write(reinterpret_cast<const uint8_t*>("up"), 2, Milliseconds(1000));
+    EXPECT_EQ(readString(port, 2), "up");
+  }
+  struct stat gone;
+  EXPECT_NE(::lstat(link.c_str(), &gone), 0);
+  std::filesystem::remove_all(folder);
 }
 
 TEST(SerialPort, InterruptCancelsABlockedReadFromAnotherThread)

@@ -16,7 +16,8 @@ namespace cnc_bridge
 class PtyMaster : public AsioStreamTransport<boost::asio::posix::stream_descriptor>
 {
  public:
-  /// \param link_path if not empty, a symbolic link created to the slave (removed on destruction).
+  /// \param link_path if not empty, a symbolic link created to the slave, its folder made if
+  ///        missing (the link is removed on destruction).
   /// \throws LinkError if no pty can be allocated or the link cannot be made.
   explicit PtyMaster(const std::string& link_path = "");
   ~PtyMaster() override;
