@@ -60,7 +60,7 @@ int main(int argc, char** argv)
     }
     const auto stats = sender.stats();
     std::cout << "state=" << Job::toString(job->state()) << " seconds=" << trajectory->duration()
-              << " setpoints=" << stats.setpoints << " underruns=" << stats.underruns
+              << " setpoints=" << stats.setpoints << " underruns=" << stats.underruns << " stalls=" << stats.stalls
               << " interval_p50_ms=" << stats.interval_p50 * 1e3 << " interval_p99_ms=" << stats.interval_p99 * 1e3
               << " interval_max_ms=" << stats.interval_max * 1e3 << " interval_min_ms=" << stats.interval_min * 1e3
               << " late_mean_ms=" << stats.mean_lateness * 1e3 << " late_max_ms=" << stats.max_lateness * 1e3

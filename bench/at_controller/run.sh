@@ -30,12 +30,32 @@ run_once() {  # $1: label
   echo "$1 | load $(cut -d' ' -f1-3 /proc/loadavg) | $result | sim arrival: $arrival"
 }
 
+# The platform's own wake-up latency in the same conditions: cyclictest (rt-tests), one thread at
+# the sender's priority waking every 1 ms for as long, with its memory locked and CPU idle latency
+# held at 0 as the sender does. Prints its max latency and how many wake-ups were over 1 ms late
+# (comparable with the sender's stalls, not its underruns: one stall delays several setpoints).
+platform_once() {  # $1: label
+  if ! command -v cyclictest >/dev/null; then
+    echo "$1 | cyclictest not installed (apt install rt-tests)"
+    return
+  fi
+  local policy=(-p "${REALTIME_PRIORITY:-0}")
+  [[ "${REALTIME_PRIORITY:-0}" == 0 ]] && policy=(--policy=other)
+  cyclictest -m "${policy[@]}" -i 1000 -l $((seconds * 1000)) -q -h 100000 >"$work/cyclictest.out" 2>&1 || true
+  awk -v label="$1" '/^[0-9]/ { if ($1 > 1000) late += $2 } /Max Latencies/ { max = $4 + 0 }
+    END { printf "%s | cyclictest: wake-ups over 1 ms late=%d max_ms=%.3f\n", label, late, max / 1000 }' "$work/cyclictest.out"
+}
+
 echo "at_controller streaming benchmark: $seconds s at 1 kHz, $(nproc) cores, sender SCHED_FIFO priority ${REALTIME_PRIORITY:-0} (0: normal scheduler)"
 idle=$(run_once idle)
 echo "$idle"
+platform_idle=$(platform_once idle)
+echo "$platform_idle"
 for _ in $(seq "$(nproc)"); do (while :; do :; done) & pids+=($!); done
 loaded=$(run_once "busy loops x$(nproc)")
 echo "$loaded"
+platform_loaded=$(platform_once "busy loops x$(nproc)")
+echo "$platform_loaded"
 for pid in "${pids[@]}"; do kill "$pid" 2>/dev/null || true; done
 pids=()
 
@@ -49,4 +69,7 @@ for key in interval_p50_ms interval_p99_ms interval_max_ms late_max_ms; do
   printf '%-22s %12s %12s %14s %14s\n' "$key" "$a" "$b" "$(ratio "$a")" "$(ratio "$b")"
 done
 printf '%-22s %12s %12s\n' "underruns" "$(field "$idle" underruns)" "$(field "$loaded" underruns)"
+printf '%-22s %12s %12s\n' "stalls" "$(field "$idle" stalls)" "$(field "$loaded" stalls)"
+printf '%-22s %12s %12s\n' "cyclictest late" "$(field "$platform_idle" late)" "$(field "$platform_loaded" late)"
+printf '%-22s %12s %12s\n' "cyclictest max_ms" "$(field "$platform_idle" max_ms)" "$(field "$platform_loaded" max_ms)"
 printf '%-22s %12s %12s\n' "setpoints" "$(field "$idle" setpoints)" "$(field "$loaded" setpoints)"

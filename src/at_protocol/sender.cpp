@@ -1,9 +1,12 @@
 // The 1 ms sender thread of the '@'-protocol node (see sender.h for the timing rules).
 #include "cnc_bridge/at_protocol/sender.h"
 
+#include <fcntl.h>
 #include <pthread.h>
 #include <sched.h>
+#include <sys/mman.h>
 #include <time.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -35,6 +38,32 @@ void sleepUntilNs(int64_t deadline)
   while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &when, nullptr) == EINTR)
   {
   }
+}
+
+/// What a real-time latency test (cyclictest) does before it measures: lock the process's memory,
+/// so the loop never waits for a page fault, and ask the kernel to keep the CPUs out of idle states
+/// slower to leave than zero microseconds (on a virtual machine: poll rather than halt the vCPU,
+/// which the host may not resume for milliseconds). \returns the descriptor that holds the request.
+int prepareForRealtime()
+{
+  if (::mlockall(MCL_CURRENT | MCL_FUTURE) != 0)
+  {
+    CNC_LOG_WARN("setpoint sender: memory not locked (" << std::strerror(errno)
+                                                        << "): a page fault can delay a setpoint");
+  }
+  const int fd = ::open("/dev/cpu_dma_latency", O_WRONLY | O_CLOEXEC);
+  const int32_t no_latency = 0;
+  if (fd < 0 || ::write(fd, &no_latency, sizeof no_latency) != static_cast<ssize_t>(sizeof no_latency))
+  {
+    CNC_LOG_WARN("setpoint sender: CPU idle latency not limited (/dev/cpu_dma_latency: "
+                 << std::strerror(errno) << "): waking an idle CPU can delay a setpoint");
+    if (fd >= 0)
+    {
+      ::close(fd);
+    }
+    return -1;
+  }
+  return fd;
 }
 
 void atomicMax(std::atomic<int64_t>& target, int64_t value)
@@ -184,6 +213,10 @@ SetpointSender::SetpointSender(Options options) : options_(std::move(options))
     throw ConfigError("setpoint sender: the period must be positive");
   }
   buffer_.reserve(4096);
+  if (options_.realtime_priority > 0)
+  {
+    cpu_latency_fd_ = prepareForRealtime();
+  }
   thread_ = std::thread([this] { run(); });
   if (options_.realtime_priority > 0)
   {
@@ -215,6 +248,10 @@ SetpointSender::~SetpointSender()
     current->interrupt();
   }
   thread_.join();
+  if (cpu_latency_fd_ >= 0)
+  {
+    ::close(cpu_latency_fd_);  // the CPUs may idle deeply again
+  }
 }
 
 std::shared_ptr<Transport> SetpointSender::link() const
@@ -322,6 +359,7 @@ SetpointSender::Stats SetpointSender::stats() const
   Stats stats;
   stats.setpoints = setpoints_.load(std::memory_order_relaxed);
   stats.underruns = underruns_.load(std::memory_order_relaxed);
+  stats.stalls = stalls_.load(std::memory_order_relaxed);
   stats.commands = commands_.load(std::memory_order_relaxed);
   stats.max_lateness = static_cast<double>(max_late_ns_.load(std::memory_order_relaxed)) * 1e-9;
   stats.mean_lateness = stats.setpoints > 0 ? static_cast<double>(sum_late_ns_.load(std::memory_order_relaxed)) * 1e-9 /
@@ -339,6 +377,7 @@ void SetpointSender::resetStats()
   intervals_.reset();
   setpoints_ = 0;
   underruns_ = 0;
+  stalls_ = 0;
   max_late_ns_ = 0;
   sum_late_ns_ = 0;
 }
@@ -523,6 +562,7 @@ void SetpointSender::runJob(const std::shared_ptr<Job>& job)
     }
 
     int64_t due = monotonicNs() + period_ns;
+    bool behind = false;  // the previous setpoint was an underrun: this one belongs to the same stall
     last_write_ns_ = 0;
     Setpoint setpoint;
     Job::State outcome = Job::State::kSucceeded;
@@ -560,10 +600,16 @@ void SetpointSender::runJob(const std::shared_ptr<Job>& job)
       write(buffer_);
       const int64_t now = monotonicNs();
       const int64_t late = now - due;
-      if (late > period_ns)
+      const bool underrun = late > period_ns;
+      if (underrun)
       {
         underruns_.fetch_add(1, std::memory_order_relaxed);
+        if (!behind)
+        {
+          stalls_.fetch_add(1, std::memory_order_relaxed);
+        }
       }
+      behind = underrun;
       atomicMax(max_late_ns_, late);
       sum_late_ns_.fetch_add(std::max<int64_t>(late, 0), std::memory_order_relaxed);
       if (last_write_ns_ != 0)

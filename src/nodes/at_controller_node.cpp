@@ -782,6 +782,7 @@ class AtControllerNode
     underruns_seen_ = stats.underruns;
     status.add("setpoints sent", stats.setpoints);
     status.add("underruns (setpoint later than one period)", stats.underruns);
+    status.add("stalls (schedule fell more than one period behind)", stats.stalls);
     status.add("latency mean (ms)", stats.mean_lateness * 1e3);
     status.add("latency max (ms)", stats.max_lateness * 1e3);
     status.add("interval p50 (ms)", stats.interval_p50 * 1e3);

@@ -3,7 +3,10 @@
 // is a FakeTransport; the tests wait on the bytes it receives or on the job, never on sleeps.
 #include <gtest/gtest.h>
 
+#include <atomic>
+#include <chrono>
 #include <future>
+#include <thread>
 
 #include "cnc_bridge/at_protocol/sender.h"
 #include "cnc_bridge/common/error.h"
@@ -81,6 +84,32 @@ TEST_F(Fixture, AnOperationIsWrittenInTheSeedsOrder)
   // Intervals were measured (their values depend on the machine's load: the benchmark reports them).
   EXPECT_GT(sender.stats().interval_max, 0.0);
   EXPECT_LE(sender.stats().underruns, steps);
+}
+
+TEST_F(Fixture, AStalledWriteIsOneStallAndAnUnderrunPerSetpointDueMeanwhile)
+{
+  Operation operation;
+  operation.trajectory = line(2.0);  // 100 setpoints
+  // The 30th write blocks for 10 ms (a controller, or the machine, holding the sender up): about
+  // ten setpoints come due meanwhile and go out late, back to back.
+  std::atomic<int> writes{0};
+  link->onWrite(
+      [&](FakeTransport&, const std::vector<uint8_t>&)
+      {
+        if (++writes == 30)
+        {
+          std::this_thread::sleep_for(std::chrono::milliseconds(10));  // the stall under test
+        }
+      });
+  auto job = sender.start(operation);
+  ASSERT_TRUE(job->waitFor(kWait));
+  EXPECT_EQ(job->state(), Job::State::kSucceeded) << job->message();
+  const auto stats = sender.stats();
+  EXPECT_EQ(stats.setpoints, operation.trajectory->steps());  // late, never skipped
+  EXPECT_GE(stats.underruns, 9u);
+  EXPECT_GE(stats.stalls, 1u);
+  EXPECT_LT(stats.stalls, stats.underruns);  // the ten late setpoints were one stall
+  EXPECT_GE(stats.max_lateness, 0.009);
 }
 
 TEST_F(Fixture, CommandsAreCheckedAndWrittenInOrder)

@@ -121,6 +121,8 @@ class SetpointSender
   {
     double period = 0.001;  ///< s
     /// SCHED_FIFO priority of the sender thread; 0 leaves the normal scheduler (needs CAP_SYS_NICE).
+    /// With a priority the process also locks its memory and keeps the CPUs out of idle states
+    /// (/dev/cpu_dma_latency = 0) while the sender lives, as a real-time latency test does.
     int realtime_priority = 0;
     /// Longest a write may block before the link counts as failed (a controller that stopped reading).
     Milliseconds write_timeout{200};
@@ -132,6 +134,9 @@ class SetpointSender
   {
     uint64_t setpoints = 0;
     uint64_t underruns = 0;
+    /// Times the schedule fell more than one period behind (one stall makes several underruns:
+    /// the setpoints that were due meanwhile). Compare with a latency test's late wake-ups.
+    uint64_t stalls = 0;
     uint64_t commands = 0;
     double max_lateness = 0.0;   ///< s, worst delay of a setpoint behind its due time
     double mean_lateness = 0.0;  ///< s
@@ -195,10 +200,12 @@ class SetpointSender
   IntervalHistogram intervals_;
   std::atomic<uint64_t> setpoints_{0};
   std::atomic<uint64_t> underruns_{0};
+  std::atomic<uint64_t> stalls_{0};
   std::atomic<uint64_t> commands_{0};
   std::atomic<int64_t> max_late_ns_{0};
   std::atomic<int64_t> sum_late_ns_{0};
   int64_t last_write_ns_ = 0;
+  int cpu_latency_fd_ = -1;  ///< /dev/cpu_dma_latency held open in real-time mode
 
   std::thread thread_;
 };
