@@ -169,20 +169,18 @@ class HaasMdcNode
     };
     callbacks.on_state = [this](LinkState link, const std::string& why)
     {
-      state_->update(
-          [&](MachineState& m)
-          {
-            m.link = MachineStatePublisher::toMessage(link);
-            if (!why.empty())
-              m.message = why;
-            if (link != LinkState::kUp)
+      if (link != LinkState::kUp)
+      {
+        state_->update(
+            [](MachineState& m)
             {
               // Nothing is known about a machine we cannot reach (MTConnect: UNAVAILABLE).
               m.mode = MachineState::MODE_UNKNOWN;
               m.execution = MachineState::EXECUTION_UNKNOWN;
               m.position_valid = false;
-            }
-          });
+            });
+      }
+      state_->setLink(link, why);
     };
     reconnector_ = std::make_unique<Reconnector>("haas_mdc " + hardware_id_, callbacks);
     reconnector_->start();

@@ -66,7 +66,12 @@ MachineStatePublisher::MachineStatePublisher(ros::NodeHandle nh, ros::NodeHandle
   updater_.add("link", this, &MachineStatePublisher::linkStatus);
   timer_ = nh_.createTimer(ros::Duration(1.0 / state_rate_), &MachineStatePublisher::onTimer, this);
   // diagnostic_updater publishes at its own ~diagnostic_period; force() keeps silence visible.
-  diagnostics_timer_ = nh_.createTimer(ros::Duration(1.0), [this](const ros::TimerEvent&) { updater_.update(); });
+  diagnostics_timer_ = nh_.createTimer(ros::Duration(1.0),
+                                       [this](const ros::TimerEvent&)
+                                       {
+                                         std::lock_guard<std::mutex> lock(diagnostics_mutex_);
+                                         updater_.update();
+                                       });
   state_.header.stamp = ros::Time::now();
   publishLocked(state_.header.stamp);
 }
@@ -110,6 +115,7 @@ void MachineStatePublisher::update(const std::function<void(MachineState&)>& mut
 
 void MachineStatePublisher::setLink(LinkState link, const std::string& message)
 {
+  const bool changed = snapshot().link != toMessage(link);
   update(
       [&](MachineState& s)
       {
@@ -120,6 +126,13 @@ void MachineStatePublisher::setLink(LinkState link, const std::string& message)
           s.message = message;
         }
       });
+  if (changed)
+  {
+    // A link lost or regained is news on /diagnostics at once, not at the next period (a restart
+    // that takes a second could fall between two).
+    std::lock_guard<std::mutex> lock(diagnostics_mutex_);
+    updater_.force_update();
+  }
 }
 
 void MachineStatePublisher::setPosition(double x, double y, double z)

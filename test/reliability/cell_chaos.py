@@ -2,10 +2,11 @@
 """Reliability campaign on the running demo cell: kill a simulator at random (SIGKILL, as a
 machine losing power or a cable pulled), again and again, while the cell works.
 
-For every kill: the machine's node must report the link loss in `state` (link not UP) and come
-back UP after the simulator is respawned, and no node process may die. Meanwhile XModem transfers
-run against the Haas's RS-232 simulator, which is killed too: every transfer that reports success
-must have delivered exactly the file (checked byte for byte in the simulated control's memory).
+For every kill: the machine's node must report the link loss in `state` (link not UP) and in its
+`link` diagnostic, and come back UP after the simulator is respawned, and no node process may die.
+Meanwhile XModem transfers run against the Haas's RS-232 simulator, which is killed too: every
+transfer that reports success must have delivered exactly the file (checked byte for byte in the
+simulated control's memory).
 
   cell_chaos.py --kills 50 --seed 7 --programs DIR --memory DIR      (rostest: ~kills, ~seed, ...)
 """
@@ -23,16 +24,19 @@ import actionlib
 import rosnode
 import rospy
 
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+
 from cnc_bridge.msg import MachineState, TransferAction, TransferGoal
 
-# Simulator command line (as the cell launches it) -> the state topic that must show its loss.
+# Simulator command line (as the cell launches it) -> the state topic and the node whose
+# diagnostics must show its loss.
 TARGETS = [
-    ("sim_haas_mdc --port 25051", "/cell/haas_vf2/state"),
-    ("sim_haas_serial dprnt --tcp 25052", "/cell/haas_vf2/dprnt/state"),
-    ("sim_ethernut --port 26666", "/cell/ethernut_mill/state"),
-    ("sim_at_controller --command-port 25000", "/cell/at_router/state"),
-    ("sim_slave_bus --link", "/cell/laser/state"),
-    ("sim_haas_serial xmodem", None),  # the transfer loop checks this one
+    ("sim_haas_mdc --port 25051", "/cell/haas_vf2/state", "/cell/haas_vf2/haas_mdc_node"),
+    ("sim_haas_serial dprnt --tcp 25052", "/cell/haas_vf2/dprnt/state", "/cell/haas_vf2/dprnt_node"),
+    ("sim_ethernut --port 26666", "/cell/ethernut_mill/state", "/cell/ethernut_mill/ethernut_node"),
+    ("sim_at_controller --command-port 25000", "/cell/at_router/state", "/cell/at_router/at_controller_node"),
+    ("sim_slave_bus --link", "/cell/laser/state", "/cell/laser/slave_bus_node"),
+    ("sim_haas_serial xmodem", None, None),  # the transfer loop checks this one
 ]
 NODES = ["/cell/haas_vf2/haas_mdc_node", "/cell/haas_vf2/dnc_node", "/cell/haas_vf2/dprnt_node",
          "/cell/ethernut_mill/ethernut_node", "/cell/at_router/at_controller_node", "/cell/laser/slave_bus_node"]
@@ -69,6 +73,30 @@ class LinkWatch:
             if up is not None or time.time() >= deadline:
                 return down, up
             time.sleep(0.05)
+
+
+class DiagnosticsWatch:
+    """When each node's `link` diagnostic was not OK (arrival times)."""
+
+    def __init__(self):
+        self.bad = {}
+        self.lock = threading.Lock()
+        self.sub = rospy.Subscriber("/diagnostics", DiagnosticArray, self._on_diagnostics, queue_size=100)
+
+    def _on_diagnostics(self, array):
+        now = time.time()
+        with self.lock:
+            for status in array.status:
+                node, _, task = status.name.rpartition(": ")
+                if task == "link" and status.level != DiagnosticStatus.OK:
+                    self.bad.setdefault(node.strip("/"), []).append(now)
+
+    def not_ok_since(self, node, since):
+        """`node` fully qualified; a status names it with or without its namespace."""
+        node = node.strip("/")
+        with self.lock:
+            return any(stamp >= since for name, stamps in self.bad.items()
+                       if node == name or node.endswith("/" + name) for stamp in stamps)
 
 
 def same_master(pid):
@@ -148,10 +176,11 @@ class CellChaos(unittest.TestCase):
         seed = rospy.get_param("~seed", ARGS.seed)
         recover = rospy.get_param("~recover_timeout", ARGS.recover_timeout)
         rng = random.Random(seed)
-        watches = {topic: LinkWatch(topic) for _, topic in TARGETS if topic}
+        watches = {topic: LinkWatch(topic) for _, topic, _ in TARGETS if topic}
+        diagnostics = DiagnosticsWatch()
         for topic in watches:
             rospy.wait_for_message(topic, MachineState, timeout=60)
-        for _, topic in TARGETS:
+        for _, topic, _ in TARGETS:
             if topic:
                 self.wait_up(topic, 60)
         node_pids = {}
@@ -161,7 +190,7 @@ class CellChaos(unittest.TestCase):
         transfers.start()
         problems = []
         for kill in range(kills):
-            pattern, topic = rng.choice(TARGETS)
+            pattern, topic, node = rng.choice(TARGETS)
             # A simulator killed a moment ago may still be waiting for its respawn (respawn_delay):
             # wait for it instead of counting it as lost.
             pids = pids_of(pattern)
@@ -187,6 +216,8 @@ class CellChaos(unittest.TestCase):
                     problems.append("kill %d: %s: %s never showed the link down" % (kill, pattern, topic))
                 elif up is None:
                     problems.append("kill %d: %s: %s did not come back UP within %d s" % (kill, pattern, topic, recover))
+                if not diagnostics.not_ok_since(node, since):
+                    problems.append("kill %d: %s: the link diagnostic of %s never left OK" % (kill, pattern, node))
             else:
                 rospy.loginfo("kill %d: %s (transfers: %d ok, %d failed)", kill, pattern, transfers.successes, transfers.failures)
                 time.sleep(rng.uniform(0.5, 2.0))

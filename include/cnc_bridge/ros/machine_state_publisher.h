@@ -63,6 +63,7 @@ class MachineStatePublisher
   ros::Publisher joint_pub_;
   tf2_ros::TransformBroadcaster tf_broadcaster_;
   diagnostic_updater::Updater updater_;
+  std::mutex diagnostics_mutex_;  ///< Updater is not thread-safe: the timer and setLink() both run it
   ros::Timer timer_;
   ros::Timer diagnostics_timer_;
   unsigned link_changes_ = 0;
