@@ -59,7 +59,7 @@ FaultSettings FaultSettings::parse(const std::string& text)
 }
 
 FaultyTransport::FaultyTransport(Transport& inner, FaultSettings settings)
-    : inner_(inner), settings_(settings), random_(settings.seed)
+    : ForwardingTransport(inner), settings_(settings), random_(settings.seed)
 {
 }
 

@@ -14,13 +14,8 @@ unsigned bitsPerCharacter(unsigned data_bits, bool parity, unsigned stop_bits)
 }
 
 PacedTransport::PacedTransport(Transport& inner, double characters_per_second)
-    : inner_(inner), rate_(characters_per_second), line_free_at_(Clock::now())
+    : ForwardingTransport(inner), rate_(characters_per_second), line_free_at_(Clock::now())
 {
-}
-
-size_t PacedTransport::read(uint8_t* buffer, size_t size, Milliseconds timeout)
-{
-  return inner_.read(buffer, size, timeout);
 }
 
 void PacedTransport::write(const uint8_t* data, size_t size, Milliseconds timeout)

@@ -16,6 +16,7 @@
 #include <thread>
 
 #include "cnc_bridge/common/error.h"
+#include "cnc_bridge/transport/forwarding_transport.h"
 #include "cnc_bridge/transport/pty.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
@@ -254,15 +255,11 @@ INSTANTIATE_TEST_SUITE_P(Sizes, PythonInterop, ::testing::Values(1, 127, 128, 12
 namespace
 {
 /// Counts the bytes a session writes, so a test can wait for "n NAKs sent" on a condition.
-class CountingTransport : public Transport
+class CountingTransport : public ForwardingTransport
 {
  public:
-  explicit CountingTransport(Transport& inner) : inner_(inner) {}
-  using Transport::write;
-  size_t read(uint8_t* buffer, size_t size, Milliseconds timeout) override
-  {
-    return inner_.read(buffer, size, timeout);
-  }
+  explicit CountingTransport(Transport& inner) : ForwardingTransport(inner) {}
+  using ForwardingTransport::write;
   void write(const uint8_t* data, size_t size, Milliseconds timeout = kWaitForever) override
   {
     inner_.write(data, size, timeout);
@@ -275,14 +272,8 @@ class CountingTransport : public Transport
     std::unique_lock<std::mutex> lock(mutex_);
     return changed_.wait_for(lock, timeout, [&] { return written_ >= count; });
   }
-  void discardInput() override { inner_.discardInput(); }
-  void interrupt() override { inner_.interrupt(); }
-  void close() override { inner_.close(); }
-  bool isOpen() const override { return inner_.isOpen(); }
-  std::string describe() const override { return inner_.describe(); }
 
  private:
-  Transport& inner_;
   std::mutex mutex_;
   std::condition_variable changed_;
   size_t written_ = 0;

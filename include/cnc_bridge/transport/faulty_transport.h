@@ -9,7 +9,7 @@
 #include <random>
 #include <string>
 
-#include "cnc_bridge/transport/transport.h"
+#include "cnc_bridge/transport/forwarding_transport.h"
 
 namespace cnc_bridge
 {
@@ -40,21 +40,15 @@ struct FaultCounts
 
 /// \brief Damages the bytes passing through \p inner. Thread-safe as the inner transport is; the
 /// random generator is guarded so a reader and a writer thread may share one object.
-class FaultyTransport : public Transport
+class FaultyTransport : public ForwardingTransport
 {
  public:
   /// \param inner must outlive this object.
   FaultyTransport(Transport& inner, FaultSettings settings);
 
-  using Transport::write;
+  using ForwardingTransport::write;
   size_t read(uint8_t* buffer, size_t size, Milliseconds timeout) override;
   void write(const uint8_t* data, size_t size, Milliseconds timeout = kWaitForever) override;
-  void drain() override { inner_.drain(); }
-  size_t pendingOutput() const override { return inner_.pendingOutput(); }
-  void discardInput() override { inner_.discardInput(); }
-  void interrupt() override { inner_.interrupt(); }
-  void close() override { inner_.close(); }
-  bool isOpen() const override { return inner_.isOpen(); }
   std::string describe() const override { return inner_.describe() + " (with injected faults)"; }
 
   FaultCounts counts() const;
@@ -63,7 +57,6 @@ class FaultyTransport : public Transport
   /// Applies per-byte faults to \p in, appending the damaged bytes to \p out.
   void damage(const uint8_t* in, size_t size, std::string& out);
 
-  Transport& inner_;
   FaultSettings settings_;
   mutable std::mutex mutex_;
   std::mt19937 random_;

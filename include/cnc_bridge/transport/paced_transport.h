@@ -5,7 +5,7 @@
 
 #include <chrono>
 
-#include "cnc_bridge/transport/transport.h"
+#include "cnc_bridge/transport/forwarding_transport.h"
 
 namespace cnc_bridge
 {
@@ -14,30 +14,23 @@ unsigned bitsPerCharacter(unsigned data_bits, bool parity, unsigned stop_bits);
 
 /// \brief Paces writes of an inner transport to \p characters_per_second. Reads pass through.
 /// Not thread-safe beyond what the inner transport offers (interrupt() is forwarded).
-class PacedTransport : public Transport
+class PacedTransport : public ForwardingTransport
 {
  public:
   /// \param inner the link to pace; must outlive this object.
   /// \param characters_per_second e.g. 11520 for 115200 baud 8N1 (10 bits per character).
   PacedTransport(Transport& inner, double characters_per_second);
 
-  using Transport::write;
-  size_t read(uint8_t* buffer, size_t size, Milliseconds timeout) override;
+  using ForwardingTransport::write;
   /// Writes in small slices, each at the time the line would have finished the previous one.
   void write(const uint8_t* data, size_t size, Milliseconds timeout = kWaitForever) override;
   void drain() override;
-  size_t pendingOutput() const override { return inner_.pendingOutput(); }
-  void discardInput() override { inner_.discardInput(); }
-  void interrupt() override { inner_.interrupt(); }
-  void close() override { inner_.close(); }
-  bool isOpen() const override { return inner_.isOpen(); }
   std::string describe() const override;
 
   double charactersPerSecond() const { return rate_; }
 
  private:
   using Clock = std::chrono::steady_clock;
-  Transport& inner_;
   double rate_;
   Clock::time_point line_free_at_;  // when the simulated line has sent everything written so far
 };

@@ -19,6 +19,7 @@
 #include "cnc_bridge/sim/haas_serial_modes.h"
 #include "cnc_bridge/sim/sim_support.h"
 #include "cnc_bridge/transport/faulty_transport.h"
+#include "cnc_bridge/transport/forwarding_transport.h"
 #include "cnc_bridge/transport/paced_transport.h"
 #include "cnc_bridge/transport/pty.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
@@ -32,13 +33,12 @@ namespace sim
 namespace
 {
 /// A byte already read can be put back, so the protocol session that the byte starts sees it.
-class PushbackTransport : public Transport
+class PushbackTransport : public ForwardingTransport
 {
  public:
-  explicit PushbackTransport(Transport& inner) : inner_(inner) {}
+  explicit PushbackTransport(Transport& inner) : ForwardingTransport(inner) {}
   void unread(uint8_t byte) { pushed_.push_front(byte); }
 
-  using Transport::write;
   size_t read(uint8_t* buffer, size_t size, Milliseconds timeout) override
   {
     if (!pushed_.empty() && size > 0)
@@ -49,23 +49,13 @@ class PushbackTransport : public Transport
     }
     return inner_.read(buffer, size, timeout);
   }
-  void write(const uint8_t* data, size_t size, Milliseconds timeout = kWaitForever) override
-  {
-    inner_.write(data, size, timeout);
-  }
-  void drain() override { inner_.drain(); }
   void discardInput() override
   {
     pushed_.clear();
     inner_.discardInput();
   }
-  void interrupt() override { inner_.interrupt(); }
-  void close() override { inner_.close(); }
-  bool isOpen() const override { return inner_.isOpen(); }
-  std::string describe() const override { return inner_.describe(); }
 
  private:
-  Transport& inner_;
   std::deque<uint8_t> pushed_;
 };
 
