@@ -9,6 +9,7 @@
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/transform_listener.h>
 
+#include <algorithm>
 #include <condition_variable>
 #include <map>
 #include <mutex>
@@ -40,6 +41,18 @@ class Responses
                                                     cv_.notify_all();
                                                   }));
     }
+    // A reply published before its subscription is connected is lost: the tests trigger replies at
+    // once, so wait until the node's publishers are connected.
+    const auto deadline = ros::WallTime::now() + kWait;
+    while (!connected() && ros::WallTime::now() < deadline)
+    {
+      ros::WallDuration(0.01).sleep();  // polling the connection count: roscpp offers no wait for it
+    }
+    EXPECT_TRUE(connected()) << ns << ": response topics have no publisher";
+  }
+  bool connected() const
+  {
+    return std::all_of(subs_.begin(), subs_.end(), [](const ros::Subscriber& s) { return s.getNumPublishers() > 0; });
   }
   /// Waits until \p pred holds on the responses so far.
   bool waitFor(const std::function<bool(std::map<std::string, std::vector<cnc_bridge::SlaveResponse>>&)>& pred)
