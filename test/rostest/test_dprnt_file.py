@@ -6,6 +6,7 @@ Lengths are millimetres here (~program_units mm). Every wait is on a message, wi
 """
 import os
 import threading
+import time
 import unittest
 
 import rospy
@@ -19,7 +20,14 @@ class Collector:
     def __init__(self, topic, msg_type):
         self.cv = threading.Condition()
         self.messages = []
-        rospy.Subscriber(topic, msg_type, self.on_message, queue_size=1000)
+        self.sub = rospy.Subscriber(topic, msg_type, self.on_message, queue_size=1000)
+
+    def wait_connected(self, timeout=20.0):
+        """A message published before the subscription is connected is lost: wait for the publisher."""
+        deadline = time.monotonic() + timeout
+        while self.sub.get_num_connections() == 0 and time.monotonic() < deadline:
+            time.sleep(0.01)  # polling the connection count: rospy offers no wait for it
+        return self.sub.get_num_connections() > 0
 
     def on_message(self, msg):
         with self.cv:
@@ -40,6 +48,8 @@ class TestDprntFile(unittest.TestCase):
         raw = Collector(ns + "/dprnt/raw", DprntLine)
         points = Collector(ns + "/dprnt/probe_hit", PointStamped)
         state = Collector(ns + "/state", MachineState)
+        for collector in (raw, points, state):
+            self.assertTrue(collector.wait_connected(), "the node publishes " + collector.sub.name)
 
         # The node waits for the file: the link is not up before the control creates it.
         self.assertIsNotNone(state.wait(lambda m: m.link != MachineState.LINK_UP))
