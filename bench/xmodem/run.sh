@@ -10,7 +10,10 @@
 # lrzsz rx 1 s). "blocks": payload / (first block .. last block's ACK), as `cnc_dnc receive`
 # reports it; the bound is measured the same way (its rounds only), so blocks/bound compares like
 # with like. rx reports no such time, so pairs ending in rx have the file rate only.
-# usage: BUILD_DIR=/work/main/.build bench/xmodem/run.sh [KILOBYTES]   (default 1024)
+# Every pair runs ROUNDS times (default 5), the pairs taking turns, and the median is reported with
+# the number of stalled runs (lrzsz rx flushes its input after each NAK/ACK; a block that crosses
+# that flush is lost and rx waits 5 s for it, see RESULTS.md).
+# usage: BUILD_DIR=/work/main/.build [ROUNDS=5] bench/xmodem/run.sh [KILOBYTES]   (default 1024)
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 build=${BUILD_DIR:-/work/main/.build}
@@ -19,6 +22,7 @@ bin="$build/devel/lib/cnc_bridge"
 cnc_dnc="$bin/cnc_dnc"
 sim="$bin/sim_haas_serial"
 kb=${1:-1024}
+rounds=${ROUNDS:-5}
 work=$(mktemp -d /tmp/bench_xmodem.XXXXXX)
 trap 'kill $(jobs -p) 2>/dev/null; rm -rf "$work"' EXIT
 # The bound's two loops in C: a Python loop costs more per round than cnc_dnc on 132-byte packets.
@@ -59,46 +63,62 @@ run() {
 }
 
 A="$work/a"; B="$work/b"; P="$work/payload.bin"; O="$work/out.bin"
-# rx flushes its input right after every ACK (RESULTS.md): cnc_dnc sends to it with a short quiet
-# time after each ACK, as the interop tests do. cnc_dnc receivers do not flush: no pause there.
-rx_turnaround=${RX_ACK_TURNAROUND_MS:-5}
+# cnc_dnc sends with its defaults: 10 ms of quiet after the start request or a NAK, none after an
+# ACK (as sx). Each measurement appends to a list; the tables show medians.
 declare -A file blocks
 measure() {  # measure MODE PAIR SENDER_CMD RECEIVER_CMD
   local r; r=($(run "$3" "$4"))
-  file[$1,$2]=${r[0]}; blocks[$1,$2]=${r[1]}
+  file[$1,$2]+="${r[0]} "; blocks[$1,$2]+="${r[1]} "
 }
-for mode in checksum 1k; do
-  if [[ $mode == checksum ]]; then sxo=""; rxo=""; sendm=checksum; recvm=checksum; pkt=132; pay=128
-  else sxo="-k"; rxo="-c"; sendm=1k; recvm=crc; pkt=1029; pay=1024; fi
-  measure $mode dnc_dnc "$cnc_dnc send --port $A --mode $sendm --binary $P" \
-                        "$cnc_dnc receive --port $B --mode $recvm --binary $O"
-  measure $mode sx_rx "sx $sxo $P <$A >$A" "cd $work && rx $rxo out.bin <$B >$B"
-  measure $mode dnc_rx "$cnc_dnc send --port $A --mode $sendm --binary --ack-turnaround $rx_turnaround $P" \
-                       "cd $work && rx $rxo out.bin <$B >$B"
-  measure $mode sx_dnc "sx $sxo $P <$A >$A" "$cnc_dnc receive --port $B --mode $recvm --binary $O"
-  link_up
-  file[$mode,bound]=-
-  blocks[$mode,bound]=$("$work/stop_and_wait" "$A" "$B" $((size / pay)) $pkt $pay)
-  link_down
-  echo "$mode done, load: $(cut -d' ' -f1-3 /proc/loadavg)" >&2
+median() {  # median of numbers (FAILED counts as 0, "-" passes through)
+  tr ' ' '\n' <<<"$1" | sed '/^$/d; s/FAILED/0/' | sort -g | awk '{v[NR] = $1} END {
+    if (NR == 0 || v[1] == "-") { print "-"; exit }
+    print (NR % 2) ? v[(NR + 1) / 2] : int((v[NR / 2] + v[NR / 2 + 1]) / 2) }'
+}
+stalls() {  # runs slower than half the median: a lost block and a receiver's timeout
+  local m; m=$(median "$1")
+  [[ $m == - ]] && { echo -; return; }
+  tr ' ' '\n' <<<"$1" | sed '/^$/d; s/FAILED/0/' | awk -v m="$m" '$1 < m / 2 {n++} END {print n + 0}'
+}
+for round in $(seq "$rounds"); do
+  for mode in checksum 1k; do
+    if [[ $mode == checksum ]]; then sxo=""; rxo=""; sendm=checksum; recvm=checksum; pkt=132; pay=128
+    else sxo="-k"; rxo="-c"; sendm=1k; recvm=crc; pkt=1029; pay=1024; fi
+    measure $mode dnc_dnc "$cnc_dnc send --port $A --mode $sendm --binary $P" \
+                          "$cnc_dnc receive --port $B --mode $recvm --binary $O"
+    measure $mode sx_rx "sx $sxo $P <$A >$A" "cd $work && rx $rxo out.bin <$B >$B"
+    measure $mode dnc_rx "$cnc_dnc send --port $A --mode $sendm --binary $P" "cd $work && rx $rxo out.bin <$B >$B"
+    measure $mode sx_dnc "sx $sxo $P <$A >$A" "$cnc_dnc receive --port $B --mode $recvm --binary $O"
+    link_up
+    file[$mode,bound]+="- "
+    blocks[$mode,bound]+="$("$work/stop_and_wait" "$A" "$B" $((size / pay)) $pkt $pay) "
+    link_down
+  done
+  echo "round $round of $rounds done, load: $(cut -d' ' -f1-3 /proc/loadavg)" >&2
+done
+declare -A stalled
+for key in "${!file[@]}"; do
+  stalled[$key]=$(stalls "${file[$key]}")
+  file[$key]=$(median "${file[$key]}"); blocks[$key]=$(median "${blocks[$key]}")
 done
 
-printf "payload bytes/s, %s KB, rate over the whole file / over the data blocks (load %s)\n" "$kb" \
-  "$(cut -d' ' -f1-3 /proc/loadavg)"
-printf "%-22s %12s %12s %12s %12s\n" "" "file chk-128" "blocks" "file 1K" "blocks"
+printf "payload bytes/s, %s KB, medians of %s runs: rate over the whole file / over the data blocks;\n" "$kb" "$rounds"
+printf "stalled runs (under half the median) in brackets (load %s)\n" "$(cut -d' ' -f1-3 /proc/loadavg)"
+printf "%-22s %16s %10s %16s %10s\n" "" "file chk-128" "blocks" "file 1K" "blocks"
 for pair in dnc_dnc sx_rx dnc_rx sx_dnc bound; do
   case $pair in dnc_dnc) name="cnc_dnc -> cnc_dnc";; sx_rx) name="sx -> rx";; dnc_rx) name="cnc_dnc -> rx";;
     sx_dnc) name="sx -> cnc_dnc";; bound) name="stop-and-wait bound";; esac
-  printf "%-22s %12s %12s %12s %12s\n" "$name" "${file[checksum,$pair]}" "${blocks[checksum,$pair]}" \
-    "${file[1k,$pair]}" "${blocks[1k,$pair]}"
+  printf "%-22s %11s [%2s] %10s %11s [%2s] %10s\n" "$name" "${file[checksum,$pair]}" "${stalled[checksum,$pair]}" \
+    "${blocks[checksum,$pair]}" "${file[1k,$pair]}" "${stalled[1k,$pair]}" "${blocks[1k,$pair]}"
 done
-# A FAILED sx->rx ran into the 120 s bound: its rate is below size/120 s, so ratios to it are lower bounds.
+# A median of 0 means most sx->rx runs FAILED (the 120 s bound): its rate is below size/120 s, so
+# ratios to it are lower bounds.
 for mode in checksum 1k; do
   awk -v a="${file[$mode,dnc_dnc]}" -v ab="${blocks[$mode,dnc_dnc]}" -v s="${file[$mode,sx_rx]}" \
       -v b="${blocks[$mode,bound]}" -v d="${file[$mode,dnc_rx]}" -v x="${file[$mode,sx_dnc]}" -v m="$mode" \
       -v n="$size" 'BEGIN {
     gt = "";
-    if (s == "FAILED") { s = n / 120; gt = ">" }
+    if (s == 0) { s = n / 120; gt = ">" }
     printf "%-9s cnc_dnc pair: blocks / bound = %.0f%%, file / sx->rx = %s%.2fx; cnc_dnc->rx / sx->rx = %s%.2f; sx->cnc_dnc / sx->rx = %s%.2f\n",
       m, 100 * ab / b, gt, a / s, gt, d / s, gt, x / s }'
 done

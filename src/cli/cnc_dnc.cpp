@@ -3,7 +3,8 @@
 // with one function and one table line. Exit status 0 only for a verified complete transfer;
 // anything else prints one line saying what went wrong.
 //
-//   cnc_dnc send    --port DEV [serial options] [--mode checksum|crc|1k] [--ack-turnaround MS] FILE
+//   cnc_dnc send    --port DEV [serial options] [--mode checksum|crc|1k] [--turnaround MS]
+//                   [--ack-turnaround MS] FILE
 //   cnc_dnc receive --port DEV [serial options] [--mode checksum|crc] [--timeout S] FILE
 //   cnc_dnc drip    --port DEV [serial options] [--start-line N] FILE   (cnc_dnc_drip.cpp)
 //   cnc_dnc backup  --port DEV [serial options] FILE                    (cnc_dnc_drip.cpp)
@@ -141,6 +142,7 @@ xmodem::Config transferConfig(const po::variables_map& vm)
     throw UsageError("--timeout must be positive");
   config.start_timeout = config.start_wait = Milliseconds(static_cast<int64_t>(timeout * 1000));
   config.max_retries = config.eot_retries = vm["retries"].as<unsigned>();
+  xmodem::fitToLine(config, serialSettings(vm).charactersPerSecond());
   return config;
 }
 
@@ -164,15 +166,19 @@ int runSend(const std::vector<std::string>& args)
 {
   po::options_description options = serialOptions();
   addTransferOptions(options, "checksum");
-  options.add_options()("ack-turnaround", po::value<unsigned>()->default_value(0),
-                        "milliseconds of quiet after each ACK before the next block (0 on a serial line; "
-                        "a few for lrzsz rx on a pty, which flushes its input after every ACK)");
+  options.add_options()("turnaround", po::value<unsigned>()->default_value(10),
+                        "milliseconds of quiet after the start request or a NAK before a block (lrzsz rx "
+                        "flushes its input right after it writes them)")(
+      "ack-turnaround", po::value<unsigned>()->default_value(0),
+      "milliseconds of quiet after each ACK before the next block (rx flushes after ACKs too; 0 is "
+      "what sx does)");
   const po::variables_map vm = parse("send", args, options);
   const xmodem::Mode mode = xmodem::parseMode(vm["mode"].as<std::string>());
   xmodem::TextOptions text;
   text.binary = vm["binary"].as<bool>();
   text.control_eob = xmodem::parseEob(vm["eob"].as<std::string>());
   xmodem::Config config = transferConfig(vm);
+  config.turnaround = Milliseconds(vm["turnaround"].as<unsigned>());
   config.ack_turnaround = Milliseconds(vm["ack-turnaround"].as<unsigned>());
   const std::string file = vm["file"].as<std::string>();
   return withPort(vm,

@@ -22,7 +22,6 @@
 #include "cnc_bridge/dnc/dnc_codes.h"
 #include "cnc_bridge/dnc/drip_feed.h"
 #include "cnc_bridge/sim/sim_support.h"
-#include "cnc_bridge/transport/paced_transport.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "progress_line.h"
 #include "serial_options.h"
@@ -136,8 +135,7 @@ int runDrip(const std::vector<std::string>& args)
   drip.eob = dnc::parseEob(vm["eob"].as<std::string>());
   drip.flow = dnc::parseDripFlow(vm["flow"].as<std::string>());
   if (!vm["no-pace"].as<bool>())
-    drip.pace_cps = static_cast<double>(settings.baud) /
-                    bitsPerCharacter(settings.data_bits, settings.parity != Parity::kNone, settings.stop_bits);
+    drip.pace_cps = settings.charactersPerSecond();
   drip.chunk = vm["chunk"].as<size_t>();
   drip.dc_codes = vm["dc-codes"].as<bool>();
   drip.leader_length = drip.trailer_length = vm["leader"].as<size_t>();

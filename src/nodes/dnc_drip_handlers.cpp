@@ -13,7 +13,6 @@
 #include "cnc_bridge/dnc/dnc_codes.h"
 #include "cnc_bridge/dnc/drip_feed.h"
 #include "cnc_bridge/ros/params.h"
-#include "cnc_bridge/transport/paced_transport.h"
 
 namespace cnc_bridge
 {
@@ -91,8 +90,7 @@ class DripHandlers
     // character), so at most ~drip_xoff_allowance characters can follow an XOFF.
     if (pnh.param("drip_pace", true))
     {
-      drip_.pace_cps = static_cast<double>(serial.baud) /
-                       bitsPerCharacter(serial.data_bits, serial.parity != Parity::kNone, serial.stop_bits);
+      drip_.pace_cps = serial.charactersPerSecond();
     }
     // ~drip_chunk (int, default 4): characters per write.
     drip_.chunk = static_cast<size_t>(std::max(1, pnh.param("drip_chunk", 4)));

@@ -1,11 +1,13 @@
 // SerialPort: Boost.Asio's serial_port does the I/O; the line settings, output queue size, drain
 // and input flush use termios directly.
 #include "cnc_bridge/transport/serial_port.h"
+#include "cnc_bridge/transport/paced_transport.h"
 
 #include <sys/ioctl.h>
 #include <sys/stat.h>
 #include <sys/sysmacros.h>
 #include <termios.h>
+#include <unistd.h>
 
 #include <cerrno>
 #include <cstring>
@@ -67,6 +69,11 @@ std::string SerialSettings::describe() const
     out << " " << toString(flow_control);
   }
   return out.str();
+}
+
+double SerialSettings::charactersPerSecond() const
+{
+  return static_cast<double>(baud) / bitsPerCharacter(data_bits, parity != Parity::kNone, stop_bits);
 }
 
 void SerialSettings::validate() const
@@ -252,6 +259,20 @@ size_t SerialPort::read(uint8_t* buffer, size_t size, Milliseconds timeout)
     }
   }
   return AsioStreamTransport::read(buffer, size, timeout);
+}
+
+void SerialPort::write(const uint8_t* data, size_t size, Milliseconds timeout)
+{
+  ensureOpen();
+  throwIfInterrupted();
+  // Asio opens the port non-blocking, so this takes what fits and never waits. Whatever is left
+  // (flow control holding, a full buffer) or any error goes the usual way, with its timeout.
+  const ssize_t written = ::write(stream_.native_handle(), data, size);
+  const size_t done = written > 0 ? static_cast<size_t>(written) : 0;
+  if (done < size)
+  {
+    AsioStreamTransport::write(data + done, size - done, timeout);
+  }
 }
 
 bool SerialPort::deviceReplaced() const

@@ -20,6 +20,7 @@
 #include "cnc_bridge/xmodem/session.h"
 
 #include <algorithm>
+#include <cmath>
 #include <sstream>
 
 #include "cnc_bridge/common/error.h"
@@ -70,6 +71,15 @@ Mode parseMode(const std::string& text)
   if (text == "1k" || text == "xmodem-1k")
     return Mode::k1K;
   throw ConfigError("XModem mode '" + text + "' is not one of checksum (xmodem), crc (xmodem-crc), 1k (xmodem-1k)");
+}
+
+void fitToLine(Config& config, double characters_per_second)
+{
+  if (characters_per_second <= 0)
+    return;
+  constexpr double kCharacters = 12;
+  const auto needed = Milliseconds(static_cast<int64_t>(std::ceil(kCharacters * 1000.0 / characters_per_second)));
+  config.eot_quiet = std::max(config.eot_quiet, needed);
 }
 
 std::string Stats::summary() const

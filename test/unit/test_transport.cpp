@@ -116,6 +116,18 @@ TEST(SerialPort, AcceptsEveryLineSettingTheSeedsUse)
   }
 }
 
+TEST(SerialPort, CharacterRateCountsStartDataParityAndStopBits)
+{
+  SerialSettings settings;
+  settings.baud = 115200;
+  EXPECT_DOUBLE_EQ(settings.charactersPerSecond(), 11520.0);  // 8N1: 10 bits a character
+  settings.baud = 9600;
+  settings.data_bits = 7;
+  settings.parity = Parity::kEven;
+  settings.stop_bits = 2;
+  EXPECT_DOUBLE_EQ(settings.charactersPerSecond(), 872.7272727272727);  // 7E2: 11 bits
+}
+
 TEST(SerialPort, RejectsInvalidSettingsWithTheirName)
 {
   SerialSettings settings;

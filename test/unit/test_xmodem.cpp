@@ -513,6 +513,19 @@ TEST(XmodemReceiver, AcceptsOneKBlocksInChecksumModeAndAGarbledEotIsNotTheEnd)
   EXPECT_EQ(receiver.stats().garbled, 1u);
 }
 
+TEST(XmodemConfig, SlowLinesGetTwelveCharacterTimesOfSilenceBeforeEotIsBelieved)
+{
+  Config fast;
+  fitToLine(fast, 11520);  // 115200 8N1: 12 characters take 1 ms, the default is longer
+  EXPECT_EQ(fast.eot_quiet, Config().eot_quiet);
+  Config slow;
+  fitToLine(slow, 30);  // 300 baud 8N1: a character every 33 ms
+  EXPECT_EQ(slow.eot_quiet, Milliseconds(400));
+  Config unknown;
+  fitToLine(unknown, 0);
+  EXPECT_EQ(unknown.eot_quiet, Config().eot_quiet);
+}
+
 TEST(XmodemReceiver, StopsOnTwoCansAndWhenTheSenderNeverStarts)
 {
   FakeTransport tx;

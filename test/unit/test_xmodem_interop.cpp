@@ -290,7 +290,7 @@ void sendAfterQueuedNaks(bool port_open_while_queued)
   PtyMaster pty;
   CountingTransport control_side(pty);
   Config control_config;
-  control_config.nak_interval = Milliseconds(50);  // a Haas: ~1 s; the sender's turnaround is 30 ms
+  control_config.nak_interval = Milliseconds(50);  // a Haas: ~1 s; the sender's turnaround is 10 ms
   control_config.start_timeout = Milliseconds(30000);
   Receiver control(control_side, Mode::kChecksum, control_config);
   SerialSettings settings;

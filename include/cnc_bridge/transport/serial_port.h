@@ -40,6 +40,8 @@ struct SerialSettings
   std::string describe() const;
   /// \throws ConfigError if a value is out of range.
   void validate() const;
+  /// \brief Characters the line carries per second: baud over start, data, parity and stop bits.
+  double charactersPerSecond() const;
 };
 
 Parity parseParity(const std::string& text);            ///< none|even|odd; \throws ConfigError
@@ -59,6 +61,10 @@ class SerialPort : public AsioStreamTransport<boost::asio::serial_port>
   /// \brief Reads as every transport does; about twice a second it also checks that the
   /// configured path still names the open device. \throws LinkError when it does not.
   size_t read(uint8_t* buffer, size_t size, Milliseconds timeout) override;
+  using Transport::write;
+  /// \brief Writes as every transport does, but first straight into the driver's buffer, where a
+  /// packet or a reply nearly always fits: one system call instead of a trip through the reactor.
+  void write(const uint8_t* data, size_t size, Milliseconds timeout) override;
   /// \returns true when settings().device now names another device than the open one, or none:
   /// a USB adapter re-plugged and given another ttyUSB behind the same /dev/serial/by-id link, a
   /// simulator restarted on a new pty. The open port then leads nowhere, or to someone else's pty.

@@ -45,8 +45,10 @@ struct Config
   /// garbled packet must not be taken for the next one).
   Milliseconds purge_quiet{1000};
   /// Receiver: an EOT counts only if this long passes without another byte (a garbled SOH can look
-  /// like EOT; lrzsz waits 1 s the same way).
-  Milliseconds eot_quiet{250};
+  /// like EOT, and the rest of its packet follows within a character time; lrzsz waits 1 s). The
+  /// default is 12 character times at 1200 baud and above a USB adapter's 16 ms latency; slower
+  /// lines need more (fitToLine).
+  Milliseconds eot_quiet{100};
   /// Sender: wait this long for the receiver's start character (NAK or 'C').
   Milliseconds start_wait{60000};
   /// Sender: wait this long for ACK/NAK after a packet or EOT.
@@ -57,7 +59,7 @@ struct Config
   /// Sender: after a NAK or the start request, wait until the line has been quiet this long before
   /// sending (what arrives meanwhile is dropped). lrzsz `rx` flushes its input right after it
   /// writes NAK, so a packet sent the instant the NAK arrives can be thrown away by the receiver.
-  Milliseconds turnaround{30};
+  Milliseconds turnaround{10};
   /// Sender: pause this long after each ACK before the next packet (0: none). lrzsz `rx` also
   /// flushes its input right after every ACK; on a pty (no line delay) a packet sent the instant
   /// the ACK arrives can be lost to that flush and cost a 10 s timeout. A real serial line needs 0.
@@ -73,6 +75,10 @@ struct Config
   /// Receiver: answer EOT with CAN CAN CAN as a Haas control does (the simulator), not with ACK.
   bool answer_eot_with_can = false;
 };
+
+/// \brief Raises the silences that mean "no more bytes follow" (eot_quiet) to at least 12 character
+/// times of a line moving \p characters_per_second, so that slow lines keep their margin.
+void fitToLine(Config& config, double characters_per_second);
 
 /// \brief Where a transfer is; given to the progress callback after every block.
 struct Progress
