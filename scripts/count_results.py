@@ -19,7 +19,7 @@ def summary(problem, limit=400):
 
 
 def count(directory):
-    passed, failed, failures = 0, 0, []
+    passed, failed, skipped, failures = 0, 0, 0, []
     for dirpath, _, files in os.walk(directory):
         for name in sorted(files):
             if not name.endswith(".xml"):
@@ -44,18 +44,19 @@ def count(directory):
                     failed += 1
                     failures.append(f"{label}: {summary(problem)}")
                 elif case.find("skipped") is not None or case.get("status") == "notrun":
-                    continue
+                    skipped += 1
                 else:
                     passed += 1
-    return passed, failed, failures
+    return passed, failed, skipped, failures
 
 
 def main():
     directory = sys.argv[1] if len(sys.argv) > 1 else ".build/test_results"
-    passed, failed, failures = count(directory)
+    passed, failed, skipped, failures = count(directory)
     for label in failures:
         print(f"FAILED: {label}")
-    print(f"{passed} passed, {failed} failed")
+    # A skipped test is neither passed nor hidden: it is named in the closing line.
+    print(f"{passed} passed, {failed} failed" + (f", {skipped} skipped" if skipped else ""))
     return 0 if failed == 0 and passed > 0 else 1
 
 

@@ -2,7 +2,8 @@
 # Runs every test of cnc_bridge and ends with one line "N passed, N failed":
 #   1. catkin build, then `make run_tests` (GoogleTest unit tests, rostests, launch-file checks);
 #   2. two hosts (network namespaces): a machine's state and tf cross to the cell's master;
-#   3. lint: clang-format on every C++ file, the core free of ROS (checked when configuring);
+#   3. lint: clang-format on every C++ file, launch-file docs; the core free of ROS in its includes
+#      and in the libraries its executables load; package.xml and the Debian package list agree;
 #   4. the core and its unit tests again under AddressSanitizer + UndefinedBehaviorSanitizer,
 #      with the libFuzzer targets, each fuzzed for FUZZ_SECONDS (default 10).
 # Every step writes JUnit XML under .build/test_results; scripts/count_results.py counts it.
@@ -16,10 +17,20 @@ fuzz_seconds=${FUZZ_SECONDS:-10}
 status=0
 step() { echo; echo "=== $*"; }
 
+# A step that cannot run at all is still counted: a JUnit file with one failed case.
+failed_step() {  # failed_step NAME MESSAGE
+  mkdir -p "$results"
+  printf '<testsuite name="%s" tests="1" failures="1"><testcase classname="make_test" name="%s"><failure message="%s"/></testcase></testsuite>\n' \
+    "$1" "$1" "$2" >"$results/$1.xml"
+}
+
 step "build"
-"$root/scripts/build.sh" || exit 1
-cmake --build "$build" -- -j"${JOBS:-$(nproc)}" tests || exit 1
 rm -rf "$build/test_results"
+if ! "$root/scripts/build.sh" || ! cmake --build "$build" -- -j"${JOBS:-$(nproc)}" tests; then
+  failed_step build "the build failed (output above); no test ran"
+  python3 "$root/scripts/count_results.py" "$build/test_results"
+  exit 1
+fi
 mkdir -p "$results"
 
 step "unit tests, rostests, launch checks"
@@ -37,6 +48,8 @@ step "distributed: a machine node on another host"
 
 step "lint"
 python3 "$root/scripts/lint.py" --junit "$results/lint.xml" || status=1
+python3 "$root/scripts/check_ros_free.py" --build "$build" --junit "$results/ros_free_core.xml" || status=1
+python3 "$root/scripts/check_packages.py" --junit "$results/packages.xml" || status=1
 
 step "sanitizers (ASan + UBSan) and fuzzing"
 "$root/scripts/sanitize_and_fuzz.sh" "$results" "$fuzz_seconds" || status=1
