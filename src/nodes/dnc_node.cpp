@@ -52,7 +52,7 @@ DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   // ~ack_timeout: sending, wait for ACK/NAK after a packet before sending it again.
   xmodem_config_.ack_timeout = params::seconds(pnh, "ack_timeout", 10.0);
   // ~eot_quiet: receiving, silence after EOT before it is believed (a garbled SOH looks like EOT).
-  xmodem_config_.eot_quiet = params::seconds(pnh, "eot_quiet", 0.1);
+  xmodem_config_.eot_quiet = params::seconds(pnh, "eot_quiet", 0.03);
   xmodem::fitToLine(xmodem_config_, serial_.charactersPerSecond());  // 12 characters at least
   // ~max_retries (int, default 10): errors in a row on one block before the transfer aborts.
   int max_retries = pnh.param("max_retries", 10);

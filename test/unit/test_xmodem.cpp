@@ -521,6 +521,9 @@ TEST(XmodemConfig, SlowLinesGetTwelveCharacterTimesOfSilenceBeforeEotIsBelieved)
   Config slow;
   fitToLine(slow, 30);  // 300 baud 8N1: a character every 33 ms
   EXPECT_EQ(slow.eot_quiet, Milliseconds(400));
+  Config just_under;
+  fitToLine(just_under, 240);  // 2400 baud 8N1: 12 characters take 50 ms, more than the default
+  EXPECT_EQ(just_under.eot_quiet, Milliseconds(50));
   Config unknown;
   fitToLine(unknown, 0);
   EXPECT_EQ(unknown.eot_quiet, Config().eot_quiet);

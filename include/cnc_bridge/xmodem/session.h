@@ -46,9 +46,9 @@ struct Config
   Milliseconds purge_quiet{1000};
   /// Receiver: an EOT counts only if this long passes without another byte (a garbled SOH can look
   /// like EOT, and the rest of its packet follows within a character time; lrzsz waits 1 s). The
-  /// default is 12 character times at 1200 baud and above a USB adapter's 16 ms latency; slower
-  /// lines need more (fitToLine).
-  Milliseconds eot_quiet{100};
+  /// default is twice a USB serial adapter's 16 ms latency timer and 12 character times at 4800
+  /// baud; slower lines need more (fitToLine).
+  Milliseconds eot_quiet{30};
   /// Sender: wait this long for the receiver's start character (NAK or 'C').
   Milliseconds start_wait{60000};
   /// Sender: wait this long for ACK/NAK after a packet or EOT.
