@@ -1,10 +1,19 @@
 #!/usr/bin/env python3
-"""Checks that package.xml and scripts/debian-packages.txt name the same dependencies.
+"""Checks that package.xml and scripts/debian-packages.txt name the same dependencies, and that
+the list holds everything the scripts, tests and benchmarks use on a fresh Debian 12.
 
 package.xml speaks in ROS dependency keys (roscpp, tf2_ros, python3-numpy, ...); setup installs
 Debian 12 packages. Every key must map to Debian packages that the list installs, and every
 package the list installs must come from a key or be one of the tools that only the build and
-the test scripts use. Writes JUnit XML (one case per key and one per listed package).
+the test scripts use.
+
+What is used: every Python module imported under scripts/, test/ and bench/ (Python files,
+Python scripts without the .py suffix, Python embedded in shell scripts) must be the standard
+library's, the repository's own, or come from a listed package (PYTHON_MODULE_PACKAGE); every
+program the scripts and tests run that no Essential package provides must come from a listed
+package (PROGRAM_PACKAGES). An import of a module the table does not know fails the check, so a
+new dependency cannot slip in unlisted. Writes JUnit XML (one case per key, listed package,
+imported module and program).
 
 usage: check_packages.py [--junit FILE]
 """
@@ -28,6 +37,7 @@ DEBIAN_OF_KEY = {
     "rostopic": ["python3-rostopic"],
     "rosservice": ["python3-rosservice"],
     "rosbash": ["rosbash"],
+    "rosparam": ["python3-rosparam"],
     "message_generation": ["ros-message-generation"],
     "message_runtime": ["ros-message-runtime"],
     "actionlib": ["libactionlib-dev", "python3-actionlib"],
@@ -55,15 +65,67 @@ DEBIAN_OF_KEY = {
     "socat": ["socat"],
     "python3-xmodem": ["python3-xmodem"],
     "rt-tests": ["rt-tests"],
-    "xvfb": ["xvfb", "x11-apps", "imagemagick", "libgl1-mesa-dri"],
+    "python3-pil": ["python3-pil"],
+    # xvfb-run needs xauth but xvfb only recommends it (setup installs without recommends)
+    "xvfb": ["xvfb", "xauth", "x11-apps", "imagemagick", "libgl1-mesa-dri"],
     "clang": ["clang", "libclang-rt-14-dev"],
     "clang-format": ["clang-format"],
     "iproute2": ["iproute2"],
     "procps": ["procps"],
 }
 
-# Installed for building and running the scripts themselves, not a dependency of the package.
-TOOLS = {"build-essential", "cmake", "ccache"}
+# Installed for building and running the scripts and benchmarks, not a dependency of the package.
+TOOLS = {"build-essential", "cmake", "ccache", "bc", "nodejs", "npm"}
+
+# Python module (top-level name) -> the Debian 12 package that provides it.
+PYTHON_MODULE_PACKAGE = {
+    "rospy": "python3-rospy",
+    "rostest": "python3-rostest",
+    "rosnode": "python3-rosnode",
+    "roslaunch": "python3-roslaunch",
+    "rosbag": "python3-rosbag",
+    "actionlib": "python3-actionlib",
+    "tf2_ros": "python3-tf2-ros",
+    "sensor_msgs": "python3-sensor-msgs",
+    "geometry_msgs": "python3-geometry-msgs",
+    "nav_msgs": "python3-nav-msgs",
+    "std_msgs": "python3-std-msgs",
+    "std_srvs": "python3-std-srvs",
+    "diagnostic_msgs": "python3-diagnostic-msgs",
+    "numpy": "python3-numpy",
+    "matplotlib": "python3-matplotlib",
+    "yaml": "python3-yaml",
+    "xmodem": "python3-xmodem",
+    "PIL": "python3-pil",
+}
+# Modules this repository makes itself: its generated messages and services.
+OWN_MODULES = {"cnc_bridge"}
+
+# Programs the scripts, tests and benchmarks run, with the packages they need; programs of
+# Essential packages (coreutils, util-linux, grep, sed, mawk, findutils, diffutils, libc-bin) are
+# left out. Keep in step with what scripts/*.sh, test/ and bench/ call.
+PROGRAM_PACKAGES = {
+    "xvfb-run": ["xvfb", "xauth"],  # every test runs under it; xvfb only recommends xauth
+    "xwd": ["x11-apps"],  # the rviz screenshot
+    "convert": ["imagemagick"],
+    "socat": ["socat"],
+    "sx": ["lrzsz"], "rx": ["lrzsz"],
+    "cyclictest": ["rt-tests"],
+    "ip": ["iproute2"],  # the two-host test's network namespaces
+    "pgrep": ["procps"],
+    "clang": ["clang", "libclang-rt-14-dev"],  # sanitizers and libFuzzer
+    "clang-format": ["clang-format"],
+    "cmake": ["cmake"], "cc": ["build-essential"], "ccache": ["ccache"],
+    "roscore": ["python3-roslaunch"], "roslaunch": ["python3-roslaunch"], "rostest": ["python3-rostest"],
+    "rosrun": ["rosbash"], "rosparam": ["python3-rosparam"], "rosbag": ["python3-rosbag"],
+    "rostopic": ["python3-rostopic"], "rosservice": ["python3-rosservice"], "rosnode": ["python3-rosnode"],
+    "rviz": ["rviz"],
+    "bc": ["bc"],  # bench/dprnt
+    "node": ["nodejs"], "npm": ["npm"],  # bench/gcode's peer, npm gcode-parser
+}
+
+SCANNED_FOLDERS = ("scripts", "test", "bench")
+IMPORT = re.compile(r"^\s*(?:from\s+([A-Za-z_]\w*)[\w.]*\s+import\b|import\s+([A-Za-z_][\w., ]*?)\s*(?:#.*)?$)")
 
 DEPEND_TAGS = ("buildtool_depend", "depend", "build_depend", "build_export_depend", "exec_depend", "test_depend")
 
@@ -76,6 +138,90 @@ def package_keys(path):
 def listed_packages(path):
     with open(path) as f:
         return [line.strip() for line in f if line.strip() and not re.match(r"\s*#", line)]
+
+
+def imported_modules(text):
+    """Top-level module names a Python text (or shell text with embedded Python) imports."""
+    names = set()
+    for line in text.splitlines():
+        match = IMPORT.match(line)
+        if match and match.group(1):
+            names.add(match.group(1))
+        elif match:
+            for part in match.group(2).split(","):
+                words = part.split()
+                if words:
+                    names.add(words[0].split(".")[0])
+    return names
+
+
+def scanned_files():
+    """Python and shell files under the scanned folders: by suffix, or by a python/sh #! line."""
+    for folder in SCANNED_FOLDERS:
+        for parent, dirs, files in os.walk(os.path.join(ROOT, folder)):
+            dirs[:] = [d for d in dirs if d not in ("node_modules", "corpus", "__pycache__")]
+            for name in files:
+                path = os.path.join(parent, name)
+                if name.endswith((".py", ".sh")):
+                    yield path
+                elif "." not in name:
+                    with open(path, "rb") as f:
+                        first = f.readline()
+                    if first.startswith(b"#!") and (b"python" in first or b"sh" in first):
+                        yield path
+
+
+def used_modules():
+    """{module: first file importing it} over the scanned files."""
+    used = {}
+    for path in sorted(scanned_files()):
+        with open(path, errors="replace") as f:
+            for module in imported_modules(f.read()):
+                used.setdefault(module, os.path.relpath(path, ROOT))
+    return used
+
+
+def local_modules():
+    return {os.path.splitext(name)[0] for folder in SCANNED_FOLDERS
+            for _, _, files in os.walk(os.path.join(ROOT, folder)) for name in files if name.endswith(".py")}
+
+
+def usage_problems(listed, used, local):
+    """(name, problem or None) for every imported module and every program the scripts run."""
+    listed_set = set(listed)
+    results = []
+    for module, where in sorted(used.items()):
+        if module in sys.stdlib_module_names or module in OWN_MODULES or module in local:
+            continue
+        package = PYTHON_MODULE_PACKAGE.get(module)
+        if package is None:
+            problem = (f"{where} imports '{module}', which scripts/check_packages.py does not know: add it to "
+                       "PYTHON_MODULE_PACKAGE and its Debian package to scripts/debian-packages.txt")
+        elif package not in listed_set:
+            problem = f"{where} imports '{module}' from {package}, missing from scripts/debian-packages.txt"
+        else:
+            problem = None
+        results.append((f"python {module}", problem))
+    for program, packages in sorted(PROGRAM_PACKAGES.items()):
+        missing = [name for name in packages if name not in listed_set]
+        results.append((f"program {program}", f"'{program}' needs {', '.join(missing)}, missing from "
+                        "scripts/debian-packages.txt" if missing else None))
+    return results
+
+
+def self_test():
+    """The import scanner on samples, so a broken pattern fails here instead of passing everything."""
+    samples = {
+        "import os": {"os"}, "from PIL import Image": {"PIL"}, "    import numpy as np": {"numpy"},
+        "import sys, time, yaml, rospy": {"sys", "time", "yaml", "rospy"},
+        "from sensor_msgs.msg import JointState": {"sensor_msgs"}, "import xml.etree.ElementTree as ET": {"xml"},
+        "# import nothing": set(), "echo important": set(), "imports = 3": set(),
+    }
+    results = []
+    for line, expected in samples.items():
+        found = imported_modules(line)
+        results.append((f"self_test {line.strip()}", None if found == expected else f"found {sorted(found)}"))
+    return results
 
 
 def problems(keys, listed):
@@ -104,8 +250,9 @@ def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--junit")
     args = parser.parse_args()
-    results = problems(package_keys(os.path.join(ROOT, "package.xml")),
-                       listed_packages(os.path.join(ROOT, "scripts/debian-packages.txt")))
+    listed = listed_packages(os.path.join(ROOT, "scripts/debian-packages.txt"))
+    results = (self_test() + problems(package_keys(os.path.join(ROOT, "package.xml")), listed)
+               + usage_problems(listed, used_modules(), local_modules()))
     failed = [(name, problem) for name, problem in results if problem]
     for name, problem in failed:
         print(f"packages: {problem}")

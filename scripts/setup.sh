@@ -1,17 +1,30 @@
 #!/usr/bin/env bash
 # Installs the Debian packages cnc_bridge needs (scripts/debian-packages.txt), skipping what is
 # already installed, so a second run costs a second. Needs root or sudo for the install itself.
+# A package counts as present when it is installed or an installed package provides it (e.g.
+# NodeSource's nodejs provides npm and conflicts with Debian's npm).
+#   scripts/setup.sh           install what is missing
+#   scripts/setup.sh --check   only list what is missing; exit status 1 if anything is
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
+check_only=0
+[[ "${1:-}" == "--check" ]] && check_only=1
 mapfile -t wanted < <(grep -vE '^\s*(#|$)' "$here/debian-packages.txt")
+
+# Installed packages and the names they provide, one per line ("npm (= 9.2)" -> "npm").
+present=$(dpkg-query -W -f='${db:Status-Abbrev} ${Package} ${Provides}\n' 2>/dev/null |
+  awk '$1 == "ii" { $1 = ""; print }' | sed -E 's/\([^)]*\)//g; s/[:,]/ /g' | tr ' ' '\n' | grep -v '^$' | sort -u)
 missing=()
 for pkg in "${wanted[@]}"; do
-  status=$(dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null || true)
-  [[ "$status" == "install ok installed" ]] || missing+=("$pkg")
+  grep -qxF "$pkg" <<<"$present" || missing+=("$pkg")
 done
 if [[ ${#missing[@]} -eq 0 ]]; then
   echo "setup: all ${#wanted[@]} Debian packages present"
   exit 0
+fi
+if [[ $check_only -eq 1 ]]; then
+  echo "setup: ${#missing[@]} Debian packages missing: ${missing[*]}"
+  exit 1
 fi
 sudo=""
 [[ $(id -u) -eq 0 ]] || sudo="sudo"
