@@ -1,10 +1,10 @@
 // ethernut_node: drives an ethernut board (the qCNC opcode protocol over TCP) from ROS. It keeps
 // the link up (init, mode, keepalive, reconnect), streams jobs from G-code files or point lists
 // through the ~run_job action, carries pause/resume/reset/kill/mode requests, publishes the
-// machine's reported position as state/joint_states/tf, and a preview of each job for rviz
-// before it runs. The protocol itself lives in the ROS-free cnc_bridge_ethernut library.
+// machine's reported and commanded position as state (the reported one as joint_states/tf), and a
+// preview of each job for rviz before it runs. The protocol itself lives in the ROS-free
+// cnc_bridge_ethernut library.
 #include <actionlib/server/simple_action_server.h>
-#include <geometry_msgs/PointStamped.h>
 #include <nav_msgs/Path.h>
 #include <ros/ros.h>
 #include <std_srvs/Trigger.h>
@@ -94,7 +94,6 @@ class EthernutNode : public ethernut::ClientListener
     state_->diagnostics().add("ethernut protocol", this, &EthernutNode::protocolDiagnostics);
     path_pub_ = nh_.advertise<nav_msgs::Path>("job/path", 1, true);
     markers_pub_ = nh_.advertise<visualization_msgs::MarkerArray>("job/markers", 1, true);
-    commanded_pub_ = nh_.advertise<geometry_msgs::PointStamped>("commanded_position", 10, true);
     pause_srv_ = pnh_.advertiseService("pause", &EthernutNode::onPause, this);
     resume_srv_ = pnh_.advertiseService("resume", &EthernutNode::onResume, this);
     reset_srv_ = pnh_.advertiseService("reset", &EthernutNode::onReset, this);
@@ -330,13 +329,9 @@ class EthernutNode : public ethernut::ClientListener
       job_.line = c.tag;
       job_.last = c;
     }
-    geometry_msgs::PointStamped p;
-    p.header.stamp = ros::Time::now();
-    p.header.frame_id = state_->frame("machine");
-    p.point.x = c.x * kMetresPerMm;
-    p.point.y = c.y * kMetresPerMm;
-    p.point.z = c.z * kMetresPerMm;
-    commanded_pub_.publish(p);
+    // The set the board acknowledged (NEXT) is the commanded position; status-4 reports are where
+    // the machine is.
+    state_->setCommandedPosition(c.x * kMetresPerMm, c.y * kMetresPerMm, c.z * kMetresPerMm);
   }
 
   void onResend(uint64_t, unsigned) override
@@ -809,7 +804,6 @@ class EthernutNode : public ethernut::ClientListener
   std::unique_ptr<MachineStatePublisher> state_;
   ros::Publisher path_pub_;
   ros::Publisher markers_pub_;
-  ros::Publisher commanded_pub_;
   ros::ServiceServer pause_srv_, resume_srv_, reset_srv_, kill_srv_, mode_srv_;
   actionlib::SimpleActionServer<RunJobAction> action_;
 

@@ -147,6 +147,18 @@ void MachineStatePublisher::setPosition(double x, double y, double z)
       });
 }
 
+void MachineStatePublisher::setCommandedPosition(double x, double y, double z)
+{
+  update(
+      [&](MachineState& s)
+      {
+        s.commanded_valid = true;
+        s.commanded_position.x = x;
+        s.commanded_position.y = y;
+        s.commanded_position.z = z;
+      });
+}
+
 MachineState MachineStatePublisher::snapshot() const
 {
   std::lock_guard<std::mutex> lock(mutex_);

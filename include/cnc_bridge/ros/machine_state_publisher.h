@@ -36,6 +36,9 @@ class MachineStatePublisher
   void setLink(LinkState link, const std::string& message = "");
   /// \brief Sets the tool position in metres (machine frame) and marks it valid.
   void setPosition(double x, double y, double z);
+  /// \brief Sets the last position sent to the machine in metres (machine frame) and marks it valid.
+  /// Nodes that command no position never call it: commanded_valid stays false.
+  void setCommandedPosition(double x, double y, double z);
 
   MachineState snapshot() const;
   const std::string& tfPrefix() const { return tf_prefix_; }
