@@ -7,7 +7,8 @@
 - Binaries (after a build): the core's executables (simulators, cnc_dnc, core unit tests) load no
   ROS library (ldd).
 - Itself: the patterns catch a sample of ROS includes and pass core includes, so a loosened
-  pattern fails here rather than letting ROS in unseen.
+  pattern fails here rather than letting ROS in unseen; and it finds core sources at all (from
+  git, or by walking the tree outside a git checkout: scripts/repo_files.py).
 
 Writes JUnit XML. usage: check_ros_free.py --junit FILE [--build BUILD_DIR]
 """
@@ -18,6 +19,8 @@ import re
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
+
+from repo_files import repo_files
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -51,9 +54,7 @@ def ros_include_in(path):
 
 
 def tracked_sources():
-    out = subprocess.run(["git", "ls-files", "--cached", "--others", "--exclude-standard", "*.h", "*.hpp", "*.cpp"],
-                         cwd=ROOT, capture_output=True, text=True, check=False).stdout
-    return [p for p in out.splitlines() if p and os.path.exists(os.path.join(ROOT, p))]
+    return repo_files(ROOT, "*.h", "*.hpp", "*.cpp")
 
 
 def core_targets():
@@ -84,9 +85,10 @@ def cases(build):
         results.append(("self_test", f"catches {text}", None if ROS_INCLUDE.search(text) else "not caught"))
     for text in SHOULD_PASS:
         results.append(("self_test", f"passes {text}", "caught as ROS" if ROS_INCLUDE.search(text) else None))
-    for path in tracked_sources():
-        if is_core(path):
-            results.append(("sources", path, ros_include_in(path)))
+    core = [path for path in tracked_sources() if is_core(path)]
+    results.append(("self_test", "finds core sources", None if core else f"no core source found under {ROOT}"))
+    for path in core:
+        results.append(("sources", path, ros_include_in(path)))
     if build:
         for name in core_targets():
             binary = find_binary(build, name)

@@ -1,19 +1,35 @@
 #!/usr/bin/env python3
 """Style checks, written as JUnit XML: every C++ file clang-formatted (.clang-format), every
-launch file with a doc on each <arg>. (The core's freedom from ROS: scripts/check_ros_free.py.)"""
+launch file with a doc on each <arg>. (The core's freedom from ROS: scripts/check_ros_free.py.)
+
+The files come from git, or from a walk of the tree outside a git checkout (scripts/repo_files.py);
+finding no C++ or no launch file at all is a failure, not a pass over nothing."""
 import argparse
 import os
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
 
+from repo_files import git_files, repo_files, walked_files
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CPP = ("*.cpp", "*.h")
+LAUNCH = ("launch/*.launch",)
 
 
-def tracked(*patterns):
-    out = subprocess.run(["git", "ls-files", "--cached", "--others", "--exclude-standard", *patterns],
-                         cwd=ROOT, capture_output=True, text=True, check=False).stdout
-    return [line for line in out.splitlines() if line and os.path.exists(os.path.join(ROOT, line))]
+def found_cases():
+    """A case per file kind that must exist; in a git checkout also: the walk finds what git lists."""
+    cases = []
+    for kind, patterns in (("C++", CPP), ("launch", LAUNCH)):
+        count = len(repo_files(ROOT, *patterns))
+        cases.append(("files_found", kind, None if count else f"no {kind} file found under {ROOT}"))
+        listed = git_files(ROOT, patterns)
+        if listed is not None:
+            walked = walked_files(ROOT, patterns)
+            differ = sorted(set(listed) ^ set(walked))
+            cases.append(("walk_matches_git", kind, f"the tree walk and git differ on: {', '.join(differ[:5])}"
+                          if differ else None))
+    return cases
 
 
 def check_format(path):
@@ -44,11 +60,10 @@ def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--junit", required=True)
     args = parser.parse_args()
-    cases = []
-    cpp = tracked("*.cpp", "*.h")
-    for path in cpp:
+    cases = found_cases()
+    for path in repo_files(ROOT, *CPP):
         cases.append(("format", path, check_format(path)))
-    for path in tracked("launch/*.launch"):
+    for path in repo_files(ROOT, *LAUNCH):
         cases.append(("launch_args_documented", path, check_launch_args(path)))
     if os.path.exists(os.path.join(ROOT, "config/cell.yaml")):
         cases.append(("cell_launch_generated", "launch/cell.launch", check_cell_launch_generated("launch/cell.launch")))
