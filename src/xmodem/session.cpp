@@ -12,11 +12,13 @@
 //   CAN CAN (block number out of sequence: the two sides disagree, nothing can repair it)
 //                                    EOT  (resent on NAK or timeout, eot_retries times)
 //   ACK  (only after eot_quiet of silence: a garbled SOH must not end the file)
+//   CAN CAN (an abort: kCancelLength CANs from this code, ten from lrzsz)
 //
 // Haas quirks handled: the control NAKs several times before the PC starts sending, so NAKs may be
 // queued when block 1 goes out (the sender discards queued input after the start character and
 // waits stale_nak_settle for an ACK before honouring a NAK of block 1); and it answers EOT with
-// CAN CAN CAN instead of ACK, which after every block was ACKed means "complete".
+// CAN CAN CAN instead of ACK, which after every block was ACKed means "complete" (checksum mode,
+// at most three CANs, Config::eot_can_completes).
 #include "cnc_bridge/xmodem/session.h"
 
 #include <algorithm>
@@ -96,13 +98,13 @@ std::string Stats::summary() const
 
 void sendCancel(Transport& link) noexcept
 {
-  const uint8_t cans[] = {kCan, kCan, kCan};
+  const std::vector<uint8_t> cans(kCancelLength, kCan);
   // Two tries: the first write may meet the interrupt() that stopped the transfer and throw.
   for (int attempt = 0; attempt < 2; ++attempt)
   {
     try
     {
-      link.write(cans, sizeof(cans), Milliseconds(1000));
+      link.write(cans.data(), cans.size(), Milliseconds(1000));
       return;
     }
     catch (const CancelledError&)
@@ -226,6 +228,21 @@ Sender::Reply Sender::waitForReply(bool first_block, Milliseconds timeout)
   }
 }
 
+size_t Sender::countCans()
+{
+  // The rest of a burst of CANs follows within a character time; other bytes (a control's next
+  // NAK) are dropped uncounted.
+  const Milliseconds quiet = std::min(config_.char_timeout, Milliseconds(100));
+  const auto limit = Clock::now() + Milliseconds(500);
+  size_t cans = 0;
+  for (int c; Clock::now() < limit && (c = input_.readByte(quiet)) >= 0;)
+  {
+    if (c == kCan)
+      ++cans;
+  }
+  return cans;
+}
+
 Stats Sender::send(const std::vector<uint8_t>& payload, const ProgressCallback& progress)
 {
   stats_ = Stats();
@@ -305,10 +322,19 @@ Stats Sender::send(const std::vector<uint8_t>& payload, const ProgressCallback& 
         break;
       if (reply == Reply::kCancel)
       {
-        // A Haas answers EOT with CAN CAN CAN. Every block was ACKed, so the data is there.
-        stats_.eot_answered_with_can = true;
-        input_.purge(std::min(config_.char_timeout, Milliseconds(100)), Milliseconds(500));
-        break;
+        // A Haas answers EOT with CAN CAN CAN; every block was ACKed, so the data is there. A
+        // receiver that aborts (cancelled, or out of step with us) sends more CANs, and its abort
+        // must not pass for success: count them.
+        const size_t cans = 2 + countCans();
+        if (config_.eot_can_completes && stats_.check == CheckType::kChecksum && cans <= kHaasEotCans)
+        {
+          stats_.eot_answered_with_can = true;
+          break;
+        }
+        abort("the receiver cancelled (" + std::to_string(cans) + " CANs) in answer to EOT after " +
+                  std::to_string(stats_.blocks) + " acknowledged blocks; it may not have stored the file" +
+                  (config_.eot_can_completes ? "" : " (CAN after EOT is not taken as complete)"),
+              false, false);
       }
       if (reply == Reply::kTimeout)
         ++stats_.timeouts;

@@ -18,6 +18,7 @@
 #include "cnc_bridge/transport/buffered_input.h"
 #include "cnc_bridge/transport/fake_transport.h"
 #include "cnc_bridge/transport/faulty_transport.h"
+#include "cnc_bridge/transport/forwarding_transport.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
 #include "cnc_bridge/xmodem/packet.h"
 #include "cnc_bridge/xmodem/session.h"
@@ -345,7 +346,7 @@ TEST(XmodemSender, ResendsANakedBlockAndGivesUpAfterMaxRetriesWithCan)
   Sender quitter(deaf, Mode::kCrc, config);
   EXPECT_THROW(quitter.send(Bytes(10, 'x')), TimeoutError);
   const Bytes written = deaf.written();
-  ASSERT_EQ(written.size(), 4 * 133 + 3u);  // 1 + 3 retries, then CAN CAN CAN
+  ASSERT_EQ(written.size(), 4 * 133 + kCancelLength);  // 1 + 3 retries, then the CANs
   EXPECT_EQ(written.back(), kCan);
 }
 
@@ -369,6 +370,101 @@ TEST(XmodemSender, StopsWhenTheReceiverCancelsAndWhenNobodyStarts)
   Config config = fastConfig();
   config.start_wait = Milliseconds(30);
   EXPECT_THROW(Sender(silent, Mode::kChecksum, config).send(Bytes(10, 'x')), TimeoutError);
+}
+
+namespace
+{
+/// Sends 200 bytes to a scripted receiver that starts with \p start, ACKs every block and answers
+/// EOT with \p cans CANs. \returns "" on success (eot_answered_with_can must then be set), else the error.
+std::string sendWithCanAnswerToEot(uint8_t start, size_t cans, bool eot_can_completes)
+{
+  FakeTransport rx;
+  rx.feed(Bytes{start});
+  rx.onWrite(
+      [cans](FakeTransport& t, const Bytes& bytes)
+      {
+        if (bytes == Bytes{kEot})
+          t.feed(Bytes(cans, kCan));
+        else if (bytes.size() > 1)
+          t.feed(Bytes{kAck});
+      });
+  Config config = fastConfig();
+  config.eot_can_completes = eot_can_completes;
+  try
+  {
+    const Stats stats = Sender(rx, start == kNak ? Mode::kChecksum : Mode::kCrc, config).send(Bytes(200, 'h'));
+    EXPECT_TRUE(stats.eot_answered_with_can);
+    return "";
+  }
+  catch (const ProtocolError& e)
+  {
+    return e.what();
+  }
+}
+}  // namespace
+
+// CAN CAN CAN after EOT is the Haas's "complete" only where it can be the Haas: checksum mode, at
+// most three CANs, the rule on. Our own receiver aborting (kCancelLength CANs), a CRC receiver's
+// CANs, or any CANs with the rule off fail the transfer.
+TEST(XmodemSender, CanAfterEotCompletesOnlyForTheHaasAnswer)
+{
+  EXPECT_EQ(sendWithCanAnswerToEot(kNak, 3, true), "");
+  EXPECT_EQ(sendWithCanAnswerToEot(kNak, 2, true), "");
+  const std::string aborted = sendWithCanAnswerToEot(kNak, kCancelLength, true);
+  EXPECT_NE(aborted.find("8 CANs) in answer to EOT"), std::string::npos) << aborted;
+  EXPECT_NE(sendWithCanAnswerToEot(kNak, 10, true), "");  // lrzsz's abort
+  const std::string off = sendWithCanAnswerToEot(kNak, 3, false);
+  EXPECT_NE(off.find("not taken as complete"), std::string::npos) << off;
+  EXPECT_NE(sendWithCanAnswerToEot('C', 3, true), "");  // a CRC receiver is no Haas
+}
+
+// A receiver cancelled just as the EOT arrives sends CANs and stores nothing: the sender must not
+// report success, with the Haas rule on or off.
+TEST(XmodemSender, AReceiverCancelledAtEotFailsTheSend)
+{
+  /// The receiver's side of the link: the read that brings the EOT also cancels the receiver.
+  class CancelAtEot : public ForwardingTransport
+  {
+   public:
+    CancelAtEot(Transport& inner, std::atomic<bool>& cancel) : ForwardingTransport(inner), cancel_(cancel) {}
+    size_t read(uint8_t* buffer, size_t size, Milliseconds timeout) override
+    {
+      const size_t n = inner_.read(buffer, size, timeout);
+      if (n == 1 && buffer[0] == kEot)
+      {
+        cancel_ = true;
+        inner_.interrupt();  // the receiver's next read (its wait for quiet after EOT) ends
+      }
+      return n;
+    }
+
+   private:
+    std::atomic<bool>& cancel_;
+  };
+  for (const bool rule : {true, false})
+  {
+    TempDir dir;
+    const std::string target = dir.path + "/O1000.nc";
+    LinkPair link;
+    std::atomic<bool> cancel{false};
+    CancelAtEot receiver_side(link.b, cancel);
+    Config config = fastConfig();
+    config.eot_can_completes = rule;
+    auto sent =
+        std::async(std::launch::async, [&] { return Sender(link.a, Mode::kChecksum, config).send(Bytes(300, 'e')); });
+    EXPECT_THROW(receiveFile(receiver_side, target, Mode::kChecksum, config, TextOptions(), nullptr, &cancel),
+                 CancelledError);
+    EXPECT_FALSE(exists(target));
+    try
+    {
+      sent.get();
+      ADD_FAILURE() << "the sender reported success for a receive that was cancelled at EOT (rule " << rule << ")";
+    }
+    catch (const ProtocolError& e)
+    {
+      EXPECT_NE(std::string(e.what()).find("in answer to EOT"), std::string::npos) << e.what();
+    }
+  }
 }
 
 TEST(XmodemSender, OneKModeFollowsAChecksumReceiverWith128ByteBlocks)
@@ -776,16 +872,33 @@ INSTANTIATE_TEST_SUITE_P(Sizes, XmodemPair,
 
 // ---------------------------------------------------------------------------------------------
 // Fault injection: every transfer either delivers the exact file or fails with an error and leaves
-// no file (and no temporary file) behind. CRC mode with every fault kind; checksum mode without
-// duplicated bytes, because an 8-bit sum misses a shifted packet 1 time in 256 (a limit of the
-// protocol, not of this code: a Haas line should be clean).
-TEST(XmodemFaults, EveryTransferIsExactOrAClearErrorWithNoFile)
+// no file (and no temporary file) behind, and the sender never reports success for a transfer the
+// receiver did not complete (it may report failure where the receiver succeeded: the last ACK was
+// lost). CRC mode with every fault kind; checksum mode without duplicated bytes, because an 8-bit
+// sum misses a shifted packet 1 time in 256 (a limit of the protocol, not of this code: a Haas line
+// should be clean).
+namespace
 {
-  TempDir dir;
+struct Campaign
+{
+  int transfers = 0;
+  int delivered = 0;
+  int failed = 0;
+  int sender_succeeded = 0;
+  int eot_answered_with_can = 0;
+  uint64_t faults = 0;
+};
+
+/// \p haas: the receiver answers EOT with CAN CAN CAN as the control does, checksum mode only, and
+/// the sender takes that answer as complete. Otherwise the receiver ACKs EOT and the sender's
+/// Config::eot_can_completes alternates (a CAN after EOT from this receiver is always an abort).
+Campaign faultCampaign(const std::string& dir, int transfers, uint32_t seed_base, bool haas)
+{
   Config config = fastConfig();
   config.nak_interval = Milliseconds(25);
   config.block_timeout = Milliseconds(30);
   config.ack_timeout = Milliseconds(30);
+  config.eot_timeout = Milliseconds(30);
   config.char_timeout = Milliseconds(10);
   config.purge_quiet = Milliseconds(5);
   config.eot_quiet = Milliseconds(5);
@@ -795,14 +908,13 @@ TEST(XmodemFaults, EveryTransferIsExactOrAClearErrorWithNoFile)
   config.start_timeout = Milliseconds(500);
   config.eot_retries = 4;
 
-  const int kTransfers = 220;
-  int delivered = 0, failed = 0;
-  uint64_t faults = 0;
-  for (int i = 0; i < kTransfers; ++i)
+  Campaign result;
+  result.transfers = transfers;
+  for (int i = 0; i < transfers; ++i)
   {
-    const bool crc = i % 3 != 0;
+    const bool crc = !haas && i % 3 != 0;
     FaultSettings settings;
-    settings.seed = 1000 + i;
+    settings.seed = seed_base + i;
     settings.flip = 0.0006;
     settings.drop = 0.0006;
     settings.duplicate = crc ? 0.0004 : 0.0;
@@ -812,47 +924,92 @@ TEST(XmodemFaults, EveryTransferIsExactOrAClearErrorWithNoFile)
     settings.seed += 50000;
     FaultyTransport receiver_side(pair.b, settings);
     const std::string contents = ncProgram(200 + (i * 37) % 1500, i);
-    const std::string source = dir.path + "/source_" + std::to_string(i);
+    const std::string source = dir + "/source_" + std::to_string(i);
     writeFile(source, contents);
-    const std::string target = dir.path + "/received_" + std::to_string(i);
+    const std::string target = dir + "/received_" + std::to_string(i);
     TextOptions options;
     options.binary = false;
     const Mode mode = crc ? (i % 2 ? Mode::k1K : Mode::kCrc) : Mode::kChecksum;
-    auto sent = std::async(std::launch::async,
-                           [&]
-                           {
-                             try
-                             {
-                               sendFile(sender_side, source, mode, config, options);
-                             }
-                             catch (const Error&)
-                             {
-                             }
-                           });
+    Config sender_config = config;
+    sender_config.eot_can_completes = haas || i % 2 == 0;
+    Config receiver_config = config;
+    receiver_config.answer_eot_with_can = haas;
+    // The sender's verdict: "" for success, else its error.
+    bool can_answer = false;
+    auto sent = std::async(
+        std::launch::async,
+        [&]() -> std::string
+        {
+          try
+          {
+            can_answer = sendFile(sender_side, source, mode, sender_config, options).stats.eot_answered_with_can;
+            return "";
+          }
+          catch (const Error& e)
+          {
+            return e.what();
+          }
+        });
+    bool received = false;
     try
     {
-      receiveFile(receiver_side, target, crc ? Mode::kCrc : Mode::kChecksum, config, options);
-      ASSERT_EQ(readFile(target), contents) << "transfer " << i << " delivered a wrong file";
-      ++delivered;
+      receiveFile(receiver_side, target, crc ? Mode::kCrc : Mode::kChecksum, receiver_config, options);
+      EXPECT_EQ(readFile(target), contents) << "transfer " << i << " delivered a wrong file";
+      received = true;
+      ++result.delivered;
     }
     catch (const Error& e)
     {
       EXPECT_FALSE(exists(target)) << "transfer " << i << " failed but left " << target;
       EXPECT_GT(std::string(e.what()).size(), 20u);
-      ++failed;
+      ++result.failed;
     }
-    sent.get();
+    const std::string sender_error = sent.get();
+    if (sender_error.empty())
+    {
+      ++result.sender_succeeded;
+      result.eot_answered_with_can += can_answer;
+      EXPECT_TRUE(received) << "transfer " << i << ": the sender reported success but the receiver failed";
+    }
+    else
+    {
+      EXPECT_GT(sender_error.size(), 20u);
+    }
     const FaultCounts a = sender_side.counts(), b = receiver_side.counts();
-    faults +=
+    result.faults +=
         a.flipped + a.dropped + a.duplicated + a.lost_writes + b.flipped + b.dropped + b.duplicated + b.lost_writes;
   }
+  std::cout << "fault injection" << (haas ? " (Haas answer to EOT)" : "") << ": " << result.delivered << " delivered, "
+            << result.failed << " failed cleanly, " << result.faults << " faults injected; the sender reported "
+            << result.sender_succeeded << " successes\n";
+  return result;
+}
+}  // namespace
+
+TEST(XmodemFaults, EveryTransferIsExactOrAClearErrorWithNoFile)
+{
+  TempDir dir;
+  const Campaign c = faultCampaign(dir.path, 220, 1000, false);
   // Only sources and delivered files remain: no temporary file of a failed transfer.
-  EXPECT_EQ(filesIn(dir.path), static_cast<size_t>(kTransfers + delivered));
-  EXPECT_EQ(delivered + failed, kTransfers);
-  EXPECT_GT(faults, 200u);               // the link really was damaged
-  EXPECT_GT(delivered, kTransfers / 2);  // and XModem repaired most of it
-  std::cout << "fault injection: " << delivered << " delivered, " << failed << " failed cleanly, " << faults
-            << " faults injected\n";
+  EXPECT_EQ(filesIn(dir.path), static_cast<size_t>(c.transfers + c.delivered));
+  EXPECT_EQ(c.delivered + c.failed, c.transfers);
+  EXPECT_GT(c.faults, 200u);                // the link really was damaged
+  EXPECT_GT(c.delivered, c.transfers / 2);  // and XModem repaired most of it
+  EXPECT_GT(c.sender_succeeded, c.transfers / 2);
+  EXPECT_EQ(c.eot_answered_with_can, 0);  // this receiver ACKs EOT
+}
+
+// The Haas path: the control answers EOT with CAN CAN CAN, the sender takes that as complete. A
+// receiver that aborts near the end (too many errors, a block out of step) must still fail the send.
+TEST(XmodemFaults, HaasAnswerToEotNeverHidesAFailedReceive)
+{
+  TempDir dir;
+  const Campaign c = faultCampaign(dir.path, 80, 7000, true);
+  EXPECT_EQ(filesIn(dir.path), static_cast<size_t>(c.transfers + c.delivered));
+  EXPECT_EQ(c.delivered + c.failed, c.transfers);
+  EXPECT_GT(c.faults, 60u);
+  EXPECT_GT(c.delivered, c.transfers / 2);
+  EXPECT_GT(c.eot_answered_with_can, c.transfers / 2);
 }
 
 TEST(FaultyTransport, ParsesSettingsAndInjectsReproducibly)

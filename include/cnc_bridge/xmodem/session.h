@@ -74,6 +74,12 @@ struct Config
   bool skip_initial_request = false;
   /// Receiver: answer EOT with CAN CAN CAN as a Haas control does (the simulator), not with ACK.
   bool answer_eot_with_can = false;
+  /// Sender: take the Haas's answer to EOT, CAN CAN CAN after every block was ACKed, as a completed
+  /// transfer (the capture). Only in checksum mode (a Haas knows no other) and only for at most
+  /// three CANs: a receiver that aborts sends more (lrzsz ten, sendCancel() eight), and an abort
+  /// must not pass for success (the receiver stored nothing). Off: any CANs after EOT fail the
+  /// transfer. On by default because the Haas path (dnc_node, cnc_dnc send --mode checksum) needs it.
+  bool eot_can_completes = true;
 };
 
 /// \brief Raises the silences that mean "no more bytes follow" (eot_quiet) to at least 12 character
@@ -136,6 +142,8 @@ class Sender
   };
   uint8_t waitForStart();
   Reply waitForReply(bool first_block, Milliseconds timeout);
+  /// Reads what follows a CAN CAN until the line is quiet; \returns the further CANs among it.
+  size_t countCans();
   void checkCancel();
   [[noreturn]] void abort(const std::string& why, bool send_can, bool timeout);
 
@@ -174,7 +182,13 @@ class Receiver
   Stats stats_;
 };
 
-/// \brief Sends CAN CAN CAN (lrzsz sends more; two are what a receiver needs) and does not throw.
+/// \brief CANs sendCancel() writes: more than the three a Haas answers EOT with, so that a sender can
+/// tell an abort from that answer (lrzsz writes ten); two are what a peer needs to stop.
+constexpr size_t kCancelLength = 8;
+/// \brief The most CANs in answer to EOT that can still be a Haas's "complete" (Config::eot_can_completes).
+constexpr size_t kHaasEotCans = 3;
+
+/// \brief Sends kCancelLength CANs and does not throw.
 void sendCancel(Transport& link) noexcept;
 }  // namespace xmodem
 }  // namespace cnc_bridge
