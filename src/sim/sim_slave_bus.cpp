@@ -59,9 +59,10 @@ int main(int argc, char** argv)
 {
   namespace po = boost::program_options;
   po::options_description options("sim_slave_bus options");
-  std::string link, framing;
+  std::string link, framing, wirepacker_crc;
   std::vector<std::string> slave_specs;
-  unsigned baud = 0, resync_gap_ms = 0, corrupt_every = 0;
+  std::vector<unsigned> noisy_slaves;
+  unsigned baud = 0, resync_gap_ms = 0, corrupt_every = 0, max_payload = 0;
   options.add_options()("help,h", "this help")("link", po::value(&link),
                                                "symbolic link to create to the pty device (default: none)")(
       "framing", po::value(&framing)->default_value("raw"), "raw (the seed's bytes) or framed (WirePacker + CRC-8)")(
@@ -70,7 +71,16 @@ int main(int argc, char** argv)
       "bytes|hundreds|be16|be16s (default: 3 be16s axes, a tool, 4 generic slaves)")(
       "baud", po::value(&baud)->default_value(0), "pace the uplink to this line rate, 8N1 (0: unpaced)")(
       "resync-gap-ms", po::value(&resync_gap_ms)->default_value(0),
-      "raw mode: drop a partial frame after this silence (0: never, as the seed's firmware)")(
+      "silence after which a partial frame from the PC is dropped; raw: 0 = never (as the seed's firmware); "
+      "framed: always resynchronises, 0 = 20 ms")(
+      "wirepacker-crc", po::value(&wirepacker_crc)->default_value("spec"),
+      "spec (CRC over length and data, as the packet format documents) or library (data only, as the "
+      "ESP32_I2C_Slave library's released code computes it): I2C frames and the framed link")(
+      "max-payload", po::value(&max_payload)->default_value(0),
+      "most data bytes of one WirePacker frame (each slave's payload, a framed step); longer payloads are "
+      "reported with status 4 (0: 251 for spec, 124 for library, the library's 128-byte buffers)")(
+      "noisy-slave", po::value(&noisy_slaves)->composing(),
+      "ADDR, repeatable: this slave's I2C answers fail the master's CRC check (status 3)")(
       "corrupt-uplink-every", po::value(&corrupt_every)->default_value(0),
       "corrupt one byte of every Nth uplink write (0: never)")("verbose,v", "log every frame on stderr");
   po::variables_map vm;
@@ -102,6 +112,16 @@ int main(int argc, char** argv)
     sim_options.framing = parseFraming(framing);
     sim_options.resync_gap = Milliseconds(resync_gap_ms);
     sim_options.corrupt_uplink_every = corrupt_every;
+    sim_options.wire = WireFormat::of(parseWireCrc(wirepacker_crc), max_payload);
+    for (const unsigned address : noisy_slaves)
+    {
+      if (address < 1 || address > slaves.size())
+      {
+        throw ConfigError("--noisy-slave " + std::to_string(address) + " is not one of the slaves 1.." +
+                          std::to_string(slaves.size()));
+      }
+      slaves[address - 1].setNoisy(true);
+    }
 
     PtyMaster pty(link);
     sim::onStop([&pty] { pty.interrupt(); });
@@ -122,7 +142,8 @@ int main(int argc, char** argv)
     master.run(stop);
     const auto& s = master.stats();
     std::cerr << "sim_slave_bus: " << s.frames << " frames, " << s.deliveries << " payloads, " << s.bad_frames
-              << " bad frames, " << s.unknown_slaves << " for unknown slaves, " << s.uplink_records
+              << " bad frames, " << s.unknown_slaves << " for unknown slaves, " << s.oversize_payloads << " too long, "
+              << s.slave_errors << " failed slave reads, " << s.resyncs << " resyncs, " << s.uplink_records
               << " uplink records\n";
     return 0;
   }

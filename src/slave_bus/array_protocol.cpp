@@ -2,6 +2,8 @@
 // (see array_protocol.h for the wire formats and how they read the seed).
 #include "cnc_bridge/slave_bus/array_protocol.h"
 
+#include <algorithm>
+
 #include "cnc_bridge/common/error.h"
 
 namespace cnc_bridge
@@ -35,15 +37,16 @@ const char* toString(MasterStatus status)
     case MasterStatus::kNoSuchSlave:
       return "no such slave";
     case MasterStatus::kSlaveNoAnswer:
-      return "slave did not answer";
+      return "I2C read of the slave failed (no acknowledge, or its answer failed the CRC check)";
     case MasterStatus::kPayloadTooLong:
-      return "payload too long for one I2C frame (not delivered)";
+      return "payload longer than one I2C frame of the master carries (not delivered)";
   }
   return "unknown master status";
 }
 
-std::vector<uint8_t> encodeStep(const StepPayloads& payloads)
+std::vector<uint8_t> encodeStep(const StepPayloads& payloads, size_t max_payload)
 {
+  max_payload = std::min(max_payload, kMaxPayload);
   if (payloads.empty())
   {
     throw ProtocolError("step frame with no slaves: the seed's master needs a slave count of at least 1");
@@ -56,10 +59,11 @@ std::vector<uint8_t> encodeStep(const StepPayloads& payloads)
   size_t size = 1 + payloads.size();
   for (size_t i = 0; i < payloads.size(); ++i)
   {
-    if (payloads[i].size() > kMaxPayload)
+    if (payloads[i].size() > max_payload)
     {
       throw ProtocolError("payload of " + std::to_string(payloads[i].size()) + " bytes for slave " +
-                          std::to_string(i + 1) + ": at most " + std::to_string(kMaxPayload));
+                          std::to_string(i + 1) + ": one I2C frame of the master carries at most " +
+                          std::to_string(max_payload));
     }
     size += payloads[i].size();
   }
@@ -74,19 +78,19 @@ std::vector<uint8_t> encodeStep(const StepPayloads& payloads)
   return frame;
 }
 
-std::vector<uint8_t> encodeStepForLink(const StepPayloads& payloads, Framing framing)
+std::vector<uint8_t> encodeStepForLink(const StepPayloads& payloads, Framing framing, const WireFormat& format)
 {
-  auto frame = encodeStep(payloads);
+  auto frame = encodeStep(payloads, format.max_data);
   if (framing == Framing::kRaw)
   {
     return frame;
   }
-  if (frame.size() > WirePacker::kMaxData)
+  if (frame.size() > format.max_data)
   {
     throw ProtocolError("framed step of " + std::to_string(frame.size()) + " bytes: at most " +
-                        std::to_string(WirePacker::kMaxData) + " fit in one WirePacker frame");
+                        std::to_string(format.max_data) + " fit in one WirePacker frame of the master");
   }
-  return WirePacker::pack(frame);
+  return WirePacker::pack(frame, format);
 }
 
 StepReceiver::StepReceiver(size_t bus_size, DeliverFn deliver, FrameDoneFn frame_done)
@@ -172,7 +176,7 @@ bool StepReceiver::reset()
   return partial;
 }
 
-std::vector<uint8_t> encodeUplink(const UplinkRecord& record, Framing framing)
+std::vector<uint8_t> encodeUplink(const UplinkRecord& record, Framing framing, const WireFormat& format)
 {
   std::vector<uint8_t> bytes;
   if (framing == Framing::kRaw)
@@ -190,10 +194,13 @@ std::vector<uint8_t> encodeUplink(const UplinkRecord& record, Framing framing)
   bytes.reserve(record.payload.size() + 1);
   bytes.push_back(record.address);
   bytes.insert(bytes.end(), record.payload.begin(), record.payload.end());
-  return WirePacker::pack(bytes);
+  return WirePacker::pack(bytes, format);
 }
 
-UplinkParser::UplinkParser(Framing framing, uint8_t max_address) : framing_(framing), max_address_(max_address) {}
+UplinkParser::UplinkParser(Framing framing, uint8_t max_address, const WireFormat& format)
+    : framing_(framing), max_address_(max_address), unpacker_(format)
+{
+}
 
 std::vector<UplinkRecord> UplinkParser::feed(const uint8_t* data, size_t size)
 {

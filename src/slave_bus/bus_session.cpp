@@ -22,12 +22,14 @@ size_t checkedBusSize(size_t bus_size)
 }
 }  // namespace
 
-BusSession::BusSession(Transport& link, Framing framing, size_t bus_size, Milliseconds resync_gap)
+BusSession::BusSession(Transport& link, Framing framing, size_t bus_size, Milliseconds resync_gap,
+                       const WireFormat& format)
     : link_(link),
       framing_(framing),
+      format_(format),
       bus_size_(checkedBusSize(bus_size)),
       resync_gap_(resync_gap),
-      parser_(framing, static_cast<uint8_t>(bus_size)),
+      parser_(framing, static_cast<uint8_t>(bus_size), format),
       read_buffer_(4096),
       last_byte_(Clock::now())
 {
@@ -52,7 +54,7 @@ void BusSession::send(const StepPayloads& payloads)
       scratch_[i].clear();
     }
   }
-  const auto bytes = encodeStepForLink(scratch_, framing_);
+  const auto bytes = encodeStepForLink(scratch_, framing_, format_);
   link_.write(bytes);
   ++stats_.steps_sent;
   stats_.bytes_sent += bytes.size();

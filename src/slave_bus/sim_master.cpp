@@ -38,7 +38,7 @@ void SimSlave::receive(const std::vector<uint8_t>& i2c_frame)
   std::vector<int32_t> values;
   try
   {
-    payload = WirePacker::unpack(i2c_frame);
+    payload = WirePacker::unpack(i2c_frame, wire_);
     if (role_ != SimRole::kGeneric)
     {
       values = decodeValues(payload, encoding_);
@@ -80,7 +80,12 @@ std::vector<uint8_t> SimSlave::request()
     return {};
   }
   has_reply_ = false;
-  return WirePacker::pack(reply_);
+  auto frame = WirePacker::pack(reply_, wire_);
+  if (noisy_)
+  {
+    frame[frame.size() - 2] ^= 0x01;  // the CRC byte: the answer no longer checks
+  }
+  return frame;
 }
 
 SimMaster::SimMaster(Transport& link, std::vector<SimSlave> slaves, Options options)
@@ -88,7 +93,8 @@ SimMaster::SimMaster(Transport& link, std::vector<SimSlave> slaves, Options opti
       slaves_(std::move(slaves)),
       options_(options),
       receiver_(
-          slaves_.size(), [this](const StepReceiver::Delivery& d) { deliver(d); }, [this] { ++stats_.frames; })
+          slaves_.size(), [this](const StepReceiver::Delivery& d) { deliver(d); }, [this] { ++stats_.frames; }),
+      unpacker_(options.wire)
 {
   for (size_t i = 0; i < slaves_.size(); ++i)
   {
@@ -97,6 +103,7 @@ SimMaster::SimMaster(Transport& link, std::vector<SimSlave> slaves, Options opti
       throw ConfigError("simulated slaves must have addresses 1..N in order (slave " + std::to_string(i + 1) + " has " +
                         std::to_string(slaves_[i].address()) + ")");
     }
+    slaves_[i].setWireFormat(options_.wire);
   }
 }
 
@@ -108,17 +115,18 @@ void SimMaster::deliver(const StepReceiver::Delivery& delivery)
     sendStatus(MasterStatus::kNoSuchSlave, delivery.address);
     return;
   }
-  if (delivery.payload.size() > WirePacker::kMaxData)
+  if (delivery.payload.size() > options_.wire.max_data)
   {
-    // A raw step frame's length byte allows 255, one WirePacker frame carries 251: the master
-    // cannot forward it, so it says so rather than sending a torn I2C write.
+    // A raw step frame's length byte allows 255, one WirePacker frame carries 251 (124 with the
+    // library's buffers): the master cannot forward it, so it says so rather than sending a torn
+    // I2C write (the library's WirePacker::write() would silently drop the bytes beyond its buffer).
     ++stats_.oversize_payloads;
     sendStatus(MasterStatus::kPayloadTooLong, delivery.address);
     return;
   }
   CNC_LOG_DEBUG("slave " << int(delivery.address) << " <- " << delivery.payload.size() << " bytes");
   // The real bytes of the I2C write, as I2C_send_packed() sends them.
-  slaves_[delivery.address - 1].receive(WirePacker::pack(delivery.payload));
+  slaves_[delivery.address - 1].receive(WirePacker::pack(delivery.payload, options_.wire));
   ++stats_.deliveries;
 }
 
@@ -136,7 +144,7 @@ void SimMaster::sendStatus(MasterStatus status, int address)
 
 void SimMaster::queueUplink(const UplinkRecord& record)
 {
-  const auto bytes = encodeUplink(record, options_.framing);
+  const auto bytes = encodeUplink(record, options_.framing, options_.wire);
   uplink_.insert(uplink_.end(), bytes.begin(), bytes.end());
   ++stats_.uplink_records;
 }
@@ -209,16 +217,46 @@ void SimMaster::pollSlaves()
     record.address = slave.address();
     try
     {
-      record.payload = WirePacker::unpack(frame);  // WireSlaveRequest checks the slave's CRC
+      record.payload = WirePacker::unpack(frame, options_.wire);  // WireSlaveRequest checks the slave's CRC
     }
     catch (const ProtocolError&)
     {
+      ++stats_.slave_errors;
       sendStatus(MasterStatus::kSlaveNoAnswer, slave.address());
       continue;
     }
     queueUplink(record);
   }
   flushUplink();
+}
+
+Milliseconds SimMaster::resyncGap() const
+{
+  if (options_.framing == Framing::kFramed && options_.resync_gap.count() == 0)
+  {
+    return kFramedResyncGap;
+  }
+  return options_.resync_gap;  // raw: 0 = never, as the seed's firmware (it has no timeout)
+}
+
+void SimMaster::onSilence()
+{
+  if (options_.framing == Framing::kRaw)
+  {
+    if (options_.resync_gap.count() > 0 && receiver_.reset())
+    {
+      ++stats_.resyncs;
+    }
+    return;
+  }
+  if (unpacker_.pending() > 0)
+  {
+    ++stats_.resyncs;
+    const auto before = unpacker_.stats();
+    const auto frames = unpacker_.resync();
+    processFrames(frames, before);
+    flushUplink();
+  }
 }
 
 void SimMaster::run(StopSignal& stop)
@@ -248,19 +286,12 @@ void SimMaster::serveOnce(std::vector<uint8_t>& buffer, std::chrono::steady_cloc
     last_byte = now;
     processInput(buffer.data(), n);
   }
-  else if (options_.resync_gap.count() > 0 && now - last_byte >= options_.resync_gap)
+  else
   {
-    if (options_.framing == Framing::kRaw && receiver_.reset())
+    const auto gap = resyncGap();
+    if (gap.count() > 0 && now - last_byte >= gap)
     {
-      ++stats_.resyncs;
-    }
-    else if (options_.framing == Framing::kFramed && unpacker_.pending() > 0)
-    {
-      ++stats_.resyncs;
-      const auto before = unpacker_.stats();
-      const auto frames = unpacker_.resync();
-      processFrames(frames, before);
-      flushUplink();
+      onSilence();
     }
   }
   // The seed's master polls its slaves only between frames.

@@ -194,6 +194,81 @@ TEST(WireStreamUnpacker, ResyncAbandonsATornFrameAndFindsWhatItHid)
   EXPECT_EQ(unpacker.feed(good.data(), good.size()).size(), 1u);
 }
 
+// The released ESP32_I2C_Slave library (the one the seed cites) computes its CRC over the data
+// only: its WireCrc::update() starts from the member seed (0) and never stores the result of
+// calc(&length, 1). Vectors worked by hand from its code: CRC-8/MAXIM of 31 32 33 is 0x95; over
+// 07 31 32 33 (the documented format, length first) it is 0x13.
+TEST(WireCrc, LibraryVariantCoversTheDataOnly)
+{
+  const Bytes data = {0x31, 0x32, 0x33};
+  EXPECT_EQ(crc8Maxim(data.data(), data.size()), 0x95);
+  const Bytes with_length = {0x07, 0x31, 0x32, 0x33};
+  EXPECT_EQ(crc8Maxim(with_length.data(), with_length.size()), 0x13);
+
+  const auto library = WireFormat::of(WireCrc::kLibrary);
+  EXPECT_EQ(WirePacker::pack(data, library), (Bytes{0x02, 0x07, 0x31, 0x32, 0x33, 0x95, 0x04}));
+  EXPECT_EQ(WirePacker::pack(data), (Bytes{0x02, 0x07, 0x31, 0x32, 0x33, 0x13, 0x04}));  // spec is the default
+  EXPECT_EQ(WirePacker::unpack(Bytes{0x02, 0x07, 0x31, 0x32, 0x33, 0x95, 0x04}, library), data);
+  // An empty frame of the library has CRC 0 (no data), the spec's the CRC of its length byte.
+  EXPECT_EQ(WirePacker::pack(Bytes{}, library), (Bytes{0x02, 0x04, 0x00, 0x04}));
+  // Each side refuses the other's frames, naming what its CRC covers.
+  try
+  {
+    WirePacker::unpack(Bytes{0x02, 0x07, 0x31, 0x32, 0x33, 0x95, 0x04});
+    FAIL() << "the spec reading accepted the library's CRC";
+  }
+  catch (const ProtocolError& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("length and data"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(WirePacker::unpack(Bytes{0x02, 0x07, 0x31, 0x32, 0x33, 0x13, 0x04}, library), ProtocolError);
+  EXPECT_EQ(parseWireCrc("spec"), WireCrc::kSpec);
+  EXPECT_EQ(parseWireCrc("library"), WireCrc::kLibrary);
+  EXPECT_THROW(parseWireCrc("data_only"), ConfigError);
+}
+
+TEST(WireFormat, LibraryFramesStopAtItsBufferAndLongerPayloadsAreRefused)
+{
+  // PACKER_BUFFER_LENGTH and UNPACKER_BUFFER_LENGTH are 128 in the library: 124 bytes of data.
+  EXPECT_EQ(WireFormat::of(WireCrc::kLibrary).max_data, 124u);
+  EXPECT_EQ(WireFormat::of(WireCrc::kSpec).max_data, 251u);
+  EXPECT_EQ(WireFormat::of(WireCrc::kLibrary, 200).max_data, 200u);  // a firmware with larger buffers
+  EXPECT_THROW(WireFormat::of(WireCrc::kSpec, 252), ConfigError);
+  const auto library = WireFormat::of(WireCrc::kLibrary);
+  EXPECT_EQ(WirePacker::pack(Bytes(124, 7), library).size(), 128u);
+  try
+  {
+    WirePacker::pack(Bytes(125, 7), library);
+    FAIL() << "packed 125 bytes into a 124-byte frame";
+  }
+  catch (const ProtocolError& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("at most 124"), std::string::npos) << e.what();
+  }
+  // A frame longer than the configured limit is refused on unpacking too.
+  EXPECT_THROW(WirePacker::unpack(WirePacker::pack(Bytes(125, 7)), library), ProtocolError);
+}
+
+TEST(WireStreamUnpacker, LibraryModeRejectsALengthOverItsBufferAtOnce)
+{
+  const auto library = WireFormat::of(WireCrc::kLibrary);
+  WireStreamUnpacker unpacker(library);
+  // A stray start byte with length 200: no library frame is that long, so the good frame behind it
+  // is found at once, with no silence needed.
+  Bytes stream = {0x02, 200, 1, 3};
+  const Bytes good = WirePacker::pack(Bytes{5}, library);
+  stream.insert(stream.end(), good.begin(), good.end());
+  const auto frames = unpacker.feed(stream.data(), stream.size());
+  ASSERT_EQ(frames.size(), 1u);
+  EXPECT_EQ(frames[0], Bytes{5});
+  EXPECT_EQ(unpacker.stats().framing_errors, 1u);
+  EXPECT_EQ(unpacker.pending(), 0u);
+  // A spec frame is a CRC error to a library receiver.
+  const Bytes spec = WirePacker::pack(Bytes{5});
+  EXPECT_TRUE(unpacker.feed(spec.data(), spec.size()).empty());
+  EXPECT_EQ(unpacker.stats().crc_errors, 1u);
+}
+
 // ---------------------------------------------------------------------------------------------
 // Step frames (PC -> master)
 
@@ -236,6 +311,26 @@ TEST(EncodeStep, FramedWrapsTheSameBytesInAWirePackerFrame)
   // 32 slaves with 7 bytes each make a 257-byte raw frame: too big for one WirePacker frame.
   EXPECT_THROW(encodeStepForLink(StepPayloads(32, Bytes(7, 1)), Framing::kFramed), ProtocolError);
   EXPECT_NO_THROW(encodeStepForLink(StepPayloads(31, Bytes(7, 1)), Framing::kFramed));  // 249 bytes
+}
+
+TEST(EncodeStep, PayloadsAndFramedStepsStopAtTheMastersFrameSize)
+{
+  const auto library = WireFormat::of(WireCrc::kLibrary);
+  EXPECT_EQ(encodeStepForLink({Bytes(124, 1)}, Framing::kRaw, library).size(), 126u);
+  try
+  {
+    encodeStepForLink({{}, Bytes(125, 1)}, Framing::kRaw, library);
+    FAIL() << "a 125-byte payload went to a master whose I2C frames carry 124";
+  }
+  catch (const ProtocolError& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("slave 2"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("at most 124"), std::string::npos) << e.what();
+  }
+  // Framed, the whole step is one frame: 8 slaves with 14 bytes each are 121 bytes, 15 are 129.
+  const auto framed = encodeStepForLink(StepPayloads(8, Bytes(14, 1)), Framing::kFramed, library);
+  EXPECT_EQ(WirePacker::unpack(framed, library).size(), 121u);
+  EXPECT_THROW(encodeStepForLink(StepPayloads(8, Bytes(15, 1)), Framing::kFramed, library), ProtocolError);
 }
 
 // ---------------------------------------------------------------------------------------------

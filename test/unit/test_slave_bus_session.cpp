@@ -42,11 +42,9 @@ std::vector<UplinkRecord> parseAll(const Bytes& bytes, Framing framing)
 class PtyBus
 {
  public:
-  PtyBus(Framing framing, unsigned corrupt_every = 0)
+  PtyBus(Framing framing, unsigned corrupt_every = 0) : PtyBus(optionsFor(framing, corrupt_every)) {}
+  explicit PtyBus(const SimMaster::Options& options)
   {
-    SimMaster::Options options;
-    options.framing = framing;
-    options.corrupt_uplink_every = corrupt_every;
     master_ = std::make_unique<SimMaster>(pty_, eightSlaves(), options);
     thread_ = std::thread([this] { master_->run(stop_); });
     SerialSettings settings;
@@ -69,6 +67,14 @@ class PtyBus
   SerialPort& port() { return *port_; }
 
  private:
+  static SimMaster::Options optionsFor(Framing framing, unsigned corrupt_every)
+  {
+    SimMaster::Options options;
+    options.framing = framing;
+    options.corrupt_uplink_every = corrupt_every;
+    return options;
+  }
+
   PtyMaster pty_;
   StopSignal stop_;
   std::unique_ptr<SimMaster> master_;
@@ -183,6 +189,91 @@ TEST(SimMaster, PayloadLongerThanAnI2cFrameIsReportedNotDelivered)
   EXPECT_EQ(master.stats().deliveries, 0u);
 }
 
+TEST(SimMaster, PayloadOverTheConfiguredFrameSizeIsReportedForItsSlave)
+{
+  // A master whose I2C frames carry 8 bytes: a 9-byte payload for slave 6 is reported with status 4
+  // and that slave's address, and not delivered; slave 5's payload in the same frame still is.
+  FakeTransport link;
+  SimMaster::Options options;
+  options.wire = WireFormat::of(WireCrc::kSpec, 8);
+  SimMaster master(link, eightSlaves(), options);
+  const Bytes frame = encodeStep({{}, {}, {}, {}, Bytes(8, 5), Bytes(9, 6)});
+  master.processInput(frame.data(), frame.size());
+  master.pollSlaves();
+  const auto records = parseAll(link.written(), Framing::kRaw);
+  ASSERT_EQ(records.size(), 2u);
+  EXPECT_EQ(records[0].address, 0);
+  EXPECT_EQ(records[0].payload, (Bytes{static_cast<uint8_t>(MasterStatus::kPayloadTooLong), 6}));
+  EXPECT_EQ(records[1].address, 5);
+  EXPECT_EQ(master.stats().oversize_payloads, 1u);
+  EXPECT_EQ(master.stats().deliveries, 1u);
+}
+
+TEST(SimMaster, NoisySlaveAnswerIsReportedWithStatus3AndItsAddress)
+{
+  FakeTransport link;
+  auto slaves = eightSlaves();
+  slaves[6].setNoisy(true);  // address 7
+  SimMaster master(link, std::move(slaves), {});
+  const Bytes frame = encodeStep({{}, {}, {}, {}, {}, {1}, {2}});
+  master.processInput(frame.data(), frame.size());
+  master.pollSlaves();
+  const auto records = parseAll(link.written(), Framing::kRaw);
+  ASSERT_EQ(records.size(), 2u);
+  EXPECT_EQ(records[0].address, 6);
+  EXPECT_EQ(records[1].address, 0);
+  EXPECT_EQ(records[1].payload, (Bytes{static_cast<uint8_t>(MasterStatus::kSlaveNoAnswer), 7}));
+  EXPECT_EQ(master.stats().slave_errors, 1u);
+}
+
+TEST(SimMaster, LibraryCrcOnTheI2cBusAndTheFramedLink)
+{
+  FakeTransport link;
+  SimMaster::Options options;
+  options.framing = Framing::kFramed;
+  options.wire = WireFormat::of(WireCrc::kLibrary);
+  SimMaster master(link, eightSlaves(), options);
+  const auto step = encodeStepForLink({{}, {}, {}, {}, {0x31, 0x32, 0x33}}, Framing::kFramed, options.wire);
+  master.processInput(step.data(), step.size());
+  master.pollSlaves();
+  // The echo of slave 5 as the library frames it: [5, 31, 32, 33], CRC over the data only.
+  const Bytes record = {5, 0x31, 0x32, 0x33};
+  EXPECT_EQ(link.written(), WirePacker::pack(record, options.wire));
+  EXPECT_EQ(link.written()[6], crc8Maxim(record.data(), record.size()));
+  EXPECT_EQ(master.slaves()[4].rejected(), 0u);  // the slave checked the I2C frame with the same CRC
+  // A step framed with the spec's CRC fails the library master's check.
+  link.clearWritten();
+  const auto spec_step = encodeStepForLink({{}, {}, {}, {}, {1}}, Framing::kFramed);
+  master.processInput(spec_step.data(), spec_step.size());
+  const auto records =
+      UplinkParser(Framing::kFramed, 8, options.wire).feed(link.written().data(), link.written().size());
+  ASSERT_EQ(records.size(), 1u);
+  EXPECT_EQ(records[0].payload, Bytes{static_cast<uint8_t>(MasterStatus::kBadFrame)});
+}
+
+TEST(SimMaster, FramedModeResynchronisesAfterASilenceWithNoGapConfigured)
+{
+  // A stray start byte with a large length (spec frames may be 255 bytes long) swallows the step
+  // behind it until the line goes quiet; then the master abandons it and runs the step.
+  FakeTransport link;
+  SimMaster::Options options;
+  options.framing = Framing::kFramed;
+  ASSERT_EQ(options.resync_gap.count(), 0);
+  SimMaster master(link, eightSlaves(), options);
+  Bytes stream = {0x02, 0xF0, 0x11};
+  const auto step = encodeStepForLink({{0x01, 0x00}}, Framing::kFramed);
+  stream.insert(stream.end(), step.begin(), step.end());
+  master.processInput(stream.data(), stream.size());
+  EXPECT_EQ(master.slaves()[0].position(), 0);
+  master.onSilence();
+  EXPECT_EQ(master.slaves()[0].position(), 256);
+  EXPECT_EQ(master.stats().resyncs, 1u);
+  master.pollSlaves();
+  const auto records = parseAll(link.written(), Framing::kFramed);
+  ASSERT_FALSE(records.empty());
+  EXPECT_EQ(records.back().address, 1);
+}
+
 TEST(SimMaster, SlaveIgnoresAPayloadItCannotDecode)
 {
   FakeTransport link;
@@ -203,6 +294,16 @@ TEST(BusSession, PadsToTheBusSizeAndRefusesMore)
   EXPECT_THROW(session.send(StepPayloads(9)), ProtocolError);
   EXPECT_THROW(BusSession(link, Framing::kRaw, 0), ProtocolError);
   EXPECT_EQ(session.stats().steps_sent, 1u);
+}
+
+TEST(BusSession, RefusesAPayloadOverTheMastersFrameSize)
+{
+  FakeTransport link;
+  BusSession session(link, Framing::kRaw, 8, Milliseconds(50), WireFormat::of(WireCrc::kLibrary));
+  EXPECT_THROW(session.send({{}, {}, Bytes(125, 1)}), ProtocolError);
+  EXPECT_TRUE(link.written().empty());
+  session.send({{}, {}, Bytes(124, 1)});
+  EXPECT_EQ(link.written().size(), 1u + 8u + 124u);
 }
 
 TEST(BusSession, SilentMasterTimesOutEverySlaveThatGotAPayload)
@@ -307,4 +408,34 @@ TEST(PtyFramed, GarbageFromThePcBetweenStepsDoesNotLoseTheNextStep)
   const auto result = session.step({{0x01, 0x00}}, kReplyTimeout);
   EXPECT_TRUE(result.missing.empty());
   EXPECT_EQ(bus.stopMaster().slaves()[0].position(), 256);
+}
+
+TEST(PtyFramed, StrayStartByteWithALargeLengthDoesNotStallTheNextStep)
+{
+  // No resync gap is configured (the simulator's default): framed mode resynchronises anyway.
+  PtyBus bus(Framing::kFramed);
+  BusSession session(bus.port(), Framing::kFramed, 8);
+  bus.port().write(Bytes{0x33, 0x02, 0xF0, 0x11});  // garbage with a start byte and length 240
+  const auto result = session.step({{0x01, 0x00}}, kReplyTimeout);
+  EXPECT_TRUE(result.missing.empty());
+  ASSERT_EQ(result.replies.size(), 1u);
+  EXPECT_EQ(result.replies[0].payload, (Bytes{0x01, 0x00}));
+  EXPECT_EQ(bus.stopMaster().slaves()[0].position(), 256);
+}
+
+TEST(PtyFramed, LibraryCrcStepsRoundTrip)
+{
+  SimMaster::Options options;
+  options.framing = Framing::kFramed;
+  options.wire = WireFormat::of(WireCrc::kLibrary);
+  PtyBus bus(options);
+  BusSession session(bus.port(), Framing::kFramed, 8, Milliseconds(50), options.wire);
+  for (int i = 1; i <= 5; ++i)
+  {
+    const auto result = session.step({encodeValues({i}, Encoding::kBigEndian16s), {}, {}, {}, {9, 9}}, kReplyTimeout);
+    ASSERT_TRUE(result.missing.empty()) << "step " << i;
+    ASSERT_EQ(result.replies.size(), 2u);
+  }
+  EXPECT_EQ(session.stats().link.crc_errors, 0u);
+  EXPECT_EQ(bus.stopMaster().slaves()[0].position(), 5);
 }

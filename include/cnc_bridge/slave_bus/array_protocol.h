@@ -19,7 +19,8 @@ namespace slave_bus
 /// \brief Largest slave count of one frame: I2C has 7-bit addresses, and the seed numbers slaves 1..N.
 constexpr size_t kMaxSlaves = 127;
 /// \brief Largest payload per slave: the length is one byte, and the master repacks it into one
-/// WirePacker frame for the I2C bus (at most 251 data bytes).
+/// WirePacker frame for the I2C bus (at most 251 data bytes; a master built on the ESP32 library
+/// takes at most WireFormat::kLibraryMaxData, 124, and WireFormat::max_data says what one takes).
 constexpr size_t kMaxPayload = WirePacker::kMaxData;
 
 /// \brief How bytes travel on the PC <-> master serial link.
@@ -42,12 +43,14 @@ using StepPayloads = std::vector<std::vector<uint8_t>>;
 /// Seed examples: [3, 2, x, y, 1, a, 3, f, g, h] and [8, 1, x, 1, y, 1, z, 0, 0, 1, data, 0, 0]
 /// (slave 6 gets data). The frame carries all slaves so that they get their data at nearly the same
 /// time (the tool fires only once X and Y are in place).
-/// \throws ProtocolError if there are no slaves, more than kMaxSlaves, or a payload over kMaxPayload.
-std::vector<uint8_t> encodeStep(const StepPayloads& payloads);
+/// \throws ProtocolError if there are no slaves, more than kMaxSlaves, or a payload over
+/// \p max_payload (the most one I2C frame of the master carries; at most kMaxPayload).
+std::vector<uint8_t> encodeStep(const StepPayloads& payloads, size_t max_payload = kMaxPayload);
 
-/// \brief The step frame for the link: raw as encodeStep(); framed inside one WirePacker frame.
-/// \throws ProtocolError as encodeStep(), and if a framed step exceeds 251 bytes.
-std::vector<uint8_t> encodeStepForLink(const StepPayloads& payloads, Framing framing);
+/// \brief The step frame for the link: raw as encodeStep(); framed inside one WirePacker frame of
+/// \p format. Payloads are limited to format.max_data (each becomes one I2C frame).
+/// \throws ProtocolError as encodeStep(), and if a framed step exceeds format.max_data bytes.
+std::vector<uint8_t> encodeStepForLink(const StepPayloads& payloads, Framing framing, const WireFormat& format = {});
 
 /// \brief The master's receive state machine, as the seed's firmware runs it (states RS_SLAVES_NUM,
 /// RS_SLAVE_LEN, RS_SLAVE_BYTES), fed one byte or a chunk at a time. Not thread-safe.
@@ -117,7 +120,8 @@ class StepReceiver
 ///   framed:  WirePacker([address, payload...])             payload 0..250
 /// \endcode
 /// address 1..127 is a slave's reply (the payload it sent when polled). address 0 is the master
-/// speaking for itself: payload[0] is a MasterStatus code, payload[1..] its arguments.
+/// speaking for itself: payload[0] is a MasterStatus code, payload[1..] its arguments. In framed
+/// mode the uplink's WirePacker frames use the same WireFormat as the downlink.
 struct UplinkRecord
 {
   uint8_t address = 0;
@@ -127,15 +131,20 @@ struct UplinkRecord
 /// \brief Codes of master status records (address 0).
 enum class MasterStatus : uint8_t
 {
-  kBadFrame = 1,        ///< framed mode: a downlink frame failed its CRC or framing; the step was dropped
-  kNoSuchSlave = 2,     ///< payload[1] = address: a payload for a slave the master does not have
-  kSlaveNoAnswer = 3,   ///< payload[1] = address: the slave did not acknowledge its I2C write
-  kPayloadTooLong = 4,  ///< payload[1] = address: more bytes than one I2C frame carries; not delivered
+  kBadFrame = 1,     ///< framed mode: a downlink frame failed its CRC or framing; the step was dropped
+  kNoSuchSlave = 2,  ///< payload[1] = address: a payload for a slave the master does not have
+  /// payload[1] = address: the master's I2C read of the slave failed (WireSlaveRequest::request()
+  /// returned false: no acknowledge, or the answer failed its length, end byte or CRC check); the
+  /// answer is lost
+  kSlaveNoAnswer = 3,
+  /// payload[1] = address: the payload is longer than one I2C frame of the master carries (its
+  /// WireFormat::max_data: 251, or 124 with the library's buffers); not delivered
+  kPayloadTooLong = 4,
 };
 const char* toString(MasterStatus status);
 
 /// \brief Encodes one uplink record for the link. \throws ProtocolError if the payload is too long.
-std::vector<uint8_t> encodeUplink(const UplinkRecord& record, Framing framing);
+std::vector<uint8_t> encodeUplink(const UplinkRecord& record, Framing framing, const WireFormat& format = {});
 
 /// \brief Parses the uplink stream on the PC side, raw or framed, from arbitrary chunks.
 /// Not thread-safe.
@@ -155,7 +164,7 @@ class UplinkParser
     uint64_t garbage_bytes = 0;
   };
 
-  explicit UplinkParser(Framing framing, uint8_t max_address = kMaxSlaves);
+  explicit UplinkParser(Framing framing, uint8_t max_address = kMaxSlaves, const WireFormat& format = {});
 
   /// \returns every record the bytes complete, in order.
   std::vector<UplinkRecord> feed(const uint8_t* data, size_t size);

@@ -45,12 +45,15 @@ class BusSession
 
   /// \param link must outlive the session.
   /// \param bus_size slaves on the bus: every frame carries this many lengths (the seed sends 8).
+  /// \param format the master's WirePacker dialect: CRC coverage of framed mode, and the most data
+  /// one frame carries (each payload becomes one I2C frame; in framed mode so does the whole step).
   /// \throws ProtocolError if bus_size is 0 or over kMaxSlaves.
-  BusSession(Transport& link, Framing framing, size_t bus_size,
-             Milliseconds resync_gap = std::chrono::milliseconds(50));
+  BusSession(Transport& link, Framing framing, size_t bus_size, Milliseconds resync_gap = std::chrono::milliseconds(50),
+             const WireFormat& format = {});
 
   /// \brief Sends one step frame. Payloads beyond the given ones are empty (length 0).
-  /// \throws ProtocolError if more payloads than bus_size, or a payload is too long; LinkError.
+  /// \throws ProtocolError if more payloads than bus_size, or a payload (or a framed step) is longer
+  /// than format.max_data, naming the limit; LinkError.
   void send(const StepPayloads& payloads);
 
   /// \brief Reads what the link has (waiting up to \p timeout for the first byte) and parses it.
@@ -64,6 +67,7 @@ class BusSession
 
   const Stats& stats() const;
   Framing framing() const { return framing_; }
+  const WireFormat& format() const { return format_; }
   size_t busSize() const { return bus_size_; }
 
  private:
@@ -72,6 +76,7 @@ class BusSession
   using Clock = std::chrono::steady_clock;
   Transport& link_;
   Framing framing_;
+  WireFormat format_;
   size_t bus_size_;
   Milliseconds resync_gap_;
   UplinkParser parser_;

@@ -38,6 +38,12 @@ class SimSlave
  public:
   SimSlave(uint8_t address, SimRole role, Encoding encoding);
 
+  /// \brief The bus's WirePacker dialect (CRC coverage, frame size); SimMaster sets its own.
+  void setWireFormat(const WireFormat& format) { wire_ = format; }
+  /// \brief A noisy slave: every answer it gives is corrupted on the bus (one bit flipped), so the
+  /// master's CRC check fails and it reports MasterStatus::kSlaveNoAnswer for this address.
+  void setNoisy(bool noisy) { noisy_ = noisy; }
+
   /// \brief The master's I2C write: one WirePacker frame. A frame that fails its CRC is ignored
   /// (counted), as the ESP32 library's unpacker rejects it.
   void receive(const std::vector<uint8_t>& i2c_frame);
@@ -55,6 +61,8 @@ class SimSlave
   uint8_t address_;
   SimRole role_;
   Encoding encoding_;
+  WireFormat wire_;
+  bool noisy_ = false;
   int32_t position_ = 0;
   bool tool_on_ = false;
   bool has_reply_ = false;
@@ -71,7 +79,12 @@ class SimMaster
   {
     Framing framing = Framing::kRaw;
     /// Raw mode: drop a partial frame after this much silence (0 = never, as the seed's firmware).
+    /// Framed mode always resynchronises after a silence inside a frame: after this gap, or
+    /// kFramedResyncGap if it is 0.
     Milliseconds resync_gap{0};
+    /// The WirePacker dialect of the master and its slaves: I2C frames and, in framed mode, the
+    /// serial link. Payloads longer than wire.max_data are reported (MasterStatus::kPayloadTooLong).
+    WireFormat wire;
     /// Corrupt one byte of every Nth uplink write (0 = never): exercises the PC's CRC check.
     unsigned corrupt_uplink_every = 0;
   };
@@ -82,9 +95,14 @@ class SimMaster
     uint64_t bad_frames = 0;         ///< framed mode: bursts of corrupted or malformed step frames
     uint64_t unknown_slaves = 0;     ///< payloads for addresses the master does not have
     uint64_t oversize_payloads = 0;  ///< payloads longer than one I2C frame carries (not delivered)
-    uint64_t resyncs = 0;            ///< raw mode: partial frames dropped after a silence
+    uint64_t resyncs = 0;            ///< partial frames dropped (raw) or abandoned (framed) after a silence
+    uint64_t slave_errors = 0;       ///< I2C reads whose answer failed its check (MasterStatus::kSlaveNoAnswer)
     uint64_t uplink_records = 0;
   };
+
+  /// \brief Framed mode's silence before a partial frame is abandoned when Options::resync_gap is 0:
+  /// long against the gaps inside one write on a pty or a USB adapter, short against a reply timeout.
+  static constexpr Milliseconds kFramedResyncGap{20};
 
   SimMaster(Transport& link, std::vector<SimSlave> slaves, Options options);
 
@@ -94,12 +112,18 @@ class SimMaster
   void processInput(const uint8_t* data, size_t size);
   /// \brief Polls every slave once and writes what they answer (the seed's idle loop).
   void pollSlaves();
+  /// \brief The link has been silent for the resync gap: raw mode drops a partial frame if a gap is
+  /// configured; framed mode always abandons a partial candidate (a stray start byte with a large
+  /// length) and runs the frames it was hiding. run() calls it; tests call it directly.
+  void onSilence();
 
   const std::vector<SimSlave>& slaves() const { return slaves_; }
   const Stats& stats() const { return stats_; }
 
  private:
   void serveOnce(std::vector<uint8_t>& buffer, std::chrono::steady_clock::time_point& last_byte);
+  /// The silence after which onSilence() runs; 0 = never (raw mode without a gap).
+  Milliseconds resyncGap() const;
   void deliver(const StepReceiver::Delivery& delivery);
   void processFrames(const std::vector<std::vector<uint8_t>>& frames, const WireStreamUnpacker::Stats& before);
   void sendStatus(MasterStatus status, int address = -1);

@@ -6,6 +6,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 namespace cnc_bridge
@@ -16,14 +17,55 @@ namespace slave_bus
 /// XOR. Check value over "123456789" is 0xA1.
 uint8_t crc8Maxim(const uint8_t* data, size_t size, uint8_t crc = 0);
 
+/// \brief Which bytes of a frame the CRC covers.
+///
+/// The packet format (the library's header comment, the seed's figure 17, DESIGN section 6) says
+/// "CRC8 of packet length and data". The released code of the library the seed cites
+/// (gutierrezps/ESP32_I2C_Slave, src/WirePacker.cpp and src/WireCrc.h) computes something else:
+/// end() calls `crc8.calc(&length, 1)` and then returns `crc8.update(data, n)`, but update() starts
+/// from the member `seed` (0, set by calc()) and never stores its result, so the length byte's CRC
+/// is thrown away and the CRC covers the data only. Its WireUnpacker checks the same way, so two
+/// library boards agree with each other and disagree with the documented format: for data 31 32 33
+/// the library sends 02 07 31 32 33 95 04, the documented format 02 07 31 32 33 13 04.
+enum class WireCrc
+{
+  kSpec,    ///< length byte then data, as the packet format documents it (cnc_bridge's default)
+  kLibrary  ///< data only, as the library's released code computes it (firmware built on the library)
+};
+WireCrc parseWireCrc(const std::string& text);  ///< "spec" | "library"; \throws ConfigError
+const char* toString(WireCrc crc);
+
+/// \brief The dialect of WirePacker a master and its slaves speak: CRC coverage and the most data
+/// one frame may carry.
+struct WireFormat
+{
+  /// Largest data of any frame: the length byte counts data + 4 and is one byte.
+  static constexpr size_t kMaxData = 255 - 4;
+  /// Largest data of a frame of the library: its buffers hold PACKER_BUFFER_LENGTH and
+  /// UNPACKER_BUFFER_LENGTH = 128 bytes of frame (WirePacker.h, WireUnpacker.h), so 124 of data;
+  /// WirePacker::write() drops bytes beyond that and WireUnpacker rejects a longer length byte.
+  static constexpr size_t kLibraryMaxData = 128 - 4;
+
+  WireCrc crc = WireCrc::kSpec;
+  size_t max_data = kMaxData;  ///< 1..kMaxData
+
+  /// \brief The format for \p crc with \p max_data (0: that variant's default, kMaxData for spec,
+  /// kLibraryMaxData for library). \throws ConfigError if max_data is over kMaxData.
+  static WireFormat of(WireCrc crc, size_t max_data = 0);
+
+  /// \brief The CRC of a frame whose length byte is \p length and data \p data.
+  uint8_t crcOf(uint8_t length, const uint8_t* data, size_t size) const;
+};
+
 /// \brief Packs and unpacks WirePacker frames.
 ///
 /// Wire format (seed figure 17; DESIGN section 6):
 /// \code
 ///   [0]     0x02            start byte (STX)
 ///   [1]     total length    every byte of the frame: data + 4, so 4..255
-///   [2..]   data            0..251 bytes
-///   [n+2]   CRC-8/MAXIM     over the length byte then the data
+///   [2..]   data            0..251 bytes (0..124 in the library's buffers)
+///   [n+2]   CRC-8/MAXIM     over the length byte then the data (WireCrc::kSpec), or the data
+///                           only (WireCrc::kLibrary, what the library's code computes)
 ///   [n+3]   0x04            end byte (EOT)
 /// \endcode
 /// The start and end bytes are not escaped: 0x02 and 0x04 may appear inside the data, so a receiver
@@ -34,28 +76,35 @@ struct WirePacker
   static constexpr uint8_t kStart = 0x02;
   static constexpr uint8_t kEnd = 0x04;
   static constexpr size_t kOverhead = 4;
-  static constexpr size_t kMaxData = 255 - kOverhead;
+  static constexpr size_t kMaxData = WireFormat::kMaxData;
 
   /// \brief Frames \p data.
-  /// \throws ProtocolError if \p data is longer than kMaxData (251) bytes.
-  static std::vector<uint8_t> pack(const uint8_t* data, size_t size);
-  static std::vector<uint8_t> pack(const std::vector<uint8_t>& data) { return pack(data.data(), data.size()); }
+  /// \throws ProtocolError if \p data is longer than format.max_data bytes (the message says which
+  /// limit: a frame's 251, or the configured one).
+  static std::vector<uint8_t> pack(const uint8_t* data, size_t size, const WireFormat& format = {});
+  static std::vector<uint8_t> pack(const std::vector<uint8_t>& data, const WireFormat& format = {})
+  {
+    return pack(data.data(), data.size(), format);
+  }
 
   /// \brief Unpacks one complete frame (nothing before or after it).
   /// \throws ProtocolError naming what is wrong: start, length, CRC or end byte.
-  static std::vector<uint8_t> unpack(const uint8_t* frame, size_t size);
-  static std::vector<uint8_t> unpack(const std::vector<uint8_t>& frame) { return unpack(frame.data(), frame.size()); }
+  static std::vector<uint8_t> unpack(const uint8_t* frame, size_t size, const WireFormat& format = {});
+  static std::vector<uint8_t> unpack(const std::vector<uint8_t>& frame, const WireFormat& format = {})
+  {
+    return unpack(frame.data(), frame.size(), format);
+  }
 };
 
 /// \brief Finds WirePacker frames in a byte stream that may hold garbage, torn frames and
 /// corrupted bytes (a serial link with no other framing). Not thread-safe.
 ///
 /// Resynchronisation: bytes before a start byte are dropped and counted as garbage. A candidate
-/// frame (start, a length of 4..255, that many bytes) is accepted only if its end byte is 0x04 and
-/// its CRC matches. Otherwise the candidate's start byte alone is dropped and the search restarts at
-/// the byte after it, so a real frame that began inside the rejected candidate is still found and
-/// nothing valid is lost. A frame split across feed() calls is kept until it completes. A stray
-/// start byte with a large length holds the frames behind it until that many bytes arrived; the
+/// frame (start, a length of 4..max_data + 4, that many bytes) is accepted only if its end byte is
+/// 0x04 and its CRC matches; a length byte outside that range rejects the candidate at once. Otherwise the candidate's
+/// start byte alone is dropped and the search restarts at the byte after it, so a real frame that began inside the
+/// rejected candidate is still found and nothing valid is lost. A frame split across feed() calls is kept until it
+/// completes. A stray start byte with a large length holds the frames behind it until that many bytes arrived; the
 /// owner calls resync() when the line has been silent, which abandons such a candidate and
 /// delivers the frames it was hiding.
 class WireStreamUnpacker
@@ -68,6 +117,8 @@ class WireStreamUnpacker
     uint64_t framing_errors = 0;  ///< candidates with a bad length or end byte
     uint64_t garbage_bytes = 0;   ///< bytes dropped while searching for a frame
   };
+
+  explicit WireStreamUnpacker(WireFormat format = {}) : format_(format) {}
 
   /// \brief Adds bytes from the link.
   /// \returns the data of every complete, valid frame they finish, in order.
@@ -85,6 +136,7 @@ class WireStreamUnpacker
  private:
   void scan(std::vector<std::vector<uint8_t>>& frames, bool abandon_incomplete);
 
+  WireFormat format_;
   std::vector<uint8_t> buffer_;
   Stats stats_;
 };
