@@ -364,10 +364,9 @@ void Client::pump(std::unique_lock<std::mutex>& lock)
   {
     if (job_ && job_cancel_)
     {
-      if (job_->in_flight && state_ == SessionState::kSending)
-      {
-        setState(lock, SessionState::kReadyToSend);  // the answer to the last set is ignored
-      }
+      // A set in flight stays in flight (state kSending): the board still answers it, and the
+      // next job's first set must wait for that answer (stop-and-wait), or the board would take
+      // it for a second set while it moves and the answers would be paired with the wrong sets.
       finishJob(lock, JobOutcome::kCancelled, "job cancelled");
       continue;
     }
@@ -437,13 +436,27 @@ void Client::pump(std::unique_lock<std::mutex>& lock)
   }
 }
 
+bool Client::orphanAnswered(std::unique_lock<std::mutex>& lock)
+{
+  if (state_ == SessionState::kSending)
+  {
+    setState(lock, SessionState::kReadyToSend);
+    return true;
+  }
+  if (state_ == SessionState::kPaused && before_pause_ == SessionState::kSending)
+  {
+    before_pause_ = SessionState::kReadyToSend;  // answered before the board held
+    return true;
+  }
+  return false;
+}
+
 void Client::onNext(std::unique_lock<std::mutex>& lock)
 {
   if (!job_ || !job_->in_flight)
   {
-    if (state_ == SessionState::kSending)
+    if (orphanAnswered(lock))
     {
-      setState(lock, SessionState::kReadyToSend);  // answer to a set sent by a cancelled job
       return;
     }
     ++stats_.unexpected_messages;
@@ -478,7 +491,7 @@ void Client::onAck(std::unique_lock<std::mutex>& lock, const Message& message)
 {
   if (!has_pending_ || pending_.expect != Opcode::kAck)
   {
-    if (job_ && job_->in_flight)
+    if ((job_ && job_->in_flight) || state_ == SessionState::kSending)
     {
       onNext(lock);  // Table 1: row 1 is answered by 16 on some boards
       return;
@@ -555,10 +568,10 @@ void Client::handle(std::unique_lock<std::mutex>& lock, const Message& message)
     {
       if (!job_ || !job_->in_flight)
       {
-        ++stats_.unexpected_messages;
-        if (state_ == SessionState::kSending)
+        // A cancelled job's set is not sent again; the board waits for the next one.
+        if (!orphanAnswered(lock))
         {
-          setState(lock, SessionState::kReadyToSend);
+          ++stats_.unexpected_messages;
         }
         break;
       }
@@ -612,6 +625,16 @@ void Client::handle(std::unique_lock<std::mutex>& lock, const Message& message)
       }
       break;
     case Opcode::kAliveResponse:
+      if (alive_outstanding_)
+      {
+        // The answer to the latest request (after a miss, an earlier one's late answer reads short).
+        const double rtt = toMs(Clock::now() - last_alive_sent_);
+        stats_.last_link_rtt_ms = rtt;
+        stats_.mean_link_rtt_ms =
+            stats_.alive_responses == 0 ? rtt : stats_.mean_link_rtt_ms + (rtt - stats_.mean_link_rtt_ms) / 16.0;
+        stats_.max_link_rtt_ms = std::max(stats_.max_link_rtt_ms, rtt);
+        ++stats_.alive_responses;
+      }
       alive_outstanding_ = false;
       break;
     case Opcode::kAliveRequest:
@@ -671,7 +694,10 @@ void Client::checkTimers(std::unique_lock<std::mutex>& lock)
          << " ms (no answer to " << (alive_outstanding_ ? "alive requests" : "requests") << ")";
     throw LinkError(what.str());
   }
-  if (silent >= options_.keepalive_period && now - last_alive_sent_ >= options_.keepalive_period)
+  const auto since_alive = now - last_alive_sent_;
+  const bool keepalive = silent >= options_.keepalive_period && since_alive >= options_.keepalive_period;
+  const bool probe = options_.rtt_probe_period.count() > 0 && since_alive >= options_.rtt_probe_period;
+  if (keepalive || probe)
   {
     if (alive_outstanding_)
     {

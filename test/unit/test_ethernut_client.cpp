@@ -551,7 +551,10 @@ TEST(EthernutClient, BadFramesAreCountedAndThreeInARowDropTheLink)
 
 TEST(EthernutClient, CancelStopsStreaming)
 {
-  Session s;
+  ClientOptions o;
+  o.keepalive_period = milliseconds(20);  // keepalives mark the passes of the client's loop below
+  o.dead_link_timeout = milliseconds(2000);
+  Session s(o);
   std::atomic<int> seen{0};
   s.board.rule = [&](const Message& m, FakeTransport&)
   {
@@ -565,10 +568,60 @@ TEST(EthernutClient, CancelStopsStreaming)
   ASSERT_TRUE(s.recorder.waitFor([&] { return !s.recorder.outcomes.empty(); }));
   EXPECT_EQ(s.recorder.outcomes[0], JobOutcome::kCancelled);
   EXPECT_EQ(s.board.coordinates().size(), 2u);
-  // A new job can start at once.
+  // A new job is accepted at once, but its first set waits for the board's answer to the held
+  // one (stop-and-wait): sent earlier, the board would take it for a second set while moving.
+  EXPECT_EQ(s.client->state(), SessionState::kSending);
   s.client->startJob(Session::points({5}));
+  const uint64_t keepalives = s.client->stats().keepalive_requests;
+  std::atomic<bool> fed{false};
+  std::thread late_answer(
+      [&]
+      {
+        // The answer comes once the client has had every chance to send too early: it has polled
+        // the link and checked the new job (a keepalive request proves a pass of the loop).
+        s.recorder.waitFor([&] { return s.client->stats().keepalive_requests >= keepalives + 2; });
+        fed = s.board.coordinates().size() == 2u;  // nothing sent before the answer
+        s.link.feed(bytesOf(makeMessage(Opcode::kNext)));
+      });
   ASSERT_TRUE(s.recorder.waitFor([&] { return s.recorder.outcomes.size() == 2; }));
+  late_answer.join();
+  EXPECT_TRUE(fed.load()) << "the new job's set went out before the held set was answered";
   EXPECT_EQ(s.recorder.outcomes[1], JobOutcome::kCompleted);
+  ASSERT_EQ(s.board.coordinates().size(), 3u);
+  EXPECT_EQ(s.board.coordinates()[2].x, 5.0f);
+  EXPECT_EQ(s.client->stats().unexpected_messages, 0u);
+}
+
+TEST(EthernutClient, AliveRequestFromTheBoardIsAnswered)  // row 17 sent by the board, row 18
+{
+  Session s;
+  s.start();
+  ASSERT_TRUE(s.waitConnected());
+  EXPECT_EQ(s.board.count(Opcode::kAliveResponse), 0u);
+  s.link.feed(bytesOf(makeMessage(Opcode::kAliveRequest)));
+  ASSERT_TRUE(s.recorder.waitFor([&] { return s.board.count(Opcode::kAliveResponse) == 1; }));
+  EXPECT_EQ(s.client->stats().unexpected_messages, 0u);
+  EXPECT_FALSE(s.finished.load());
+}
+
+TEST(EthernutClient, AliveRoundTripIsMeasuredAsTheLinkRoundTrip)
+{
+  ClientOptions o;
+  // Never silent long enough for a keepalive: only the round-trip probe sends alive requests.
+  o.keepalive_period = milliseconds(3600 * 1000);
+  o.dead_link_timeout = milliseconds(7200 * 1000);
+  o.rtt_probe_period = milliseconds(20);
+  Session s(o);
+  s.start();
+  ASSERT_TRUE(s.waitConnected());
+  ASSERT_TRUE(s.recorder.waitFor([&] { return s.client->stats().alive_responses >= 3; }));
+  const ClientStats st = s.client->stats();
+  EXPECT_GE(st.keepalive_requests, 3u);
+  EXPECT_EQ(st.keepalive_misses, 0u);
+  EXPECT_GE(st.last_link_rtt_ms, 0.0);
+  EXPECT_LE(st.last_link_rtt_ms, st.max_link_rtt_ms);
+  EXPECT_LT(st.max_link_rtt_ms, 5000.0);  // an in-memory peer answers at once
+  EXPECT_EQ(st.coordinates_done, 0u);     // coordinate round trips are counted apart
 }
 
 TEST(EthernutClient, CommandsWhileDisconnectedAreRefused)

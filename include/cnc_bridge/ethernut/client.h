@@ -79,11 +79,16 @@ struct ClientOptions
   bool ack_position_reports = true;
   /// Mode selected after every (re)connection.
   BoardMode initial_mode = BoardMode::kFile;
+  /// An alive request also goes out when none was sent for this long, however busy the link, so
+  /// that the link round trip is measured while jobs stream too; 0: only on silence.
+  Milliseconds rtt_probe_period{5000};
   /// Longest wait inside one read, which bounds how late a command from another thread is sent.
   Milliseconds poll_interval{10};
 };
 
-/// Counters for diagnostics. Round-trip time: coordinate sent -> NEXT received.
+/// Counters for diagnostics. Two round-trip times: coordinate sent -> NEXT received (the board
+/// answers once it has moved there, so this includes the move), and alive request -> alive
+/// response (the link's own round trip: network plus the board's TCP task).
 struct ClientStats
 {
   uint64_t coordinates_sent = 0;  ///< including resends
@@ -97,6 +102,10 @@ struct ClientStats
   double last_rtt_ms = 0.0;
   double mean_rtt_ms = 0.0;  ///< exponential average (1/16 weight per sample)
   double max_rtt_ms = 0.0;
+  uint64_t alive_responses = 0;  ///< answers to our alive requests (link round-trip samples)
+  double last_link_rtt_ms = 0.0;
+  double mean_link_rtt_ms = 0.0;  ///< exponential average (1/16 weight per sample)
+  double max_link_rtt_ms = 0.0;
   float last_board_error = 0.0f;  ///< last non-zero `error` field from the board
 };
 
@@ -128,8 +137,10 @@ class ClientListener
 ///              (send the next set) or RESEND (200,60) (send the same set again, at most
 ///              max_resends times). A bare ack after coordinates is read as NEXT (Table 1 lists
 ///              16 as the response of row 1).
-///   keepalive: when the board has been silent for keepalive_period, PC alive-request (200,199)
-///              -> board alive-response (200,999). Any message from the board proves the link;
+///   keepalive: when the board has been silent for keepalive_period (or no alive request went
+///              out for rtt_probe_period), PC alive-request (200,199) -> board alive-response
+///              (200,999), timed as the link round trip. The board's alive request is answered
+///              with an alive response at any time. Any message from the board proves the link;
 ///              dead_link_timeout of silence is a dead link (run() throws LinkError).
 ///   pause:     PC pause-request (99,199) -> board pause-achieved (99,201). Rows 10/11 are read
 ///              as request and answer: the board sends pause-achieved once motion has stopped
@@ -169,7 +180,9 @@ class Client
   /// \throws LinkError if not connected, ProtocolError if a job is running or the board is paused.
   void startJob(std::function<bool(Coordinate&)> source);
   /// \brief Stops streaming; the job ends with kCancelled. The coordinate in flight (if any) is
-  /// not taken back: the board finishes or holds it. Does nothing without a job.
+  /// not taken back: the board finishes or holds it, and the next job's first coordinate is sent
+  /// only after the board answered it (the session stays kSending until then). Does nothing
+  /// without a job.
   void cancelJob();
   /// \brief Pause request; returns once the board reported pause achieved.
   /// \throws TimeoutError, LinkError.
@@ -218,6 +231,9 @@ class Client
   void handle(std::unique_lock<std::mutex>& lock, const Message& message);
   void onAck(std::unique_lock<std::mutex>& lock, const Message& message);
   void onNext(std::unique_lock<std::mutex>& lock);
+  /// A NEXT/RESEND with no job set in flight: the answer to the set of a cancelled job, if one
+  /// was still in flight (the session leaves kSending); false otherwise.
+  bool orphanAnswered(std::unique_lock<std::mutex>& lock);
   void pump(std::unique_lock<std::mutex>& lock);
   void sendCurrent(std::unique_lock<std::mutex>& lock);
   void setState(std::unique_lock<std::mutex>& lock, SessionState state);
