@@ -641,7 +641,9 @@ const Block& Parser::parseLine(std::string_view text)
         const Word w = scan.has(kI) ? kI : (scan.has(kJ) ? kJ : (scan.has(kK) ? kK : kR));
         throw ParseError(line, scan.column[w], "I/J/K/R words need G02 or G03");
       }
-      if (target.x != start.x || target.y != start.y || target.z != start.z)
+      // A G53 move is in another frame: equal numbers are no proof that the tool stays put.
+      const bool report_anyway = machine_coordinates && options_.separate_machine_moves;
+      if (report_anyway || target.x != start.x || target.y != start.y || target.z != start.z)
       {
         block.moves.push_back(proto);
       }
@@ -793,7 +795,10 @@ const Block& Parser::parseLine(std::string_view text)
       }
       position_ = target;
     }
-    position_ = target;
+    if (!(machine_coordinates && options_.separate_machine_moves))
+    {
+      position_ = target;
+    }
   }
   else if (has_offset)
   {

@@ -377,3 +377,39 @@ TEST(GcodeReader, LastLineWithoutNewlineAndBlockDelete)
   const auto all = parseAll("G1 X1\n/G1 X5\nX3");
   EXPECT_EQ(all.size(), 3u);
 }
+
+// A consumer that keeps G53 moves apart (ethernut: the board has one coordinate system) sees
+// every G53 move, even one whose numbers equal the program position, and the program position
+// is not changed by it: the move after a left-out G53 retract keeps the program's Z.
+TEST(GcodeParser, SeparateMachineMovesLeaveTheProgramPositionAlone)
+{
+  const std::string program = "G90 G00 X0 Y0 Z0\nG53 G00 Z0\nG01 Z-1 F100\nG00 Z25\nG53 Z0\nX40\nG53 Y0\n";
+  ParserOptions separate;
+  separate.separate_machine_moves = true;
+  const auto moves = parseAll(program, separate);
+  std::vector<uint32_t> g53_lines;
+  std::vector<Move> program_moves;
+  for (const Move& m : moves)
+  {
+    if (m.machine_coordinates)
+    {
+      g53_lines.push_back(m.line);
+    }
+    else
+    {
+      program_moves.push_back(m);
+    }
+  }
+  EXPECT_EQ(g53_lines, (std::vector<uint32_t>{2, 5, 7}));  // line 2 too: Z0 in another frame
+  ASSERT_EQ(program_moves.size(), 3u);                     // line 1 goes nowhere from the origin
+  expectNear(program_moves[0].start, {0, 0, 0});
+  expectNear(program_moves[0].end, {0, 0, -1});
+  expectNear(program_moves[2].start, {0, 0, 25});  // after the G53 Z0: still at the program's Z25
+  expectNear(program_moves[2].end, {40, 0, 25});
+
+  // Without the option, a G53 target becomes the program position (one frame for everything).
+  const auto mixed = parseAll(program);
+  ASSERT_FALSE(mixed.empty());
+  EXPECT_EQ(std::count_if(mixed.begin(), mixed.end(), [](const Move& m) { return m.machine_coordinates; }), 1);
+  expectNear(mixed.back().end, {40, 0, 0});
+}

@@ -157,6 +157,14 @@ struct ParserOptions
   /// that moves before any motion word is read as feed moves: the slower, safer reading.
   Motion initial_motion = Motion::kLinear;
   Vec3 initial_position;  ///< mm
+  /// For consumers that keep G53 (machine coordinate) moves apart from the program, e.g. a
+  /// streamer to a board that knows one coordinate system and refuses or skips them: a G53 block
+  /// always yields its move (flagged Move::machine_coordinates), even when its numbers equal the
+  /// program position, and leaves position() unchanged, so the next move starts where the last
+  /// program move ended and keeps that move's values on the axes it does not name. Off: a G53
+  /// target becomes the program position (the numbers of two frames mixed, as a preview that
+  /// draws everything in one frame does).
+  bool separate_machine_moves = false;
 };
 
 /// \brief Parses one line at a time, keeping the modal state between lines.
