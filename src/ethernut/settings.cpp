@@ -3,6 +3,7 @@
 
 #include <charconv>
 #include <fstream>
+#include <sstream>
 
 namespace cnc_bridge
 {
@@ -19,6 +20,20 @@ std::string trim(const std::string& text)
     return "";
   }
   return text.substr(first, text.find_last_not_of(space) - first + 1);
+}
+
+bool hasWord(const std::string& line, const std::string& word)
+{
+  std::istringstream words(line);
+  std::string w;
+  while (words >> w)
+  {
+    if (w == word)
+    {
+      return true;
+    }
+  }
+  return false;
 }
 
 template <typename T>
@@ -57,8 +72,10 @@ Settings parseSettings(std::istream& in, const std::string& source)
     const size_t bar = line.find('|');
     if (bar == std::string::npos)
     {
-      // 'TSS' "has to be present somewhere": we accept it as a line (or word) of its own.
-      if (line == "TSS")
+      // 'TSS' "has to be present somewhere": as a word of its own on a line without '|' ("TSS",
+      // "qCNC TSS v2"), or as a setting's name (TSS|...). Not inside a comment, and not inside a
+      // longer word; other lines without '|' are errors.
+      if (hasWord(line, "TSS"))
       {
         marker = true;
         continue;

@@ -227,4 +227,19 @@ TEST(EthernutSettings, RejectsBadFiles)
   EXPECT_NE(error("TSS\njust words\n").find("expected NAME|value"), std::string::npos);
   EXPECT_NE(error("TSS\n|5\n").find("without a name"), std::string::npos);
   EXPECT_NE(error("TSS\nA|b|c\n").find("may not contain"), std::string::npos);
+  // TSS only counts as a word of its own outside comments.
+  EXPECT_NE(error("# TSS\nINET_PORT|6666\n").find("no 'TSS' marker"), std::string::npos);
+  EXPECT_NE(error("TSSX\nINET_PORT|6666\n").find("expected NAME|value"), std::string::npos);
+}
+
+TEST(EthernutSettings, TssMarkerMayBeAWordOnALineOrASettingName)
+{
+  for (const char* text :
+       {"qCNC TSS settings\nINET_PORT|6667\n", "INET_PORT|6667\n  TSS  # marker\n", "TSS|1\nINET_PORT|6667\n"})
+  {
+    std::istringstream in(text);
+    Settings s;
+    ASSERT_NO_THROW(s = parseSettings(in, "f.tss")) << text;
+    EXPECT_EQ(s.port.value_or(0), 6667) << text;
+  }
 }

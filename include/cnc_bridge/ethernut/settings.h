@@ -1,6 +1,7 @@
 // The qCNC settings file (seed section 8), read so that people moving from qCNC can keep theirs:
-// '#' starts a comment, 'TSS' must appear somewhere to mark the file valid, and each setting is
-// `NAME|value`. Only the settings this bridge uses are interpreted; the others are kept as text.
+// '#' starts a comment, 'TSS' must appear somewhere to mark the file valid (a word of its own on
+// a line without '|', or a setting named TSS; not in a comment), and each setting is `NAME|value`. Only the settings
+// this bridge uses are interpreted; the others are kept as text.
 #pragma once
 
 #include <cstdint>
