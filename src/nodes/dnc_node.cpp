@@ -4,6 +4,7 @@
 // library cnc_bridge_xmodem.
 #include "cnc_bridge/ros/dnc_node.h"
 
+#include <chrono>
 #include <filesystem>
 
 #include "cnc_bridge/common/error.h"
@@ -13,7 +14,12 @@
 namespace cnc_bridge
 {
 DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh)
-    : nh_(nh), pnh_(pnh), serial_(params::serialSettings(pnh, 115200)), port_lock_(serial_.device)
+    : nh_(nh),
+      pnh_(pnh),
+      serial_(params::serialSettings(pnh, 115200)),
+      // ~lock_dir (string, default /tmp): directory of the serial-port lock shared with a status
+      // poller on the same line (haas_mdc_node ~lock_dir; both must name the same directory).
+      port_lock_(serial_.device, pnh.param<std::string>("lock_dir", "/tmp"))
 {
   // ~program_dir (string, required): the only directory files are read from and written to;
   // created if it does not exist.
@@ -213,8 +219,10 @@ TransferResult DncNode::run(TransferGoal goal, const std::function<void(const Tr
   bool cancelled = false;
   try
   {
-    // A status poller on the same line (haas_mdc_node) skips its polls while this is held.
-    if (!port_lock_.tryLock())
+    // A status poller on the same line (haas_mdc_node) skips its polls while this is held. It
+    // holds the lock itself for the length of one query (under a second), so a busy lock is tried
+    // again for a while before the transfer is refused.
+    if (!port_lock_.lockForTransfer(std::chrono::seconds(2), [this] { return cancel_.load(); }))
       throw LinkError(serial_.device + " is in use by another process (port lock " + port_lock_.lockFile() + ")");
     Transport& link = openLink();
     // Opening the port set its own message: while the transfer runs, state says what it is.

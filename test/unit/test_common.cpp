@@ -5,9 +5,12 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <atomic>
+#include <chrono>
 #include <cstdlib>
 #include <fstream>
 #include <sstream>
+#include <thread>
 
 #include "cnc_bridge/common/atomic_file.h"
 #include "cnc_bridge/common/error.h"
@@ -155,4 +158,121 @@ TEST(PortLock, OneHolderAtATimeAcrossObjects)
     EXPECT_TRUE(dnc.heldElsewhere());
   }
   EXPECT_FALSE(dnc.heldElsewhere());
+}
+
+namespace
+{
+// A lock directory of the test's own, so no other program's lock on the same name interferes.
+std::string lockDir()
+{
+  char path[] = "/tmp/cnc_bridge_lock_test_XXXXXX";
+  const char* dir = ::mkdtemp(path);
+  return dir ? dir : "/tmp";
+}
+}  // namespace
+
+TEST(PortLock, ATransferWaitingForTheLockGoesBeforeTheNextQuery)
+{
+  const std::string dir = lockDir();
+  PortLock poller("/dev/ttyS_test_cnc_bridge", dir);
+  PortLock dnc("/dev/ttyS_test_cnc_bridge", dir);
+  ASSERT_TRUE(poller.tryLockForQuery());  // a query in flight
+  std::atomic<bool> got{false};
+  std::thread transfer([&] { got = dnc.lockForTransfer(std::chrono::seconds(10)); });
+  // Bounded wait for the transfer to announce itself (it polls every 20 ms).
+  for (int i = 0; i < 500 && !poller.wantedElsewhere(); ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  ASSERT_TRUE(poller.wantedElsewhere());
+  poller.unlock();  // the query is done
+  // The next query must not take the line from the waiting transfer.
+  EXPECT_FALSE(poller.tryLockForQuery());
+  transfer.join();
+  EXPECT_TRUE(got);
+  EXPECT_TRUE(dnc.held());
+  EXPECT_FALSE(poller.tryLockForQuery());
+  dnc.unlock();
+  EXPECT_TRUE(poller.tryLockForQuery());
+  poller.unlock();
+}
+
+TEST(PortLock, QueriesAndTransfersNeverOverlapAndTransfersAreNotStarved)
+{
+  // A poller that queries back to back (holding the lock for 2 ms, releasing it for microseconds)
+  // and a transfer that needs the line five times, each within 2 s. Without the transfer's
+  // announced wait the poller would win nearly every race for the lock.
+  const std::string dir = lockDir();
+  std::atomic<int> inside{0};
+  std::atomic<bool> overlap{false}, done{false};
+  std::atomic<int> queries{0};
+  auto enter = [&]
+  {
+    if (++inside > 1)
+      overlap = true;
+  };
+  std::thread poller(
+      [&]
+      {
+        PortLock lock("/dev/ttyS_test_cnc_bridge", dir);
+        while (!done)
+        {
+          if (!lock.tryLockForQuery())
+          {
+            std::this_thread::yield();
+            continue;
+          }
+          enter();
+          std::this_thread::sleep_for(std::chrono::milliseconds(2));  // the query's round trip
+          --inside;
+          lock.unlock();
+          ++queries;
+        }
+      });
+  PortLock dnc("/dev/ttyS_test_cnc_bridge", dir);
+  int transfers = 0;
+  for (int i = 0; i < 5; ++i)
+  {
+    while (queries < 3 * (i + 1))  // the poller is busy before each transfer asks
+      std::this_thread::yield();
+    if (!dnc.lockForTransfer(std::chrono::seconds(2)))
+      continue;
+    ++transfers;
+    enter();
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));  // the transfer
+    --inside;
+    dnc.unlock();
+  }
+  done = true;
+  poller.join();
+  EXPECT_FALSE(overlap);
+  EXPECT_EQ(transfers, 5);
+}
+
+TEST(PortLock, EachTransferBumpsTheGenerationQueriesDoNot)
+{
+  const std::string dir = lockDir();
+  PortLock poller("/dev/ttyS_test_cnc_bridge", dir);
+  PortLock dnc("/dev/ttyS_test_cnc_bridge", dir);
+  ASSERT_TRUE(poller.tryLockForQuery());
+  const uint64_t before = poller.generation();
+  poller.unlock();
+  ASSERT_TRUE(poller.tryLockForQuery());
+  EXPECT_EQ(poller.generation(), before);
+  poller.unlock();
+  ASSERT_TRUE(dnc.lockForTransfer(std::chrono::milliseconds(100)));
+  dnc.unlock();
+  ASSERT_TRUE(poller.tryLockForQuery());
+  EXPECT_EQ(poller.generation(), before + 1);
+  poller.unlock();
+}
+
+TEST(PortLock, ACancelledTransferStopsWaiting)
+{
+  const std::string dir = lockDir();
+  PortLock poller("/dev/ttyS_test_cnc_bridge", dir);
+  PortLock dnc("/dev/ttyS_test_cnc_bridge", dir);
+  ASSERT_TRUE(poller.tryLockForQuery());
+  int asked = 0;
+  EXPECT_FALSE(dnc.lockForTransfer(std::chrono::seconds(60), [&] { return ++asked >= 3; }));
+  EXPECT_EQ(asked, 3);
+  EXPECT_FALSE(poller.wantedElsewhere());  // the wait is withdrawn
 }

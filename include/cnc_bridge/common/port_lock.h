@@ -1,38 +1,68 @@
 // Sharing one serial line between nodes. A Haas Classic control can freeze if it is polled for
-// status (Q commands) while a DNC transfer runs on the same port, so the node doing the transfer
-// holds this lock for its duration and pollers skip their polls while it is held. The lock is an
-// advisory flock(2) on a file named after the device, so it works across processes and is
-// released by the kernel if the holder dies.
+// status (Q commands) while a DNC transfer runs on the same port, and a query in flight when a
+// transfer starts would write `?Qnnn` into the transfer and read its first bytes as a reply. So
+// every use of the line holds this lock: a status poller for each query (tryLockForQuery), a
+// transfer for its whole length (lockForTransfer). A transfer waiting for a query to finish goes
+// first: pollers skip their queries while it waits. The lock is an advisory flock(2) on a file
+// named after the device, so it works across processes and is released by the kernel if the
+// holder dies.
 #pragma once
 
+#include <chrono>
+#include <cstdint>
+#include <functional>
 #include <string>
 
 namespace cnc_bridge
 {
 /// \brief An exclusive, inter-process lock on one serial device. Not thread-safe.
+///
+/// Files: `<lock_dir>/cnc_bridge-<device>.lock` (the lock; holds the transfer generation as text)
+/// and `<...>.lock.want` (held by a transfer waiting for the lock).
 class PortLock
 {
  public:
   /// \param device the serial device (symbolic links are resolved so both nodes agree).
-  /// \param lock_dir where lock files live (default /tmp).
+  /// \param lock_dir where lock files live (default /tmp); every node on the line must use the same.
   explicit PortLock(const std::string& device, const std::string& lock_dir = "/tmp");
   ~PortLock();
   PortLock(const PortLock&) = delete;
   PortLock& operator=(const PortLock&) = delete;
 
   /// \returns true if the lock was taken (or is already held by this object).
+  /// \throws LinkError if the lock file cannot be opened.
   bool tryLock();
   void unlock();
   bool held() const { return held_; }
 
+  /// \brief Takes the lock for one short use of the line (a status query), only if it is free and
+  /// no transfer is waiting for it (lockForTransfer()).
+  bool tryLockForQuery();
+
+  /// \brief Takes the lock for a transfer: tries again every 20 ms for up to \p patience while it
+  /// is held elsewhere (a query in flight), meanwhile telling pollers to leave it alone. On success
+  /// the generation is bumped, so pollers know another protocol has used the line.
+  /// \param cancelled polled while waiting; true gives up.
+  /// \returns false if the lock stayed held elsewhere or the wait was cancelled.
+  bool lockForTransfer(std::chrono::milliseconds patience, const std::function<bool()>& cancelled = {});
+
+  /// \brief How many transfers have held the lock (stored in the lock file). Read it while holding
+  /// the lock. 0 when never used.
+  uint64_t generation();
+
   /// \returns true if some other holder has the lock right now (probes without keeping it).
   bool heldElsewhere();
+  /// \returns true if a transfer is waiting for the lock.
+  bool wantedElsewhere();
 
   const std::string& lockFile() const { return path_; }
 
  private:
+  void open();
+
   std::string path_;
   int fd_ = -1;
+  int want_fd_ = -1;
   bool held_ = false;
 };
 
