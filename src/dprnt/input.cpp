@@ -5,6 +5,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 
@@ -33,7 +34,7 @@ StreamInput::~StreamInput()
   stop();
 }
 
-void StreamInput::start(BytesHandler on_bytes, StateHandler on_state)
+void StreamInput::start(BytesHandler on_bytes, StateHandler on_state, RestartHandler /*on_restart*/)
 {
   on_bytes_ = std::move(on_bytes);
   Reconnector::Callbacks callbacks;
@@ -102,9 +103,10 @@ FileInput::~FileInput()
   closeFile();
 }
 
-void FileInput::start(BytesHandler on_bytes, StateHandler on_state)
+void FileInput::start(BytesHandler on_bytes, StateHandler on_state, RestartHandler on_restart)
 {
   on_bytes_ = std::move(on_bytes);
+  on_restart_ = std::move(on_restart);
   Reconnector::Callbacks callbacks;
   callbacks.connect = [this] { openFile(); };
   callbacks.session = [this] { session(); };
@@ -141,6 +143,8 @@ void FileInput::closeFile()
 void FileInput::openFile()
 {
   closeFile();
+  tail_.clear();
+  seen_size_ = -1;
   // Only a file that exists at the very first attempt has history to skip; a file created later,
   // or reopened after a failure, holds only what was written while we waited: read it all.
   const bool skip_history = first_attempt_ && !from_start_;
@@ -152,8 +156,62 @@ void FileInput::openFile()
   }
   if (skip_history)
   {
-    ::lseek(fd_, 0, SEEK_END);
+    const off_t end = ::lseek(fd_, 0, SEEK_END);
+    // The skipped history's last bytes are what a rewrite check compares against.
+    const off_t from = std::max<off_t>(0, end - static_cast<off_t>(kVerifyWindow));
+    std::string history(static_cast<size_t>(end - from), '\0');
+    const ssize_t n = ::pread(fd_, &history[0], history.size(), from);
+    if (n == static_cast<ssize_t>(history.size()))
+      tail_ = std::move(history);
   }
+}
+
+void FileInput::keepTail(const uint8_t* data, size_t size)
+{
+  if (size >= kVerifyWindow)
+  {
+    tail_.assign(reinterpret_cast<const char*>(data) + size - kVerifyWindow, kVerifyWindow);
+    return;
+  }
+  tail_.append(reinterpret_cast<const char*>(data), size);
+  if (tail_.size() > kVerifyWindow)
+    tail_.erase(0, tail_.size() - kVerifyWindow);
+}
+
+const char* FileInput::changedUnderneath()
+{
+  struct stat st;
+  if (::fstat(fd_, &st) != 0)
+  {
+    throw LinkError("file " + path_ + ": " + std::strerror(errno));
+  }
+  const off_t position = ::lseek(fd_, 0, SEEK_CUR);
+  if (st.st_size < position)
+    return "truncated";
+  const bool unchanged =
+      st.st_size == seen_size_ && st.st_mtim.tv_sec == seen_mtime_.tv_sec && st.st_mtim.tv_nsec == seen_mtime_.tv_nsec;
+  seen_size_ = st.st_size;
+  seen_mtime_ = st.st_mtim;
+  if (unchanged || tail_.empty() || position < static_cast<off_t>(tail_.size()))
+    return nullptr;
+  // Written since the last look: are the bytes before the read position still the ones read?
+  std::string now(tail_.size(), '\0');
+  const ssize_t n = ::pread(fd_, &now[0], now.size(), position - static_cast<off_t>(tail_.size()));
+  if (n < 0)
+  {
+    throw LinkError("file " + path_ + ": " + std::strerror(errno));
+  }
+  return static_cast<size_t>(n) == now.size() && now == tail_ ? nullptr : "rewritten";
+}
+
+void FileInput::startOver(const std::string& why)
+{
+  ++restarts_;
+  CNC_LOG_INFO("file " << path_ << " " << why);
+  if (on_restart_)
+    on_restart_(why);
+  if (on_state_)
+    on_state_(LinkState::kUp, why);
 }
 
 void FileInput::session()
@@ -161,9 +219,20 @@ void FileInput::session()
   uint8_t buffer[kChunk];
   while (!stop_.stopped())
   {
+    // Checked before every read, not only after a poll: the bytes handler may have taken a while.
+    // One fstat per read; the file is compared only when it changed.
+    if (const char* what = changedUnderneath())
+    {
+      ::lseek(fd_, 0, SEEK_SET);
+      tail_.clear();
+      seen_size_ = -1;
+      startOver(std::string("file ") + what + ": reading from its start");
+      continue;
+    }
     const ssize_t n = ::read(fd_, buffer, sizeof buffer);
     if (n > 0)
     {
+      keepTail(buffer, static_cast<size_t>(n));
       on_bytes_(buffer, static_cast<size_t>(n));
       continue;
     }
@@ -177,25 +246,16 @@ void FileInput::session()
     {
       throw LinkError("file " + path_ + ": " + std::strerror(errno));
     }
-    const off_t position = ::lseek(fd_, 0, SEEK_CUR);
-    if (open_stat.st_size < position)
+    if (open_stat.st_size < ::lseek(fd_, 0, SEEK_CUR))
     {
-      ++restarts_;
-      CNC_LOG_INFO("file " << path_ << " was truncated: reading from its start");
-      ::lseek(fd_, 0, SEEK_SET);
-      if (on_state_)
-        on_state_(LinkState::kUp, "file truncated: reading from its start");
-      continue;
+      continue;  // truncated: changedUnderneath() tells it
     }
     if (::stat(path_.c_str(), &path_stat) == 0 &&
         (path_stat.st_ino != open_stat.st_ino || path_stat.st_dev != open_stat.st_dev))
     {
       // Everything of the old file has been read (read() returned 0 above): switch to the new one.
-      ++restarts_;
-      CNC_LOG_INFO("file " << path_ << " was rotated: following the new file");
       openFile();
-      if (on_state_)
-        on_state_(LinkState::kUp, "file rotated: following the new file");
+      startOver("file rotated: following the new file");
       continue;
     }
     stop_.waitFor(poll_);

@@ -7,6 +7,7 @@
 #include <ros/ros.h>
 #include <std_msgs/Float64.h>
 #include <std_srvs/Trigger.h>
+#include <tf2_ros/static_transform_broadcaster.h>
 
 #include <cmath>
 #include <limits>
@@ -95,6 +96,8 @@ class DprntNode
   void onLine(const dprnt::LineEvent& event, const ros::Time& stamp);
   void publishRule(const dprnt::RuleOutput& output, const std::string& line, const ros::Time& stamp);
   void onLinkState(LinkState state, const std::string& why);
+  void onRestart(const std::string& why);
+  void publishWorkOffset(const ros::NodeHandle& pnh);
   bool clear(std_srvs::Trigger::Request& request, std_srvs::Trigger::Response& response);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
 
@@ -118,6 +121,7 @@ class DprntNode
   ros::Publisher raw_pub_;
   ros::Publisher values_pub_;
   ros::ServiceServer clear_srv_;
+  std::unique_ptr<tf2_ros::StaticTransformBroadcaster> work_frame_;
 };
 
 DprntNode::DprntNode(ros::NodeHandle nh, ros::NodeHandle pnh)
@@ -161,6 +165,7 @@ DprntNode::DprntNode(ros::NodeHandle nh, ros::NodeHandle pnh)
 
   state_ = std::make_unique<MachineStatePublisher>(nh, pnh, input_->describe());
   state_->diagnostics().add("dprnt", this, &DprntNode::diagnose);
+  publishWorkOffset(pnh);
 
   // Publishers exist before the input thread can call into them.
   std::lock_guard<std::mutex> lock(mutex_);
@@ -191,7 +196,33 @@ DprntNode::DprntNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   ROS_INFO("DPRNT from %s, %zu rules%s%s", input_->describe().c_str(), rules_.rules().size(),
            rules_file_.empty() ? "" : " from ", rules_file_.c_str());
   input_->start([this](const uint8_t* data, size_t size) { onBytes(data, size); },
-                [this](LinkState state, const std::string& why) { onLinkState(state, why); });
+                [this](LinkState state, const std::string& why) { onLinkState(state, why); },
+                [this](const std::string& why) { onRestart(why); });
+}
+
+void DprntNode::publishWorkOffset(const ros::NodeHandle& pnh)
+{
+  // ~work_offset: [x, y, z] m, the work zero (G54) in <tf_prefix>machine, published as the static
+  // transform <tf_prefix>machine -> <tf_prefix>work so points of `frame: work` rules can be placed
+  // when nothing else publishes that frame. Empty (default): not published (haas_mdc_node
+  // publishes it from the control's work offset variables).
+  std::vector<double> offset;
+  if (!pnh.getParam("work_offset", offset) || offset.empty())
+    return;
+  if (offset.size() != 3)
+    throw ConfigError("Parameter " + pnh.resolveName("work_offset") + " needs [x, y, z] (m) or [].");
+  geometry_msgs::TransformStamped t;
+  t.header.stamp = ros::Time::now();
+  t.header.frame_id = state_->frame("machine");
+  t.child_frame_id = state_->frame("work");
+  t.transform.translation.x = offset[0];
+  t.transform.translation.y = offset[1];
+  t.transform.translation.z = offset[2];
+  t.transform.rotation.w = 1.0;
+  work_frame_ = std::make_unique<tf2_ros::StaticTransformBroadcaster>();
+  work_frame_->sendTransform(t);
+  ROS_INFO("work frame %s at (%g, %g, %g) m in %s", t.child_frame_id.c_str(), offset[0], offset[1], offset[2],
+           t.header.frame_id.c_str());
 }
 
 DprntNode::~DprntNode()
@@ -322,6 +353,18 @@ void DprntNode::onLinkState(LinkState state, const std::string& why)
     link_ = state;
   }
   state_->setLink(state, why);
+}
+
+void DprntNode::onRestart(const std::string& why)
+{
+  std::lock_guard<std::mutex> lock(mutex_);
+  // The file started over under a link that stays UP: an unfinished line belongs to the old
+  // content. Drop it (counted in "partial lines dropped") rather than glue it to the new bytes.
+  if (assembler_.pending() > 0)
+  {
+    ROS_WARN("%s: unfinished line dropped (\"%.60s\")", why.c_str(), std::string(assembler_.pendingText()).c_str());
+  }
+  assembler_.reset();
 }
 
 bool DprntNode::clear(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response)

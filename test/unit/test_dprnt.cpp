@@ -448,6 +448,17 @@ struct Sink
       cv.notify_all();
     };
   }
+  /// Marks a start-over in the byte record as '|', where the reader would drop its partial line.
+  DprntInput::RestartHandler restartHandler()
+  {
+    return [this](const std::string& why)
+    {
+      std::lock_guard<std::mutex> lock(mutex);
+      bytes.push_back('|');
+      messages.push_back(why);
+      cv.notify_all();
+    };
+  }
   DprntInput::StateHandler stateHandler()
   {
     return [this](LinkState state, const std::string& why)
@@ -550,6 +561,146 @@ TEST(DprntInput, FileIsFollowedThroughTruncationAndRotation)
   std::remove((path + ".1").c_str());
   std::remove(path.c_str());
   rmdir(dir.c_str());
+}
+
+namespace
+{
+// A temporary directory with one DPRNT file in it, removed at the end.
+struct TempFile
+{
+  std::string dir, path;
+  TempFile()
+  {
+    char dir_template[] = "/tmp/test_dprnt_file_XXXXXX";
+    EXPECT_NE(mkdtemp(dir_template), nullptr);
+    dir = dir_template;
+    path = dir + "/dprnt.txt";
+    std::ofstream(path) << "";
+  }
+  ~TempFile()
+  {
+    std::remove((path + ".1").c_str());
+    std::remove(path.c_str());
+    rmdir(dir.c_str());
+  }
+  void append(const std::string& text) const { std::ofstream(path, std::ios::app) << text; }
+  void rewrite(const std::string& text) const { std::ofstream(path, std::ios::trunc) << text; }
+};
+
+// Feeds a byte record of Sink (with '|' for a start-over) to an assembler as dprnt_node does:
+// a start-over resets it. Returns the lines.
+std::vector<std::string> linesOf(const std::string& record, LineAssembler& assembler)
+{
+  std::vector<std::string> lines;
+  for (char c : record)
+  {
+    if (c == '|')
+      assembler.reset();
+    else
+      assembler.feed(std::string_view(&c, 1), [&](const LineEvent& e) { lines.emplace_back(e.text); });
+  }
+  return lines;
+}
+}  // namespace
+
+TEST(DprntInput, PartialLineBeforeTruncationIsNotGluedToTheNewContent)
+{
+  TempFile file;
+  FileInput input(file.path, false, Milliseconds(2), Backoff(Milliseconds(1), Milliseconds(5)));
+  Sink sink;
+  input.start(sink.bytesHandler(), sink.stateHandler(), sink.restartHandler());
+  ASSERT_TRUE(sink.waitForUps(1));
+  file.append("PROBE X 1.0 Y");  // the control was cut off mid-line, then starts the file again
+  ASSERT_TRUE(sink.waitForBytes("PROBE X 1.0 Y"));
+  file.rewrite("");
+  ASSERT_TRUE(sink.waitForMessage("truncated"));
+  file.append(" 2.0 Z 3.0\r");
+  ASSERT_TRUE(sink.waitForBytes("PROBE X 1.0 Y| 2.0 Z 3.0\r"));
+  input.stop();
+  LineAssembler assembler;
+  EXPECT_EQ(linesOf(sink.bytes, assembler), std::vector<std::string>{" 2.0 Z 3.0"});
+  EXPECT_EQ(assembler.stats().partial_dropped, 1u);
+}
+
+TEST(DprntInput, PartialLineBeforeRotationIsNotGluedToTheNewFile)
+{
+  TempFile file;
+  FileInput input(file.path, false, Milliseconds(2), Backoff(Milliseconds(1), Milliseconds(5)));
+  Sink sink;
+  input.start(sink.bytesHandler(), sink.stateHandler(), sink.restartHandler());
+  ASSERT_TRUE(sink.waitForUps(1));
+  file.append("OLD 1\rCUT OFF");
+  ASSERT_TRUE(sink.waitForBytes("OLD 1\rCUT OFF"));
+  ASSERT_EQ(std::rename(file.path.c_str(), (file.path + ".1").c_str()), 0);
+  file.append("NEW 2\r");
+  ASSERT_TRUE(sink.waitForBytes("OLD 1\rCUT OFF|NEW 2\r"));
+  EXPECT_TRUE(sink.waitForMessage("rotated"));
+  input.stop();
+  LineAssembler assembler;
+  EXPECT_EQ(linesOf(sink.bytes, assembler), (std::vector<std::string>{"OLD 1", "NEW 2"}));
+  EXPECT_EQ(assembler.stats().partial_dropped, 1u);
+}
+
+TEST(DprntInput, TruncatedAndRegrownBetweenTwoReadsIsReadFromItsStart)
+{
+  TempFile file;
+  // The bytes handler holds the reader on its first chunk while the control truncates the file
+  // and writes more than it held: by size alone that looks like an append.
+  std::mutex mutex;
+  std::condition_variable cv;
+  bool holding = false, release = false;
+  Sink sink;
+  const auto record = sink.bytesHandler();
+  FileInput input(file.path, false, Milliseconds(2), Backoff(Milliseconds(1), Milliseconds(5)));
+  input.start(
+      [&](const uint8_t* data, size_t size)
+      {
+        record(data, size);
+        std::unique_lock<std::mutex> lock(mutex);
+        if (!release)
+        {
+          holding = true;
+          cv.notify_all();
+          cv.wait(lock, [&] { return release; });
+        }
+      },
+      sink.stateHandler(), sink.restartHandler());
+  ASSERT_TRUE(sink.waitForUps(1));
+  file.append("A 1\r");
+  {
+    std::unique_lock<std::mutex> lock(mutex);
+    ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(5), [&] { return holding; }));
+  }
+  file.rewrite("CYCLE START O1\rB 2\r");
+  {
+    std::lock_guard<std::mutex> lock(mutex);
+    release = true;
+    cv.notify_all();
+  }
+  EXPECT_TRUE(sink.waitForBytes("A 1\r|CYCLE START O1\rB 2\r"));
+  EXPECT_TRUE(sink.waitForMessage("rewritten"));
+  EXPECT_EQ(input.restarts(), 1u);
+  input.stop();
+}
+
+TEST(DprntInput, AppendsAreNotTakenForRewrites)
+{
+  TempFile file;
+  file.append("HISTORY 0\r");  // skipped (from_start false), yet compared against
+  FileInput input(file.path, false, Milliseconds(2), Backoff(Milliseconds(1), Milliseconds(5)));
+  Sink sink;
+  input.start(sink.bytesHandler(), sink.stateHandler(), sink.restartHandler());
+  ASSERT_TRUE(sink.waitForUps(1));
+  std::string expected;
+  for (int i = 1; i <= 20; ++i)
+  {
+    const std::string line = "LINE " + std::to_string(i) + "\r";
+    file.append(line);
+    expected += line;
+    ASSERT_TRUE(sink.waitForBytes(expected));
+  }
+  EXPECT_EQ(input.restarts(), 0u);
+  input.stop();
 }
 
 TEST(DprntInput, MissingFileIsWaitedFor)

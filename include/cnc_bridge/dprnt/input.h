@@ -6,7 +6,10 @@
 // follow a file through rotation and truncation).
 #pragma once
 
+#include <sys/types.h>
+
 #include <atomic>
+#include <ctime>
 #include <functional>
 #include <memory>
 #include <mutex>
@@ -27,10 +30,15 @@ class DprntInput
   using BytesHandler = std::function<void(const uint8_t* data, size_t size)>;
   /// Called from the input thread on every link change; \p why is empty when there is nothing to say.
   using StateHandler = std::function<void(LinkState state, const std::string& why)>;
+  /// Called from the input thread when the byte stream starts over while the link stays up (a
+  /// followed file was truncated, rewritten or rotated), before any byte of the new content: an
+  /// unfinished line held by the reader belongs to the old content and must not be glued to it.
+  using RestartHandler = std::function<void(const std::string& why)>;
 
   virtual ~DprntInput() = default;
-  /// \brief Starts the input thread. Handlers must stay valid until stop() returns.
-  virtual void start(BytesHandler on_bytes, StateHandler on_state) = 0;
+  /// \brief Starts the input thread. Handlers must stay valid until stop() returns; \p on_restart
+  /// may be empty.
+  virtual void start(BytesHandler on_bytes, StateHandler on_state, RestartHandler on_restart = nullptr) = 0;
   /// \brief Stops and joins the input thread; no handler runs after it returns. Thread-safe.
   virtual void stop() = 0;
   /// \brief "/dev/ttyUSB0@9600 8N1", "10.0.0.5:5051", "file /mnt/haas/dprnt.txt".
@@ -51,7 +59,8 @@ class StreamInput : public DprntInput
   StreamInput(std::function<std::unique_ptr<Transport>()> open, std::string description, Backoff backoff = Backoff());
   ~StreamInput() override;
 
-  void start(BytesHandler on_bytes, StateHandler on_state) override;
+  /// A stream never restarts while up (a reconnect is a link change): \p on_restart is not called.
+  void start(BytesHandler on_bytes, StateHandler on_state, RestartHandler on_restart = nullptr) override;
   void stop() override;
   std::string describe() const override { return description_; }
   unsigned reconnects() const override;
@@ -73,10 +82,17 @@ class StreamInput : public DprntInput
 ///
 /// Polls rather than using inotify: the file normally lives on an SMB share the control writes to
 /// from another host, and inotify never sees remote writes. Each poll reads what was appended.
-/// A file that shrinks was truncated: reading restarts at its beginning. A file whose inode changed
-/// was rotated (renamed away, a new one created): the rest of the old file is read, then the new
-/// one from its beginning; both are told to the state handler (link UP, with a message). A missing file is waited for
-/// (link CONNECTING/DOWN) with backoff.
+///
+/// Start-overs (each told to the restart handler, then to the state handler: link UP, with a message):
+///   - truncated: the file is shorter than what was read; reading restarts at its beginning;
+///   - rewritten: truncated and written past the old length between two polls. The size alone
+///     cannot tell, so when size or modification time changed, the last bytes read (up to
+///     kVerifyWindow) are read again from the file; if they differ, the file was rewritten and is
+///     read from its beginning. A rewrite whose bytes up to the old length equal the old ones
+///     is indistinguishable from an append (nothing but inotify could tell; see docs/dprnt_node.md);
+///   - rotated: the inode changed (renamed away, a new file created): the rest of the old file is
+///     read, then the new one from its beginning.
+/// A missing file is waited for (link CONNECTING/DOWN) with backoff.
 class FileInput : public DprntInput
 {
  public:
@@ -86,17 +102,25 @@ class FileInput : public DprntInput
   FileInput(std::string path, bool from_start, Milliseconds poll = Milliseconds(50), Backoff backoff = Backoff());
   ~FileInput() override;
 
-  void start(BytesHandler on_bytes, StateHandler on_state) override;
+  /// Bytes before the read position compared to detect a rewrite (see the class comment).
+  static constexpr size_t kVerifyWindow = 4096;
+
+  void start(BytesHandler on_bytes, StateHandler on_state, RestartHandler on_restart = nullptr) override;
   void stop() override;
   std::string describe() const override { return "file " + path_; }
   unsigned reconnects() const override;
-  /// \brief Truncations and rotations seen so far.
+  /// \brief Truncations, rewrites and rotations seen so far.
   unsigned restarts() const { return restarts_; }
 
  private:
   void openFile();
   void session();
   void closeFile();
+  /// Before reading after a poll: was the file truncated or rewritten under the read position?
+  /// Returns the reason ("truncated", "rewritten") or nullptr.
+  const char* changedUnderneath();
+  void keepTail(const uint8_t* data, size_t size);
+  void startOver(const std::string& why);
 
   std::string path_;
   bool from_start_;
@@ -104,7 +128,11 @@ class FileInput : public DprntInput
   Backoff backoff_;
   BytesHandler on_bytes_;
   StateHandler on_state_;
+  RestartHandler on_restart_;
   int fd_ = -1;
+  std::string tail_;      // the last bytes read (up to kVerifyWindow), to detect a rewrite
+  off_t seen_size_ = -1;  // size and modification time at the last check: unchanged means no rewrite
+  struct timespec seen_mtime_ = {0, 0};
   bool first_attempt_ = true;
   StopSignal stop_;
   std::atomic<unsigned> restarts_{0};

@@ -72,6 +72,8 @@ class LineAssembler
 
   /// \brief Characters of the unfinished line held so far.
   size_t pending() const { return line_.size(); }
+  /// \brief The unfinished line held so far (for a report before reset()).
+  std::string_view pendingText() const { return line_; }
   const AssemblerStats& stats() const { return stats_; }
   void clearStats() { stats_ = AssemblerStats(); }
   size_t maxLength() const { return max_length_; }
