@@ -32,7 +32,7 @@ once=()
 set +e
 python3 "$root/scripts/cell_demo.py" --cell "$root/config/cell.yaml" --output "$out" --programs "$out/programs" \
   --program "$root/config/demo/O05555.nc" --job "$root/config/demo/ethernut_job.nc" \
-  --path-program "$root/config/demo/at_path.nc" "${once[@]}"
+  --path-program "$root/config/demo/at_path.nc" --recorded "${once[@]}"
 status=$?
 set -e
 echo "demo: rosbag $out/cell.bag, surface map $(ls "$out"/*.png 2>/dev/null | head -1)"

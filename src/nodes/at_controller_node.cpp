@@ -5,6 +5,7 @@
 // plans a G-code program or a nav_msgs/Path into 1 ms setpoints that a dedicated sender thread
 // streams; reports become state, joint_states and tf.
 #include <actionlib/server/simple_action_server.h>
+#include <nav_msgs/Path.h>
 #include <ros/ros.h>
 #include <std_srvs/SetBool.h>
 #include <std_srvs/Trigger.h>
@@ -96,6 +97,8 @@ class AtControllerNode
     const std::string hardware_id = host_ + ":" + std::to_string(command_port_);
     state_ = std::make_unique<MachineStatePublisher>(nh, pnh, hardware_id);
     state_->diagnostics().add("streaming", this, &AtControllerNode::streamingDiagnostics);
+    // job/path: the planned path of the last accepted follow_path goal (latched), for rviz and bags.
+    path_pub_ = nh.advertise<nav_msgs::Path>("job/path", 1, true);
     state_->update(
         [&](MachineState& s)
         {
@@ -609,6 +612,25 @@ class AtControllerNode
     return plan;
   }
 
+  /// Publishes the planned corners (pulses) as job/path in <tf_prefix>machine, metres.
+  void publishPlannedPath(const Plan& plan)
+  {
+    nav_msgs::Path path;
+    path.header.stamp = ros::Time::now();
+    path.header.frame_id = state_->frame("machine");
+    path.poses.resize(plan.points.size());
+    for (size_t i = 0; i < plan.points.size(); ++i)
+    {
+      auto& pose = path.poses[i];
+      pose.header = path.header;
+      pose.pose.position.x = plan.points[i][0] / ap::kPulsesPerMetre;
+      pose.pose.position.y = plan.points[i][1] / ap::kPulsesPerMetre;
+      pose.pose.position.z = plan.points[i][2] / ap::kPulsesPerMetre;
+      pose.pose.orientation.w = 1.0;
+    }
+    path_pub_.publish(path);
+  }
+
   static geometry_msgs::Point toPoint(const std::array<int32_t, 3>& pulses)
   {
     geometry_msgs::Point p;
@@ -670,6 +692,7 @@ class AtControllerNode
                                                           << operation.trajectory->length() / ap::kPulsesPerMm
                                                           << " mm in " << operation.trajectory->duration() << " s ("
                                                           << operation.trajectory->steps() << " setpoints)");
+      publishPlannedPath(plan);  // before motion: the path is known once the goal is accepted
       const uint64_t underruns_before = sender_->stats().underruns;
       job = sender_->start(operation);
       state_->update(
@@ -837,6 +860,7 @@ class AtControllerNode
 
   actionlib::SimpleActionServer<AtFollowPathAction> follow_path_;
   ros::ServiceServer set_auto_srv_, jog_srv_, spindle_srv_, coolant_srv_, tool_srv_, home_srv_;
+  ros::Publisher path_pub_;
 };
 }  // namespace cnc_bridge
 

@@ -1,0 +1,136 @@
+#!/usr/bin/env python3
+"""`make demo` run once, headless, as a newcomer would (scripts/demo.sh with DEMO_ONCE=1 against
+this test's master): it must exit 0, print a summary of every step with its numbers, leave the
+surface-map PNG, and leave a rosbag that holds what launch/record.launch promises (state, DPRNT
+lines, the probe cloud, the actions' results, the '@' controller's planned path, the slave
+commands). While it runs, every machine's tool_path trail and the '@' controller's job/path are
+watched: each must arrive, in its machine's frame, with the tool's motion in it.
+"""
+import glob
+import math
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import threading
+import unittest
+
+import rosbag
+import rospy
+from nav_msgs.msg import Path
+
+MACHINES = ["haas_vf2", "ethernut_mill", "at_router", "laser"]
+
+# One pattern per step of the scenario: what the summary must say, with numbers that must be sane.
+SUMMARY = {
+    "xmodem": r"haas_vf2: sent O05555\.nc by XModem: (\d+) bytes, (\d+) blocks, \d+ retries",
+    "surface": r"haas_vf2: surface map of (\d+) points: z -?[\d.]+ \.\. -?[\d.]+ mm, flatness ([\d.]+) mm",
+    "job": r"ethernut_mill: job ethernut_job\.nc streamed: (\d+)/(\d+) coordinates",
+    "path": r"at_router: path followed: (\d+) setpoints at 1 kHz, \d+ late",
+    "bus": r"laser: bus stepped x, y, z and the laser around a 150 mm square; (\d+) answers",
+    "cycles": r"haas_vf2: (\d+) cycle events seen",
+    "done": r"scenario done: (\d+) steps, 0 failed",
+}
+
+# Topics the bag must hold, each with at least one message.
+BAG_TOPICS = [
+    "/cell/haas_vf2/state", "/cell/haas_vf2/dnc/state", "/cell/ethernut_mill/state", "/cell/at_router/state",
+    "/cell/laser/state", "/cell/haas_vf2/dprnt/raw", "/cell/haas_vf2/surface/cloud",
+    "/cell/haas_vf2/dnc_node/transfer/goal", "/cell/haas_vf2/dnc_node/transfer/result",
+    "/cell/ethernut_mill/ethernut_node/run_job/result", "/cell/at_router/at_controller_node/follow_path/goal",
+    "/cell/at_router/at_controller_node/follow_path/feedback", "/cell/at_router/at_controller_node/follow_path/result",
+    "/cell/ethernut_mill/job/path", "/cell/at_router/job/path", "/cell/laser/slaves/x/command",
+    "/cell/laser/slaves/x/response", "/tf", "/tf_static",
+]
+
+
+class PathWatch:
+    """The last message of every watched nav_msgs/Path topic."""
+
+    def __init__(self, topics):
+        self.last = {}
+        self.lock = threading.Lock()
+        self.subs = [rospy.Subscriber(t, Path, self._on_path, callback_args=t) for t in topics]
+
+    def _on_path(self, path, topic):
+        with self.lock:
+            self.last[topic] = path
+
+
+def extent(path):
+    """Largest x or y span of a path's poses (m)."""
+    if not path.poses:
+        return 0.0
+    xs = [p.pose.position.x for p in path.poses]
+    ys = [p.pose.position.y for p in path.poses]
+    return max(max(xs) - min(xs), max(ys) - min(ys))
+
+
+class Demo(unittest.TestCase):
+    def test_demo_runs_once(self):
+        script = rospy.get_param("~demo")
+        out = tempfile.mkdtemp(prefix="cnc_demo_test.")
+        watch = PathWatch(["/cell/%s/tool_path" % m for m in MACHINES] + ["/cell/at_router/job/path"])
+        env = dict(os.environ, DEMO_ONCE="1", DEMO_OUTPUT=out, GUI="0")
+        run = subprocess.run(["bash", script], env=env, capture_output=True, text=True,
+                             timeout=rospy.get_param("~timeout", 150))
+        output = run.stdout + run.stderr
+        with open(os.path.join(out, "demo_output.txt"), "w") as f:
+            f.write(output)
+        self.assertEqual(run.returncode, 0, "the demo failed; its output:\n" + output)
+
+        numbers = {}
+        for step, pattern in SUMMARY.items():
+            match = re.search(pattern, run.stdout)
+            self.assertIsNotNone(match, "no summary line for %s (/%s/) in:\n%s" % (step, pattern, run.stdout))
+            numbers[step] = [float(g) for g in match.groups()]
+        self.assertGreater(numbers["xmodem"][0], 0)
+        self.assertGreater(numbers["xmodem"][1], 0)
+        self.assertEqual(numbers["surface"][0], 100)
+        self.assertTrue(math.isfinite(numbers["surface"][1]))
+        self.assertEqual(numbers["job"][0], numbers["job"][1])
+        self.assertGreater(numbers["job"][0], 0)
+        self.assertGreater(numbers["path"][0], 1000)
+        self.assertGreater(numbers["bus"][0], 0)
+        self.assertEqual(numbers["done"][0], 5)
+
+        pngs = glob.glob(os.path.join(out, "haas_vf2_surface*.png"))
+        self.assertTrue(pngs, "no surface map PNG in %s: %s" % (out, os.listdir(out)))
+        with open(pngs[0], "rb") as f:
+            self.assertEqual(f.read(8), b"\x89PNG\r\n\x1a\n", "%s is not a PNG" % pngs[0])
+
+        bag_path = os.path.join(out, "cell.bag")
+        self.assertTrue(os.path.exists(bag_path), "no bag %s (still .active?): %s" % (bag_path, os.listdir(out)))
+        info = subprocess.run(["rosbag", "info", bag_path], capture_output=True, text=True)
+        self.assertEqual(info.returncode, 0, info.stderr)
+        listed = set(re.findall(r"^\s*(?:topics:)?\s+(/\S+)\s+\d+ msgs?", info.stdout, re.M))
+        missing = [t for t in BAG_TOPICS if t not in listed]
+        self.assertEqual(missing, [], "rosbag info does not list these topics:\n" + info.stdout)
+
+        # The '@' controller's planned path, as recorded: in its machine frame, in metres, from
+        # where the tool stood through the corners of config/demo/at_path.nc (a 150 mm square
+        # from X10 Y10, at Z-1 mm).
+        with rosbag.Bag(bag_path) as bag:
+            planned = [m for _, m, _ in bag.read_messages(topics=["/cell/at_router/job/path"])]
+        self.assertTrue(planned)
+        self.assertEqual(planned[-1].header.frame_id, "at_router/machine")
+        corners = [(p.pose.position.x, p.pose.position.y, p.pose.position.z) for p in planned[-1].poses]
+        for corner in [(0.010, 0.010, 0.002), (0.160, 0.010, -0.001), (0.160, 0.160, -0.001), (0.010, 0.160, -0.001)]:
+            self.assertTrue(any(all(abs(a - b) < 1e-6 for a, b in zip(c, corner)) for c in corners),
+                            "corner %s not in the planned path %s" % (corner, corners))
+
+        # Every machine left a trail of its tool in its own frame, with the motion of the scenario.
+        with watch.lock:
+            last = dict(watch.last)
+        for machine in MACHINES:
+            trail = last.get("/cell/%s/tool_path" % machine)
+            self.assertIsNotNone(trail, "no tool_path from %s" % machine)
+            self.assertEqual(trail.header.frame_id, machine + "/machine")
+            self.assertGreater(extent(trail), 0.1, "%s's tool_path hardly moved (%d poses)" % (machine, len(trail.poses)))
+
+
+if __name__ == "__main__":
+    import rostest
+    rospy.init_node("test_demo")
+    rostest.rosrun("cnc_bridge", "demo", Demo, sys.argv)
