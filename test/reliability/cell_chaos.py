@@ -4,9 +4,11 @@ machine losing power or a cable pulled), again and again, while the cell works.
 
 For every kill: the machine's node must report the link loss in `state` (link not UP) and in its
 `link` diagnostic, and come back UP after the simulator is respawned, and no node process may die.
-Meanwhile XModem transfers run against the Haas's RS-232 simulator, which is killed too: every
+Meanwhile XModem transfers run against the Haas's RS-232 simulator, which is killed too: dnc_node
+keeps its port open in the cell (~keep_open), so it must show that loss like the others, and every
 transfer that reports success must have delivered exactly the file (checked byte for byte in the
-simulated control's memory).
+simulated control's memory). Targets are taken round-robin, in a new shuffled order each round, so
+every simulator gets its share of the kills (6 kills: each of the six once).
 
   cell_chaos.py --kills 50 --seed 7 --programs DIR --memory DIR      (rostest: ~kills, ~seed, ...)
 """
@@ -36,7 +38,8 @@ TARGETS = [
     ("sim_ethernut --port 26666", "/cell/ethernut_mill/state", "/cell/ethernut_mill/ethernut_node"),
     ("sim_at_controller --command-port 25000", "/cell/at_router/state", "/cell/at_router/at_controller_node"),
     ("sim_slave_bus --link", "/cell/laser/state", "/cell/laser/slave_bus_node"),
-    ("sim_haas_serial xmodem", None, None),  # the transfer loop checks this one
+    # dnc_node finds the loss at its next read or write: the transfer loop keeps it busy.
+    ("sim_haas_serial xmodem", "/cell/haas_vf2/dnc/state", "/cell/haas_vf2/dnc_node"),
 ]
 NODES = ["/cell/haas_vf2/haas_mdc_node", "/cell/haas_vf2/dnc_node", "/cell/haas_vf2/dprnt_node",
          "/cell/ethernut_mill/ethernut_node", "/cell/at_router/at_controller_node", "/cell/laser/slave_bus_node"]
@@ -176,21 +179,28 @@ class CellChaos(unittest.TestCase):
         seed = rospy.get_param("~seed", ARGS.seed)
         recover = rospy.get_param("~recover_timeout", ARGS.recover_timeout)
         rng = random.Random(seed)
-        watches = {topic: LinkWatch(topic) for _, topic, _ in TARGETS if topic}
+        watches = {topic: LinkWatch(topic) for _, topic, _ in TARGETS}
         diagnostics = DiagnosticsWatch()
-        for topic in watches:
-            rospy.wait_for_message(topic, MachineState, timeout=60)
-        for _, topic, _ in TARGETS:
-            if topic:
-                self.wait_up(topic, 60)
-        node_pids = {}
         for node in NODES:
             self.assertTrue(rosnode.rosnode_ping(node, max_count=1), "%s is not running at the start" % node)
+        # Opening its port per transfer, dnc_node would show DOWN between transfers anyway: the
+        # check of its link loss means something only with the port kept open.
+        self.assertTrue(rospy.get_param("/cell/haas_vf2/dnc_node/keep_open", False),
+                        "the cell's dnc_node must keep its port open (~keep_open) for this campaign")
+        # Transfers first: dnc_node opens its port for good at its first transfer if the simulator's
+        # pty was not there yet when it started.
         transfers = TransferLoop(ARGS.programs, ARGS.memory)
         transfers.start()
+        for topic in watches:
+            self.wait_up(topic, 60)
         problems = []
+        order = []
+        killed = {}
         for kill in range(kills):
-            pattern, topic, node = rng.choice(TARGETS)
+            if not order:  # a new round: every target once, in a new order
+                order = rng.sample(TARGETS, len(TARGETS))
+            pattern, topic, node = order.pop()
+            killed[pattern] = killed.get(pattern, 0) + 1
             # A simulator killed a moment ago may still be waiting for its respawn (respawn_delay):
             # wait for it instead of counting it as lost.
             pids = pids_of(pattern)
@@ -208,24 +218,22 @@ class CellChaos(unittest.TestCase):
                     os.kill(pid, signal.SIGKILL)
                 except ProcessLookupError:
                     pass  # it ended between pgrep and now
-            if topic:
-                down, up = watches[topic].down_then_up_after(since, recover)
-                rospy.loginfo("kill %d: %s: link down after %s s, up again after %s s", kill, pattern,
-                              "%.2f" % down if down is not None else "-", "%.2f" % up if up is not None else "-")
-                if down is None:
-                    problems.append("kill %d: %s: %s never showed the link down" % (kill, pattern, topic))
-                elif up is None:
-                    problems.append("kill %d: %s: %s did not come back UP within %d s" % (kill, pattern, topic, recover))
-                if not diagnostics.not_ok_since(node, since):
-                    problems.append("kill %d: %s: the link diagnostic of %s never left OK" % (kill, pattern, node))
-            else:
-                rospy.loginfo("kill %d: %s (transfers: %d ok, %d failed)", kill, pattern, transfers.successes, transfers.failures)
-                time.sleep(rng.uniform(0.5, 2.0))
+            down, up = watches[topic].down_then_up_after(since, recover)
+            rospy.loginfo("kill %d: %s: link down after %s s, up again after %s s (transfers: %d ok, %d failed)",
+                          kill, pattern, "%.2f" % down if down is not None else "-",
+                          "%.2f" % up if up is not None else "-", transfers.successes, transfers.failures)
+            if down is None:
+                problems.append("kill %d: %s: %s never showed the link down" % (kill, pattern, topic))
+            elif up is None:
+                problems.append("kill %d: %s: %s did not come back UP within %d s" % (kill, pattern, topic, recover))
+            if not diagnostics.not_ok_since(node, since):
+                problems.append("kill %d: %s: the link diagnostic of %s never left OK" % (kill, pattern, node))
             for node in NODES:
                 if not rosnode.rosnode_ping(node, max_count=1):
                     problems.append("kill %d: node %s died" % (kill, node))
         transfers.stop.set()
         transfers.join(150)
+        rospy.loginfo("kills per simulator: %s", ", ".join("%s %d" % kv for kv in sorted(killed.items())))
         rospy.loginfo("%d kills; transfers: %d succeeded (all verified), %d failed as they should when cut",
                       kills, transfers.successes, transfers.failures)
         for reason, count in sorted(transfers.reasons.items(), key=lambda item: -item[1]):
@@ -237,7 +245,7 @@ class CellChaos(unittest.TestCase):
     def wait_up(self, topic, timeout):
         deadline = time.time() + timeout
         while time.time() < deadline:
-            state = rospy.wait_for_message(topic, MachineState, timeout=timeout)
+            state = rospy.wait_for_message(topic, MachineState, timeout=max(deadline - time.time(), 1.0))
             if state.link == MachineState.LINK_UP:
                 return
             time.sleep(0.2)
