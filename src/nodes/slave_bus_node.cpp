@@ -112,6 +112,20 @@ class SlaveBusNode
     // WirePacker frame with CRC-8, both directions; recommended where the firmware supports it).
     pnh.param("framing", framing, framing);
     framing_ = slave_bus::parseFraming(framing);
+    std::string crc = "spec";
+    // ~wirepacker_crc: spec (CRC-8 over the length byte and the data, as the packet format documents
+    // it) or library (data only, as the released ESP32_I2C_Slave library computes it): framed mode.
+    pnh.param("wirepacker_crc", crc, crc);
+    int max_payload = 0;
+    // ~max_payload: most data bytes of one WirePacker frame of the master (each slave's payload is
+    // one I2C frame; in framed mode so is the whole step); 0 = 251 (spec) or 124 (library buffers).
+    pnh.param("max_payload", max_payload, max_payload);
+    if (max_payload < 0 || max_payload > static_cast<int>(slave_bus::kMaxPayload))
+    {
+      throw ConfigError(pnh.resolveName("max_payload") + " must be 0 (the default of ~wirepacker_crc) or 1.." +
+                        std::to_string(slave_bus::kMaxPayload));
+    }
+    wire_ = slave_bus::WireFormat::of(slave_bus::parseWireCrc(crc), static_cast<size_t>(max_payload));
     // ~enable_motion: axis and tool payloads (bus/frame or commands) are refused unless true.
     pnh.param("enable_motion", enable_motion_, false);
     // ~reply_timeout (s): how long a slave that got a payload has to answer before it counts a timeout.
@@ -169,7 +183,9 @@ class SlaveBusNode
     reconnector_ = std::make_unique<Reconnector>("slave bus", callbacks);
     reconnector_->start();
     ROS_INFO_STREAM("slave_bus_node: " << slaves_.size() << " slaves on a bus of " << bus_size_ << ", "
-                                       << slave_bus::toString(framing_) << " framing, " << settings_.describe()
+                                       << slave_bus::toString(framing_) << " framing, WirePacker CRC "
+                                       << slave_bus::toString(wire_.crc) << ", payloads up to " << wire_.max_data
+                                       << " bytes, " << settings_.describe()
                                        << (enable_motion_ ? ", motion enabled" : ", motion disabled"));
   }
 
@@ -190,9 +206,12 @@ class SlaveBusNode
     ros::Publisher response_pub;
     ros::Subscriber command_sub;
     // Counters, under stats_mutex_.
+    uint64_t payloads_sent = 0;  ///< non-empty payloads in frames that went out
     uint64_t replies = 0;
     uint64_t timeouts = 0;
     uint64_t decode_errors = 0;
+    uint64_t read_failures = 0;  ///< master status 3: its I2C read of this slave failed
+    uint64_t too_long = 0;       ///< master status 4: the payload did not fit its I2C frame
   };
 
   struct Step
@@ -286,10 +305,10 @@ class SlaveBusNode
       {
         why = "two payloads for address " + std::to_string(payload.address);
       }
-      else if (payload.data.size() > slave_bus::kMaxPayload)
+      else if (payload.data.size() > wire_.max_data)
       {
         why = "payload for address " + std::to_string(payload.address) + " has " + std::to_string(payload.data.size()) +
-              " bytes (at most " + std::to_string(slave_bus::kMaxPayload) + ")";
+              " bytes: " + payloadLimit();
       }
       else if (!payload.data.empty() && !motionAllowed(payload.address))
       {
@@ -337,10 +356,9 @@ class SlaveBusNode
     }
     if (!msg.data.empty())
     {
-      if (msg.data.size() > slave_bus::kMaxPayload)
+      if (msg.data.size() > wire_.max_data)
       {
-        throw ProtocolError(std::to_string(msg.data.size()) + " bytes (at most " +
-                            std::to_string(slave_bus::kMaxPayload) + ")");
+        throw ProtocolError(std::to_string(msg.data.size()) + " bytes: " + payloadLimit());
       }
       return msg.data;
     }
@@ -373,11 +391,20 @@ class SlaveBusNode
       }
     }
     auto payload = slave_bus::encodeValues(values, slave.encoding);
-    if (payload.size() > slave_bus::kMaxPayload)
+    if (payload.size() > wire_.max_data)
     {
-      throw ProtocolError("too many values for one payload");
+      throw ProtocolError("too many values for one payload: " + payloadLimit());
     }
     return payload;
+  }
+
+  /// Why a payload is too long, in words an operator can act on.
+  std::string payloadLimit() const
+  {
+    return "one I2C frame of the master carries at most " + std::to_string(wire_.max_data) + " bytes (~max_payload" +
+           (wire_.crc == slave_bus::WireCrc::kLibrary && wire_.max_data == slave_bus::WireFormat::kLibraryMaxData
+                ? "; the ESP32_I2C_Slave library's 128-byte buffers)"
+                : ")");
   }
 
   bool motionAllowed(uint8_t address) const
@@ -479,7 +506,7 @@ class SlaveBusNode
     std::lock_guard<std::mutex> lock(link_mutex_);
     session_.reset();
     port_ = std::move(port);
-    session_ = std::make_unique<slave_bus::BusSession>(*port_, framing_, bus_size_, resync_gap_);
+    session_ = std::make_unique<slave_bus::BusSession>(*port_, framing_, bus_size_, resync_gap_, wire_);
   }
 
   void disconnect()
@@ -522,8 +549,7 @@ class SlaveBusNode
           }
           handle(result.replies);
           handle(result.master_status);
-          countTimeouts(result.missing);
-          snapshotStats();
+          recordStep(step.payloads, result.missing);
           std::lock_guard<std::mutex> lock(queue_mutex_);
           if (queue_.empty())
           {
@@ -623,6 +649,20 @@ class SlaveBusNode
     const auto code = record.payload.empty() ? 0 : record.payload[0];
     std::lock_guard<std::mutex> lock(stats_mutex_);
     ++master_reports_[code];
+    // Codes 3 and 4 name the slave: count them against it (an unconfigured address stays bus-wide).
+    const auto found = record.payload.size() > 1 ? by_address_.find(record.payload[1]) : by_address_.end();
+    if (found != by_address_.end())
+    {
+      Slave& slave = slaves_[found->second];
+      if (code == static_cast<uint8_t>(slave_bus::MasterStatus::kSlaveNoAnswer))
+      {
+        ++slave.read_failures;
+      }
+      else if (code == static_cast<uint8_t>(slave_bus::MasterStatus::kPayloadTooLong))
+      {
+        ++slave.too_long;
+      }
+    }
     if (code == static_cast<uint8_t>(slave_bus::MasterStatus::kBadFrame))
     {
       ROS_WARN_STREAM_THROTTLE(1.0, "slave bus master: a step frame arrived corrupted and was dropped");
@@ -637,9 +677,20 @@ class SlaveBusNode
     }
   }
 
-  void countTimeouts(const std::vector<uint8_t>& missing)
+  /// After a step went out: its payloads per slave, its timeouts and the session's counters, in one
+  /// critical section so that one diagnostics message shows them consistently.
+  void recordStep(const StepPayloads& payloads, const std::vector<uint8_t>& missing)
   {
     std::lock_guard<std::mutex> lock(stats_mutex_);
+    for (size_t i = 0; i < payloads.size(); ++i)
+    {
+      const auto found = by_address_.find(static_cast<uint8_t>(i + 1));
+      if (!payloads[i].empty() && found != by_address_.end())
+      {
+        ++slaves_[found->second].payloads_sent;
+      }
+    }
+    session_stats_ = session_->stats();
     for (const uint8_t address : missing)
     {
       const auto found = by_address_.find(address);
@@ -673,9 +724,14 @@ class SlaveBusNode
     }
     const uint64_t link_errors = s.link.crc_errors + s.link.framing_errors;
     const uint64_t bad_frames = master_reports_[static_cast<uint8_t>(slave_bus::MasterStatus::kBadFrame)];
-    if (timeouts > last_timeouts_ || link_errors > last_link_errors_ || bad_frames > last_bad_frames_)
+    const uint64_t read_failures = master_reports_[static_cast<uint8_t>(slave_bus::MasterStatus::kSlaveNoAnswer)];
+    const uint64_t too_long = master_reports_[static_cast<uint8_t>(slave_bus::MasterStatus::kPayloadTooLong)];
+    const uint64_t slave_errors = read_failures + too_long;
+    if (timeouts > last_timeouts_ || link_errors > last_link_errors_ || bad_frames > last_bad_frames_ ||
+        slave_errors > last_slave_errors_)
     {
-      status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "slaves timed out or frames were corrupted");
+      status.summary(diagnostic_msgs::DiagnosticStatus::WARN,
+                     "slaves timed out, frames were corrupted, or the master reported a slave error");
     }
     else
     {
@@ -684,7 +740,10 @@ class SlaveBusNode
     last_timeouts_ = timeouts;
     last_link_errors_ = link_errors;
     last_bad_frames_ = bad_frames;
+    last_slave_errors_ = slave_errors;
     status.add("framing", slave_bus::toString(framing_));
+    status.add("WirePacker CRC", slave_bus::toString(wire_.crc));
+    status.add("max payload", wire_.max_data);
     status.add("bus size", bus_size_);
     status.add("motion enabled", enable_motion_);
     status.add("frames sent", s.steps_sent);
@@ -699,14 +758,21 @@ class SlaveBusNode
     status.add("frames the master dropped (bad CRC)", bad_frames);
     status.add("payloads for absent slaves",
                master_reports_[static_cast<uint8_t>(slave_bus::MasterStatus::kNoSuchSlave)]);
+    status.add("slave reads that failed (master status 3)", read_failures);
+    status.add("payloads too long for the master (status 4)", too_long);
     status.add("replies from unconfigured addresses", unknown_replies_);
     status.add("refused inputs", refused_);
+    // Per slave, one numeric key each, "<name>: <counter>", so that tools and tests can read them.
     for (const auto& slave : slaves_)
     {
-      status.addf(slave.name + " (address " + std::to_string(slave.address) + ")",
-                  "%llu replies, %llu timeouts, %llu undecodable", static_cast<unsigned long long>(slave.replies),
-                  static_cast<unsigned long long>(slave.timeouts),
-                  static_cast<unsigned long long>(slave.decode_errors));
+      const std::string prefix = slave.name + ": ";
+      status.add(prefix + "address", static_cast<int>(slave.address));
+      status.add(prefix + "payloads sent", slave.payloads_sent);
+      status.add(prefix + "replies", slave.replies);
+      status.add(prefix + "timeouts", slave.timeouts);
+      status.add(prefix + "undecodable replies", slave.decode_errors);
+      status.add(prefix + "failed reads (status 3)", slave.read_failures);
+      status.add(prefix + "payloads too long (status 4)", slave.too_long);
     }
   }
 
@@ -714,6 +780,7 @@ class SlaveBusNode
   SerialSettings settings_;
   MachineStatePublisher state_;
   slave_bus::Framing framing_ = slave_bus::Framing::kRaw;
+  slave_bus::WireFormat wire_;
   bool enable_motion_ = false;
   Milliseconds reply_timeout_{500};
   Milliseconds command_delay_{5};
@@ -744,7 +811,7 @@ class SlaveBusNode
   uint64_t unknown_replies_ = 0;
   uint64_t unconfigured_timeouts_ = 0;
   uint64_t refused_ = 0;
-  uint64_t last_timeouts_ = 0, last_link_errors_ = 0, last_bad_frames_ = 0;
+  uint64_t last_timeouts_ = 0, last_link_errors_ = 0, last_bad_frames_ = 0, last_slave_errors_ = 0;
 };
 }  // namespace cnc_bridge
 

@@ -1,7 +1,9 @@
 // slave_bus_node against sim_slave_bus (see slave_bus_node.test): one step frame moves the three
 // simulated axes and fires the laser; each slave's answer arrives on its own topic, in metres for
-// the axes; state, joint_states and tf follow; per-slave commands work; diagnostics count frames;
-// with motion disabled, axis commands are refused while generic slaves still answer.
+// the axes; state, joint_states and tf follow; per-slave commands travel in one frame; diagnostics
+// count frames, and per slave payloads, replies and the master's status 3 and 4; with motion
+// disabled, axis commands are refused while generic slaves still answer; the library's CRC and
+// frame size on the framed link.
 #include <diagnostic_msgs/DiagnosticArray.h>
 #include <gtest/gtest.h>
 #include <ros/ros.h>
@@ -118,6 +120,31 @@ class DiagnosticsWatch
           cv_.notify_all();
         });
   }
+  using Values = std::map<std::string, std::string>;
+
+  /// Waits until a status whose name contains \p name has values satisfying \p pred (all values of
+  /// one status come from one message, so they are consistent with each other); copies them to \p out.
+  bool waitForStatus(const std::string& name, const std::function<bool(const Values&)>& pred, Values* out = nullptr)
+  {
+    std::unique_lock<std::mutex> lock(mutex_);
+    return cv_.wait_for(lock, std::chrono::duration<double>(kWait.toSec()),
+                        [&]
+                        {
+                          for (const auto& status : values_)
+                          {
+                            if (status.first.find(name) != std::string::npos && pred(status.second))
+                            {
+                              if (out)
+                              {
+                                *out = status.second;
+                              }
+                              return true;
+                            }
+                          }
+                          return false;
+                        });
+  }
+
   /// Waits until a status whose name contains \p name has key \p key with a numeric value satisfying \p pred.
   bool waitFor(const std::string& name, const std::string& key, const std::function<bool(double)>& pred)
   {
@@ -152,6 +179,17 @@ bool waitForDiagnostic(const std::string& name, const std::string& key, const st
 {
   return diagnostics->waitFor(name, key, pred);
 }
+
+/// A numeric diagnostics value, or -1 if the key is missing.
+double number(const DiagnosticsWatch::Values& values, const std::string& key)
+{
+  const auto found = values.find(key);
+  return found == values.end() ? -1.0 : std::stod(found->second);
+}
+
+const std::string kLaser1Status = "laser1/slave_bus_node: slave bus";
+/// Step frames the tests have made laser1's node send so far (each waited for its answers).
+int laser1_frames = 0;
 }  // namespace
 
 TEST(SlaveBusNode, OneStepFrameMovesTheAxesAndAnswersArriveOnTheRightTopics)
@@ -166,6 +204,7 @@ TEST(SlaveBusNode, OneStepFrameMovesTheAxesAndAnswersArriveOnTheRightTopics)
   ASSERT_TRUE(responses.waitFor(
       [](auto& r)
       { return !r["x"].empty() && !r["y"].empty() && !r["z"].empty() && !r["laser"].empty() && !r["aux6"].empty(); }));
+  ++laser1_frames;
   const auto x = responses.of("x").back();
   EXPECT_EQ(x.address, 1);
   EXPECT_EQ(x.name, "x");
@@ -212,6 +251,11 @@ TEST(SlaveBusNode, OneStepFrameMovesTheAxesAndAnswersArriveOnTheRightTopics)
 
 TEST(SlaveBusNode, PerSlaveCommandsAreQueuedIntoTheNextFrame)
 {
+  // The counters once every earlier frame to laser1 is accounted for (one diagnostics message).
+  DiagnosticsWatch::Values before;
+  ASSERT_TRUE(diagnostics->waitForStatus(
+      kLaser1Status, [](const DiagnosticsWatch::Values& v) { return number(v, "frames sent") == laser1_frames; },
+      &before));
   Responses responses("/cell/laser1", {"x", "laser", "aux7"});
   auto x = advertiseAndWait<cnc_bridge::SlaveCommand>("/cell/laser1/slaves/x/command");
   auto laser = advertiseAndWait<cnc_bridge::SlaveCommand>("/cell/laser1/slaves/laser/command");
@@ -232,6 +276,47 @@ TEST(SlaveBusNode, PerSlaveCommandsAreQueuedIntoTheNextFrame)
   EXPECT_EQ(responses.of("x").back().data, (std::vector<uint8_t>{0xF6, 0x3C}));  // -2500 be16s
   EXPECT_EQ(responses.of("aux7").back().data, (std::vector<uint8_t>{12, 34}));
   EXPECT_EQ(responses.of("aux7").back().values, std::vector<double>{1234.0});
+
+  // The three commands went out in ONE frame (laser1's ~command_delay is 0.3 s in the test launch).
+  DiagnosticsWatch::Values after;
+  ASSERT_TRUE(diagnostics->waitForStatus(
+      kLaser1Status,
+      [&](const DiagnosticsWatch::Values& v)
+      {
+        return number(v, "x: payloads sent") == number(before, "x: payloads sent") + 1 &&
+               number(v, "laser: payloads sent") == number(before, "laser: payloads sent") + 1 &&
+               number(v, "aux7: payloads sent") == number(before, "aux7: payloads sent") + 1;
+      },
+      &after));
+  EXPECT_EQ(number(after, "frames sent") - number(before, "frames sent"), 1.0);
+  ++laser1_frames;
+}
+
+TEST(SlaveBusNode, MasterStatusThreeAndFourAreCountedAgainstTheirSlave)
+{
+  // sim_laser1's I2C frames carry at most 8 bytes (--max-payload 8) and slave 8's answers fail the
+  // master's CRC check (--noisy-slave 8): aux6's 9 bytes come back as status 4, aux8's answer as
+  // status 3, each counted against that slave; aux5 answers as usual.
+  Responses responses("/cell/laser1", {"aux5"});
+  auto pub = advertiseAndWait<cnc_bridge::BusFrame>("/cell/laser1/bus/frame");
+  cnc_bridge::BusFrame frame;
+  frame.payloads = {payload(5, {5}), payload(6, std::vector<uint8_t>(9, 6)), payload(8, {8})};
+  pub.publish(frame);
+  ASSERT_TRUE(responses.waitFor([](auto& r) { return !r["aux5"].empty(); }));
+  DiagnosticsWatch::Values v;
+  ASSERT_TRUE(diagnostics->waitForStatus(
+      kLaser1Status,
+      [](const DiagnosticsWatch::Values& v) {
+        return number(v, "aux6: payloads too long (status 4)") >= 1 && number(v, "aux8: failed reads (status 3)") >= 1;
+      },
+      &v));
+  EXPECT_EQ(number(v, "aux6: payloads too long (status 4)"), 1.0);
+  EXPECT_EQ(number(v, "aux8: failed reads (status 3)"), 1.0);
+  EXPECT_EQ(number(v, "aux5: failed reads (status 3)"), 0.0);
+  EXPECT_GE(number(v, "aux6: payloads sent"), 2.0);  // the first test's two bytes, and these nine
+  EXPECT_EQ(number(v, "slave reads that failed (master status 3)"), 1.0);
+  EXPECT_EQ(number(v, "payloads too long for the master (status 4)"), 1.0);
+  ++laser1_frames;
 }
 
 TEST(SlaveBusNode, DiagnosticsCountFramesAndReplies)
@@ -241,8 +326,11 @@ TEST(SlaveBusNode, DiagnosticsCountFramesAndReplies)
   cnc_bridge::BusFrame frame;
   frame.payloads = {payload(5, {1})};
   pub.publish(frame);
-  EXPECT_TRUE(waitForDiagnostic("laser1/slave_bus_node: slave bus", "frames sent", [](double v) { return v >= 1; }));
-  EXPECT_TRUE(waitForDiagnostic("laser1/slave_bus_node: slave bus", "replies", [](double v) { return v >= 1; }));
+  EXPECT_TRUE(waitForDiagnostic(kLaser1Status, "frames sent", [](double v) { return v >= 1; }));
+  EXPECT_TRUE(waitForDiagnostic(kLaser1Status, "replies", [](double v) { return v >= 1; }));
+  // Per slave: aux5 got this payload (and it answered).
+  EXPECT_TRUE(waitForDiagnostic(kLaser1Status, "aux5: payloads sent", [](double v) { return v >= 1; }));
+  EXPECT_TRUE(waitForDiagnostic(kLaser1Status, "aux5: replies", [](double v) { return v >= 1; }));
 }
 
 TEST(SlaveBusNode, MotionDisabledRefusesAxesButGenericSlavesAnswerOverTheFramedLink)
@@ -264,6 +352,35 @@ TEST(SlaveBusNode, MotionDisabledRefusesAxesButGenericSlavesAnswerOverTheFramedL
   ASSERT_TRUE(responses.waitFor([](auto& r) { return !r["aux5"].empty(); }));
   EXPECT_EQ(responses.of("aux5").back().data, (std::vector<uint8_t>{7, 8, 9}));
   EXPECT_TRUE(responses.of("x").empty());  // the axis never got a payload, so it never answered
+  // Per slave: the axis got nothing, aux5 one payload.
+  EXPECT_TRUE(
+      waitForDiagnostic("laser2/slave_bus_node: slave bus", "aux5: payloads sent", [](double v) { return v == 1; }));
+  EXPECT_TRUE(
+      waitForDiagnostic("laser2/slave_bus_node: slave bus", "x: payloads sent", [](double v) { return v == 0; }));
+}
+
+TEST(SlaveBusNode, LibraryCrcLinkRefusesPayloadsOverTheLibrarysFrameSize)
+{
+  // laser2 and its simulator speak the library's CRC (data only) on the framed link; its frames
+  // carry at most 124 data bytes (the library's 128-byte buffers): a 125-byte payload is refused
+  // by the node, a 100-byte one (a 109-byte framed step) goes out and is echoed (first 32 bytes).
+  Responses responses("/cell/laser2", {"aux6"});
+  auto aux6 = advertiseAndWait<cnc_bridge::SlaveCommand>("/cell/laser2/slaves/aux6/command");
+  const std::string status = "laser2/slave_bus_node: slave bus";
+  DiagnosticsWatch::Values before;
+  ASSERT_TRUE(diagnostics->waitForStatus(
+      status, [](const DiagnosticsWatch::Values& v) { return number(v, "refused inputs") >= 0; }, &before));
+  cnc_bridge::SlaveCommand cmd;
+  cmd.data.assign(125, 0x11);
+  aux6.publish(cmd);
+  ASSERT_TRUE(
+      waitForDiagnostic(status, "refused inputs", [&](double v) { return v >= number(before, "refused inputs") + 1; }));
+  cmd.data.assign(100, 0x22);
+  aux6.publish(cmd);
+  ASSERT_TRUE(responses.waitFor([](auto& r) { return !r["aux6"].empty(); }));
+  EXPECT_EQ(responses.of("aux6").size(), 1u);
+  EXPECT_EQ(responses.of("aux6").back().data, std::vector<uint8_t>(32, 0x22));
+  EXPECT_TRUE(waitForDiagnostic(status, "aux6: payloads sent", [](double v) { return v == 1; }));
 }
 
 TEST(SlaveBusNode, CorruptedAnswersAreCountedAsCrcErrorsAndTimeoutsPerSlave)
