@@ -10,6 +10,7 @@
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/log.h"
 #include "cnc_bridge/sim/sim_support.h"
+#include "cnc_bridge/slave_bus/line_timed_transport.h"
 #include "cnc_bridge/slave_bus/sim_master.h"
 #include "cnc_bridge/transport/paced_transport.h"
 #include "cnc_bridge/transport/pty.h"
@@ -69,7 +70,9 @@ int main(int argc, char** argv)
       "slave", po::value(&slave_specs)->composing(),
       "ADDR:ROLE[:ENCODING], repeatable, addresses 1..N in order; ROLE axis|tool|generic, ENCODING "
       "bytes|hundreds|be16|be16s (default: 3 be16s axes, a tool, 4 generic slaves)")(
-      "baud", po::value(&baud)->default_value(0), "pace the uplink to this line rate, 8N1 (0: unpaced)")(
+      "baud", po::value(&baud)->default_value(0),
+      "time the uplink as a line of this rate, 8N1: each byte reaches the PC when a UART would have finished "
+      "it (0: unpaced)")(
       "resync-gap-ms", po::value(&resync_gap_ms)->default_value(0),
       "silence after which a partial frame from the PC is dropped; raw: 0 = never (as the seed's firmware); "
       "framed: always resynchronises, 0 = 20 ms")(
@@ -125,12 +128,13 @@ int main(int argc, char** argv)
 
     PtyMaster pty(link);
     sim::onStop([&pty] { pty.interrupt(); });
-    std::unique_ptr<PacedTransport> paced;
+    // The uplink reaches the PC when a UART at --baud would have finished each byte, not before.
+    std::unique_ptr<LineTimedTransport> timed;
     Transport* transport = &pty;
     if (baud > 0)
     {
-      paced = std::make_unique<PacedTransport>(pty, baud / static_cast<double>(bitsPerCharacter(8, false, 1)));
-      transport = paced.get();
+      timed = std::make_unique<LineTimedTransport>(pty, baud / static_cast<double>(bitsPerCharacter(8, false, 1)));
+      transport = timed.get();
     }
     if (vm.count("verbose"))
     {
