@@ -3,11 +3,13 @@
 
 The simulator's surface is z = -0.01 + 0.002 x + 0.001 y (inches), probed on a 10 x 10 grid of
 0.5 in pitch from (0, 0); the program prints the Haas manual's example line, cycle start/end with a
-part counter, every probe hit and the last Z offset. Expected numbers below are computed from that,
+part counter, every probe hit, the last Z offset and the machine position at the end (G54 X -12.5,
+Y -8.25 given to the simulator). Expected numbers below are computed from that,
 by hand, not by our own formatter. Every wait is on a message or a service, with a timeout.
 """
 import math
 import os
+import sys
 import threading
 import unittest
 
@@ -22,6 +24,9 @@ from std_srvs.srv import Trigger
 
 from cnc_bridge.msg import CycleEvent, DprntLine, DprntValues, MachineState
 from cnc_bridge.srv import DprntSaveSurface
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import dprnt_png  # noqa: E402
 
 INCH = 0.0254  # m
 
@@ -79,6 +84,8 @@ class TestDprntNode(unittest.TestCase):
         cls.points = Collector(cls.ns + "/dprnt/probe_hit", PointStamped)
         cls.offsets = Collector(cls.ns + "/dprnt/z_offset", Float64)
         cls.events = Collector(cls.ns + "/dprnt/cycle_end", CycleEvent)
+        cls.starts = Collector(cls.ns + "/dprnt/cycle_start", CycleEvent)
+        cls.machine_points = Collector(cls.ns + "/dprnt/machine_position", PointStamped)
         cls.state = Collector(cls.ns + "/state", MachineState)
         cls.diagnostics = Collector("/diagnostics", DiagnosticArray)
         cls.cloud = Collector(cls.ns + "/surface/cloud", PointCloud2)
@@ -107,6 +114,16 @@ class TestDprntNode(unittest.TestCase):
         self.assertAlmostEqual(msg.point.z, surface_inch(0.5, 1.0) * INCH, delta=1e-9)
         self.assertAlmostEqual(msg.point.z, -0.008 * INCH, delta=1e-9)
 
+    def test_machine_position_is_a_point_in_the_machine_frame(self):
+        # "MACHINE X -12.5000 Y  -3.2500 Z   0.0035": the end position (X0 Y5 in work) plus G54
+        # (-12.5, -8.25); Z is the last probed G54 Z offset, 0.0035 in.
+        msg = self.machine_points.wait(lambda m: True)
+        self.assertIsNotNone(msg, "no machine position point")
+        self.assertEqual(msg.header.frame_id, self.prefix + "machine")
+        self.assertAlmostEqual(msg.point.x, -12.5 * INCH, delta=1e-12)
+        self.assertAlmostEqual(msg.point.y, -3.25 * INCH, delta=1e-12)
+        self.assertAlmostEqual(msg.point.z, 0.0035 * INCH, delta=1e-12)
+
     def test_z_offset_is_the_last_cell_in_metres(self):
         msg = self.offsets.wait(lambda m: True)
         self.assertIsNotNone(msg)
@@ -125,6 +142,21 @@ class TestDprntNode(unittest.TestCase):
         state = self.state.wait(lambda m: m.part_count >= first.part_count)
         self.assertIsNotNone(state, "part count in state")
         self.assertEqual(state.program, "O01000")
+
+    def test_cycle_start_carries_program_and_sets_execution_active(self):
+        start = self.starts.wait(lambda m: True)
+        self.assertIsNotNone(start, "no cycle start")
+        self.assertEqual(start.event, CycleEvent.CYCLE_START)
+        self.assertEqual(start.program, "O01000")
+        self.assertEqual(start.text, "CYCLE START O01000")
+        self.assertEqual(start.machine, self.prefix.rstrip("/"))
+        self.assertTrue(math.isnan(start.cycle_time))
+        # A start comes before its cycle's end: the end that follows it has the same program.
+        end = self.events.wait(lambda m: m.header.stamp >= start.header.stamp, timeout=30)
+        self.assertIsNotNone(end, "a cycle end after the start")
+        self.assertEqual(end.program, start.program)
+        active = self.state.wait(lambda m: m.execution == MachineState.EXECUTION_ACTIVE, timeout=30)
+        self.assertIsNotNone(active, "execution ACTIVE in state after a cycle start")
 
     def test_latched_last_value_reaches_a_late_subscriber(self):
         self.assertIsNotNone(self.offsets.wait(lambda m: True))
@@ -155,7 +187,8 @@ class TestDprntNode(unittest.TestCase):
         self.assertAlmostEqual(result.range, (0.0035 + 0.01) * INCH, delta=1e-7)
         with open(result.png_path, "rb") as f:
             self.assertEqual(f.read(8), b"\x89PNG\r\n\x1a\n")
-        self.assertGreater(os.path.getsize(result.png_path), 5000)
+        # The height map and, right of it, a colour bar running through the whole scale.
+        self.assertIsNone(dprnt_png.colour_bar_problem(result.png_path))
         with open(result.csv_path) as f:
             rows = [line for line in f if line[0].isdigit() or line[0] == "-"]
         self.assertEqual(len(rows), 100)

@@ -68,6 +68,21 @@ TEST(DprntSim, SeedGridProbingOverAPlane)
   EXPECT_DOUBLE_EQ(machine.variables[5062], 1.0);
 }
 
+TEST(DprntSim, MachinePositionIsWorkPositionPlusTheG54Offset)
+{
+  MacroMachine machine;
+  machine.variables[5221] = -12.5;  // G54 X, Y
+  machine.variables[5222] = -8.25;
+  machine.surface = [](double, double) { return 0.0035; };
+  const auto lines =
+      run("G90 G00 X1. Y2.\nG65 P9995 W54. A20. H-1.\nG00 G91 X.5\n"
+          "DPRNT[MACHINE*X#5021[44]*Y#5022[44]*Z#5023[44]]\nDPRNT[WORK*X#5041[44]*Y#5042[44]]",
+          machine);
+  // Machine X = 1.5 - 12.5, Y = 2 - 8.25, Z = 0 + the probed G54 Z offset.
+  EXPECT_EQ(lines,
+            (std::vector<std::string>{"MACHINE X -11.0000 Y  -6.2500 Z   0.0035", "WORK X   1.5000 Y   2.0000"}));
+}
+
 TEST(DprntSim, NestedLoopsAndGoto)
 {
   const auto lines =

@@ -416,9 +416,14 @@ void MacroProgram::run(MacroMachine& m, const std::function<bool(const std::stri
           m.variables[5062] = m.position[1];
           m.variables[5063] = z;
         }
-        m.variables[5041] = m.position[0];
-        m.variables[5042] = m.position[1];
-        m.variables[5043] = m.position[2];
+        // Work position (#5041-#5043) and machine position (#5021-#5023): work plus the G54
+        // offset (#5221-#5223; the probe cycle above sets the Z offset, as in the seed).
+        for (int axis = 0; axis < 3; ++axis)
+        {
+          m.variables[5041 + axis] = m.position[axis];
+          const auto offset = m.variables.find(5221 + axis);
+          m.variables[5021 + axis] = m.position[axis] + (offset == m.variables.end() ? 0.0 : offset->second);
+        }
         if (end)
           return;
       }

@@ -33,7 +33,9 @@ struct MacroMachine
 /// (comments); N numbers; '%' and O-number lines ignored; `#n = expr`; `DPRNT[...]`;
 /// `WHILE [expr] DOn` ... `ENDn`; `IF [expr] GOTOn` with `Nn` targets; G00/G01 X Y Z moves under
 /// G90/G91; `G65 P9995` single-surface Z probe (sets #5223, the G54 Z offset the seed prints, and
-/// #5061..#5063, the probe trigger position); M30/M02/M99 end the program. Expressions: numbers,
+/// #5061..#5063, the probe trigger position); after every block #5041..#5043 hold the work position
+/// and #5021..#5023 the machine position (work position + G54 offset #5221..#5223);
+/// M30/M02/M99 end the program. Expressions: numbers,
 /// #n, #[expr], + - * /, [ ], EQ NE GT GE LT LE, AND OR, ABS SQRT SIN COS TAN ROUND FIX FUP.
 class MacroProgram
 {
