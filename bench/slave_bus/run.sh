@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Steps per second of 8-slave step frames to sim_slave_bus on a pty and back:
 #  1. the core BusSession, unpaced (pty speed) and at a simulated 115200 baud (both directions
-#     paced), raw and framed, with the line-rate bound and measured/bound;
+#     timed as a UART: a byte reaches the peer when the line would have finished it), raw and
+#     framed, with the line-rate bound and the fraction of it reached over the whole run and at
+#     the median step;
 #  2. the same through slave_bus_node (rospy publisher -> node -> pty -> simulator -> 8 response
 #     topics), raw, side by side with the core session as a ratio.
 # Builds nothing: runs BUILD_DIR's binaries. usage: BUILD_DIR=/work/main/.build bench/slave_bus/run.sh [STEPS]
@@ -14,6 +16,7 @@ sim=$(bin sim_slave_bus)
 bench=$(bin bench_slave_bus)
 tmp=$(mktemp -d /tmp/bench_slave_bus.XXXXXX)
 pids=()
+echo "load average at start: $(cut -d' ' -f1-3 /proc/loadavg)"
 cleanup() { for p in "${pids[@]}"; do kill "$p" 2>/dev/null || true; done; wait 2>/dev/null || true; rm -rf "$tmp"; }
 trap cleanup EXIT
 start_sim() { # link framing baud
@@ -56,3 +59,4 @@ if [[ -f "$build/devel/setup.bash" && -x "$build/devel/lib/cnc_bridge/slave_bus_
 else
   echo "(no devel space with slave_bus_node in $build: node benchmark skipped)"
 fi
+echo "load average at end: $(cut -d' ' -f1-3 /proc/loadavg)"
