@@ -2,7 +2,10 @@
 // of this process) and prints what the benchmark in bench/dnc/ measures: throughput against the
 // line rate, characters sent after each XOFF, and the resident memory of the process.
 //   dnc_drip_bench --bytes N [--baud B] [--exec-rate CPS] [--buffer N] [--high N] [--low N]
-//                  [--seconds S] [--dir DIR]
+//                  [--seconds S] [--dir DIR] [--line pty|memory]
+// --line pty (default): the sender on a SerialPort on a pty, the control's UART taking characters
+// at the line rate; memory: both on a SimulatedLine (a wire in memory, free of the pty's kernel
+// delivery delays, which under load can hold a DC3 for milliseconds).
 // The program is written to DIR (default /tmp) and deleted afterwards. --seconds stops the feed
 // (cancel) after S seconds, for programs too large to send whole at the line rate.
 #include <unistd.h>
@@ -13,6 +16,7 @@
 #include <fstream>
 #include <future>
 #include <iostream>
+#include <memory>
 #include <string>
 #include <thread>
 
@@ -20,6 +24,7 @@
 #include "cnc_bridge/transport/pty.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "dnc_sim.h"
+#include "simulated_line.h"
 
 namespace po = boost::program_options;
 using namespace cnc_bridge;
@@ -69,6 +74,7 @@ int main(int argc, char** argv)
   unsigned baud = 115200;
   double seconds = 0;
   std::string dir = "/tmp";
+  std::string line = "pty";
   sim::DripControlOptions control;
   control.execution_cps = 0;
   control.realtime = true;  // as a control's UART: see DripControlOptions::realtime
@@ -80,7 +86,8 @@ int main(int argc, char** argv)
       "high", po::value(&control.high_mark)->default_value(control.high_mark), "XOFF mark")(
       "low", po::value(&control.low_mark)->default_value(control.low_mark), "XON mark")(
       "seconds", po::value(&seconds)->default_value(0), "cancel after this long (0 = send it all)")(
-      "dir", po::value(&dir)->default_value(dir), "where to generate the program");
+      "dir", po::value(&dir)->default_value(dir), "where to generate the program")(
+      "line", po::value(&line)->default_value(line), "pty or memory (SimulatedLine)");
   po::variables_map vm;
   po::store(po::parse_command_line(argc, argv, options), vm);
   po::notify(vm);
@@ -91,21 +98,46 @@ int main(int argc, char** argv)
   int status = 0;
   try
   {
-    PtyMaster pty;
+    // The control's UART takes characters at the line rate: what the sender queues beyond it stays
+    // on the host's side and counts against the sender after an XOFF.
+    const double line_cps = (baud == 0 ? 115200 : baud) / 10.0;
+    std::unique_ptr<PtyMaster> pty;
+    std::unique_ptr<SerialPort> port;
+    std::unique_ptr<sim::SimulatedLine> wire;
+    Transport* control_end = nullptr;
+    Transport* host_end = nullptr;
+    if (line == "memory")
+    {
+      wire = std::make_unique<sim::SimulatedLine>(line_cps);
+      control_end = &wire->control();
+      host_end = &wire->host();
+    }
+    else
+    {
+      control.line_cps = line_cps;
+      pty = std::make_unique<PtyMaster>();
+      control_end = pty.get();
+    }
     StopSignal stop;
     sim::DripControlStats stats;
     uint64_t received = 0;
     std::thread control_thread(
-        [&] { stats = sim::runDripControl(pty, control, stop, [&](const uint8_t*, size_t n) { received += n; }); });
-    SerialSettings settings;
-    settings.device = pty.slavePath();
-    settings.baud = baud == 0 ? 115200 : baud;
-    SerialPort port(settings);
+        [&] {
+          stats = sim::runDripControl(*control_end, control, stop, [&](const uint8_t*, size_t n) { received += n; });
+        });
+    if (!wire)
+    {
+      SerialSettings settings;
+      settings.device = pty->slavePath();
+      settings.baud = baud == 0 ? 115200 : baud;
+      port = std::make_unique<SerialPort>(settings);
+      host_end = port.get();
+    }
     dnc::DripOptions drip;
     drip.pace_cps = baud / 10.0;
     const auto plan = dnc::planDrip(path, drip);
     const long rss_planned = statusKb("VmRSS:");
-    dnc::DripSender sender(port, drip);
+    dnc::DripSender sender(*host_end, drip);
     const auto start = std::chrono::steady_clock::now();
     auto done = std::async(std::launch::async, [&] { return sender.send(plan); });
     if (seconds > 0 && done.wait_for(std::chrono::duration<double>(seconds)) == std::future_status::timeout)
@@ -122,14 +154,16 @@ int main(int argc, char** argv)
     const double cps = static_cast<double>(result.bytes) / elapsed;
     std::printf(
         "bytes_file=%llu bytes_sent=%llu seconds=%.3f chars_per_s=%.0f line_cps=%.0f line_fraction=%.4f "
-        "xoff=%llu max_after_xoff=%llu max_in_flight=%llu overruns=%llu overflow=%llu rss_start_kb=%ld "
+        "xoff=%llu max_after_xoff=%llu xoff_over_allowance=%llu overruns=%llu overflow=%llu "
+        "sender_xoff=%llu sender_max_queued_at_xoff=%llu rss_start_kb=%ld "
         "rss_after_scan_kb=%ld "
         "rss_end_kb=%ld hwm_kb=%ld outcome=%s\n",
         static_cast<unsigned long long>(bytes), static_cast<unsigned long long>(result.bytes), elapsed, cps,
         drip.pace_cps, drip.pace_cps > 0 ? cps / drip.pace_cps : 0.0,
         static_cast<unsigned long long>(stats.xoff_events), static_cast<unsigned long long>(stats.max_after_xoff),
-        static_cast<unsigned long long>(stats.max_in_flight), static_cast<unsigned long long>(stats.overruns),
-        static_cast<unsigned long long>(stats.overflow), rss_before, rss_planned, statusKb("VmRSS:"),
+        static_cast<unsigned long long>(stats.xoff_over_allowance), static_cast<unsigned long long>(stats.overruns),
+        static_cast<unsigned long long>(stats.overflow), static_cast<unsigned long long>(result.xoff_events),
+        static_cast<unsigned long long>(result.max_queued_at_xoff), rss_before, rss_planned, statusKb("VmRSS:"),
         statusKb("VmHWM:"),
         result.completed() ? "completed"
                            : (result.outcome == dnc::DripResult::Outcome::kCancelled ? "cancelled" : "failed"));

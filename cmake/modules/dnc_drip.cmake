@@ -10,7 +10,8 @@ cnc_core_module(cnc_bridge_drip
 # The simulated control, shared by sim_haas_serial and the unit tests that run it in-process.
 add_library(cnc_bridge_dnc_sim STATIC
   src/sim/haas_serial/dnc_drip_control.cpp
-  src/sim/haas_serial/dnc_punch.cpp)
+  src/sim/haas_serial/dnc_punch.cpp
+  src/sim/haas_serial/simulated_line.cpp)
 target_include_directories(cnc_bridge_dnc_sim PUBLIC ${PROJECT_SOURCE_DIR}/src/sim/haas_serial)
 target_link_libraries(cnc_bridge_dnc_sim PUBLIC cnc_bridge_drip)
 

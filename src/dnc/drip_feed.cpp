@@ -3,6 +3,7 @@
 #include "cnc_bridge/dnc/drip_feed.h"
 
 #include <algorithm>
+#include <cmath>
 #include <sstream>
 #include <thread>
 
@@ -45,6 +46,11 @@ const char* toString(DripFlow flow)
       return "rtscts";
   }
   return "?";
+}
+
+size_t leadCharacters(const DripOptions& options)
+{
+  return options.xoff_allowance > options.chunk ? options.xoff_allowance - options.chunk - 1 : 0;
 }
 
 void DripOptions::validate() const
@@ -205,7 +211,7 @@ void DripSender::pollInput(Milliseconds timeout)
         held_ = true;
         held_since_ = Clock::now();
         ++progress_.xoff_events;
-        max_queued_at_xoff_ = std::max<uint64_t>(max_queued_at_xoff_, link_.pendingOutput());
+        max_queued_at_xoff_ = std::max<uint64_t>(max_queued_at_xoff_, queuedNow());
       }
     }
     else if (code == kDc1)
@@ -217,6 +223,18 @@ void DripSender::pollInput(Milliseconds timeout)
       waiting_for_dc1_ = false;
     }
   }
+}
+
+size_t DripSender::queuedNow() const
+{
+  size_t queued = link_.pendingOutput();  // the kernel's count, where the link knows it
+  if (options_.pace_cps > 0)
+  {
+    // What the line still has to carry, as the pacing models it (a pty reports no queue).
+    const double line = std::chrono::duration<double>(line_free_at_ - Clock::now()).count() * options_.pace_cps;
+    queued = std::max(queued, static_cast<size_t>(std::max(0.0, std::ceil(line))));
+  }
+  return queued;
 }
 
 void DripSender::report(bool force)
@@ -291,9 +309,11 @@ void DripSender::emit(const char* data, size_t size)
   const bool paced = options_.pace_cps > 0;
   const auto char_time =
       paced ? std::chrono::duration<double>(1.0 / options_.pace_cps) : std::chrono::duration<double>(0);
-  // Wake while the line still carries this much: the next write lands before it runs dry.
-  const auto lead = std::chrono::duration_cast<Clock::duration>(
-      char_time * static_cast<double>(options_.xoff_allowance - options_.chunk));
+  // Wake while the line still carries this much: the next write lands before it runs dry. What
+  // is queued then, plus the write, plus the character the control's DC3 itself takes on the
+  // wire (while it travels we cannot see it) stays within the allowance.
+  const auto lead =
+      std::chrono::duration_cast<Clock::duration>(char_time * static_cast<double>(leadCharacters(options_)));
   size_t done = 0;
   while (done < size)
   {

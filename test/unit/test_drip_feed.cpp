@@ -21,6 +21,7 @@
 #include "cnc_bridge/transport/pty.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "dnc_sim.h"
+#include "simulated_line.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::dnc;
@@ -339,6 +340,48 @@ EndToEnd runEndToEnd(const DripPlan& plan, const DripOptions& options, const sim
   control_thread.join();
   return out;
 }
+
+// The same on a SimulatedLine: a wire in memory carrying one character per character time each
+// way, the host's queue explicit, free of a pty's kernel delivery delays. The control's count of
+// characters after its XOFF includes everything the host had queued.
+EndToEnd runOnLine(const DripPlan& plan, const DripOptions& options, const sim::DripControlOptions& control,
+                   double line_cps)
+{
+  sim::SimulatedLine line(line_cps);
+  StopSignal stop;
+  EndToEnd out;
+  std::mutex received_mutex;
+  std::condition_variable received_changed;
+  sim::DripControlOptions rt_control = control;
+  rt_control.realtime = true;
+  rt_control.line_cps = 0;         // the line itself carries characters at its rate
+  rt_control.stop_at_end = false;  // stopped below once the EOB after the closing '%' is in too
+  std::thread control_thread(
+      [&]
+      {
+        auto stats = sim::runDripControl(line.control(), rt_control, stop,
+                                         [&](const uint8_t* data, size_t size)
+                                         {
+                                           std::lock_guard<std::mutex> lock(received_mutex);
+                                           out.received.append(reinterpret_cast<const char*>(data), size);
+                                           received_changed.notify_all();
+                                         });
+        std::lock_guard<std::mutex> lock(received_mutex);
+        out.stats = stats;
+      });
+  DripSender sender(line.host(), options);
+  ProgressLog log;
+  out.result = sender.send(plan, std::ref(log));
+  out.ever_held = log.everHeld();
+  {
+    // Sent means carried by the line; the control thread takes it within its next read.
+    std::unique_lock<std::mutex> lock(received_mutex);
+    received_changed.wait_for(lock, std::chrono::seconds(5), [&] { return out.received.size() >= out.result.bytes; });
+  }
+  stop.stop();
+  control_thread.join();
+  return out;
+}
 }  // namespace
 
 class DripEndToEnd : public ::testing::TestWithParam<unsigned>
@@ -349,41 +392,83 @@ TEST_P(DripEndToEnd, ProgramSeveralTimesTheBufferArrivesWholeInOrderWithoutOverr
 {
   const unsigned baud = GetParam();
   TempDir dir;
-  // A few kilobytes (a few seconds at 9600), several times the control's buffer.
-  const std::string program = generateProgram(baud <= 9600 ? 70 : 150);
+  // About ten times the control's 256-character buffer.
+  const std::string program = generateProgram(90);
   const auto path = dir.write("p.nc", program);
   DripOptions options;
   options.pace_cps = baud / 10.0;
   sim::DripControlOptions control;
-  // The control holds the host at 192 characters. Above that there is room for all a pty can
-  // queue (4 KiB) while this test's control thread waits for a CPU on a loaded machine: a real
-  // control's UART takes characters as they arrive whatever the load, so what the pty queued
-  // meanwhile is not the host's doing and must not be lost.
-  control.buffer_size = 192 + 4096 + 64;
+  control.buffer_size = 256;
   control.high_mark = 192;
   control.low_mark = 64;
   // The control executes slower than the line carries, and slower than even a host starved of CPU
   // on a loaded machine sends: it must hold the host many times.
   control.execution_cps = std::min(options.pace_cps * 0.6, 1000.0);
-  SerialSettings settings;
-  settings.baud = baud;
-  const auto run = runEndToEnd(planDrip(path, options), options, control, settings);
+  const auto run = runOnLine(planDrip(path, options), options, control, baud / 10.0);
   ASSERT_TRUE(run.result.completed()) << run.result.message;
-  EXPECT_GT(program.size(), 9 * control.high_mark);
+  EXPECT_GT(program.size(), 9 * control.buffer_size);
   EXPECT_EQ(program, run.received);
   EXPECT_TRUE(run.stats.program_complete);
   EXPECT_GE(run.stats.xoff_events, 3u) << run.stats.summary();
   EXPECT_EQ(0u, run.stats.overruns) << run.stats.summary();
   EXPECT_EQ(0u, run.stats.overflow) << run.stats.summary();
-  EXPECT_LE(run.stats.max_after_xoff, options.chunk) << run.stats.summary();  // poll, then one write
+  EXPECT_LE(run.stats.max_after_xoff, options.xoff_allowance) << run.stats.summary();
   EXPECT_TRUE(run.ever_held);
   EXPECT_LE(run.result.xoff_events, run.stats.xoff_events);  // the last XOFF may follow the last byte
   EXPECT_GE(run.result.xoff_events + 1, run.stats.xoff_events);
 }
 
+// Many XOFF events (a control with a 40-character high mark executing at about half the line
+// rate): at every one, what the host had queued plus what it wrote before it saw the XOFF stays
+// within the Fanuc allowance of 10. The sender's own view of its queue is reported too.
+TEST_P(DripEndToEnd, AtEveryXoffQueuedPlusLaterWritesStayWithinTheAllowance)
+{
+  const unsigned baud = GetParam();
+  TempDir dir;
+  const std::string program = generateProgram(baud <= 9600 ? 60 : 400);
+  const auto path = dir.write("p.nc", program);
+  DripOptions options;
+  options.pace_cps = baud / 10.0;
+  sim::DripControlOptions control;
+  control.buffer_size = 64;
+  control.high_mark = 40;
+  control.low_mark = 20;
+  control.execution_cps = options.pace_cps / 2;
+  const auto run = runOnLine(planDrip(path, options), options, control, baud / 10.0);
+  ASSERT_TRUE(run.result.completed()) << run.result.message;
+  EXPECT_EQ(program, run.received);
+  EXPECT_GE(run.stats.xoff_events, baud <= 9600 ? 30u : 200u) << run.stats.summary();
+  EXPECT_LE(run.stats.max_after_xoff, options.xoff_allowance) << run.stats.summary();
+  EXPECT_EQ(0u, run.stats.xoff_over_allowance) << run.stats.summary();
+  EXPECT_EQ(0u, run.stats.overflow) << run.stats.summary();
+  EXPECT_LE(run.result.max_queued_at_xoff + options.chunk, options.xoff_allowance);
+  EXPECT_GT(run.result.xoff_events, 0u);
+}
+
 INSTANTIATE_TEST_SUITE_P(Pacing, DripEndToEnd, ::testing::Values(9600u, 115200u),
                          [](const ::testing::TestParamInfo<unsigned>& info)
                          { return "Baud" + std::to_string(info.param); });
+
+// The measurement can fail: a host that writes three times faster than the line keeps a queue,
+// and the control counts it after its XOFFs.
+TEST(DripEndToEndAllowance, AHostQueueingAheadOfTheLineIsCaught)
+{
+  TempDir dir;
+  const std::string program = generateProgram(60);
+  const auto path = dir.write("p.nc", program);
+  DripOptions options;
+  options.pace_cps = 3 * 11520;
+  sim::DripControlOptions control;
+  control.buffer_size = 4096;
+  control.high_mark = 40;
+  control.low_mark = 20;
+  control.execution_cps = 5760;
+  const auto run = runOnLine(planDrip(path, options), options, control, 11520);
+  ASSERT_TRUE(run.result.completed()) << run.result.message;
+  EXPECT_EQ(program, run.received);
+  EXPECT_GT(run.stats.max_after_xoff, options.xoff_allowance) << run.stats.summary();
+  EXPECT_GT(run.stats.overruns, 0u) << run.stats.summary();
+}
 
 TEST(DripEndToEnd7E1, ParityMaskedXoffIsHonouredOnA7E1Link)
 {

@@ -53,8 +53,9 @@ struct DripOptions
   double pace_cps = 0;
   size_t chunk = 4;  ///< characters per write (<= xoff_allowance)
   /// Characters the control takes after its XOFF (Fanuc: 10). With pacing, a write goes out when
-  /// the line still holds xoff_allowance - chunk characters, so the line never runs dry while the
-  /// host wakes up, and what is queued plus one write never exceeds the allowance.
+  /// the line still holds leadCharacters() = xoff_allowance - chunk - 1 characters, so the line
+  /// never runs dry while the host wakes up, and what is queued, plus one write, plus the character
+  /// time the DC3 itself takes to arrive, never exceeds the allowance.
   size_t xoff_allowance = 10;
   Milliseconds hold_timeout{0};  ///< held longer than this -> on_hold_timeout; 0 = wait forever
   HoldTimeoutAction on_hold_timeout = HoldTimeoutAction::kFail;
@@ -68,6 +69,10 @@ struct DripOptions
   /// \throws ConfigError for an empty EOB, a chunk of 0 or above the allowance, a negative rate.
   void validate() const;
 };
+
+/// \brief Characters the paced line still carries when the next write goes out (see
+/// DripOptions::xoff_allowance); 0 when the chunk leaves no room.
+size_t leadCharacters(const DripOptions& options);
 
 /// \brief What a feed will send: the file, where it starts, and what is restated before.
 struct DripPlan
@@ -116,7 +121,10 @@ struct DripResult
   uint64_t stopped_at_line = 0;  ///< last file line fully sent (restart after it); 0 = none
   std::string stopped_at_block;  ///< last sequence number fully sent
   uint64_t xoff_events = 0;
-  uint64_t max_queued_at_xoff = 0;  ///< largest kernel output queue seen when an XOFF arrived
+  /// Largest output queue when an XOFF arrived: the kernel's (TIOCOUTQ) or, when pacing, what the
+  /// line still had to carry as the pacing models it, whichever is larger. It plus the write in
+  /// progress is what could follow the XOFF.
+  uint64_t max_queued_at_xoff = 0;
   bool completed() const { return outcome == Outcome::kCompleted; }
 };
 
@@ -130,8 +138,9 @@ struct DripResult
 ///
 /// Timing: writes of `chunk` characters (4 by default), input polled before each. With pacing
 /// (pace_cps), a write goes out when the line (as the sender models it) still has
-/// xoff_allowance - chunk characters to carry: the line stays busy across the host's wake-up
-/// latency and at most xoff_allowance characters (queued + one write) can follow an XOFF. Without
+/// xoff_allowance - chunk - 1 characters to carry: the line stays busy across the host's wake-up
+/// latency and at most xoff_allowance characters (queued + one write + the DC3's own character
+/// time) can follow an XOFF. Without
 /// pacing, each write is drained (tcdrain) before the next. Memory does not depend on the program
 /// size.
 ///
@@ -167,6 +176,7 @@ class DripSender
   bool cancelRequested() const { return cancelled_ || (options_.cancel != nullptr && *options_.cancel); }
   void pollInput(Milliseconds timeout);
   void report(bool force);
+  size_t queuedNow() const;
 
   Transport& link_;
   DripOptions options_;

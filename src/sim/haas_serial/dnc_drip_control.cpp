@@ -2,8 +2,11 @@
 #include <pthread.h>
 #include <sched.h>
 
+#include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <sstream>
+#include <thread>
 #include <vector>
 
 #include "cnc_bridge/dnc/dnc_codes.h"
@@ -17,15 +20,82 @@ std::string DripControlStats::summary() const
 {
   std::ostringstream out;
   out << "received " << received << " characters, xoff " << xoff_events << ", max after xoff " << max_after_xoff
-      << ", max in flight at xoff " << max_in_flight << ", overruns " << overruns << ", overflow " << overflow
+      << ", xoff over allowance " << xoff_over_allowance << ", overruns " << overruns << ", overflow " << overflow
       << ", parity errors " << parity_errors << ", program " << (program_complete ? "complete" : "incomplete");
   return out.str();
 }
 
+namespace
+{
+using Clock = std::chrono::steady_clock;
+
+/// The control's UART: how many characters it may take from the link now. With a line rate, no
+/// more than the line has carried since the previous character; after the link ran empty, the
+/// next character starts the line again when it arrives.
+class UartModel
+{
+ public:
+  explicit UartModel(double line_cps) : cps_(line_cps) {}
+  bool modelled() const { return cps_ > 0; }
+  /// Characters the next read may take (>= 1), sleeping until the line has carried one.
+  size_t allowed(size_t limit)
+  {
+    if (!modelled() || idle_)
+    {
+      return idle_ && modelled() ? 1 : limit;  // waiting for the line to start: one character
+    }
+    accrue();
+    if (credit_ < 1)
+    {
+      std::this_thread::sleep_for(std::chrono::duration<double>((1 - credit_) / cps_));
+      accrue();
+    }
+    return static_cast<size_t>(std::min<double>(static_cast<double>(limit), std::max(1.0, std::floor(credit_))));
+  }
+  /// How long the read may wait: only when the line is empty (for the next character to arrive).
+  Milliseconds timeout() const { return !modelled() || idle_ ? Milliseconds(1) : Milliseconds(0); }
+  /// The read returned \p got of the \p wanted characters.
+  void took(size_t got, size_t wanted)
+  {
+    if (!modelled())
+    {
+      return;
+    }
+    if (idle_)
+    {
+      if (got > 0)
+      {
+        idle_ = false;  // it arrived now: the line carries the next one from here
+        credit_ = 0;
+        last_ = Clock::now();
+      }
+      return;
+    }
+    credit_ -= static_cast<double>(got);
+    if (got < wanted)
+    {
+      idle_ = true;  // the host had nothing more queued: the line went quiet
+      credit_ = 0;
+    }
+  }
+
+ private:
+  void accrue()
+  {
+    const auto now = Clock::now();
+    credit_ += std::chrono::duration<double>(now - last_).count() * cps_;
+    last_ = now;
+  }
+  double cps_;
+  bool idle_ = true;
+  double credit_ = 0;
+  Clock::time_point last_ = Clock::now();
+};
+}  // namespace
+
 DripControlStats runDripControl(Transport& link, const DripControlOptions& options, StopSignal& stop,
                                 const std::function<void(const uint8_t*, size_t)>& sink)
 {
-  using Clock = std::chrono::steady_clock;
   DripControlStats stats;
   if (options.realtime)
   {
@@ -38,11 +108,11 @@ DripControlStats runDripControl(Transport& link, const DripControlOptions& optio
   {
     link.writeByte(code(dnc::kDc1));
   }
+  UartModel uart(options.line_cps);
   size_t buffered = 0;
   double credit = 0;  // characters the control could have executed but has not yet
   bool xoff = false;
   uint64_t after = 0;
-  uint64_t in_flight = 0;
   unsigned percents = 0;
   auto last = Clock::now();
   uint8_t buffer[256];
@@ -52,18 +122,21 @@ DripControlStats runDripControl(Transport& link, const DripControlOptions& optio
   const auto closeXoffEvent = [&]
   {
     stats.max_after_xoff = std::max(stats.max_after_xoff, after);
-    stats.max_in_flight = std::max(stats.max_in_flight, in_flight);
-    stats.overruns += after > options.allowance ? after - options.allowance : 0;
+    if (after > options.allowance)
+    {
+      stats.overruns += after - options.allowance;
+      ++stats.xoff_over_allowance;
+    }
     xoff = false;
   };
 
-  // Takes received characters into the buffer. \p sent_after_xoff: they were read after the XOFF
-  // went out and after what was queued at that moment had been taken, so the host sent them after
-  // it could have seen the XOFF.
-  bool crossed = false;
-  const auto take = [&](const uint8_t* data, size_t n, bool sent_after_xoff)
+  // Takes what one read returned into the buffer. Every character counts against the host if
+  // the XOFF went out before the read; the XOFF is written after the batch that crossed the mark
+  // (its characters were on the line before it).
+  const auto take = [&](const uint8_t* data, size_t n)
   {
     masked.clear();
+    bool crossed = false;
     for (size_t i = 0; i < n; ++i)
     {
       uint8_t c = data[i];
@@ -79,7 +152,7 @@ DripControlStats runDripControl(Transport& link, const DripControlOptions& optio
       masked.push_back(c);
       if (xoff)
       {
-        ++(sent_after_xoff ? after : in_flight);
+        ++after;
       }
       if (buffered >= options.buffer_size)
       {
@@ -93,15 +166,14 @@ DripControlStats runDripControl(Transport& link, const DripControlOptions& optio
       {
         stats.program_complete = true;
       }
-      if (!xoff && buffered >= options.high_mark)
-      {
-        link.writeByte(code(dnc::kDc3));
-        xoff = true;
-        crossed = true;
-        after = 0;
-        in_flight = 0;
-        ++stats.xoff_events;
-      }
+      crossed = crossed || (!xoff && buffered >= options.high_mark);
+    }
+    if (crossed)
+    {
+      link.writeByte(code(dnc::kDc3));
+      xoff = true;
+      after = 0;
+      ++stats.xoff_events;
     }
     if (!masked.empty() && sink)
     {
@@ -111,8 +183,9 @@ DripControlStats runDripControl(Transport& link, const DripControlOptions& optio
 
   while (!stop.stopped())
   {
-    // 1 ms reads: execution proceeds (and XON goes out) even while the host is silent.
-    const size_t n = link.read(buffer, sizeof(buffer), Milliseconds(1));
+    const size_t wanted = uart.allowed(sizeof(buffer));
+    const size_t n = link.read(buffer, wanted, uart.timeout());
+    uart.took(n, wanted);
     const auto now = Clock::now();
     if (options.execution_cps <= 0)
     {
@@ -130,19 +203,7 @@ DripControlStats runDripControl(Transport& link, const DripControlOptions& optio
       }
     }
     last = now;
-    crossed = false;
-    take(buffer, n, xoff);
-    if (crossed)
-    {
-      // A UART control reacts within a character time; this one may have been descheduled while
-      // the pty filled. What is queued now was sent before the XOFF: take it as in flight, so
-      // that `after` counts only what the host sent once it could have seen the XOFF.
-      for (size_t queued = 1; queued > 0;)
-      {
-        queued = link.read(buffer, sizeof(buffer), Milliseconds(0));
-        take(buffer, queued, false);
-      }
-    }
+    take(buffer, n);
     if (xoff && buffered <= options.low_mark)
     {
       closeXoffEvent();

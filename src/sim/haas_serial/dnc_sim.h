@@ -16,25 +16,31 @@ namespace sim
 /// \brief A control executing a drip-fed program: a finite receive buffer drained at an execution
 /// rate, XOFF above a high mark, XON below a low mark. Not thread-safe (one run() at a time).
 ///
-/// Characters the host sends after an XOFF (until the XON) are counted; those beyond `allowance`
-/// are overruns, which a real Fanuc answers with an alarm. A pty has no wire: when the XOFF goes
-/// out, what is already queued in the pty was sent before it, and is counted apart as "in flight"
-/// (it depends on how late this process was scheduled, not on the host). Characters that arrive
-/// with the buffer full are lost (counted as overflow).
+/// The control's UART is modelled (line_cps > 0): it takes characters from the link no faster than
+/// the line carries them, so whatever the host has written beyond the line rate stays queued on
+/// the host's side (on a pty: in the pty), as it would in the host's kernel and adapter. Every
+/// character the control takes after it wrote its XOFF (DC3), until its XON, counts against the
+/// host, what the host had queued at that moment included; those beyond `allowance` per XOFF are
+/// overruns, which a real Fanuc answers with an alarm. When this process is scheduled late it
+/// catches up at the line rate: the characters the line would have carried meanwhile arrived
+/// before the XOFF it then sends. Characters that arrive with the buffer full are lost (counted
+/// as overflow).
 struct DripControlOptions
 {
-  size_t buffer_size = 1024;       ///< characters the control can hold
-  size_t high_mark = 768;          ///< XOFF when the buffer reaches this
-  size_t low_mark = 256;           ///< XON when it drains to this
-  double execution_cps = 2000;     ///< characters executed (removed from the buffer) per second; 0 = instantly
+  size_t buffer_size = 1024;    ///< characters the control can hold
+  size_t high_mark = 768;       ///< XOFF when the buffer reaches this
+  size_t low_mark = 256;        ///< XON when it drains to this
+  double execution_cps = 2000;  ///< characters executed (removed from the buffer) per second; 0 = instantly
+  /// Characters per second the line carries (baud / bits per character): the UART takes no more.
+  /// 0 = no line model, take whatever has arrived (what the host queued then never counts).
+  double line_cps = 0;
   size_t allowance = 10;           ///< characters the control takes after its XOFF without alarm
   bool seven_e1 = false;           ///< send DC1/DC3 with the even-parity bit set, mask it on input
   bool stop_at_end = true;         ///< return after the second '%'
   bool send_dc1_at_start = false;  ///< send DC1 ("reader start") once ready, as a Fanuc in DNC mode does
-  /// Run the receiving thread at real-time priority (SCHED_FIFO) when the system allows it: a
-  /// control's UART takes every character as it arrives, while a thread of a loaded machine can
-  /// wait long enough for the pty to queue hundreds of characters, which would then count as
-  /// overflow. Ignored (the normal priority kept) when not permitted.
+  /// Run the receiving thread at real-time priority (SCHED_FIFO) when the system allows it, so the
+  /// modelled UART keeps up with the line on a loaded machine. Ignored (the normal priority kept)
+  /// when not permitted.
   bool realtime = false;
 };
 
@@ -42,12 +48,12 @@ struct DripControlStats
 {
   uint64_t received = 0;  ///< characters received (leader and DC codes included)
   uint64_t xoff_events = 0;
-  uint64_t max_after_xoff = 0;    ///< most characters the host sent after one XOFF, before its XON
-  uint64_t max_in_flight = 0;     ///< most characters already queued when an XOFF went out
-  uint64_t overruns = 0;          ///< characters beyond the allowance, summed over all XOFFs
-  uint64_t overflow = 0;          ///< characters lost to a full buffer
-  uint64_t parity_errors = 0;     ///< 7E1: bytes whose bit 7 was set but did not give even parity
-  bool program_complete = false;  ///< the second '%' arrived
+  uint64_t max_after_xoff = 0;       ///< most characters taken after one XOFF went out, before its XON
+  uint64_t xoff_over_allowance = 0;  ///< XOFF events after which more than the allowance came
+  uint64_t overruns = 0;             ///< characters beyond the allowance, summed over all XOFFs
+  uint64_t overflow = 0;             ///< characters lost to a full buffer
+  uint64_t parity_errors = 0;        ///< 7E1: bytes whose bit 7 was set but did not give even parity
+  bool program_complete = false;     ///< the second '%' arrived
 
   /// \brief One line for the simulator's exit report.
   std::string summary() const;

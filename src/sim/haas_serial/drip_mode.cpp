@@ -1,6 +1,7 @@
 // sim_haas_serial drip: a control in DNC mode executing a drip-fed program from a finite buffer.
 // It sends XOFF above a high mark and XON below a low mark, executes at a set rate, and reports on
-// exit how many characters arrived after its XOFFs (the host may send at most 10).
+// exit how many characters arrived after its XOFFs (the host may send at most 10). With --baud its
+// UART takes characters no faster than the line, so what the host queued counts after an XOFF.
 #include <boost/program_options.hpp>
 #include <fstream>
 #include <iostream>
@@ -32,7 +33,8 @@ int runDripMode(const std::vector<std::string>& args)
   po::options_description options("sim_haas_serial drip [options]");
   options.add_options()("help,h", "this help")("link", po::value(&link_path),
                                                "also reachable as this path (a symbolic link to the pty)")(
-      "baud", po::value(&baud), "pace what the control sends to this baud rate (0 = no pacing)")(
+      "baud", po::value(&baud),
+      "line rate: the control's UART takes characters no faster, and what it sends is paced to it (0 = no line model)")(
       "7e1", po::bool_switch(&control.seven_e1), "7 data bits + even parity: DC1/DC3 sent as 0x11/0x93")(
       "buffer", po::value(&control.buffer_size)->default_value(control.buffer_size), "receive buffer, characters")(
       "high", po::value(&control.high_mark)->default_value(control.high_mark), "XOFF at this many buffered")(
@@ -74,6 +76,7 @@ int runDripMode(const std::vector<std::string>& args)
     onStop([&pty] { pty.interrupt(); });
     const unsigned bits = bitsPerCharacter(control.seven_e1 ? 7 : 8, control.seven_e1, 1);
     PacedTransport paced(pty, baud > 0 ? static_cast<double>(baud) / bits : 1e9);
+    control.line_cps = baud > 0 ? static_cast<double>(baud) / bits : 0;
     Transport& link = baud > 0 ? static_cast<Transport&>(paced) : pty;
     announce("sim_haas_serial", "pty " + pty.slavePath());
     std::ofstream output;
