@@ -3,15 +3,22 @@
 // for an event: every wait is a blocking read with a timeout or a condition variable.
 #include <gtest/gtest.h>
 
+#include <dlfcn.h>
 #include <fcntl.h>
+#include <poll.h>
+#include <pty.h>
+#include <sys/ioctl.h>
 #include <sys/stat.h>
+#include <termios.h>
 #include <unistd.h>
 
 #include <ctime>
 #include <filesystem>
 
 #include <future>
+#include <map>
 #include <memory>
+#include <mutex>
 #include <thread>
 #include <vector>
 
@@ -27,6 +34,95 @@ using std::chrono::steady_clock;
 
 namespace
 {
+// What the process last asked the driver for, per file descriptor (see tcsetattr below).
+std::mutex requested_mutex;
+std::map<int, termios> requested_termios;
+}  // namespace
+
+// Every tcsetattr() of this test passes here on its way to the C library's, so a test can see the
+// termios a port asked for, including what a pty does not keep: its driver forces 8 data bits and
+// no parity (drivers/tty/pty.c), so those two cannot be read back from a pty.
+extern "C" int tcsetattr(int fd, int actions, const struct termios* tio) noexcept
+{
+  using Real = int (*)(int, int, const struct termios*);
+  static const Real real = reinterpret_cast<Real>(::dlsym(RTLD_NEXT, "tcsetattr"));
+  {
+    std::lock_guard<std::mutex> lock(requested_mutex);
+    requested_termios[fd] = *tio;
+  }
+  return real(fd, actions, tio);
+}
+
+namespace
+{
+termios requestedTermios(int fd)
+{
+  std::lock_guard<std::mutex> lock(requested_mutex);
+  return requested_termios.at(fd);
+}
+
+termios driverTermios(int fd)
+{
+  termios tio{};
+  EXPECT_EQ(::tcgetattr(fd, &tio), 0);
+  return tio;
+}
+
+/// A pty pair held by the test itself (no PtyMaster), for what PtyMaster does not offer: the
+/// master in packet mode, where the kernel reports the slave's output being stopped and started.
+struct RawPty
+{
+  RawPty()
+  {
+    char name[64];
+    if (::openpty(&master, &slave, name, nullptr, nullptr) != 0)
+      throw std::runtime_error("openpty failed");
+    slave_path = name;
+  }
+  ~RawPty()
+  {
+    ::close(master);
+    ::close(slave);
+  }
+  /// Waits (at most \p limit, a bound against a hang) for a packet-mode status byte with \p flag.
+  bool waitForStatus(int flag, std::chrono::seconds limit)
+  {
+    const auto end = steady_clock::now() + limit;
+    while (steady_clock::now() < end)
+    {
+      pollfd fd{master, POLLIN | POLLPRI, 0};
+      if (::poll(&fd, 1, 1000) <= 0)
+        continue;
+      uint8_t packet[256];
+      const ssize_t n = ::read(master, packet, sizeof(packet));
+      if (n > 0 && packet[0] != TIOCPKT_DATA && (packet[0] & flag))
+        return true;
+    }
+    return false;
+  }
+  /// Data bytes that arrive (packet mode: each read starts with a status byte, 0 for data).
+  std::string readData(size_t count, std::chrono::seconds limit)
+  {
+    std::string data;
+    const auto end = steady_clock::now() + limit;
+    while (data.size() < count && steady_clock::now() < end)
+    {
+      pollfd fd{master, POLLIN, 0};
+      if (::poll(&fd, 1, 1000) <= 0)
+        continue;
+      char packet[256];
+      const ssize_t n = ::read(master, packet, sizeof(packet));
+      if (n > 1 && packet[0] == TIOCPKT_DATA)
+        data.append(packet + 1, n - 1);
+    }
+    return data;
+  }
+
+  int master = -1;
+  int slave = -1;
+  std::string slave_path;
+};
+
 SerialSettings ptySettings(const PtyMaster& pty)
 {
   SerialSettings settings;
@@ -113,6 +209,132 @@ TEST(SerialPort, AcceptsEveryLineSettingTheSeedsUse)
       settings.flow_control = baud == 57600 ? FlowControl::kXonXoff : FlowControl::kNone;
       EXPECT_NO_THROW(SerialPort port(settings)) << settings.describe();
     }
+  }
+}
+
+struct LineCase
+{
+  unsigned baud;
+  speed_t speed;
+  Parity parity;
+  FlowControl flow;
+};
+
+class SerialLineSettings : public ::testing::TestWithParam<LineCase>
+{
+};
+
+// Each setting as the port asks the driver for it, and read back from the driver where a pty keeps
+// it (speed, stop bits, odd parity's sense, flow control, raw mode; not data bits or parity on/off).
+TEST_P(SerialLineSettings, ReachTheDriver)
+{
+  const LineCase line = GetParam();
+  PtyMaster device;
+  SerialSettings settings = ptySettings(device);
+  settings.baud = line.baud;
+  settings.data_bits = 7;
+  settings.parity = line.parity;
+  settings.stop_bits = 2;
+  settings.flow_control = line.flow;
+  SerialPort port(settings);
+  const termios asked = requestedTermios(port.nativeHandle());
+  const termios kept = driverTermios(port.nativeHandle());
+  const bool odd = line.parity == Parity::kOdd, rtscts = line.flow == FlowControl::kRtsCts,
+             xonxoff = line.flow == FlowControl::kXonXoff;
+
+  EXPECT_EQ(asked.c_cflag & CSIZE, static_cast<tcflag_t>(CS7));
+  EXPECT_TRUE(asked.c_cflag & PARENB);
+  EXPECT_TRUE(asked.c_iflag & INPCK);
+  for (const termios& tio : {asked, kept})
+  {
+    const char* which = &tio == &asked ? "asked" : "kept by the driver";
+    SCOPED_TRACE(which);
+    EXPECT_EQ(::cfgetispeed(&tio), line.speed);
+    EXPECT_EQ(::cfgetospeed(&tio), line.speed);
+    EXPECT_EQ(static_cast<bool>(tio.c_cflag & PARODD), odd);
+    EXPECT_TRUE(tio.c_cflag & CSTOPB);
+    EXPECT_EQ(static_cast<bool>(tio.c_cflag & CRTSCTS), rtscts);
+    EXPECT_EQ(static_cast<bool>(tio.c_iflag & IXON), xonxoff);
+    EXPECT_EQ(static_cast<bool>(tio.c_iflag & IXOFF), xonxoff);
+    EXPECT_FALSE(tio.c_iflag & IXANY);  // only DC1 restarts output
+    EXPECT_TRUE(tio.c_cflag & CREAD);
+    EXPECT_TRUE(tio.c_cflag & CLOCAL);  // no modem lines on a 3-wire cable
+    // Raw: no line editing, echo, signals, CR/LF translation or stripping, no output processing.
+    EXPECT_EQ(tio.c_lflag & (ICANON | ECHO | ECHONL | ISIG | IEXTEN), 0u);
+    EXPECT_EQ(tio.c_iflag & (ICRNL | INLCR | IGNCR | ISTRIP | IGNBRK | BRKINT | PARMRK), 0u);
+    EXPECT_EQ(tio.c_oflag & OPOST, 0u);
+    EXPECT_EQ(tio.c_cc[VMIN], 1);
+    EXPECT_EQ(tio.c_cc[VTIME], 0);
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(SerialPort, SerialLineSettings,
+                         ::testing::Values(LineCase{230400, B230400, Parity::kEven, FlowControl::kRtsCts},
+                                           LineCase{230400, B230400, Parity::kOdd, FlowControl::kXonXoff},
+                                           LineCase{460800, B460800, Parity::kEven, FlowControl::kXonXoff},
+                                           LineCase{460800, B460800, Parity::kOdd, FlowControl::kRtsCts},
+                                           LineCase{460800, B460800, Parity::kOdd, FlowControl::kNone}));
+
+TEST(SerialPort, EightBitsNoParityOneStopBitReachTheDriver)
+{
+  PtyMaster device;
+  SerialPort port(ptySettings(device));
+  const termios asked = requestedTermios(port.nativeHandle());
+  EXPECT_EQ(asked.c_cflag & CSIZE, static_cast<tcflag_t>(CS8));
+  EXPECT_EQ(asked.c_cflag & (PARENB | PARODD | CSTOPB | CRTSCTS), 0u);
+  EXPECT_EQ(asked.c_iflag & (INPCK | IXON | IXOFF), 0u);
+  EXPECT_EQ(::cfgetospeed(&asked), static_cast<speed_t>(B115200));
+}
+
+TEST(SerialPort, KernelXonXoffHoldsOutputUntilXon)
+{
+  RawPty device;
+  int on = 1;
+  ASSERT_EQ(::ioctl(device.master, TIOCPKT, &on), 0);
+  SerialSettings settings;
+  settings.device = device.slave_path;
+  settings.baud = 9600;
+  settings.flow_control = FlowControl::kXonXoff;
+  SerialPort port(settings);
+
+  ASSERT_EQ(::write(device.master, "\x13", 1), 1);  // the machine sends XOFF (DC3)
+  ASSERT_TRUE(device.waitForStatus(TIOCPKT_STOP, std::chrono::seconds(10))) << "the kernel never stopped output";
+  // Held: the driver takes nothing, so the write times out (its timeout is the only wait here).
+  EXPECT_THROW(port.write(std::string("held"), Milliseconds(100)), TimeoutError);
+  EXPECT_EQ(port.pendingOutput(), 0u);
+
+  ASSERT_EQ(::write(device.master, "\x11", 1), 1);  // XON (DC1)
+  ASSERT_TRUE(device.waitForStatus(TIOCPKT_START, std::chrono::seconds(10))) << "the kernel never restarted output";
+  port.write(std::string("go"), Milliseconds(1000));
+  EXPECT_EQ(device.readData(2, std::chrono::seconds(10)), "go");
+}
+
+TEST(SerialPort, DeviceEndClosingIsALinkErrorNotAHangOrAnEmptyRead)
+{
+  auto device = std::make_unique<PtyMaster>();
+  SerialPort port(ptySettings(*device));
+  device.reset();  // the simulator (the machine's end of the cable) goes away
+  auto reader = std::async(std::launch::async,
+                           [&]
+                           {
+                             uint8_t byte;
+                             // Far longer than the test may take: returning at all means it did
+                             // not wait for the timeout.
+                             return port.read(&byte, 1, Milliseconds(3600 * 1000));
+                           });
+  if (reader.wait_for(std::chrono::seconds(30)) != std::future_status::ready)
+  {
+    port.interrupt();
+    FAIL() << "the read went on after the device end closed";
+  }
+  try
+  {
+    const size_t n = reader.get();
+    FAIL() << "the read returned " << n << " bytes instead of a link error";
+  }
+  catch (const LinkError& e)
+  {
+    EXPECT_NE(std::string(e.what()).find(port.settings().device), std::string::npos) << e.what();
   }
 }
 
@@ -318,6 +540,31 @@ TEST(Tcp, ReadTimeoutThenDataStillArrives)
   EXPECT_EQ(client->read(&byte, 1, Milliseconds(20)), 0u);
   peer->write(std::string("!"));
   EXPECT_EQ(client->readByte(Milliseconds(2000)), '!');
+}
+
+TEST(Tcp, ReadReturnsTheBytesThatArrivedWithoutWaitingForMore)
+{
+  TcpServer server(0, "127.0.0.1");
+  auto accepted = std::async(std::launch::async, [&] { return server.accept(Milliseconds(5000)); });
+  auto client = TcpConnection::connect("127.0.0.1", server.port(), Milliseconds(2000));
+  auto peer = accepted.get();
+  ASSERT_TRUE(peer);
+  peer->write(std::string("abc"));
+  uint8_t buffer[64];
+  // An hour's timeout, far beyond the test's budget: the read must return with what has come.
+  auto reader =
+      std::async(std::launch::async, [&] { return client->read(buffer, sizeof(buffer), Milliseconds(3600 * 1000)); });
+  if (reader.wait_for(std::chrono::seconds(30)) != std::future_status::ready)
+  {
+    client->interrupt();
+    FAIL() << "the read waited for the whole buffer";
+  }
+  const size_t n = reader.get();
+  ASSERT_GT(n, 0u);
+  ASSERT_LE(n, 3u);  // fewer than the 64 asked for
+  std::string got(reinterpret_cast<char*>(buffer), n);
+  got += readString(*client, 3 - n);  // the rest, should the segment have been split
+  EXPECT_EQ(got, "abc");
 }
 
 TEST(FakeTransport, ScriptedRepliesPartialReadsAndDisconnect)
