@@ -75,7 +75,7 @@ int main(int argc, char** argv)
       "it (0: unpaced)")(
       "resync-gap-ms", po::value(&resync_gap_ms)->default_value(0),
       "silence after which a partial frame from the PC is dropped; raw: 0 = never (as the seed's firmware); "
-      "framed: always resynchronises, 0 = 20 ms")(
+      "framed: always resynchronises, 0 = 100 ms")(
       "wirepacker-crc", po::value(&wirepacker_crc)->default_value("spec"),
       "spec (CRC over length and data, as the packet format documents) or library (data only, as the "
       "ESP32_I2C_Slave library's released code computes it): I2C frames and the framed link")(

@@ -100,9 +100,11 @@ class SimMaster
     uint64_t uplink_records = 0;
   };
 
-  /// \brief Framed mode's silence before a partial frame is abandoned when Options::resync_gap is 0:
-  /// long against the gaps inside one write on a pty or a USB adapter, short against a reply timeout.
-  static constexpr Milliseconds kFramedResyncGap{20};
+  /// \brief Framed mode's silence before a partial frame is abandoned when Options::resync_gap is 0.
+  /// Long against the gaps inside one frame from a healthy PC (a USB adapter's 16 ms latency timer;
+  /// a sender descheduled between two paced slices on a loaded machine: 20 ms gaps made the
+  /// benchmark lose a step in a thousand), short against the node's 0.5 s reply timeout.
+  static constexpr Milliseconds kFramedResyncGap{100};
 
   SimMaster(Transport& link, std::vector<SimSlave> slaves, Options options);
 
