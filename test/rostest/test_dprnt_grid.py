@@ -14,6 +14,7 @@ import math
 import os
 import sys
 import threading
+import time
 import unittest
 
 import rospy
@@ -63,10 +64,20 @@ class Collector:
             self.messages.append(msg)
             self.cv.notify_all()
 
-    def wait(self, predicate, timeout=30.0):
+    def count(self):
         with self.cv:
-            ok = self.cv.wait_for(lambda: any(predicate(m) for m in self.messages), timeout)
-            return next((m for m in self.messages if predicate(m)), None) if ok else None
+            return len(self.messages)
+
+    def wait(self, predicate, timeout=30.0, start=0):
+        """The first message from index start on that satisfies predicate, or None after timeout s."""
+        found = []
+
+        def ready():
+            found[:] = [m for m in self.messages[start:] if predicate(m)][:1]
+            return bool(found)
+
+        with self.cv:
+            return found[0] if self.cv.wait_for(ready, timeout) else None
 
 
 def cloud_matches_the_surface(cloud):
@@ -130,9 +141,28 @@ class TestDprntGrid(unittest.TestCase):
                          {(i, j) for i in range(10) for j in range(10)})
         self.assertIsNone(dprnt_png.colour_bar_problem(result.png_path))
 
+    def test_zz_cycle_start_realigns_the_grid(self):
+        # Runs last (alphabetical). A stray CYCLE_START 30 values into a cycle makes the mapper put
+        # the next values from the first cell on: the map goes wrong. The machine's next CYCLE_START
+        # puts it right again.
+        self.assertIsNotNone(self.cloud.wait(cloud_matches_the_surface, timeout=60))
+        stray = rospy.Publisher(self.ns + "/dprnt/cycle_start", CycleEvent, queue_size=1)
+        deadline = time.monotonic() + 10
+        # Two subscribers: this test's own collector and surface_mapper.
+        while stray.get_num_connections() < 2 and time.monotonic() < deadline:
+            time.sleep(0.01)  # rospy offers no wait for a subscriber
+        self.assertEqual(stray.get_num_connections(), 2, "surface_mapper subscribes to cycle_start")
+        self.assertIsNotNone(self.starts.wait(lambda m: True, timeout=30, start=self.starts.count()))
+        self.assertIsNotNone(self.values.wait(lambda m: True, timeout=30, start=self.values.count() + 29))
+        stray.publish(CycleEvent(event=CycleEvent.CYCLE_START, machine="stray", text="stray"))
+        wrong = self.cloud.wait(lambda m: not cloud_matches_the_surface(m), timeout=30, start=self.cloud.count())
+        self.assertIsNotNone(wrong, "the stray cycle start restarted the grid")
+        right = self.cloud.wait(cloud_matches_the_surface, timeout=30, start=self.cloud.count())
+        self.assertIsNotNone(right, "the next real cycle start realigned the grid")
+
     def test_work_offset_parameter_publishes_the_work_frame(self):
         buffer = tf2_ros.Buffer()
-        tf2_ros.TransformListener(buffer)
+        listener = tf2_ros.TransformListener(buffer)  # noqa: F841 (must live while we look up)
         t = buffer.lookup_transform("seed/machine", "seed/work", rospy.Time(0), rospy.Duration(10))
         self.assertAlmostEqual(t.transform.translation.x, -0.3175, delta=1e-12)
         self.assertAlmostEqual(t.transform.translation.y, -0.20955, delta=1e-12)
