@@ -20,6 +20,8 @@ usage: check_packages.py [--junit FILE]
 import argparse
 import os
 import re
+import shutil
+import subprocess
 import sys
 import xml.etree.ElementTree as ET
 
@@ -224,6 +226,17 @@ def self_test():
     return results
 
 
+def setup_check():
+    """After setup (make test runs it first), setup.sh --check must find nothing missing: else a
+    second run would install again, or the tests ran without a package the list names."""
+    setup = os.path.join(ROOT, "scripts/setup.sh")
+    if not shutil.which("dpkg-query"):
+        return []
+    result = subprocess.run([setup, "--check"], capture_output=True, text=True)
+    problem = None if result.returncode == 0 else (result.stdout + result.stderr).strip()
+    return [("setup --check", problem)]
+
+
 def problems(keys, listed):
     """(name, problem or None) for every key of package.xml and every package of the list."""
     listed_set = set(listed)
@@ -252,7 +265,7 @@ def main():
     args = parser.parse_args()
     listed = listed_packages(os.path.join(ROOT, "scripts/debian-packages.txt"))
     results = (self_test() + problems(package_keys(os.path.join(ROOT, "package.xml")), listed)
-               + usage_problems(listed, used_modules(), local_modules()))
+               + usage_problems(listed, used_modules(), local_modules()) + setup_check())
     failed = [(name, problem) for name, problem in results if problem]
     for name, problem in failed:
         print(f"packages: {problem}")
