@@ -26,6 +26,17 @@ endif()
 cnc_tool(cnc_dnc src/cli/cnc_dnc.cpp)
 target_link_libraries(cnc_dnc cnc_bridge_xmodem)
 
+# The tools as a user runs them: cnc_dnc and sim_haas_serial xmodem as processes over a pty.
+if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
+  cnc_core_gtest(test_xmodem_cli test/unit/test_xmodem_cli.cpp)
+  if(TARGET test_xmodem_cli)
+    target_link_libraries(test_xmodem_cli cnc_bridge_xmodem)
+    target_compile_definitions(test_xmodem_cli PRIVATE CNC_DNC="$<TARGET_FILE:cnc_dnc>"
+                                                       SIM_HAAS_SERIAL="$<TARGET_FILE:sim_haas_serial>")
+    add_dependencies(test_xmodem_cli cnc_dnc sim_haas_serial)
+  endif()
+endif()
+
 # sim_haas_serial xmodem: the Haas of the capture.
 target_sources(sim_haas_serial PRIVATE src/sim/haas_serial/xmodem_mode.cpp)
 target_link_libraries(sim_haas_serial cnc_bridge_xmodem)

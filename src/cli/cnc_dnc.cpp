@@ -122,6 +122,20 @@ std::string blockRate(const xmodem::Stats& stats)
   return text;
 }
 
+/// A value of the command line the core refuses (a mode or EOB name): a usage error, exit status 2.
+template <typename T>
+T parsed(const po::variables_map& vm, const std::string& option, T (*parse)(const std::string&))
+{
+  try
+  {
+    return parse(vm[option].as<std::string>());
+  }
+  catch (const ConfigError& e)
+  {
+    throw UsageError("--" + option + ": " + e.what());
+  }
+}
+
 /// Options shared by send and receive: mode, EOB, binary, timing.
 void addTransferOptions(po::options_description& options, const std::string& default_mode)
 {
@@ -173,10 +187,10 @@ int runSend(const std::vector<std::string>& args)
       "milliseconds of quiet after each ACK before the next block (rx flushes after ACKs too; 0 is "
       "what sx does)");
   const po::variables_map vm = parse("send", args, options);
-  const xmodem::Mode mode = xmodem::parseMode(vm["mode"].as<std::string>());
+  const xmodem::Mode mode = parsed(vm, "mode", &xmodem::parseMode);
   xmodem::TextOptions text;
   text.binary = vm["binary"].as<bool>();
-  text.control_eob = xmodem::parseEob(vm["eob"].as<std::string>());
+  text.control_eob = parsed(vm, "eob", &xmodem::parseEob);
   xmodem::Config config = transferConfig(vm);
   config.turnaround = Milliseconds(vm["turnaround"].as<unsigned>());
   config.ack_turnaround = Milliseconds(vm["ack-turnaround"].as<unsigned>());
@@ -199,13 +213,13 @@ int runReceive(const std::vector<std::string>& args)
   options.add_options()("file-eob", po::value<std::string>()->default_value("lf"),
                         "line ends of the stored file: lf|cr|crlf|crcr|lflf");
   const po::variables_map vm = parse("receive", args, options);
-  const xmodem::Mode mode = xmodem::parseMode(vm["mode"].as<std::string>());
+  const xmodem::Mode mode = parsed(vm, "mode", &xmodem::parseMode);
   if (mode == xmodem::Mode::k1K)
     throw UsageError("receive --mode is checksum or crc (1K blocks are accepted in either)");
   xmodem::TextOptions text;
   text.binary = vm["binary"].as<bool>();
-  text.control_eob = xmodem::parseEob(vm["eob"].as<std::string>());
-  text.file_eob = xmodem::parseEob(vm["file-eob"].as<std::string>());
+  text.control_eob = parsed(vm, "eob", &xmodem::parseEob);
+  text.file_eob = parsed(vm, "file-eob", &xmodem::parseEob);
   xmodem::Config config = transferConfig(vm);
   // Waiting for the other side: the start request is repeated every 10 s (or more often when the
   // whole wait is short), 'C' three times before falling back to checksum.

@@ -2,17 +2,27 @@
 // seed's capture shows it (opendnc_haas_xmodem_dprnt.md, Appendix): checksum mode only; while
 // waiting to receive it NAKs every --nak-interval, so several NAKs are queued before a host starts
 // sending; it answers the host's EOT with CAN CAN CAN; programs it receives are stored in --dir
-// under their O number. When the host asks for a program (NAK; a 'C' is ignored, as a checksum-only
-// control does) it sends --program. Line-rate pacing (--pace-baud) and seeded faults (--faults).
+// under their O number. It sends --program (NAK start; a 'C' is ignored, as a checksum-only
+// control does) when asked: with --send-on request (the default) whenever the host asks with NAK;
+// with --send-on signal only after the operator presses SEND: SIGUSR1, or --send at start-up (the
+// control then waits for the host's NAK, as a Haas does). Line-rate pacing (--pace-baud) and
+// seeded faults (--faults).
 //
-//   sim_haas_serial xmodem [--link PATH] [--dir DIR] [--program FILE] [--nak-interval S]
-//                          [--pace-baud N] [--faults flip=..,drop=..,dup=..,lose=..,seed=..] [--eob lf]
+//   sim_haas_serial xmodem [--link PATH] [--dir DIR] [--program FILE] [--send-on request|signal]
+//                          [--send] [--nak-interval S] [--pace-baud N]
+//                          [--faults flip=..,drop=..,dup=..,lose=..,seed=..] [--eob lf]
+//   kill -USR1 <pid>       the operator presses SEND (the program goes to the host's next NAK)
+#include <pthread.h>
+
+#include <atomic>
 #include <boost/program_options.hpp>
+#include <csignal>
 #include <deque>
 #include <filesystem>
 #include <iostream>
 #include <memory>
 #include <regex>
+#include <thread>
 
 #include "cnc_bridge/common/atomic_file.h"
 #include "cnc_bridge/common/error.h"
@@ -69,6 +79,60 @@ std::string programName(const std::string& text, unsigned counter)
   return "received_" + std::to_string(counter) + ".nc";
 }
 
+/// SIGUSR1 blocked in this thread and the threads it starts: call before any thread starts.
+void blockSendSignal()
+{
+  sigset_t set;
+  sigemptyset(&set);
+  sigaddset(&set, SIGUSR1);
+  pthread_sigmask(SIG_BLOCK, &set, nullptr);
+}
+
+/// The operator's SEND key: SIGUSR1 sets it, a send takes it. SIGUSR1 is taken by sigwait in a
+/// thread of its own, started after installStopHandler() so that it keeps SIGINT/SIGTERM blocked
+/// (blockSendSignal() must have run before either).
+std::atomic<bool>& sendPressedOnSignal()
+{
+  static std::atomic<bool> pressed{false};
+  sigset_t set;
+  sigemptyset(&set);
+  sigaddset(&set, SIGUSR1);
+  std::thread(
+      [set]
+      {
+        for (;;)
+        {
+          int signal_number = 0;
+          if (sigwait(&set, &signal_number) == 0)
+          {
+            pressed = true;
+            std::cerr << "sim_haas_serial: SEND pressed (SIGUSR1)" << std::endl;
+          }
+        }
+      })
+      .detach();  // lives as long as the process: sigwait has no timeout to end it by
+  return pressed;
+}
+
+/// After SEND: waits up to \p wait for the host's NAK (a 'C' or anything else is not an answer a
+/// checksum-only control knows), puts it back for the sender. \returns false if none came.
+bool waitForHostNak(PushbackTransport& line, Milliseconds wait)
+{
+  const auto deadline = std::chrono::steady_clock::now() + wait;
+  for (;;)
+  {
+    const auto left = std::chrono::duration_cast<Milliseconds>(deadline - std::chrono::steady_clock::now());
+    const int c = left.count() > 0 ? line.readByte(left) : -1;
+    if (c < 0)
+      return false;
+    if (c == xmodem::kNak)
+    {
+      line.unread(xmodem::kNak);
+      return true;
+    }
+  }
+}
+
 int runXmodem(const std::vector<std::string>& all_args)
 {
   // roslaunch appends __name:= and __log:= when a test launches the simulator as a node.
@@ -80,6 +144,10 @@ int runXmodem(const std::vector<std::string>& all_args)
                                                "make this symbolic link to the pty (a stable device name)")(
       "dir", po::value<std::string>()->default_value("."), "where received programs are stored")(
       "program", po::value<std::string>()->default_value(""), "the program sent when the host asks for one")(
+      "send-on", po::value<std::string>()->default_value("request"),
+      "request: send --program whenever the host asks with NAK; signal: only after SEND is pressed "
+      "(SIGUSR1 or --send), then to the host's next NAK")(
+      "send", po::bool_switch(), "press SEND once at start-up (the program goes to the host's first NAK)")(
       "nak-interval", po::value<double>()->default_value(1.0), "seconds between NAKs while waiting to receive")(
       "pace-baud", po::value<unsigned>()->default_value(0), "pace output to this baud rate, 8N1 (0 = pty speed)")(
       "faults", po::value<std::string>()->default_value(""), "fault injection, e.g. flip=0.001,lose=0.01,seed=3")(
@@ -103,7 +171,17 @@ int runXmodem(const std::vector<std::string>& all_args)
     return 0;
   }
 
+  const std::string send_on = vm["send-on"].as<std::string>();
+  if (send_on != "request" && send_on != "signal")
+  {
+    std::cerr << "sim_haas_serial xmodem: --send-on is request or signal, not '" << send_on << "'\n";
+    return 2;
+  }
+  const bool send_on_signal = send_on == "signal";
+  blockSendSignal();  // before the stop handler's thread starts
   StopSignal& stop = installStopHandler();
+  std::atomic<bool>& send_pressed = sendPressedOnSignal();
+  send_pressed = vm["send"].as<bool>();
   try
   {
     PtyMaster pty(vm["link"].as<std::string>());
@@ -143,6 +221,7 @@ int runXmodem(const std::vector<std::string>& all_args)
     std::filesystem::create_directories(dir, ignored);  // a failure shows when a program is stored
     const std::string program = vm["program"].as<std::string>();
     const Milliseconds nak_interval(static_cast<int64_t>(vm["nak-interval"].as<double>() * 1000));
+    const Milliseconds send_wait = scaled(60000);  // how long a pressed SEND waits for the host
 
     announce("sim_haas_serial", "pty " + pty.slavePath());
     unsigned received = 0;
@@ -150,6 +229,19 @@ int runXmodem(const std::vector<std::string>& all_args)
     {
       try
       {
+        if (send_pressed.exchange(false))
+        {
+          // SEND pressed: the control waits for the host's NAK and sends the program.
+          if (program.empty())
+            std::cerr << "sim_haas_serial: SEND pressed but --program is not set" << std::endl;
+          else if (!waitForHostNak(line, send_wait))
+            std::cerr << "sim_haas_serial: SEND pressed but the host did not ask (no NAK within "
+                      << send_wait.count() / 1000.0 << " s)" << std::endl;
+          else
+            std::cerr << "sim_haas_serial: "
+                      << xmodem::sendFile(line, program, xmodem::Mode::kChecksum, config, text).message << std::endl;
+          continue;
+        }
         // Waiting in "receive" as the control does: a NAK now and then until something happens.
         line.writeByte(xmodem::kNak);
         const int c = line.readByte(nak_interval);
@@ -165,7 +257,7 @@ int runXmodem(const std::vector<std::string>& all_args)
           std::cerr << "sim_haas_serial: received " << path << " (" << contents.size() << " bytes, "
                     << receiver.stats().retries << " retries)" << std::endl;
         }
-        else if (c == xmodem::kNak)
+        else if (c == xmodem::kNak && !send_on_signal)
         {
           // The host wants a program (it is a receiver asking in checksum mode).
           if (program.empty())
@@ -179,7 +271,8 @@ int runXmodem(const std::vector<std::string>& all_args)
           const xmodem::FileResult result = xmodem::sendFile(line, program, xmodem::Mode::kChecksum, config, text);
           std::cerr << "sim_haas_serial: " << result.message << std::endl;
         }
-        // Anything else ('C' from a host that wants CRC, noise): a checksum-only control ignores it.
+        // Anything else ('C' from a host that wants CRC, noise, a NAK nobody pressed SEND for): a
+        // checksum-only control ignores it.
       }
       catch (const CancelledError&)
       {

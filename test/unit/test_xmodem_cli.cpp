@@ -1,0 +1,478 @@
+// The XModem tools as a user runs them: the `cnc_dnc send` and `cnc_dnc receive` executables against
+// sim_haas_serial xmodem (both spawned as processes, the simulator on its own pty), and the
+// simulator's fault injection (--faults, seeded) against this process's XModem over the pty.
+// Checks exit statuses (0 only for an exact file, 1 with one `cnc_dnc ...: error: ...` line, 2 for
+// a bad command line), plain progress lines when stderr is no terminal, the simulator's SEND key
+// (SIGUSR1), and that no failed transfer leaves a partial file. No sleeps: every wait is a read of
+// a process's output with a timeout, or the exit of a process whose own timeouts bound it.
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <poll.h>
+#include <signal.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <dirent.h>
+#include <chrono>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "cnc_bridge/common/error.h"
+#include "cnc_bridge/transport/pty.h"
+#include "cnc_bridge/transport/serial_port.h"
+#include "cnc_bridge/xmodem/file_transfer.h"
+
+using namespace cnc_bridge;
+
+namespace
+{
+struct TempDir
+{
+  std::string path;
+  TempDir()
+  {
+    char templ[] = "/tmp/test_xmodem_cli.XXXXXX";
+    path = ::mkdtemp(templ);
+  }
+  ~TempDir() { std::system(("rm -rf '" + path + "'").c_str()); }
+};
+
+std::string readFile(const std::string& path)
+{
+  std::ifstream in(path, std::ios::binary);
+  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+void writeFile(const std::string& path, const std::string& contents)
+{
+  std::ofstream(path, std::ios::binary) << contents;
+}
+
+bool exists(const std::string& path)
+{
+  struct stat st;
+  return ::stat(path.c_str(), &st) == 0;
+}
+
+std::vector<std::string> filesIn(const std::string& dir)
+{
+  std::vector<std::string> names;
+  if (DIR* d = ::opendir(dir.c_str()))
+  {
+    while (dirent* e = ::readdir(d))
+      if (std::string(e->d_name) != "." && std::string(e->d_name) != "..")
+        names.push_back(e->d_name);
+    ::closedir(d);
+  }
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+std::vector<std::string> lines(const std::string& text)
+{
+  std::vector<std::string> out;
+  std::istringstream in(text);
+  for (std::string line; std::getline(in, line);)
+    out.push_back(line);
+  return out;
+}
+
+/// An NC program with O number \p number, about \p size bytes, LF line ends.
+std::string program(unsigned number, size_t size)
+{
+  char head[64];
+  std::snprintf(head, sizeof(head), "%%\nO%05u (CLI TEST)\n", number);
+  std::string out = head;
+  for (unsigned n = 10; out.size() < size; n += 10)
+    out += "N" + std::to_string(n) + " G01 X" + std::to_string((n * 37) % 1000) + ".5 F200.\n";
+  return out + "M30\n%\n";
+}
+
+/// Starts \p argv with stdout and stderr going to \p out_fd and \p err_fd (closed in the child after dup).
+pid_t spawn(const std::vector<std::string>& argv, int out_fd, int err_fd)
+{
+  const pid_t pid = ::fork();
+  if (pid == 0)
+  {
+    ::dup2(out_fd, 1);
+    ::dup2(err_fd, 2);
+    const int null = ::open("/dev/null", O_RDONLY);
+    ::dup2(null, 0);
+    std::vector<char*> args;
+    for (const auto& a : argv)
+      args.push_back(const_cast<char*>(a.c_str()));
+    args.push_back(nullptr);
+    ::execv(args[0], args.data());
+    ::_exit(127);
+  }
+  return pid;
+}
+
+int exitStatus(pid_t pid)
+{
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+}
+
+/// A finished run of the cnc_dnc tool: exit status and what it printed (to files: no terminal).
+struct ToolRun
+{
+  int status = -1;
+  std::string out;
+  std::string err;
+};
+
+/// cnc_dnc started in the background; finish() waits for it (its own --timeout bounds the wait).
+class Tool
+{
+ public:
+  Tool(const std::vector<std::string>& args, const std::string& dir) : out_(dir + "/tool.out"), err_(dir + "/tool.err")
+  {
+    std::vector<std::string> argv = {CNC_DNC};
+    argv.insert(argv.end(), args.begin(), args.end());
+    const int out = ::open(out_.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    const int err = ::open(err_.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    pid_ = spawn(argv, out, err);
+    ::close(out);
+    ::close(err);
+  }
+  ToolRun finish()
+  {
+    ToolRun run;
+    run.status = exitStatus(pid_);
+    pid_ = -1;
+    run.out = readFile(out_);
+    run.err = readFile(err_);
+    return run;
+  }
+  ~Tool()
+  {
+    if (pid_ > 0)
+    {
+      ::kill(pid_, SIGKILL);
+      ::waitpid(pid_, nullptr, 0);
+    }
+  }
+
+ private:
+  std::string out_, err_;
+  pid_t pid_ = -1;
+};
+
+ToolRun cncDnc(const std::vector<std::string>& args, const std::string& dir)
+{
+  return Tool(args, dir).finish();
+}
+
+/// A failed run: exit status 1 and exactly one line on stderr, "cnc_dnc COMMAND: error: ...",
+/// containing \p reason; nothing on stdout.
+void expectOneErrorLine(const ToolRun& run, const std::string& command, const std::string& reason)
+{
+  EXPECT_EQ(run.status, 1) << run.err;
+  const auto err = lines(run.err);
+  ASSERT_EQ(err.size(), 1u) << run.err;
+  EXPECT_EQ(err[0].rfind("cnc_dnc " + command + ": error: ", 0), 0u) << err[0];
+  EXPECT_NE(err[0].find(reason), std::string::npos) << err[0];
+  EXPECT_EQ(run.out, "");
+}
+
+/// sim_haas_serial xmodem on its own pty; its output is read line by line.
+class Simulator
+{
+ public:
+  Simulator(const std::string& dir, const std::vector<std::string>& options, const std::string& timeout_scale = "0.1")
+  {
+    int fds[2];
+    if (::pipe(fds) != 0)
+      throw std::runtime_error("pipe");
+    std::vector<std::string> argv = {SIM_HAAS_SERIAL,  "xmodem", "--dir",           dir,
+                                     "--nak-interval", "0.2",    "--timeout-scale", timeout_scale};
+    argv.insert(argv.end(), options.begin(), options.end());
+    pid_ = spawn(argv, fds[1], fds[1]);
+    ::close(fds[1]);
+    output_ = fds[0];
+    const std::string first = waitFor("sim_haas_serial pty ", std::chrono::seconds(10));
+    if (first.empty())
+      throw std::runtime_error("sim_haas_serial did not start: " + seen_);
+    port_ = first.substr(first.rfind(' ') + 1);
+  }
+  ~Simulator()
+  {
+    stop();
+    ::close(output_);
+  }
+  /// Stops the simulator (SIGTERM) and waits for it. \returns its exit status.
+  int stop()
+  {
+    if (pid_ <= 0)
+      return -1;
+    ::kill(pid_, SIGTERM);
+    const int status = exitStatus(pid_);
+    pid_ = -1;
+    waitFor("\n", std::chrono::milliseconds(1000));  // reads what is left up to the end of its output
+    return status;
+  }
+  const std::string& port() const { return port_; }
+  pid_t pid() const { return pid_; }
+
+  /// The next line of output containing \p text ("" if none came within \p timeout).
+  std::string waitFor(const std::string& text, std::chrono::milliseconds timeout)
+  {
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    for (;;)
+    {
+      for (size_t end; (end = pending_.find('\n')) != std::string::npos;)
+      {
+        const std::string line = pending_.substr(0, end);
+        pending_.erase(0, end + 1);
+        if (line.find(text) != std::string::npos)
+          return line;
+      }
+      const auto left =
+          std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+      pollfd p{output_, POLLIN, 0};
+      if (left.count() <= 0 || ::poll(&p, 1, static_cast<int>(left.count())) <= 0)
+        return "";
+      char buffer[4096];
+      const ssize_t n = ::read(output_, buffer, sizeof(buffer));
+      if (n <= 0)
+        return "";
+      pending_.append(buffer, n);
+      seen_.append(buffer, n);
+    }
+  }
+  /// Everything the simulator printed so far (for failure messages).
+  const std::string& seen() const { return seen_; }
+
+ private:
+  pid_t pid_ = -1;
+  int output_ = -1;
+  std::string port_;
+  std::string pending_;
+  std::string seen_;
+};
+
+constexpr auto kSimulatorReply = std::chrono::seconds(20);
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+TEST(CncDncCli, SendStoresTheExactProgramOnTheSimulatedHaas)
+{
+  TempDir dir;
+  const std::string memory = dir.path + "/haas";
+  Simulator haas(memory, {});
+  const std::string source = dir.path + "/O01234.nc";
+  const std::string text = program(1234, 5000);
+  writeFile(source, text);
+  const ToolRun run =
+      cncDnc({"send", "--port", haas.port(), "--mode", "checksum", "--timeout", "20", source}, dir.path);
+  ASSERT_EQ(run.status, 0) << run.err;
+  EXPECT_NE(haas.waitFor("received " + memory + "/O01234.nc", kSimulatorReply), "") << haas.seen();
+  EXPECT_EQ(readFile(memory + "/O01234.nc"), text);
+  // One result line on stdout; the Haas's CAN answer to EOT is reported as complete.
+  const auto out = lines(run.out);
+  ASSERT_EQ(out.size(), 1u) << run.out;
+  EXPECT_EQ(out[0].rfind("sent " + source + ": ", 0), 0u) << out[0];
+  EXPECT_NE(out[0].find("answered EOT with CAN"), std::string::npos) << out[0];
+  // stderr is a file, not a terminal: plain progress lines, no carriage returns, the last one 100 %.
+  EXPECT_EQ(run.err.find('\r'), std::string::npos);
+  const auto err = lines(run.err);
+  ASSERT_FALSE(err.empty());
+  EXPECT_EQ(err.back().rfind("send " + source + " [", 0), 0u) << err.back();
+  EXPECT_NE(err.back().find("100%"), std::string::npos) << err.back();
+}
+
+TEST(CncDncCli, ReceiveStoresTheSimulatorsProgramExactly)
+{
+  TempDir dir;
+  const std::string source = dir.path + "/O00777.nc";
+  const std::string text = program(777, 3000);
+  writeFile(source, text);
+  Simulator haas(dir.path + "/haas", {"--program", source});
+  const std::string target = dir.path + "/received.nc";
+  writeFile(target, "previous version\n");
+  const ToolRun run =
+      cncDnc({"receive", "--port", haas.port(), "--mode", "checksum", "--timeout", "20", target}, dir.path);
+  ASSERT_EQ(run.status, 0) << run.err;
+  EXPECT_EQ(readFile(target), text);
+  const auto out = lines(run.out);
+  ASSERT_EQ(out.size(), 1u) << run.out;
+  EXPECT_EQ(out[0].rfind("received " + target + " (" + std::to_string(text.size()) + " bytes)", 0), 0u) << out[0];
+  EXPECT_EQ(run.err.find('\r'), std::string::npos);
+  ASSERT_FALSE(run.err.empty());
+  EXPECT_EQ(lines(run.err).back().rfind("receive " + target + " ", 0), 0u) << run.err;
+}
+
+// --send-on signal: the control sends only when its operator presses SEND (SIGUSR1). A host
+// asking before that gets nothing and gives up with one clear line; after SIGUSR1 it gets the program.
+TEST(CncDncCli, SimulatorSendsOnlyAfterSendIsPressed)
+{
+  TempDir dir;
+  const std::string source = dir.path + "/O00042.nc";
+  const std::string text = program(42, 2000);
+  writeFile(source, text);
+  Simulator haas(dir.path + "/haas", {"--program", source, "--send-on", "signal"});
+  const std::string target = dir.path + "/received.nc";
+
+  const ToolRun early =
+      cncDnc({"receive", "--port", haas.port(), "--mode", "checksum", "--timeout", "1.5", target}, dir.path);
+  expectOneErrorLine(early, "receive", "did not start");
+  EXPECT_FALSE(exists(target));
+
+  // --timeout 12: the host repeats its NAK every 2 s, and the control sends at the first NAK after SEND.
+  Tool waiting({"receive", "--port", haas.port(), "--mode", "checksum", "--timeout", "12", target}, dir.path);
+  ASSERT_EQ(::kill(haas.pid(), SIGUSR1), 0);
+  EXPECT_NE(haas.waitFor("SEND pressed", kSimulatorReply), "") << haas.seen();
+  const ToolRun run = waiting.finish();
+  ASSERT_EQ(run.status, 0) << run.err;
+  EXPECT_EQ(readFile(target), text);
+  EXPECT_NE(haas.waitFor("sent " + source, kSimulatorReply), "") << haas.seen();
+}
+
+TEST(CncDncCli, FailuresExitOneWithOneErrorLineAndLeaveNoFile)
+{
+  TempDir dir;
+  PtyMaster silent;  // a peer that never answers
+  const std::string source = dir.path + "/O00001.nc";
+  writeFile(source, program(1, 500));
+
+  expectOneErrorLine(cncDnc({"send", "--port", silent.slavePath(), dir.path + "/missing.nc"}, dir.path), "send",
+                     "missing.nc");
+  expectOneErrorLine(cncDnc({"send", "--port", dir.path + "/no_such_tty", source}, dir.path), "send", "no_such_tty");
+  expectOneErrorLine(cncDnc({"receive", "--port", dir.path + "/no_such_tty", dir.path + "/x.nc"}, dir.path), "receive",
+                     "no_such_tty");
+  expectOneErrorLine(cncDnc({"send", "--port", silent.slavePath(), "--timeout", "0.5", source}, dir.path), "send",
+                     "did not start");
+
+  const std::string target = dir.path + "/kept.nc";
+  writeFile(target, "previous version\n");
+  expectOneErrorLine(cncDnc({"receive", "--port", silent.slavePath(), "--timeout", "0.5", target}, dir.path), "receive",
+                     "did not start");
+  EXPECT_EQ(readFile(target), "previous version\n");
+  expectOneErrorLine(
+      cncDnc({"receive", "--port", silent.slavePath(), "--timeout", "0.5", dir.path + "/new.nc"}, dir.path), "receive",
+      "did not start");
+  EXPECT_FALSE(exists(dir.path + "/new.nc"));
+  // Only the files this test wrote: no temporary file of a failed receive.
+  EXPECT_EQ(filesIn(dir.path), (std::vector<std::string>{"O00001.nc", "kept.nc", "tool.err", "tool.out"}));
+}
+
+TEST(CncDncCli, BadCommandLineExitsTwo)
+{
+  TempDir dir;
+  const std::vector<std::vector<std::string>> bad = {
+      {},
+      {"frobnicate"},
+      {"send"},
+      {"send", dir.path + "/a.nc"},  // no --port
+      {"send", "--port", "/dev/null", "--mode", "zmodem", "a.nc"},
+      {"send", "--port", "/dev/null", "--eob", "semicolon", "a.nc"},
+      {"send", "--port", "/dev/null", "--baud", "fast", "a.nc"},
+      {"receive", "--port", "/dev/null", "--mode", "1k", "a.nc"},
+      {"receive", "--port", "/dev/null", "--timeout", "0", "a.nc"},
+      {"receive", "--port", "/dev/null", "--file-eob", "x", "a.nc"},
+  };
+  for (const auto& args : bad)
+  {
+    const ToolRun run = cncDnc(args, dir.path);
+    std::string line;
+    for (const auto& a : args)
+      line += a + " ";
+    EXPECT_EQ(run.status, 2) << "cnc_dnc " << line << "\n" << run.err;
+    EXPECT_FALSE(run.err.empty()) << "cnc_dnc " << line;
+  }
+  EXPECT_EQ(cncDnc({"--help"}, dir.path).status, 0);
+  EXPECT_EQ(cncDnc({"send", "--help"}, dir.path).status, 0);
+}
+
+// ---------------------------------------------------------------------------------------------
+// sim_haas_serial --faults (seeded; bytes it writes and reads are damaged): every transfer in
+// either direction delivers the exact program or fails with a clear error, and no failed transfer
+// leaves a file (or a temporary file) on either side. This process is the host, with timeouts
+// short enough for a test (the simulator's are scaled by 0.05).
+TEST(SimHaasSerialFaults, EveryTransferIsExactOrAClearErrorWithNoPartialFile)
+{
+  TempDir dir;
+  const std::string memory = dir.path + "/haas";
+  const std::string host = dir.path + "/host";
+  ::mkdir(host.c_str(), 0755);
+  const std::string offered = dir.path + "/O09000.nc";
+  const std::string offered_text = program(9000, 2500);
+  writeFile(offered, offered_text);
+  Simulator haas(memory, {"--program", offered, "--faults", "flip=0.0015,drop=0.0015,lose=0.03,read=1,seed=11"},
+                 "0.05");
+
+  xmodem::Config config;
+  config.nak_interval = Milliseconds(400);
+  config.start_timeout = config.start_wait = Milliseconds(15000);  // the simulator may still be in a failed transfer
+  config.block_timeout = config.ack_timeout = config.eot_timeout = Milliseconds(300);
+  config.char_timeout = Milliseconds(50);
+  config.purge_quiet = Milliseconds(40);
+  config.stale_nak_settle = Milliseconds(150);
+  SerialSettings settings;
+  settings.device = haas.port();
+  settings.baud = 115200;
+  const xmodem::TextOptions text;
+
+  constexpr unsigned kEachWay = 10;
+  std::vector<bool> sent_ok(kEachWay, false);
+  unsigned ok = 0, failed = 0, repaired = 0;
+  for (unsigned i = 0; i < kEachWay; ++i)
+  {
+    const std::string source = host + "/O0" + std::to_string(1000 + i) + ".nc";
+    writeFile(source, program(1000 + i, 1500 + 300 * i));
+    const std::string target = host + "/received_" + std::to_string(i) + ".nc";
+    for (const bool send : {true, false})
+    {
+      SerialPort port(settings);
+      xmodem::Stats stats;
+      try
+      {
+        if (send)
+        {
+          xmodem::sendFile(port, source, xmodem::Mode::kChecksum, config, text, nullptr, nullptr, &stats);
+          sent_ok[i] = true;
+        }
+        else
+        {
+          xmodem::receiveFile(port, target, xmodem::Mode::kChecksum, config, text, nullptr, nullptr, &stats);
+          EXPECT_EQ(readFile(target), offered_text) << "receive " << i;
+        }
+        ++ok;
+      }
+      catch (const Error& e)
+      {
+        ++failed;
+        EXPECT_GT(std::string(e.what()).size(), 20u);
+        if (!send)
+        {
+          EXPECT_FALSE(exists(target)) << "a failed receive left " << target << ": " << e.what();
+        }
+      }
+      repaired += stats.retries;
+    }
+  }
+  ASSERT_EQ(haas.stop(), 0) << haas.seen();
+  // The control's memory: a program the host reported sent is there exactly; one that failed is
+  // there exactly (the last answer was lost) or not at all; nothing else (no temporary file).
+  std::vector<std::string> expected;
+  for (unsigned i = 0; i < kEachWay; ++i)
+  {
+    const std::string name = "O0" + std::to_string(1000 + i) + ".nc";
+    if (sent_ok[i] || exists(memory + "/" + name))
+    {
+      expected.push_back(name);
+      EXPECT_EQ(readFile(memory + "/" + name), readFile(host + "/" + name)) << name;
+    }
+  }
+  EXPECT_EQ(filesIn(memory), expected);
+  EXPECT_GT(ok, kEachWay);                     // most transfers got through the damaged line
+  EXPECT_GT(repaired + failed, kEachWay / 2);  // which really was damaged
+  std::cout << "sim_haas_serial --faults: " << ok << " transfers exact, " << failed << " failed cleanly, " << repaired
+            << " blocks resent or NAKed by this side\n"
+            << haas.seen();
+}
