@@ -65,9 +65,10 @@ void SimSlave::receive(const std::vector<uint8_t>& i2c_frame)
       reply_ = encodeValues({tool_on_ ? 1 : 0}, encoding_);
       break;
     case SimRole::kGeneric:
-      // Echo, as the seed's slave sketch does, but no more than the master reads.
-      reply_.assign(payload.begin(),
-                    payload.begin() + static_cast<std::ptrdiff_t>(std::min(payload.size(), kMaxReply)));
+      // Echo, as the seed's slave sketch does, but no more than the master reads (nor than one of
+      // the bus's frames carries).
+      reply_.assign(payload.begin(), payload.begin() + static_cast<std::ptrdiff_t>(
+                                                           std::min({payload.size(), kMaxReply, wire_.max_data})));
       break;
   }
   has_reply_ = true;
@@ -96,6 +97,12 @@ SimMaster::SimMaster(Transport& link, std::vector<SimSlave> slaves, Options opti
           slaves_.size(), [this](const StepReceiver::Delivery& d) { deliver(d); }, [this] { ++stats_.frames; }),
       unpacker_(options.wire)
 {
+  if (options_.framing == Framing::kFramed && options_.wire.max_data < 1 + kMaxReply)
+  {
+    throw ConfigError("framed uplink records carry an address and up to " + std::to_string(kMaxReply) +
+                      " bytes of answer: frames of " + std::to_string(options_.wire.max_data) +
+                      " data bytes are too small (at least " + std::to_string(1 + kMaxReply) + ")");
+  }
   for (size_t i = 0; i < slaves_.size(); ++i)
   {
     if (slaves_[i].address() != i + 1)

@@ -208,6 +208,11 @@ TEST(SimMaster, PayloadOverTheConfiguredFrameSizeIsReportedForItsSlave)
   EXPECT_EQ(records[1].address, 5);
   EXPECT_EQ(master.stats().oversize_payloads, 1u);
   EXPECT_EQ(master.stats().deliveries, 1u);
+  // Framed, the uplink needs frames for an address and a 32-byte answer.
+  options.framing = Framing::kFramed;
+  EXPECT_THROW(SimMaster(link, eightSlaves(), options), ConfigError);
+  options.wire = WireFormat::of(WireCrc::kSpec, 1 + kMaxReply);
+  EXPECT_NO_THROW(SimMaster(link, eightSlaves(), options));
 }
 
 TEST(SimMaster, NoisySlaveAnswerIsReportedWithStatus3AndItsAddress)
