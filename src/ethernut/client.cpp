@@ -507,9 +507,17 @@ void Client::onAck(std::unique_lock<std::mutex>& lock, const Message& message)
       break;  // handled by run()
     case Opcode::kFileMode:
       mode_ = BoardMode::kFile;
+      if (state_ == SessionState::kInitialising)
+      {
+        setState(lock, SessionState::kConnected);
+      }
       break;
     case Opcode::kGuiControlMode:
       mode_ = BoardMode::kGuiControl;
+      if (state_ == SessionState::kInitialising)
+      {
+        setState(lock, SessionState::kConnected);
+      }
       break;
     case Opcode::kStandaloneMode:
       mode_ = BoardMode::kStandalone;
@@ -675,9 +683,9 @@ void Client::checkTimers(std::unique_lock<std::mutex>& lock)
     const std::string what = std::string("ethernut: ") + toString(pending_.opcode) + " not answered by " +
                              transport_.describe() + " within " + std::to_string(options_.reply_timeout.count()) +
                              " ms";
-    if (pending_.opcode == Opcode::kInitRequest)
+    if (state_ == SessionState::kInitialising)
     {
-      throw LinkError(what);
+      throw LinkError(what);  // init or the initial mode not acknowledged: no session
     }
     if (pending_.opcode == Opcode::kReadyToSend && state_ == SessionState::kWaitingReady)
     {
@@ -741,8 +749,9 @@ void Client::run()
     {
       if (!initialised && !has_pending_)
       {
+        // Init acknowledged; the handshake ends with the mode's acknowledge (onAck), so that a
+        // connected session always knows the board's mode (a job needs file mode).
         initialised = true;
-        setState(lock, SessionState::kConnected);
         sendRequest(lock, Request{makeMessage(modeOpcode(options_.initial_mode)), modeOpcode(options_.initial_mode),
                                   Opcode::kAck, nullptr});
       }
@@ -794,9 +803,14 @@ void Client::run()
       checkTimers(lock);
     }
   }
-  catch (const Error& e)
+  catch (const std::exception& e)
   {
     failure = e.what();
+  }
+  // A transport read or write that threw did so with the lock released.
+  if (!lock.owns_lock())
+  {
+    lock.lock();
   }
   running_ = false;
   const std::string why = failure.empty() ? std::string("ethernut: session ended") : failure;

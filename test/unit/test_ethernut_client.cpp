@@ -270,6 +270,23 @@ TEST(EthernutClient, InitWithoutAckIsALinkError)
   EXPECT_NE(s.failure.find("init-request not answered"), std::string::npos) << s.failure;
 }
 
+// The handshake ends with the mode's acknowledge: until then the session is not connected (a
+// job would be refused for want of file mode), and a mode never acknowledged is a link error.
+TEST(EthernutClient, HandshakeEndsOnlyWhenTheModeIsAcknowledged)
+{
+  ClientOptions o;
+  o.reply_timeout = milliseconds(100);
+  Session s(o);
+  s.board.rule = [](const Message& m, FakeTransport&) { return classify(m) == Opcode::kFileMode; };
+  s.start();
+  ASSERT_TRUE(s.recorder.waitFor([&] { return s.board.count(Opcode::kFileMode) == 1; }));
+  EXPECT_EQ(s.client->state(), SessionState::kInitialising);
+  EXPECT_THROW(s.client->startJob(Session::points({1})), LinkError);
+  ASSERT_TRUE(s.recorder.waitFor([&] { return s.finished.load(); }));
+  EXPECT_NE(s.failure.find("file-mode not answered"), std::string::npos) << s.failure;
+  EXPECT_EQ(std::count(s.recorder.states.begin(), s.recorder.states.end(), SessionState::kConnected), 0);
+}
+
 TEST(EthernutClient, JobStreamsCoordinatesInOrderWithResend)  // rows 13, 1, 12, 14
 {
   Session s;
@@ -622,6 +639,29 @@ TEST(EthernutClient, AliveRoundTripIsMeasuredAsTheLinkRoundTrip)
   EXPECT_LE(st.last_link_rtt_ms, st.max_link_rtt_ms);
   EXPECT_LT(st.max_link_rtt_ms, 5000.0);  // an in-memory peer answers at once
   EXPECT_EQ(st.coordinates_done, 0u);     // coordinate round trips are counted apart
+}
+
+// The board closes the connection in the middle of a job (the read fails, not a timer): the job
+// ends as a lost link and run() throws LinkError.
+TEST(EthernutClient, PeerClosingDuringAJobFailsTheJob)
+{
+  Session s;
+  std::atomic<int> seen{0};
+  s.board.rule = [&](const Message& m, FakeTransport&)
+  {
+    return classify(m) == Opcode::kCoordinates && ++seen == 2;  // hold the second move
+  };
+  s.start();
+  ASSERT_TRUE(s.waitConnected());
+  s.client->startJob(Session::points({1, 2, 3}));
+  ASSERT_TRUE(s.recorder.waitFor([&] { return seen == 2; }));
+  s.link.disconnect();
+  ASSERT_TRUE(s.recorder.waitFor([&] { return s.finished.load() && !s.recorder.outcomes.empty(); }));
+  EXPECT_EQ(s.recorder.outcomes[0], JobOutcome::kFailed);
+  EXPECT_NE(s.recorder.messages[0].find("link lost"), std::string::npos) << s.recorder.messages[0];
+  EXPECT_FALSE(s.failure.empty());
+  EXPECT_EQ(s.client->state(), SessionState::kDisconnected);
+  EXPECT_FALSE(s.client->jobActive());
 }
 
 TEST(EthernutClient, CommandsWhileDisconnectedAreRefused)

@@ -24,8 +24,8 @@ namespace ethernut
 enum class SessionState : uint8_t
 {
   kDisconnected,  ///< run() not running
-  kInitialising,  ///< init request sent, waiting for the board's ack
-  kConnected,     ///< acknowledged; READYTOSEND not (yet) requested
+  kInitialising,  ///< handshake: init request and then the initial mode, each waiting for its ack
+  kConnected,     ///< both acknowledged (the mode is known); READYTOSEND not (yet) requested
   kWaitingReady,  ///< READYTOSEND requested for a job
   kReadyToSend,   ///< the board takes coordinates; none in flight
   kSending,       ///< a coordinate is in flight, waiting for NEXT or RESEND
