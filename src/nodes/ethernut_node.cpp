@@ -56,6 +56,89 @@ bool parseMode(const std::string& text, ethernut::BoardMode& mode)
   return true;
 }
 
+// What to do with G53 moves (machine coordinates) in a G-code job. The board knows one coordinate
+// system, the one the program's coordinates are streamed in; a G53 target in it would be a move
+// to the wrong place (G53 Z0, a retract to the top of the machine, becomes a plunge to the work
+// zero).
+enum class G53Moves : uint8_t
+{
+  kRefuse,  ///< the job is refused before anything is sent
+  kSkip     ///< left out of the stream and the preview; the next move keeps the unnamed axes
+};
+
+// The moves of a G-code program as the board gets them: G53 moves refused or left out.
+class GcodeJob
+{
+ public:
+  GcodeJob(const std::string& path, const gcode::ParserOptions& options, G53Moves g53, std::string g53_param)
+      : in_(path, std::ios::binary),
+        reader_(in_, withSeparateMachineMoves(options)),
+        g53_(g53),
+        g53_param_(std::move(g53_param))
+  {
+    if (!in_)
+    {
+      throw ConfigError("cannot open " + path);
+    }
+  }
+
+  // The next move to stream; false at the end. Throws ParseError, or ConfigError for a G53 move
+  // under kRefuse.
+  bool next(gcode::Move& move)
+  {
+    while (reader_.nextMove(move))
+    {
+      if (!move.machine_coordinates)
+      {
+        return true;
+      }
+      if (g53_ == G53Moves::kRefuse)
+      {
+        throw ConfigError("G-code line " + std::to_string(move.line) +
+                          ": G53 move to machine coordinates, which the board does not have (it knows one "
+                          "coordinate system, the program's); set " +
+                          g53_param_ + " to skip to leave G53 moves out");
+      }
+      if (skipped_lines_.size() < 5)
+      {
+        skipped_lines_.push_back(move.line);
+      }
+      ++skipped_;
+    }
+    return false;
+  }
+
+  // "" when no G53 move was left out, else e.g. "3 G53 moves left out (lines 8, 58, 63)".
+  std::string skippedSummary() const
+  {
+    if (skipped_ == 0)
+    {
+      return "";
+    }
+    std::string text = std::to_string(skipped_) + " G53 move" + (skipped_ == 1 ? "" : "s") + " left out (line";
+    text += skipped_lines_.size() == 1 ? " " : "s ";
+    for (size_t i = 0; i < skipped_lines_.size(); ++i)
+    {
+      text += (i ? ", " : "") + std::to_string(skipped_lines_[i]);
+    }
+    return text + (skipped_ > skipped_lines_.size() ? ", ...)" : ")");
+  }
+
+ private:
+  static gcode::ParserOptions withSeparateMachineMoves(gcode::ParserOptions options)
+  {
+    options.separate_machine_moves = true;  // a skipped G53 move leaves the program position alone
+    return options;
+  }
+
+  std::ifstream in_;
+  gcode::Reader reader_;
+  G53Moves g53_;
+  std::string g53_param_;
+  uint64_t skipped_ = 0;
+  std::vector<uint32_t> skipped_lines_;
+};
+
 uint8_t stateMode(ethernut::BoardMode mode)
 {
   switch (mode)
@@ -172,6 +255,15 @@ class EthernutNode : public ethernut::ClientListener
       throw ConfigError(pnh_.resolveName("dead_link_timeout") + " must be longer than " +
                         pnh_.resolveName("keepalive_period"));
     }
+    // ~rtt_probe_period (s, 5): an alive request also goes out when none did for this long, so the
+    // link round trip is measured on a busy link too; 0: only when the board is silent.
+    double probe = 5.0;
+    pnh_.param("rtt_probe_period", probe, 5.0);
+    if (probe < 0)
+    {
+      throw ConfigError(pnh_.resolveName("rtt_probe_period") + " must be >= 0");
+    }
+    options_.rtt_probe_period = Milliseconds(static_cast<long>(probe * 1000));
     // ~reply_timeout (s, 2): how long a command waits for the board's answer.
     options_.reply_timeout = params::seconds(pnh_, "reply_timeout", 2.0);
     // ~connect_timeout (s, 3): TCP connection timeout.
@@ -203,6 +295,23 @@ class EthernutNode : public ethernut::ClientListener
     }
     // ~chord_tolerance (m, 0.00001): largest deviation of the streamed chords from a G02/G03 arc.
     parser_options_.chord_tolerance_mm = params::positive(pnh_, "chord_tolerance", 1e-5) / kMetresPerMm;
+    // ~g53_moves (string, "refuse"): G53 moves (machine coordinates) in G-code jobs, which the
+    // board cannot carry out (it knows one coordinate system): refuse (the job is refused before
+    // anything is sent) or skip (left out of the stream and the preview).
+    std::string g53;
+    pnh_.param<std::string>("g53_moves", g53, "refuse");
+    if (g53 == "refuse")
+    {
+      g53_moves_ = G53Moves::kRefuse;
+    }
+    else if (g53 == "skip")
+    {
+      g53_moves_ = G53Moves::kSkip;
+    }
+    else
+    {
+      throw ConfigError(pnh_.resolveName("g53_moves") + " must be refuse or skip, not '" + g53 + "'");
+    }
     // ~max_preview_points (int, 100000): job/path is thinned to at most this many poses.
     pnh_.param("max_preview_points", max_preview_points_, 100000);
     max_preview_points_ = std::max(max_preview_points_, 2);
@@ -228,7 +337,24 @@ class EthernutNode : public ethernut::ClientListener
     auto link = std::shared_ptr<TcpConnection>(TcpConnection::connect(host_, port_, connect_timeout_));
     auto client = std::make_shared<ethernut::Client>(*link, options, this);
     std::lock_guard<std::mutex> lock(mutex_);
+    if (session_.client)
+    {
+      addCounts(earlier_sessions_, session_.client->stats());  // diagnostics count since the start
+    }
     session_ = Session{link, client};
+  }
+
+  // Adds the counters of \p from to \p to (round-trip times are per connection).
+  static void addCounts(ethernut::ClientStats& to, const ethernut::ClientStats& from)
+  {
+    to.coordinates_sent += from.coordinates_sent;
+    to.coordinates_done += from.coordinates_done;
+    to.resends += from.resends;
+    to.keepalive_requests += from.keepalive_requests;
+    to.keepalive_misses += from.keepalive_misses;
+    to.bad_frames += from.bad_frames;
+    to.unexpected_messages += from.unexpected_messages;
+    to.alive_responses += from.alive_responses;
   }
 
   void runSession()
@@ -477,6 +603,12 @@ class EthernutNode : public ethernut::ClientListener
       abort(why);
       return;
     }
+    if (c->state() == ethernut::SessionState::kPaused)
+    {
+      abort("the board is paused (a cancelled job holds its move there): call " + pnh_.resolveName("resume") +
+            " first");
+      return;
+    }
 
     // Load the job: a first pass over the file counts the coordinates and builds the preview, so
     // the preview is out before the first set is sent and a bad program is refused before it runs.
@@ -484,6 +616,7 @@ class EthernutNode : public ethernut::ClientListener
     std::function<bool(ethernut::Coordinate&)> source;
     uint64_t count = 0;
     std::string program;
+    std::string skipped_note;  // G53 moves left out
     if (!goal->file.empty())
     {
       if (!program_dir_)
@@ -495,16 +628,11 @@ class EthernutNode : public ethernut::ClientListener
       try
       {
         path = program_dir_->resolveExisting(goal->file);
-        std::ifstream in(path, std::ios::binary);
-        if (!in)
-        {
-          throw ConfigError("cannot open " + path);
-        }
-        gcode::Reader reader(in, parser_options_);
+        GcodeJob job(path, parser_options_, g53_moves_, pnh_.resolveName("g53_moves"));
         gcode::Move move;
         bool first_move = true;
         Preview fresh(static_cast<size_t>(max_preview_points_), state_->frame("machine"));
-        while (reader.nextMove(move))
+        while (job.next(move))
         {
           if (first_move)
           {
@@ -515,6 +643,12 @@ class EthernutNode : public ethernut::ClientListener
           ++count;
         }
         preview = std::move(fresh);
+        skipped_note = job.skippedSummary();
+        if (!skipped_note.empty())
+        {
+          ROS_WARN_STREAM("run_job: " << goal->file << ": " << skipped_note << " (" << pnh_.resolveName("g53_moves")
+                                      << ": skip)");
+        }
       }
       catch (const Error& e)
       {
@@ -522,12 +656,11 @@ class EthernutNode : public ethernut::ClientListener
         return;
       }
       program = goal->file;
-      auto in = std::make_shared<std::ifstream>(path, std::ios::binary);
-      auto reader = std::make_shared<gcode::Reader>(*in, parser_options_);
-      source = [in, reader](ethernut::Coordinate& out)
+      auto job = std::make_shared<GcodeJob>(path, parser_options_, g53_moves_, pnh_.resolveName("g53_moves"));
+      source = [job](ethernut::Coordinate& out)
       {
         gcode::Move move;
-        if (!reader->nextMove(move))
+        if (!job->next(move))
         {
           return false;
         }
@@ -626,7 +759,7 @@ class EthernutNode : public ethernut::ClientListener
         result.coordinates_done = static_cast<uint32_t>(p.done);
         result.coordinate_count = static_cast<uint32_t>(count);
         result.resends = p.resends;
-        result.message = p.message;
+        result.message = skipped_note.empty() ? p.message : p.message + "; " + skipped_note;
         result.success = p.outcome == ethernut::JobOutcome::kCompleted;
         if (cancelled)
         {
@@ -644,15 +777,24 @@ class EthernutNode : public ethernut::ClientListener
       }
       if (!cancelled && (action_.isPreemptRequested() || !ros::ok()))
       {
-        // Cancel: hold the board first (it stops the move in progress), then stop streaming.
         cancelled = true;
-        try
+        if (action_.isNewGoalAvailable() && ros::ok())
         {
-          c->pause();
+          // Replaced by a new goal: stop streaming without holding the board. The set in flight
+          // completes and the new job's first set follows its NEXT.
+          ROS_INFO_STREAM("run_job: " << program << " preempted by a new goal");
         }
-        catch (const Error& e)
+        else
         {
-          ROS_WARN_STREAM("run_job: pause on cancel failed: " << e.what());
+          // Cancel: hold the board first (it stops the move in progress), then stop streaming.
+          try
+          {
+            c->pause();
+          }
+          catch (const Error& e)
+          {
+            ROS_WARN_STREAM("run_job: pause on cancel failed: " << e.what());
+          }
         }
         c->cancelJob();
       }
@@ -767,7 +909,13 @@ class EthernutNode : public ethernut::ClientListener
       status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "not connected yet");
       return;
     }
-    const ethernut::ClientStats st = s.client->stats();
+    const ethernut::ClientStats st = s.client->stats();  // round trips: this connection
+    ethernut::ClientStats total;                         // counters: since the node started
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      total = earlier_sessions_;
+    }
+    addCounts(total, st);
     status.summary(diagnostic_msgs::DiagnosticStatus::OK, ethernut::toString(s.client->state()));
     if (st.last_board_error != 0.0f)
     {
@@ -775,16 +923,21 @@ class EthernutNode : public ethernut::ClientListener
     }
     status.add("session state", ethernut::toString(s.client->state()));
     status.add("board mode", ethernut::toString(s.client->mode()));
-    status.add("round trip last (ms)", st.last_rtt_ms);
-    status.add("round trip mean (ms)", st.mean_rtt_ms);
-    status.add("round trip max (ms)", st.max_rtt_ms);
-    status.add("coordinates sent", st.coordinates_sent);
-    status.add("coordinates acknowledged", st.coordinates_done);
-    status.add("resends", st.resends);
-    status.add("keepalive requests", st.keepalive_requests);
-    status.add("keepalive misses", st.keepalive_misses);
-    status.add("invalid frames", st.bad_frames);
-    status.add("unexpected messages", st.unexpected_messages);
+    // Link: alive request -> response. Coordinate: set sent -> NEXT, which includes the move.
+    status.add("link round trip last (ms)", st.last_link_rtt_ms);
+    status.add("link round trip mean (ms)", st.mean_link_rtt_ms);
+    status.add("link round trip max (ms)", st.max_link_rtt_ms);
+    status.add("link round trip samples", st.alive_responses);
+    status.add("coordinate round trip last (ms)", st.last_rtt_ms);
+    status.add("coordinate round trip mean (ms)", st.mean_rtt_ms);
+    status.add("coordinate round trip max (ms)", st.max_rtt_ms);
+    status.add("coordinates sent", total.coordinates_sent);
+    status.add("coordinates acknowledged", total.coordinates_done);
+    status.add("resends", total.resends);
+    status.add("keepalive requests", total.keepalive_requests);
+    status.add("keepalive misses", total.keepalive_misses);
+    status.add("invalid frames", total.bad_frames);
+    status.add("unexpected messages", total.unexpected_messages);
     status.add("last board error code", st.last_board_error);
     status.add("reconnects", reconnector_ ? reconnector_->reconnects() : 0u);
     status.add("kill enabled", enable_kill_);
@@ -799,6 +952,7 @@ class EthernutNode : public ethernut::ClientListener
   bool enable_kill_ = false;
   std::unique_ptr<ProgramDirectory> program_dir_;
   gcode::ParserOptions parser_options_;
+  G53Moves g53_moves_ = G53Moves::kRefuse;
   int max_preview_points_ = 100000;
 
   std::unique_ptr<MachineStatePublisher> state_;
@@ -810,6 +964,7 @@ class EthernutNode : public ethernut::ClientListener
   std::mutex mutex_;  // session_, hold_, stopping_, options_.initial_mode
   std::condition_variable hold_cv_;
   Session session_;
+  ethernut::ClientStats earlier_sessions_;  // counters of the connections before session_
   bool hold_ = false;
   bool stopping_ = false;
 

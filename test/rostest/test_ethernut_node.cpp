@@ -1,7 +1,10 @@
 // ethernut_node against sim_ethernut: jobs streamed in order despite RESENDs (checked against the
-// simulator's log of accepted coordinates and against our own parse of the program), the preview
-// published before the job runs, pause/resume, cancel, the kill gate, and link loss.
+// simulator's log of accepted coordinates and against our own parse of the program), G53 moves
+// skipped or refused, the preview published before the job runs, pause/resume, cancel, a new goal
+// preempting a running one, the kill gate, diagnostics, and link loss (silence and a dropped
+// connection).
 #include <actionlib/client/simple_action_client.h>
+#include <diagnostic_msgs/DiagnosticArray.h>
 #include <gtest/gtest.h>
 #include <nav_msgs/Path.h>
 #include <ros/ros.h>
@@ -12,6 +15,7 @@
 #include <atomic>
 #include <condition_variable>
 #include <fstream>
+#include <map>
 #include <mutex>
 
 #include "cnc_bridge/MachineState.h"
@@ -43,6 +47,7 @@ struct Watch
   std::vector<cnc_bridge::RunJobFeedback> feedback;
   uint64_t first_feedback_seq = 0;
   ros::WallTime last_feedback_time;
+  std::map<std::string, std::string> protocol;  // the last "ethernut protocol" diagnostics, key -> value
 
   template <typename F>
   bool waitFor(F condition, double seconds = 20.0)
@@ -93,6 +98,31 @@ void onFeedback(const RunJobFeedbackConstPtr& f)
   watch->cv.notify_all();
 }
 
+void onDiagnostics(const diagnostic_msgs::DiagnosticArray::ConstPtr& m)
+{
+  for (const auto& status : m->status)
+  {
+    if (status.name.find("ethernut protocol") == std::string::npos || status.values.empty())
+    {
+      continue;
+    }
+    std::lock_guard<std::mutex> lock(watch->mutex);
+    watch->protocol.clear();
+    for (const auto& kv : status.values)
+    {
+      watch->protocol[kv.key] = kv.value;
+    }
+    watch->cv.notify_all();
+  }
+}
+
+// A number from the last protocol diagnostics (caller holds watch->mutex); NaN if absent.
+double diag(const std::string& key)
+{
+  const auto it = watch->protocol.find(key);
+  return it == watch->protocol.end() ? std::nan("") : std::stod(it->second);
+}
+
 void clearJob()
 {
   std::lock_guard<std::mutex> lock(watch->mutex);
@@ -113,16 +143,24 @@ std::vector<std::array<float, 3>> simLog()
   return lines;
 }
 
-// The coordinates the node must send for a program: the end of every move, mm, as float.
+// The coordinates the node must send for a program: the end of every move, mm, as float; G53
+// moves left out (~g53_moves: skip), the program position kept across them.
 std::vector<std::array<float, 3>> expectedFor(const std::string& file)
 {
   std::ifstream in(program_dir + "/" + file);
   std::vector<std::array<float, 3>> out;
+  cnc_bridge::gcode::ParserOptions options;
+  options.separate_machine_moves = true;
   cnc_bridge::gcode::forEachMove(
       in,
-      [&](const cnc_bridge::gcode::Move& m) {
-        out.push_back({static_cast<float>(m.end.x), static_cast<float>(m.end.y), static_cast<float>(m.end.z)});
-      });
+      [&](const cnc_bridge::gcode::Move& m)
+      {
+        if (!m.machine_coordinates)
+        {
+          out.push_back({static_cast<float>(m.end.x), static_cast<float>(m.end.y), static_cast<float>(m.end.z)});
+        }
+      },
+      options);
   return out;
 }
 
@@ -239,14 +277,26 @@ TEST(EthernutJob, HaasProgramPreviewStaysInsideThePartAndStreamsInOrder)
   ASSERT_EQ(client->getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client->getState().getText();
   const auto expected = expectedFor("haas_O05555.nc");
   EXPECT_GT(expected.size(), 100u);  // the arcs are cut into chords
-  expectSameCoordinates(simLog(), before, expected);
+  const auto streamed = simLog();
+  expectSameCoordinates(streamed, before, expected);
+  // The four G53 moves (machine coordinates, lines 9, 53, 57, 59) are left out (~g53_moves: skip)
+  // and the program's Z is kept across them: the last set is N66455 X2.1875 at the Z1. clearance
+  // of N235, not G53 Y0 (in work coordinates: a plunge to Y0 Z0 on the part).
+  EXPECT_NE(client->getResult()->message.find("4 G53 moves left out (lines 9, 53, 57, 59)"), std::string::npos)
+      << client->getResult()->message;
+  ASSERT_FALSE(streamed.empty());
+  EXPECT_NEAR(streamed.back()[0], 2.1875 * 25.4, 1e-3);
+  EXPECT_NEAR(streamed.back()[1], 2.906 * 25.4, 1e-3);
+  EXPECT_NEAR(streamed.back()[2], 1.0 * 25.4, 1e-3);
 
   std::lock_guard<std::mutex> lock(watch->mutex);
   const double inch = 0.0254;
+  ASSERT_EQ(watch->path.poses.size(), expected.size() + 1);  // the start point plus every streamed move
+  EXPECT_NEAR(watch->path.poses.back().pose.position.z, 1.0 * inch, 1e-9);
   for (const auto& pose : watch->path.poses)
   {
     const auto& p = pose.pose.position;
-    // Part extent (the G53 retracts go to machine zero: Y0, Z0, inside these bounds too).
+    // Part extent (the G53 retracts are not in the preview).
     EXPECT_GE(p.x, -1.3 * inch - 1e-6);
     EXPECT_LE(p.x, 5.675 * inch + 1e-6);
     EXPECT_GE(p.y, -1e-6);
@@ -288,6 +338,13 @@ TEST(EthernutJob, ReportedPositionEndsAtTheLastCoordinate)
                std::fabs(p.z - 0.001) < 1e-6;
       },
       10.0));
+  // The commanded position (the last set the board acknowledged) rides in the same message.
+  std::lock_guard<std::mutex> lock(watch->mutex);
+  const auto& c = watch->state.commanded_position;
+  EXPECT_TRUE(watch->state.commanded_valid);
+  EXPECT_NEAR(c.x, 0.012, 1e-6);
+  EXPECT_NEAR(c.y, -0.004, 1e-6);
+  EXPECT_NEAR(c.z, 0.001, 1e-6);
 }
 
 TEST(EthernutJob, PauseHoldsTheJobAndResumeFinishesIt)
@@ -346,6 +403,76 @@ TEST(EthernutJob, CancelStopsStreamingAndPausesTheBoard)
   ASSERT_TRUE(call("resume", res));  // the held move completes; nothing more is sent
   EXPECT_TRUE(res.success) << res.message;
   EXPECT_TRUE(boardReady(10.0));
+}
+
+// A new goal while a job streams: the running goal ends PREEMPTED (streaming stops after the set
+// in flight, the board is not held) and the new one runs to the end.
+TEST(EthernutJob, NewGoalPreemptsTheRunningJobAndRuns)
+{
+  ASSERT_TRUE(boardReady());
+  auto first = actionClient();
+  auto second = actionClient();
+  clearJob();
+  const size_t before = simLog().size();
+  std::vector<std::array<double, 3>> points;  // 100 ms per move at 2000 mm/s
+  for (int i = 0; i < 20; ++i)
+  {
+    points.push_back({(i % 2) * 0.2, 0.0, 0.0});
+  }
+  first->sendGoal(pointsGoal(points), Client::SimpleDoneCallback(), Client::SimpleActiveCallback(), &onFeedback);
+  ASSERT_TRUE(watch->waitFor([] { return !watch->feedback.empty(); }));
+  second->sendGoal(pointsGoal({{0.01, 0.02, 0.003}, {0.02, 0.01, 0.002}}));
+  ASSERT_TRUE(first->waitForResult(ros::Duration(20.0)));
+  EXPECT_EQ(first->getState(), actionlib::SimpleClientGoalState::PREEMPTED) << first->getState().getText();
+  ASSERT_TRUE(second->waitForResult(ros::Duration(30.0)));
+  ASSERT_EQ(second->getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << second->getState().getText();
+  EXPECT_EQ(second->getResult()->coordinates_done, 2u);
+  const auto log = simLog();
+  ASSERT_GE(log.size() - before, 3u);
+  EXPECT_LT(log.size() - before, points.size() + 2);  // the first job stopped early
+  expectSameCoordinates(log, log.size() - 2, {{10, 20, 3}, {20, 10, 2}});
+  EXPECT_TRUE(boardReady(10.0));
+}
+
+// The protocol diagnostics after the jobs above: RESENDs counted (the simulator asks again for
+// every 4th set), no keepalive missed, both round trips measured and plausible on loopback.
+TEST(EthernutJob, DiagnosticsReportRoundTripsResendsAndKeepalives)
+{
+  ASSERT_TRUE(boardReady());
+  // Link round trips are sampled by alive requests, which go out while the idle board is silent.
+  ASSERT_TRUE(watch->waitFor([] { return diag("link round trip samples") >= 1; }, 20.0));
+  std::lock_guard<std::mutex> lock(watch->mutex);
+  EXPECT_GE(diag("resends"), 3);  // at least one in each of the seed, Haas and preemption jobs
+  EXPECT_EQ(diag("keepalive misses"), 0);
+  EXPECT_GE(diag("keepalive requests"), 1);
+  EXPECT_GT(diag("coordinates acknowledged"), 100);
+  EXPECT_EQ(diag("reconnects"), 0);
+  const double link = diag("link round trip mean (ms)");
+  EXPECT_GT(link, 0.0);
+  EXPECT_LT(link, 500.0);  // loopback; generous for a loaded machine
+  EXPECT_LE(diag("link round trip last (ms)"), diag("link round trip max (ms)"));
+  // Coordinate -> NEXT includes the move (0.2 m at 2 m/s in the jobs above): longer than the link's.
+  EXPECT_GT(diag("coordinate round trip max (ms)"), 50.0);
+  EXPECT_GT(diag("coordinate round trip max (ms)"), diag("link round trip max (ms)"));
+}
+
+// Default ~g53_moves (refuse): a program with G53 moves is refused before anything is sent, with
+// the line and the parameter named.
+TEST(EthernutLink, G53MovesAreRefusedByDefault)
+{
+  ASSERT_TRUE(boardReady());
+  auto client = actionClient();
+  const size_t before = simLog().size();
+  RunJobGoal goal;
+  goal.file = "haas_O05555.nc";
+  client->sendGoal(goal);
+  ASSERT_TRUE(client->waitForResult(ros::Duration(20.0)));
+  EXPECT_EQ(client->getState(), actionlib::SimpleClientGoalState::ABORTED);
+  const std::string text = client->getState().getText();
+  EXPECT_NE(text.find("G-code line 9: G53"), std::string::npos) << text;
+  EXPECT_NE(text.find(ns + "/ethernut_node/g53_moves"), std::string::npos) << text;
+  EXPECT_EQ(simLog().size(), before);
+  EXPECT_TRUE(boardReady(5.0));
 }
 
 TEST(EthernutLink, DeadLinkIsDetectedWithinTheTimeoutAndTheNodeReconnects)
@@ -408,6 +535,54 @@ TEST(EthernutLink, DeadLinkIsDetectedWithinTheTimeoutAndTheNodeReconnects)
   expectSameCoordinates(simLog(), before, {{1, 2, 3}, {4, 5, 6}});
 }
 
+// The simulator drops the connection (--drop-after) in the middle of a job: the job is aborted as
+// a lost link at once (no waiting for a timeout), the node reconnects and runs the next job.
+TEST(EthernutLink, DroppedConnectionAbortsTheJobAndTheNodeReconnects)
+{
+  ASSERT_TRUE(boardReady());
+  auto client = actionClient();
+  clearJob();
+  std::vector<std::array<double, 3>> points;
+  for (int i = 0; i < 20; ++i)
+  {
+    points.push_back({0.001 * i, 0.001, 0.0});
+  }
+  size_t links_before;
+  {
+    std::lock_guard<std::mutex> lock(watch->mutex);
+    links_before = watch->links.size();
+  }
+  client->sendGoal(pointsGoal(points));
+  ASSERT_TRUE(client->waitForResult(ros::Duration(20.0)));
+  EXPECT_EQ(client->getState(), actionlib::SimpleClientGoalState::ABORTED);
+  EXPECT_NE(client->getState().getText().find("link lost"), std::string::npos) << client->getState().getText();
+  EXPECT_LT(client->getResult()->coordinates_done, points.size());
+  ASSERT_TRUE(watch->waitFor(
+      [&]
+      {
+        for (size_t i = links_before; i < watch->links.size(); ++i)
+        {
+          if (watch->links[i].second != MachineState::LINK_UP)
+          {
+            return true;
+          }
+        }
+        return false;
+      }));
+  ASSERT_TRUE(boardReady(20.0));
+  const size_t before = simLog().size();
+  client->sendGoal(pointsGoal({{0.007, 0.008, 0.009}}));
+  ASSERT_TRUE(client->waitForResult(ros::Duration(20.0)));
+  ASSERT_EQ(client->getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client->getState().getText();
+  expectSameCoordinates(simLog(), before, {{7, 8, 9}});
+
+  // Diagnostics count across connections: the silence of the test above (unanswered alive
+  // requests) and both reconnections.
+  ASSERT_TRUE(watch->waitFor([] { return diag("reconnects") >= 2; }, 10.0));
+  std::lock_guard<std::mutex> lock(watch->mutex);
+  EXPECT_GE(diag("keepalive misses"), 1);
+}
+
 int main(int argc, char** argv)
 {
   testing::InitGoogleTest(&argc, argv);
@@ -423,6 +598,7 @@ int main(int argc, char** argv)
   auto state_sub = nh.subscribe(ns + "/state", 100, &onState);
   auto path_sub = nh.subscribe(ns + "/job/path", 10, &onPath);
   auto markers_sub = nh.subscribe(ns + "/job/markers", 10, &onMarkers);
+  auto diagnostics_sub = nh.subscribe("/diagnostics", 10, &onDiagnostics);
   ros::AsyncSpinner spinner(2);
   spinner.start();
   const int result = RUN_ALL_TESTS();
