@@ -1,6 +1,10 @@
 // Parse-rate benchmark of the G-code parser: reads a program through gcode::Reader (file I/O
-// included, arcs cut into chords at the default 0.01 mm) and prints "lines seconds moves".
-// Run by bench/gcode/run.sh beside the npm package gcode-parser.
+// included, arcs cut into chords at the default 0.01 mm) and prints "lines seconds moves
+// max_rss_kib", the last being the process's peak resident memory (getrusage ru_maxrss), which
+// must not grow with the program's size (the reader streams). Run by bench/gcode/run.sh beside
+// the npm package gcode-parser.
+#include <sys/resource.h>
+
 #include <chrono>
 #include <fstream>
 #include <iostream>
@@ -36,6 +40,10 @@ int main(int argc, char** argv)
     lines = reader.parser().lineCount();
     best = std::min(best, seconds);
   }
-  std::cout << lines << ' ' << best << ' ' << moves << std::endl;
+  struct rusage usage
+  {
+  };
+  getrusage(RUSAGE_SELF, &usage);  // ru_maxrss: KiB on Linux
+  std::cout << lines << ' ' << best << ' ' << moves << ' ' << usage.ru_maxrss << std::endl;
   return 0;
 }
