@@ -143,6 +143,13 @@ void MdcClient::drainForeign(Milliseconds timeout)
   }
 }
 
+void MdcClient::discardInput()
+{
+  partial_.clear();
+  overflow_ = false;
+  transport_.discardInput();
+}
+
 WritePolicy::WritePolicy(std::vector<int> allowed, std::string parameter_name)
     : allowed_(std::move(allowed)), parameter_name_(std::move(parameter_name))
 {

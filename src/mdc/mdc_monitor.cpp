@@ -62,7 +62,7 @@ std::optional<std::pair<Query, Clock::time_point>> QueryScheduler::next() const
   return std::make_pair(best->query, best->due);
 }
 
-void QueryScheduler::done(Clock::time_point now)
+QueryScheduler::Slot* QueryScheduler::current()
 {
   Slot* best = nullptr;
   for (auto& slot : slots_)
@@ -72,6 +72,12 @@ void QueryScheduler::done(Clock::time_point now)
       best = &slot;
     }
   }
+  return best;
+}
+
+void QueryScheduler::done(Clock::time_point now)
+{
+  Slot* best = current();
   if (!best)
   {
     return;
@@ -86,6 +92,28 @@ void QueryScheduler::done(Clock::time_point now)
   {
     best->due = now;
   }
+}
+
+void QueryScheduler::unanswered(Clock::time_point now, Milliseconds retry_after)
+{
+  Slot* best = current();
+  if (best && best->period == kOnce)
+  {
+    // Asked once per connection, so a lost reply must not lose the value for the whole connection.
+    best->due = now + retry_after;
+    return;
+  }
+  done(now);
+}
+
+std::vector<std::pair<Query, Milliseconds>> QueryScheduler::plan() const
+{
+  std::vector<std::pair<Query, Milliseconds>> result;
+  for (const auto& slot : slots_)
+  {
+    result.emplace_back(slot.query, slot.period);
+  }
+  return result;
 }
 
 void MdcMonitor::setWorkOffsetAxes(const std::vector<std::pair<int, int>>& machine_work)
@@ -258,29 +286,71 @@ std::vector<CycleEventData> MdcMonitor::applyProgramStatus(const ProgramStatus& 
 
 QueryScheduler PollPlan::scheduler() const
 {
-  QueryScheduler scheduler;
+  std::vector<std::pair<Query, Milliseconds>> entries;
   if (identity)
   {
-    scheduler.add(q(100), QueryScheduler::kOnce);
-    scheduler.add(q(101), QueryScheduler::kOnce);
-    scheduler.add(q(102), QueryScheduler::kOnce);
+    for (int code : {100, 101, 102})
+    {
+      entries.emplace_back(q(code), QueryScheduler::kOnce);
+    }
   }
-  scheduler.add(q(500), status_period);
-  scheduler.add(q(104), status_period);
+  entries.emplace_back(q(500), status_period);
+  entries.emplace_back(q(104), status_period);
   for (int variable : variables)
   {
-    scheduler.add(macroQuery(variable), variables_period);
+    entries.emplace_back(macroQuery(variable), variables_period);
   }
   for (int variable : slow_variables)
   {
-    scheduler.add(macroQuery(variable), counters_period);
+    entries.emplace_back(macroQuery(variable), counters_period);
   }
-  scheduler.add(q(201), counters_period);
-  scheduler.add(q(303), counters_period);
-  scheduler.add(q(304), counters_period);
-  scheduler.add(q(402), counters_period);
-  scheduler.add(q(200), counters_period);
+  for (int code : {201, 303, 304, 402, 200})
+  {
+    entries.emplace_back(q(code), counters_period);
+  }
+  for (const auto& [query, period] : query_periods)
+  {
+    bool found = false;
+    for (auto& entry : entries)
+    {
+      if (entry.first == query)
+      {
+        entry.second = period;
+        found = true;
+      }
+    }
+    if (!found)
+    {
+      entries.emplace_back(query, period);
+    }
+  }
+  QueryScheduler scheduler;
+  for (const auto& [query, period] : entries)
+  {
+    if (period != Milliseconds(0))
+    {
+      scheduler.add(query, period);
+    }
+  }
   return scheduler;
+}
+
+Query parseQueryKey(const std::string& key)
+{
+  std::string text = key;
+  const size_t first = text.find_first_not_of(' ');
+  text.erase(0, first == std::string::npos ? text.size() : first);
+  if (!text.empty() && text[0] != '?')
+  {
+    text.insert(0, "?");
+  }
+  std::replace(text.begin(), text.end(), '_', ' ');  // "Q600_5021": a key without a space
+  const auto query = parseReadOnlyQuery(text);
+  if (!query)
+  {
+    throw ConfigError("'" + key + "' is not a read-only query such as Q500 or \"Q600 5021\"");
+  }
+  return *query;
 }
 
 MdcPoller::MdcPoller(PollPlan plan, Milliseconds reply_timeout, PortLock* port_lock)
@@ -297,11 +367,123 @@ void MdcPoller::setWorkOffsetAxes(const std::vector<std::pair<int, int>>& machin
 void MdcPoller::notify(const Reply& reply)
 {
   // Called with mutex_ held.
-  const auto events = monitor_.apply(reply, Clock::now());
+  auto events = monitor_.apply(reply, Clock::now());
+  const bool cycle_end = std::any_of(events.begin(), events.end(),
+                                     [](const CycleEventData& e) { return e.type == CycleEventData::kCycleEnd; });
+  if (hold_cycle_ends_ && (cycle_end || !held_events_.empty()))
+  {
+    // Held until the control's cycle time is asked (deliverHeldEvents), in order.
+    held_events_.insert(held_events_.end(), events.begin(), events.end());
+    events.clear();
+  }
   if (listener_)
   {
     listener_(monitor_.status(), events);
   }
+}
+
+void MdcPoller::deliverHeldEvents(MdcClient& client)
+{
+  // Called with mutex_ held (and the port lock, if any).
+  while (!held_events_.empty())
+  {
+    std::vector<CycleEventData> events;
+    events.swap(held_events_);
+    std::optional<double> control_time;
+    hold_cycle_ends_ = false;  // replies to the Q303 request go straight to the listener
+    struct Rehold
+    {
+      bool& hold;
+      ~Rehold() { hold = true; }
+    } rehold{hold_cycle_ends_};
+    try
+    {
+      const Reply reply = client.request(q(303), reply_timeout_);
+      notify(reply);
+      if (reply.kind == ReplyKind::kLastCycle)
+      {
+        control_time = monitor_.status().last_cycle_s;
+      }
+    }
+    catch (const TimeoutError& e)
+    {
+      CNC_LOG_DEBUG("MDC: no last cycle time at the cycle end, the measured one is used: " << e.what());
+    }
+    catch (const LinkError&)
+    {
+      if (listener_)
+      {
+        listener_(monitor_.status(), events);  // with the measured cycle time
+      }
+      throw;
+    }
+    for (auto& e : events)
+    {
+      if (e.type == CycleEventData::kCycleEnd && control_time)
+      {
+        e.cycle_time = *control_time;
+        e.text += ", cycle time from the control";
+      }
+    }
+    if (listener_)
+    {
+      listener_(monitor_.status(), events);
+    }
+  }
+}
+
+// Holds the port lock for one use of the line; releases it when it goes out of scope.
+class MdcPoller::PortUse
+{
+ public:
+  explicit PortUse(PortLock* lock) : lock_(lock) {}
+  ~PortUse()
+  {
+    if (lock_)
+    {
+      lock_->unlock();
+    }
+  }
+  PortUse(const PortUse&) = delete;
+  PortUse& operator=(const PortUse&) = delete;
+
+ private:
+  PortLock* lock_;
+};
+
+bool MdcPoller::takePort(MdcClient& client)
+{
+  if (!port_lock_)
+  {
+    return true;
+  }
+  if (!port_lock_->tryLockForQuery())
+  {
+    return false;
+  }
+  const uint64_t generation = port_lock_->generation();
+  const bool used_elsewhere = port_generation_ && *port_generation_ != generation;
+  port_generation_ = generation;
+  if (used_elsewhere)
+  {
+    // A transfer used the line since our last query: its leftover bytes are not replies, and it
+    // may have set the line up its own way (baud, data bits) on the shared device.
+    ++regained_;
+    try
+    {
+      client.discardInput();
+      if (port_regained_)
+      {
+        port_regained_(client.transport());
+      }
+    }
+    catch (...)
+    {
+      port_lock_->unlock();
+      throw;
+    }
+  }
+  return true;
 }
 
 void MdcPoller::run(Transport& transport, StopSignal& stop)
@@ -309,9 +491,13 @@ void MdcPoller::run(Transport& transport, StopSignal& stop)
   MdcClient client(transport);
   client.setForeignListener([this](const Reply& reply) { notify(reply); });
   QueryScheduler scheduler = plan_.scheduler();
+  const bool ask_cycle_time = plan_.cycle_time_from_control;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     client_ = &client;
+    port_generation_.reset();  // a freshly opened port has our settings
+    hold_cycle_ends_ = ask_cycle_time;
+    held_events_.clear();
   }
   struct Detach
   {
@@ -323,9 +509,17 @@ void MdcPoller::run(Transport& transport, StopSignal& stop)
       self.base_stats_ = sum(self.base_stats_, client.stats());
       self.stats_ = self.base_stats_;
       self.client_ = nullptr;
+      self.hold_cycle_ends_ = false;
+      if (!self.held_events_.empty() && self.listener_)
+      {
+        self.listener_(self.monitor_.status(), self.held_events_);  // with the measured cycle time
+      }
+      self.held_events_.clear();
     }
   } detach{*this, client};
 
+  // How long a poll waits before it tries a busy port again.
+  constexpr Milliseconds kPortBusyRetry{50};
   scheduler.reset(Clock::now());
   unsigned unanswered_in_a_row = 0;
   while (!stop.stopped())
@@ -340,32 +534,41 @@ void MdcPoller::run(Transport& transport, StopSignal& stop)
     {
       return;
     }
-    std::lock_guard<std::mutex> lock(mutex_);
-    if (port_lock_ && port_lock_->heldElsewhere())
+    std::unique_lock<std::mutex> lock(mutex_);
+    if (!takePort(client))
     {
-      // A DNC transfer owns the serial line: stay silent until it ends.
+      // A DNC transfer owns the serial line, or waits for it: stay silent until it ends. The query
+      // stays due and goes first when the port is free.
       ++skipped_;
-      scheduler.done(Clock::now());
+      lock.unlock();
+      if (stop.waitFor(kPortBusyRetry))
+      {
+        return;
+      }
       continue;
     }
+    PortUse port(port_lock_);
     ++polls_;
     try
     {
       const Reply reply = client.request(next->first, reply_timeout_);
       unanswered_in_a_row = 0;
       notify(reply);
+      scheduler.done(Clock::now());
+      deliverHeldEvents(client);
     }
     catch (const TimeoutError& e)
     {
       CNC_LOG_DEBUG(e.what());
+      scheduler.unanswered(Clock::now(), plan_.counters_period);
       if (plan_.max_unanswered > 0 && ++unanswered_in_a_row >= plan_.max_unanswered)
       {
         stats_ = sum(base_stats_, client.stats());
         throw LinkError("MDC " + transport.describe() + ": no reply to " + std::to_string(unanswered_in_a_row) +
                         " queries in a row");
       }
+      deliverHeldEvents(client);
     }
-    scheduler.done(Clock::now());
     stats_ = sum(base_stats_, client.stats());
   }
 }
@@ -377,11 +580,13 @@ void MdcPoller::withClient(const std::function<void(MdcClient&)>& action)
   {
     throw LinkError("MDC: not connected");
   }
-  if (port_lock_ && port_lock_->heldElsewhere())
+  if (!takePort(*client_))
   {
     throw LinkError("MDC: a DNC transfer holds the serial port (" + port_lock_->lockFile() + "); try again after it");
   }
+  PortUse port(port_lock_);
   action(*client_);
+  deliverHeldEvents(*client_);
   stats_ = sum(base_stats_, client_->stats());
 }
 
@@ -401,6 +606,12 @@ uint64_t MdcPoller::skippedForPortLock() const
 {
   std::lock_guard<std::mutex> lock(mutex_);
   return skipped_;
+}
+
+uint64_t MdcPoller::portRegained() const
+{
+  std::lock_guard<std::mutex> lock(mutex_);
+  return regained_;
 }
 
 uint64_t MdcPoller::polls() const

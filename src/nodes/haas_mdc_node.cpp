@@ -49,6 +49,44 @@ Milliseconds period(const ros::NodeHandle& pnh, const std::string& name, double 
 {
   return std::max(params::seconds(pnh, name, fallback_seconds), Milliseconds(1));
 }
+
+// ~query_periods: {"Q500": 0.25, "Q600 5021": 0.1, "Q303": 0} -> per-query periods (0: not polled).
+std::vector<std::pair<mdc::Query, Milliseconds>> queryPeriods(const ros::NodeHandle& pnh)
+{
+  std::vector<std::pair<mdc::Query, Milliseconds>> periods;
+  XmlRpc::XmlRpcValue table;
+  if (!pnh.getParam("query_periods", table))
+    return periods;
+  const std::string name = pnh.resolveName("query_periods");
+  if (table.getType() != XmlRpc::XmlRpcValue::TypeStruct)
+    throw ConfigError(name + " must be a dictionary of query: seconds, e.g. {Q500: 0.25, \"Q600 5021\": 0.1}");
+  for (auto& [key, value] : table)
+  {
+    double seconds = 0;
+    if (value.getType() == XmlRpc::XmlRpcValue::TypeDouble)
+      seconds = static_cast<double>(value);
+    else if (value.getType() == XmlRpc::XmlRpcValue::TypeInt)
+      seconds = static_cast<int>(value);
+    else
+      throw ConfigError(name + "/" + key + " must be a number of seconds");
+    if (!std::isfinite(seconds) || seconds < 0)
+      throw ConfigError(name + "/" + key + " must be 0 (not polled) or a positive number of seconds");
+    mdc::Query query;
+    try
+    {
+      query = mdc::parseQueryKey(key);
+    }
+    catch (const ConfigError& e)
+    {
+      throw ConfigError(name + ": " + e.what());
+    }
+    const auto period = seconds == 0
+                            ? Milliseconds(0)
+                            : std::max(Milliseconds(static_cast<int64_t>(seconds * 1000 + 0.5)), Milliseconds(1));
+    periods.emplace_back(query, period);
+  }
+  return periods;
+}
 }  // namespace
 
 class HaasMdcNode
@@ -132,7 +170,18 @@ class HaasMdcNode
     {
       plan.slow_variables.push_back(4006);
     }
+    // ~query_periods: per-query periods in s overriding the three above, keyed by the query
+    // ("Q500", "Q600 5021"); a query not otherwise polled is added, 0 stops polling one.
+    plan.query_periods = queryPeriods(pnh);
     poller_ = std::make_unique<mdc::MdcPoller>(plan, reply_timeout_, port_lock_.get());
+    // A DNC transfer on the same serial line may have set the device up its own way (the line
+    // settings belong to the device, not to our open port): ours again before the next query.
+    poller_->setPortRegainedHook(
+        [](Transport& link)
+        {
+          if (auto* serial = dynamic_cast<SerialPort*>(&link))
+            serial->applySettings();
+        });
     if (!position_vars_.empty() && !work_vars_.empty())
     {
       poller_->setWorkOffsetAxes(
@@ -385,6 +434,7 @@ class HaasMdcNode
     status.add("latency mean (ms)", stats.answered ? stats.total_latency_ms / stats.answered : 0.0);
     status.add("latency max (ms)", stats.max_latency_ms);
     status.add("polls skipped for a DNC transfer", poller_->skippedForPortLock());
+    status.add("port regained after a DNC transfer", poller_->portRegained());
     status.add("reconnects", reconnector_ ? reconnector_->reconnects() : 0u);
     if (s.last_cycle_s)
       status.add("last cycle (s)", *s.last_cycle_s);

@@ -186,7 +186,7 @@ tcflag_t characterSize(unsigned data_bits)
 SerialPort::SerialPort(SerialSettings settings) : settings_(std::move(settings))
 {
   settings_.validate();
-  const speed_t speed = speedConstant(settings_.baud);
+  speedConstant(settings_.baud);  // an unsupported rate fails before the port is opened
   refuseStaleLinkToPty(settings_);
   boost::system::error_code error;
   stream_.open(settings_.device, error);
@@ -194,6 +194,27 @@ SerialPort::SerialPort(SerialSettings settings) : settings_(std::move(settings))
   {
     throw LinkError(settings_.describe() + ": cannot open: " + error.message());
   }
+  try
+  {
+    applySettings();
+  }
+  catch (const LinkError&)
+  {
+    close();
+    throw;
+  }
+  struct stat opened;
+  if (::fstat(stream_.native_handle(), &opened) == 0)
+  {
+    device_number_ = opened.st_rdev;
+  }
+  next_device_check_ = std::chrono::steady_clock::now() + kDeviceCheckInterval;
+  // Bytes left in the driver from before we opened belong to nobody.
+  discardInput();
+}
+
+void SerialPort::applySettings()
+{
   // termios directly rather than Asio's option classes: Asio reads each option back and rejects
   // what a pty does not emulate (character size, parity), and ptys are our test devices.
   struct termios tio;
@@ -201,7 +222,6 @@ SerialPort::SerialPort(SerialSettings settings) : settings_(std::move(settings))
   if (::tcgetattr(fd, &tio) != 0)
   {
     const std::string reason = std::strerror(errno);
-    close();
     throw LinkError(settings_.describe() + ": not a serial port: " + reason);
   }
   ::cfmakeraw(&tio);  // no echo, no line editing, no CR/LF translation, all 8 bits kept
@@ -228,22 +248,13 @@ SerialPort::SerialPort(SerialSettings settings) : settings_(std::move(settings))
   }
   tio.c_cc[VMIN] = 1;
   tio.c_cc[VTIME] = 0;
-  ::cfsetispeed(&tio, speed);
-  ::cfsetospeed(&tio, speed);
+  ::cfsetispeed(&tio, speedConstant(settings_.baud));
+  ::cfsetospeed(&tio, speedConstant(settings_.baud));
   if (::tcsetattr(fd, TCSANOW, &tio) != 0)
   {
     const std::string reason = std::strerror(errno);
-    close();
     throw LinkError(settings_.describe() + ": cannot configure: " + reason);
   }
-  struct stat opened;
-  if (::fstat(fd, &opened) == 0)
-  {
-    device_number_ = opened.st_rdev;
-  }
-  next_device_check_ = std::chrono::steady_clock::now() + kDeviceCheckInterval;
-  // Bytes left in the driver from before we opened belong to nobody.
-  discardInput();
 }
 
 size_t SerialPort::read(uint8_t* buffer, size_t size, Milliseconds timeout)

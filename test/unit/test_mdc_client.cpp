@@ -6,7 +6,9 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <condition_variable>
+#include <map>
 #include <thread>
 
 #include "cnc_bridge/common/error.h"
@@ -423,4 +425,300 @@ TEST(MdcPoller, AControlThatStopsAnsweringEndsThePollWithALinkError)
     EXPECT_NE(std::string(e.what()).find("3 queries in a row"), std::string::npos) << e.what();
   }
   EXPECT_EQ(poller.stats().unanswered, 3u);
+}
+
+namespace
+{
+// A fake control whose answer to each query line is a function of the query and how often that
+// query was asked before (0 for the first time); an empty answer is no reply.
+using Answer = std::function<std::string(const std::string& query, int asked)>;
+void scriptedControl(FakeTransport& fake, Answer answer)
+{
+  auto asked = std::make_shared<std::map<std::string, int>>();
+  fake.onWrite(
+      [answer, asked](FakeTransport& f, const std::vector<uint8_t>& bytes)
+      {
+        const std::string query(bytes.begin(), bytes.end() - 2);  // without CR LF
+        const std::string reply = answer(query, (*asked)[query]++);
+        if (!reply.empty())
+          f.feed(">" + reply + "\r\n");
+      });
+}
+
+// What a poller reported, with a bounded wait for a condition on it.
+struct Reported
+{
+  std::mutex mutex;
+  std::condition_variable changed;
+  MachineStatus status;
+  std::vector<CycleEventData> events;
+
+  void listen(MdcPoller& poller)
+  {
+    poller.setListener(
+        [this](const MachineStatus& s, const std::vector<CycleEventData>& e)
+        {
+          std::lock_guard<std::mutex> lock(mutex);
+          status = s;
+          events.insert(events.end(), e.begin(), e.end());
+          changed.notify_all();
+        });
+  }
+  bool waitFor(const std::function<bool()>& predicate, std::chrono::milliseconds timeout = 5s)
+  {
+    std::unique_lock<std::mutex> lock(mutex);
+    return changed.wait_for(lock, timeout, predicate);
+  }
+};
+
+PollPlan fastPlan()
+{
+  PollPlan plan;
+  plan.identity = false;
+  plan.status_period = 2ms;
+  plan.variables_period = 2ms;
+  plan.counters_period = 10s;
+  return plan;
+}
+}  // namespace
+
+TEST(MdcScheduler, AnUnansweredOnceQueryIsAskedAgainAPeriodicOneKeepsItsPeriod)
+{
+  QueryScheduler s;
+  s.add(q(100), QueryScheduler::kOnce);
+  s.add(q(500), 100ms);
+  const Clock::time_point t0{};
+  s.reset(t0);
+  ASSERT_EQ(s.next()->first, q(100));
+  s.unanswered(t0 + 10ms, 2000ms);
+  ASSERT_EQ(s.next()->first, q(500));
+  s.unanswered(t0 + 20ms, 2000ms);
+  EXPECT_EQ(s.next()->second, t0 + 100ms);  // Q500 again one period on
+  s.done(t0 + 100ms);
+  s.done(t0 + 200ms);
+  // ... and Q100 is still there, due 2 s after it went unanswered; answered, it is finished.
+  for (int i = 0; i < 100 && s.next()->first == q(500); ++i)
+    s.done(s.next()->second);
+  EXPECT_EQ(s.next()->first, q(100));
+  EXPECT_EQ(s.next()->second, t0 + 2010ms);
+  s.done(t0 + 2010ms);
+  for (int i = 0; i < 50; ++i)
+  {
+    EXPECT_EQ(s.next()->first, q(500));
+    s.done(s.next()->second);
+  }
+}
+
+TEST(MdcPollPlan, PerQueryPeriodsOverrideTheGroupsAddAndRemoveQueries)
+{
+  PollPlan plan;
+  plan.status_period = 250ms;
+  plan.variables_period = 250ms;
+  plan.counters_period = 2000ms;
+  plan.variables = {5021, 5022};
+  plan.query_periods = {{parseQueryKey("Q500"), 100ms},
+                        {parseQueryKey("Q600 5021"), 50ms},
+                        {parseQueryKey("?Q300"), 60000ms},
+                        {parseQueryKey("Q303"), 0ms},
+                        {parseQueryKey("Q600_100"), 1000ms}};
+  const auto entries = plan.scheduler().plan();
+  std::map<std::string, Milliseconds> period;
+  for (const auto& [query, p] : entries)
+  {
+    EXPECT_EQ(period.count(query.text()), 0u) << query.text() << " twice";
+    period[query.text()] = p;
+  }
+  EXPECT_EQ(period.at("?Q500"), 100ms);
+  EXPECT_EQ(period.at("?Q104"), 250ms);  // its group's period
+  EXPECT_EQ(period.at("?Q600 5021"), 50ms);
+  EXPECT_EQ(period.at("?Q600 5022"), 250ms);
+  EXPECT_EQ(period.at("?Q300"), 60000ms);  // not in the groups: added
+  EXPECT_EQ(period.at("?Q600 100"), 1000ms);
+  EXPECT_EQ(period.count("?Q303"), 0u);  // 0: not polled
+  EXPECT_EQ(period.at("?Q304"), 2000ms);
+  EXPECT_EQ(period.at("?Q100"), QueryScheduler::kOnce);
+  EXPECT_EQ(entries.front().first, q(100));  // the groups' order is kept
+}
+
+TEST(MdcPollPlan, QueryKeysMustBeReadOnlyQueries)
+{
+  EXPECT_EQ(parseQueryKey(" Q600 5021"), macroQuery(5021));
+  EXPECT_EQ(parseQueryKey("q104"), q(104));
+  EXPECT_THROW(parseQueryKey("E100 1"), ConfigError);
+  EXPECT_THROW(parseQueryKey("status"), ConfigError);
+  EXPECT_THROW(parseQueryKey(""), ConfigError);
+}
+
+TEST(MdcPoller, IdentityQueriesLeftUnansweredAreAskedAgain)
+{
+  // The Haas documentation: the first ?Q100 after connecting may go unanswered.
+  FakeTransport fake;
+  scriptedControl(fake,
+                  [](const std::string& query, int asked) -> std::string
+                  {
+                    if (query == "?Q100")
+                      return asked == 0 ? "" : "SERIAL NUMBER, 1234567";
+                    if (query == "?Q102")
+                      return "?, ?Q102";  // rejected: finished, not asked again
+                    if (query == "?Q500")
+                      return "PROGRAM, O1, IDLE, PARTS, 1";
+                    return "";
+                  });
+  PollPlan plan = fastPlan();
+  plan.identity = true;
+  plan.counters_period = 20ms;  // also the wait before an identity query is asked again
+  plan.query_periods = {{q(104), 0ms}, {q(201), 0ms}, {q(303), 0ms}, {q(304), 0ms}, {q(402), 0ms}, {q(200), 0ms}};
+  plan.max_unanswered = 0;
+  MdcPoller poller(plan, 20ms);
+  Reported reported;
+  reported.listen(poller);
+  StopSignal stop;
+  std::thread thread([&] { poller.run(fake, stop); });
+  EXPECT_TRUE(reported.waitFor([&] { return reported.status.serial_number == "1234567"; }));
+  stop.stop();
+  thread.join();
+  const std::string sent = text(fake.written());
+  auto count = [&](const std::string& what)
+  {
+    size_t n = 0;
+    for (size_t at = sent.find(what); at != std::string::npos; at = sent.find(what, at + 1))
+      ++n;
+    return n;
+  };
+  EXPECT_EQ(count("?Q100\r\n"), 2u);
+  EXPECT_EQ(count("?Q102\r\n"), 1u);
+}
+
+TEST(MdcPoller, HoldsThePortLockForEachQueryAndReleasesItBetween)
+{
+  const std::string device = "/tmp/cnc_bridge_test_mdc_hold_" + std::to_string(::getpid());
+  PortLock probe(device);
+  PortLock mine(device);
+  FakeTransport fake;
+  std::atomic<int> written_unlocked{0}, written{0};
+  // The control looks at the lock whenever a query arrives: it must be held by the poller then.
+  fake.onWrite(
+      [&](FakeTransport& f, const std::vector<uint8_t>&)
+      {
+        ++written;
+        if (!probe.heldElsewhere())
+          ++written_unlocked;
+        f.feed(">STATUS, BUSY\r\n>MODE, (MEM)\r\n");
+      });
+  PollPlan plan = fastPlan();
+  plan.query_periods = {{q(201), 0ms}, {q(303), 0ms}, {q(304), 0ms}, {q(402), 0ms}, {q(200), 0ms}};
+  MdcPoller poller(plan, 500ms, &mine);
+  StopSignal stop;
+  std::thread thread([&] { poller.run(fake, stop); });
+  ASSERT_TRUE(fake.waitForWritten(100, 5s));
+  // Between two queries the lock is free: a transfer gets it within its patience.
+  PortLock dnc(device);
+  ASSERT_TRUE(dnc.lockForTransfer(2s));
+  dnc.unlock();
+  stop.stop();
+  thread.join();
+  EXPECT_GT(written.load(), 10);
+  EXPECT_EQ(written_unlocked.load(), 0);
+  EXPECT_FALSE(probe.heldElsewhere());
+}
+
+TEST(MdcPoller, AfterATransferUsedTheLineItsBytesAreDroppedAndTheSettingsReapplied)
+{
+  const std::string device = "/tmp/cnc_bridge_test_mdc_regain_" + std::to_string(::getpid());
+  PortLock mine(device);
+  PortLock dnc(device);
+  FakeTransport fake;
+  fakeControl(fake, "PROGRAM, O7, IDLE, PARTS, 1");
+  PollPlan plan = fastPlan();
+  MdcPoller poller(plan, 500ms, &mine);
+  std::atomic<int> reapplied{0};
+  poller.setPortRegainedHook([&](Transport& link) { reapplied += &link == &fake ? 1 : 100; });
+  Reported reported;
+  reported.listen(poller);
+  StopSignal stop;
+  std::thread thread([&] { poller.run(fake, stop); });
+  ASSERT_TRUE(fake.waitForWritten(30, 5s));
+  EXPECT_EQ(reapplied.load(), 0);  // no transfer yet
+  ASSERT_TRUE(dnc.lockForTransfer(2s));
+  const size_t before = fake.written().size();
+  // The transfer's bytes (an XModem block with no line end) arrive while the poller is silent.
+  fake.feed(std::string("\x01\x01\xfe") + std::string(128, 'G') + "\x1a");
+  EXPECT_FALSE(fake.waitForWritten(before + 1, 100ms));  // not a byte from the poller meanwhile
+  dnc.unlock();
+  ASSERT_TRUE(fake.waitForWritten(before + 30, 5s));
+  stop.stop();
+  thread.join();
+  EXPECT_EQ(reapplied.load(), 1);
+  EXPECT_EQ(poller.portRegained(), 1u);
+  EXPECT_GT(poller.skippedForPortLock(), 0u);
+  // The transfer's bytes were dropped, not glued to the next reply (which would go unanswered).
+  EXPECT_EQ(poller.stats().unanswered, 0u);
+  EXPECT_EQ(poller.status().program, "O7");
+}
+
+namespace
+{
+// A control that runs one cycle: Q500 says IDLE, BUSY, BUSY, then IDLE with one more part.
+std::string oneCycle(const std::string& query, int asked, const std::string& q303)
+{
+  if (query == "?Q500")
+    return asked == 0 ? "PROGRAM, O1, IDLE, PARTS, 1" : asked < 3 ? "STATUS, BUSY" : "PROGRAM, O1, IDLE, PARTS, 2";
+  if (query == "?Q303")
+    return q303.empty() ? "?, ?Q303" : q303 + std::to_string(asked + 1);
+  return "?, " + query;
+}
+
+std::vector<CycleEventData> runOneCycle(FakeTransport& fake, bool from_control)
+{
+  PollPlan plan = fastPlan();
+  plan.cycle_time_from_control = from_control;
+  MdcPoller poller(plan, 500ms);
+  Reported reported;
+  reported.listen(poller);
+  StopSignal stop;
+  std::thread thread([&] { poller.run(fake, stop); });
+  const bool ended = reported.waitFor(
+      [&]
+      {
+        return std::any_of(reported.events.begin(), reported.events.end(),
+                           [](const CycleEventData& e) { return e.type == CycleEventData::kCycleEnd; });
+      });
+  stop.stop();
+  thread.join();
+  EXPECT_TRUE(ended);
+  return reported.events;
+}
+}  // namespace
+
+TEST(MdcPoller, CycleEndCarriesTheControlsLastCycleTime)
+{
+  FakeTransport fake;
+  // LAST CYCLE is 1 s when first polled, 2 s when asked again: only a fresh ask gives 2 s.
+  scriptedControl(fake,
+                  [](const std::string& query, int asked) { return oneCycle(query, asked, "LAST CYCLE, 0:00:0"); });
+  const auto events = runOneCycle(fake, true);
+  ASSERT_EQ(events.size(), 2u);
+  EXPECT_EQ(events[0].type, CycleEventData::kCycleStart);
+  EXPECT_EQ(events[1].type, CycleEventData::kCycleEnd);
+  EXPECT_EQ(events[1].part_count, 2);
+  EXPECT_DOUBLE_EQ(events[1].cycle_time, 2.0);
+  EXPECT_NE(events[1].text.find("from the control"), std::string::npos) << events[1].text;
+  // Asked right after the status that ended the cycle.
+  const std::string sent = text(fake.written());
+  const size_t end_status =
+      sent.find("?Q500\r\n", sent.find("?Q500\r\n", sent.find("?Q500\r\n", sent.find("?Q500\r\n") + 1) + 1) + 1);
+  ASSERT_NE(end_status, std::string::npos);
+  EXPECT_EQ(sent.substr(end_status, 14), "?Q500\r\n?Q303\r\n");
+}
+
+TEST(MdcPoller, CycleEndFallsBackToTheMeasuredTimeWhenTheControlHasNone)
+{
+  FakeTransport fake;
+  scriptedControl(fake, [](const std::string& query, int asked) { return oneCycle(query, asked, ""); });
+  const auto events = runOneCycle(fake, true);
+  ASSERT_EQ(events.size(), 2u);
+  EXPECT_EQ(events[1].type, CycleEventData::kCycleEnd);
+  EXPECT_GE(events[1].cycle_time, 0.0);
+  EXPECT_LT(events[1].cycle_time, 1.0);  // two 2 ms polls, not a control's value
+  EXPECT_EQ(events[1].text.find("from the control"), std::string::npos);
 }

@@ -66,6 +66,10 @@ class MdcClient
   /// polls so broadcast replies do not pile up in the input buffer).
   void drainForeign(Milliseconds timeout);
 
+  /// \brief Drops what has arrived but not been read, buffered here and in the transport (bytes of
+  /// another protocol that used the line meanwhile, e.g. a DNC transfer).
+  void discardInput();
+
   const ClientStats& stats() const { return stats_; }
   Transport& transport() { return transport_; }
 

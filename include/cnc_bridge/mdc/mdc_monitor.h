@@ -37,10 +37,17 @@ class QueryScheduler
   void reset(Clock::time_point now);
   /// \returns the query due first and when; nullopt when nothing is left.
   std::optional<std::pair<Query, Clock::time_point>> next() const;
-  /// \brief The query next() returned was sent (answered or not) at \p now: schedule its next run
+  /// \brief The query next() returned was answered (or rejected) at \p now: schedule its next run
   /// one period after its due time, or at \p now if that is already past (no bursts after a stall).
+  /// A once-only query is finished.
   void done(Clock::time_point now);
+  /// \brief The query next() returned went unanswered at \p now: a periodic one is scheduled as by
+  /// done(); a once-only one is not finished but tried again at \p now + \p retry_after.
+  void unanswered(Clock::time_point now, Milliseconds retry_after);
   size_t size() const { return slots_.size(); }
+
+  /// \brief The queries and their periods, in the order added.
+  std::vector<std::pair<Query, Milliseconds>> plan() const;
 
  private:
   struct Slot
@@ -50,6 +57,7 @@ class QueryScheduler
     Clock::time_point due;
     bool finished = false;
   };
+  Slot* current();
   std::vector<Slot> slots_;
 };
 
@@ -146,6 +154,12 @@ struct PollPlan
   std::vector<int> variables;          ///< Q600 list (positions, spindle, counters, #100s)
   std::vector<int> slow_variables;     ///< Q600 list polled at counters_period (#4006 units)
   bool identity = true;                ///< Q100, Q101, Q102 once per connection
+  /// Per-query periods that override the group periods above; a query not in the plan is added
+  /// (e.g. Q300 power-on time), a period of 0 removes it from the plan.
+  std::vector<std::pair<Query, Milliseconds>> query_periods;
+  /// When a cycle ends, ask the control for its last cycle time (Q303) at once and put it in the
+  /// cycle-end event; the time measured between polls stays the fallback.
+  bool cycle_time_from_control = true;
   /// Queries left unanswered in a row before the link is declared dead (a serial control switched
   /// off, a half-open TCP connection); the poller then ends with LinkError so it is reopened.
   unsigned max_unanswered = 5;
@@ -153,6 +167,10 @@ struct PollPlan
   /// \brief The scheduler for this plan.
   QueryScheduler scheduler() const;
 };
+
+/// \brief Reads a key of a per-query period table: "Q500", "?Q500", "Q600 5021" (a read-only query).
+/// \throws ConfigError naming \p key when it is not one.
+Query parseQueryKey(const std::string& key);
 
 /// \brief Polls over one connection until stopped or the link fails. Thread-safe as documented
 /// per method: run() in one thread; withClient() from any other.
@@ -162,9 +180,17 @@ class MdcPoller
   /// \brief Called (under the client lock) after each reply is folded in, with the events found.
   using UpdateListener = std::function<void(const MachineStatus&, const std::vector<CycleEventData>&)>;
 
-  /// \param port_lock if set, polls are skipped while another process holds it (a DNC transfer
-  ///        on the same serial port: polling a Classic control then can freeze it).
+  /// \brief Called with the link, the port lock held, before the first query after another process
+  /// (a DNC transfer) used the serial line: the line's settings may have been changed meanwhile.
+  using PortRegainedHook = std::function<void(Transport&)>;
+
+  /// \param port_lock if set, it is held for each query (PortLock::tryLockForQuery()), and polls
+  ///        wait while another process holds it or waits for it (a DNC transfer on the same serial
+  ///        port: polling a Classic control then can freeze it, and a query would mix with the
+  ///        transfer's bytes).
   MdcPoller(PollPlan plan, Milliseconds reply_timeout, PortLock* port_lock = nullptr);
+
+  void setPortRegainedHook(PortRegainedHook hook) { port_regained_ = std::move(hook); }
 
   /// \brief See MdcMonitor::setWorkOffsetAxes(). Call before run().
   void setWorkOffsetAxes(const std::vector<std::pair<int, int>>& machine_work);
@@ -183,16 +209,25 @@ class MdcPoller
   /// \brief A copy of the status and counters. Thread-safe.
   MachineStatus status() const;
   ClientStats stats() const;
+  /// \brief Times a due poll waited (50 ms each) because another process held or wanted the port.
   uint64_t skippedForPortLock() const;
+  /// \brief Times the port came back after another process had used it (settings reapplied).
+  uint64_t portRegained() const;
   uint64_t polls() const;
 
  private:
+  class PortUse;
   void notify(const Reply& reply);
+  /// Takes the port lock for one use (with mutex_ held). \returns false if it is busy.
+  bool takePort(MdcClient& client);
+  /// Asks for the control's cycle time for cycle ends held back by notify(), then delivers them.
+  void deliverHeldEvents(MdcClient& client);
 
   PollPlan plan_;
   Milliseconds reply_timeout_;
   PortLock* port_lock_;
   UpdateListener listener_;
+  PortRegainedHook port_regained_;
 
   mutable std::mutex mutex_;  // guards everything below, and all use of client_
   MdcClient* client_ = nullptr;
@@ -200,7 +235,11 @@ class MdcPoller
   ClientStats stats_;  // of past connections plus the live one
   ClientStats base_stats_;
   uint64_t skipped_ = 0;
+  uint64_t regained_ = 0;
   uint64_t polls_ = 0;
+  std::optional<uint64_t> port_generation_;  // of the port lock when last held, this connection
+  bool hold_cycle_ends_ = false;             // a client can ask Q303 before the event goes out
+  std::vector<CycleEventData> held_events_;
 };
 }  // namespace mdc
 }  // namespace cnc_bridge

@@ -74,6 +74,10 @@ class SerialPort : public AsioStreamTransport<boost::asio::serial_port>
   void discardInput() override;
   std::string describe() const override { return settings_.describe(); }
   const SerialSettings& settings() const { return settings_; }
+  /// \brief Sets the line settings on the device again: another program that shares the line (a
+  /// DNC transfer between two status polls) may have changed them, and they belong to the device,
+  /// not to this open port. \throws LinkError.
+  void applySettings();
 
   /// \brief Native file descriptor, for ioctls the interface does not cover (modem lines).
   int nativeHandle() { return stream_.native_handle(); }
