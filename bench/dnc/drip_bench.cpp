@@ -75,6 +75,7 @@ int main(int argc, char** argv)
   double seconds = 0;
   std::string dir = "/tmp";
   std::string line = "pty";
+  int realtime_priority = 0;
   sim::DripControlOptions control;
   control.execution_cps = 0;
   control.realtime = true;  // as a control's UART: see DripControlOptions::realtime
@@ -87,7 +88,8 @@ int main(int argc, char** argv)
       "low", po::value(&control.low_mark)->default_value(control.low_mark), "XON mark")(
       "seconds", po::value(&seconds)->default_value(0), "cancel after this long (0 = send it all)")(
       "dir", po::value(&dir)->default_value(dir), "where to generate the program")(
-      "line", po::value(&line)->default_value(line), "pty or memory (SimulatedLine)");
+      "line", po::value(&line)->default_value(line), "pty or memory (SimulatedLine)")(
+      "realtime", po::value(&realtime_priority)->default_value(0), "sender SCHED_FIFO priority (0 = normal)");
   po::variables_map vm;
   po::store(po::parse_command_line(argc, argv, options), vm);
   po::notify(vm);
@@ -135,6 +137,7 @@ int main(int argc, char** argv)
     }
     dnc::DripOptions drip;
     drip.pace_cps = baud / 10.0;
+    drip.realtime_priority = realtime_priority;
     const auto plan = dnc::planDrip(path, drip);
     const long rss_planned = statusKb("VmRSS:");
     dnc::DripSender sender(*host_end, drip);

@@ -2,8 +2,12 @@
 // and works out the framing and restart preamble before a single character goes out.
 #include "cnc_bridge/dnc/drip_feed.h"
 
+#include <pthread.h>
+#include <sched.h>
+
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <sstream>
 #include <thread>
 
@@ -187,6 +191,47 @@ DripPlan planDrip(const std::string& path, const DripOptions& options, const Res
 // ---------------------------------------------------------------------------------------------
 // Sender
 
+namespace
+{
+/// Runs the calling thread at SCHED_FIFO \p priority while it lives (best effort), then restores
+/// the scheduling it had.
+class RealtimeScope
+{
+ public:
+  explicit RealtimeScope(int priority)
+  {
+    if (priority <= 0 || pthread_getschedparam(pthread_self(), &policy_, &saved_) != 0)
+    {
+      return;
+    }
+    sched_param param{};
+    param.sched_priority = priority;
+    const int error = pthread_setschedparam(pthread_self(), SCHED_FIFO, &param);
+    if (error != 0)
+    {
+      CNC_LOG_WARN("drip-feed: SCHED_FIFO priority " << priority << " not granted (" << std::strerror(error)
+                                                     << "); pacing with the normal scheduler");
+      return;
+    }
+    changed_ = true;
+  }
+  ~RealtimeScope()
+  {
+    if (changed_)
+    {
+      pthread_setschedparam(pthread_self(), policy_, &saved_);
+    }
+  }
+  RealtimeScope(const RealtimeScope&) = delete;
+  RealtimeScope& operator=(const RealtimeScope&) = delete;
+
+ private:
+  int policy_ = SCHED_OTHER;
+  sched_param saved_{};
+  bool changed_ = false;
+};
+}  // namespace
+
 class DripSender::Stopped
 {
 };
@@ -342,6 +387,7 @@ void DripSender::emit(const char* data, size_t size)
 
 DripResult DripSender::send(const DripPlan& plan, const ProgressCallback& progress, const LineCallback& line_sent)
 {
+  const RealtimeScope realtime(options_.realtime_priority);
   callback_ = progress;
   progress_ = DripProgress{};
   progress_.total = plan.total_bytes;

@@ -3,11 +3,15 @@
 // serialises them), so the handlers hold no lock of their own.
 #include "cnc_bridge/ros/dnc_drip_handlers.h"
 
+#include <std_srvs/Trigger.h>
 #include <termios.h>
 
 #include <memory>
+#include <mutex>
+#include <sstream>
 
 #include "cnc_bridge/DncLine.h"
+#include "cnc_bridge/PlanDrip.h"
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/dnc/backup.h"
 #include "cnc_bridge/dnc/dnc_codes.h"
@@ -92,6 +96,10 @@ class DripHandlers
     {
       drip_.pace_cps = serial.charactersPerSecond();
     }
+    // ~drip_realtime_priority (int, default 0): SCHED_FIFO priority of the feeding thread while a
+    // feed runs (0 = normal scheduler). Keeps the pacing on time on a loaded machine; needs
+    // CAP_SYS_NICE (a warning and the normal scheduler without it).
+    drip_.realtime_priority = std::max(0, pnh.param("drip_realtime_priority", 0));
     // ~drip_chunk (int, default 4): characters per write.
     drip_.chunk = static_cast<size_t>(std::max(1, pnh.param("drip_chunk", 4)));
     // ~drip_xoff_allowance (int, default 10): characters the control takes after its XOFF (Fanuc: 10).
@@ -141,6 +149,15 @@ class DripHandlers
     line_pub_ = nh.advertise<DncLine>("dnc/current_line", 100);
   }
 
+  /// ~pause, ~resume and ~plan_drip; \p programs resolves the files ~plan_drip reads.
+  void advertise(ros::NodeHandle pnh, const ProgramDirectory& programs)
+  {
+    programs_ = &programs;
+    pause_srv_ = pnh.advertiseService("pause", &DripHandlers::onPause, this);
+    resume_srv_ = pnh.advertiseService("resume", &DripHandlers::onResume, this);
+    plan_srv_ = pnh.advertiseService("plan_drip", &DripHandlers::onPlan, this);
+  }
+
   TransferResult drip(Transport& link, const TransferJob& job,
                       const std::function<void(const TransferFeedback&)>& feedback, const std::atomic<bool>& cancel)
   {
@@ -161,7 +178,9 @@ class DripHandlers
     }
     FlowControlGuard guard(link, options.flow);
     dnc::DripSender sender(link, options);
+    ActiveSender active(*this, sender);
     bool was_held = false;
+    bool was_paused = false;
     const auto progress = [&](const dnc::DripProgress& p)
     {
       TransferFeedback f;
@@ -171,20 +190,24 @@ class DripHandlers
       f.block_number = p.block;
       f.percent = static_cast<float>(p.percent());
       f.held = p.held;
+      f.paused = p.paused;
       if (feedback)
         feedback(f);
-      const bool paused = p.held || p.paused;
       state_.update(
           [&](MachineState& s)
           {
             s.block = static_cast<uint32_t>(p.line);
-            if (paused != was_held)
+            if (p.held != was_held || p.paused != was_paused)
             {
-              s.execution = paused ? MachineState::EXECUTION_PAUSED : MachineState::EXECUTION_ACTIVE;
-              s.message = paused ? "drip-feed held by the control (XOFF)" : "drip-feeding " + job.goal.file;
+              const bool stopped = p.held || p.paused;
+              s.execution = stopped ? MachineState::EXECUTION_PAUSED : MachineState::EXECUTION_ACTIVE;
+              s.message = p.paused ? "drip-feed paused by the operator (~resume to go on)"
+                          : p.held ? "drip-feed held by the control (XOFF)"
+                                   : "drip-feeding " + job.goal.file;
             }
           });
-      was_held = paused;
+      was_held = p.held;
+      was_paused = p.paused;
     };
     const auto line_sent = [&](uint64_t line, const std::string& text)
     {
@@ -205,6 +228,8 @@ class DripHandlers
     TransferResult result;
     result.success = r.completed();
     result.message = r.message;
+    if (r.xoff_events > 0)
+      result.message += "; largest output queue at an XOFF " + std::to_string(r.max_queued_at_xoff) + " characters";
     result.bytes = r.bytes;
     result.stopped_at_line = static_cast<uint32_t>(r.stopped_at_line);
     result.stopped_at_block = r.stopped_at_block;
@@ -238,7 +263,131 @@ class DripHandlers
   }
 
  private:
+  /// Makes a running sender reachable from ~pause and ~resume for the length of one feed.
+  class ActiveSender
+  {
+   public:
+    ActiveSender(DripHandlers& handlers, dnc::DripSender& sender) : handlers_(handlers)
+    {
+      std::lock_guard<std::mutex> lock(handlers_.sender_mutex_);
+      handlers_.sender_ = &sender;
+    }
+    ~ActiveSender()
+    {
+      std::lock_guard<std::mutex> lock(handlers_.sender_mutex_);
+      handlers_.sender_ = nullptr;
+    }
+    ActiveSender(const ActiveSender&) = delete;
+    ActiveSender& operator=(const ActiveSender&) = delete;
+
+   private:
+    DripHandlers& handlers_;
+  };
+
+  bool onPause(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response)
+  {
+    std::lock_guard<std::mutex> lock(sender_mutex_);
+    if (sender_ == nullptr)
+    {
+      response.message = "refused: no drip-feed is running (pause applies to protocol drip)";
+      return true;
+    }
+    response.success = true;
+    response.message = sender_->paused() ? "already paused" : "paused: nothing more is sent until ~resume";
+    sender_->pause();
+    state_.update(
+        [&](MachineState& s)
+        {
+          s.execution = MachineState::EXECUTION_PAUSED;
+          s.message = "drip-feed paused by the operator (~resume to go on)";
+        });
+    ROS_INFO("drip-feed paused");
+    return true;
+  }
+
+  bool onResume(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response)
+  {
+    std::lock_guard<std::mutex> lock(sender_mutex_);
+    if (sender_ == nullptr)
+    {
+      response.message = "refused: no drip-feed is running (resume applies to a paused drip-feed)";
+      return true;
+    }
+    if (!sender_->paused())
+    {
+      response.message = "refused: the drip-feed is not paused";
+      return true;
+    }
+    sender_->resume();
+    response.success = true;
+    response.message = "resumed";
+    ROS_INFO("drip-feed resumed");
+    return true;
+  }
+
+  bool onPlan(PlanDrip::Request& request, PlanDrip::Response& response)
+  {
+    try
+    {
+      const std::string path = programs_->resolveExisting(request.file);
+      dnc::RestartPoint restart;
+      restart.line = request.start_line;
+      restart.block = request.start_block;
+      const dnc::ProgramScan scan =
+          dnc::scanProgram(path, drip_.rules, restart, drip_.eob.size(), drip_.max_line_length);
+      response.resume_line = static_cast<uint32_t>(scan.start_line);
+      response.resume_block = blockAtLine(path, scan.start_line);
+      response.warnings = scan.warnings;
+      if (restart.active())
+        response.preamble = request.restart_preamble.empty() ? scan.computed_preamble : request.restart_preamble;
+      for (const auto& issue : scan.issues)
+        response.character_issues.push_back(issue.describe());
+      response.character_issue_count = scan.issue_count;
+      std::vector<dnc::CharacterIssue> preamble_issues;
+      std::istringstream preamble(response.preamble);
+      std::string line;
+      for (uint64_t n = 1; std::getline(preamble, line); ++n)
+        dnc::checkLine(line, n, drip_.rules, preamble_issues);
+      for (const auto& issue : preamble_issues)
+        response.character_issues.push_back("restart preamble " + issue.describe());
+      response.character_issue_count += preamble_issues.size();
+      if (response.character_issue_count == 0)
+        response.total_bytes = dnc::planDrip(path, drip_, restart, request.restart_preamble).total_bytes;
+      response.success = true;
+      response.message = response.character_issue_count == 0
+                             ? "ready: " + std::to_string(response.total_bytes) + " bytes from line " +
+                                   std::to_string(response.resume_line)
+                             : std::to_string(response.character_issue_count) +
+                                   " character(s) the control cannot take: a feed would be refused";
+    }
+    catch (const Error& e)
+    {
+      response.success = false;
+      response.message = e.what();
+    }
+    return true;
+  }
+
+  /// The sequence number of line \p number of the file ("" if it has none).
+  std::string blockAtLine(const std::string& path, uint64_t number) const
+  {
+    dnc::LineReader reader(path, drip_.max_line_length);
+    std::string line;
+    while (reader.next(line))
+    {
+      if (reader.lineNumber() == number)
+        return dnc::sequenceNumber(line);
+    }
+    return "";
+  }
+
   MachineStatePublisher& state_;
+  const ProgramDirectory* programs_ = nullptr;
+  std::mutex sender_mutex_;
+  dnc::DripSender* sender_ = nullptr;  ///< the feed running, for ~pause / ~resume
+  ros::ServiceServer pause_srv_;
+  ros::ServiceServer resume_srv_;
+  ros::ServiceServer plan_srv_;
   dnc::DripOptions drip_;
   dnc::BackupOptions backup_;
   ros::Publisher line_pub_;
@@ -249,6 +398,7 @@ void registerDripProtocols(DncNode& node, ros::NodeHandle nh, ros::NodeHandle pn
                            MachineStatePublisher& state, ros::Duration feedback_period)
 {
   auto handlers = std::make_shared<DripHandlers>(nh, pnh, serial, state, feedback_period);
+  handlers->advertise(pnh, node.programs());
   node.registerProtocol("drip", [handlers](Transport& link, const TransferJob& job, const auto& feedback,
                                            const auto& cancel) { return handlers->drip(link, job, feedback, cancel); });
   node.registerProtocol("backup",

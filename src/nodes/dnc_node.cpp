@@ -106,9 +106,12 @@ DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh)
 
   send_srv_ = pnh.advertiseService("send_program", &DncNode::onSend, this);
   receive_srv_ = pnh.advertiseService("receive_program", &DncNode::onReceive, this);
-  action_ = std::make_unique<actionlib::SimpleActionServer<TransferAction>>(
-      pnh, "transfer", [this](const TransferGoalConstPtr& goal) { onGoal(goal); }, false);
-  action_->registerPreemptCallback([this] { onPreempt(); });
+  // ~transfer: an ActionServer (not a SimpleActionServer, whose new goal preempts the running
+  // one): a goal arriving while a transfer runs is rejected with the reason, the running one goes
+  // on. Accepted goals run in worker_.
+  worker_ = std::thread([this] { actionWorker(); });
+  action_ = std::make_unique<actionlib::ActionServer<TransferAction>>(
+      pnh, "transfer", [this](GoalHandle goal) { onGoal(goal); }, [this](GoalHandle goal) { onCancel(goal); }, false);
   action_->start();
   ROS_INFO("dnc_node on %s, programs in %s, default protocol %s", serial_.describe().c_str(), programs_->root().c_str(),
            default_protocol_.c_str());
@@ -116,14 +119,42 @@ DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh)
 
 DncNode::~DncNode()
 {
-  cancel_ = true;
+  cancelRunning();
   {
-    std::lock_guard<std::mutex> lock(link_mutex_);
-    if (link_)
-      link_->interrupt();
+    std::lock_guard<std::mutex> lock(goal_mutex_);
+    stopping_ = true;
   }
-  if (action_)
-    action_->shutdown();
+  goal_ready_.notify_all();
+  if (worker_.joinable())
+    worker_.join();
+  action_.reset();
+}
+
+bool DncNode::tryReserve()
+{
+  {
+    std::lock_guard<std::mutex> lock(busy_mutex_);
+    if (!busy_)
+    {
+      busy_ = true;
+      cancel_ = false;  // a cancel for the previous transfer does not carry over
+      return true;
+    }
+  }
+  std::lock_guard<std::mutex> lock(stats_mutex_);
+  ++counters_.refused;
+  return false;
+}
+
+void DncNode::release()
+{
+  std::lock_guard<std::mutex> lock(busy_mutex_);
+  busy_ = false;
+}
+
+std::string DncNode::busyMessage() const
+{
+  return "refused: another transfer is running on " + serial_.device + " (one at a time)";
 }
 
 void DncNode::registerProtocol(const std::string& protocol, ProtocolHandler handler)
@@ -160,17 +191,24 @@ void DncNode::closeLink()
   state_->setLink(LinkState::kDown, keep_open_ ? "port closed after a link error" : "port opened on demand");
 }
 
-TransferResult DncNode::run(TransferGoal goal, const std::function<void(const TransferFeedback&)>& feedback)
+TransferResult DncNode::run(TransferGoal goal, const Feedback& feedback)
 {
-  TransferResult result;
-  std::unique_lock<std::mutex> busy(busy_, std::try_to_lock);
-  if (!busy.owns_lock())
+  if (!tryReserve())
   {
-    std::lock_guard<std::mutex> lock(stats_mutex_);
-    ++counters_.refused;
-    result.message = "refused: another transfer is running on " + serial_.device + " (one at a time)";
+    TransferResult result;
+    result.message = busyMessage();
     return result;
   }
+  bool cancelled = false;
+  TransferResult result = runReserved(std::move(goal), feedback, cancelled);
+  release();
+  return result;
+}
+
+TransferResult DncNode::runReserved(TransferGoal goal, const Feedback& feedback, bool& cancelled)
+{
+  TransferResult result;
+  cancelled = false;
   if (goal.protocol.empty())
     goal.protocol = default_protocol_;
   const auto handler = protocols_.find(goal.protocol);
@@ -200,7 +238,6 @@ TransferResult DncNode::run(TransferGoal goal, const std::function<void(const Tr
     return result;
   }
 
-  cancel_ = false;
   {
     std::lock_guard<std::mutex> lock(stats_mutex_);
     ++counters_.transfers;
@@ -216,7 +253,6 @@ TransferResult DncNode::run(TransferGoal goal, const std::function<void(const Tr
       });
   ROS_INFO("%s %s by %s", job.send ? "sending" : "receiving", job.path.c_str(), goal.protocol.c_str());
 
-  bool cancelled = false;
   try
   {
     // A status poller on the same line (haas_mdc_node) skips its polls while this is held. It
@@ -228,6 +264,8 @@ TransferResult DncNode::run(TransferGoal goal, const std::function<void(const Tr
     // Opening the port set its own message: while the transfer runs, state says what it is.
     state_->update([&](MachineState& s) { s.message = transfer_message; });
     result = handler->second(link, job, feedback, cancel_);
+    // A protocol that reports a cancel in its result (drip, backup) rather than by CancelledError.
+    cancelled = !result.success && cancel_;
   }
   catch (const CancelledError& e)
   {
@@ -324,24 +362,77 @@ TransferResult DncNode::runXmodem(Transport& link, const TransferJob& job,
   return result;
 }
 
-void DncNode::onGoal(const TransferGoalConstPtr& goal)
+void DncNode::onGoal(GoalHandle goal)
 {
-  const TransferResult result =
-      run(*goal, [this](const TransferFeedback& feedback) { action_->publishFeedback(feedback); });
-  if (action_->isPreemptRequested() || !ros::ok())
-    action_->setPreempted(result, result.message);
-  else if (result.success)
-    action_->setSucceeded(result, result.message);
-  else
-    action_->setAborted(result, result.message);
+  if (!tryReserve())
+  {
+    TransferResult result;
+    result.message = busyMessage();
+    ROS_WARN("~transfer goal for %s rejected: %s", goal.getGoal()->file.c_str(), result.message.c_str());
+    goal.setRejected(result, result.message);
+    return;
+  }
+  goal.setAccepted();
+  {
+    std::lock_guard<std::mutex> lock(goal_mutex_);
+    pending_goal_ = std::make_unique<GoalHandle>(goal);
+  }
+  goal_ready_.notify_all();
 }
 
-void DncNode::onPreempt()
+void DncNode::onCancel(GoalHandle goal)
+{
+  std::lock_guard<std::mutex> lock(goal_mutex_);
+  if ((current_goal_ && *current_goal_ == goal) || (pending_goal_ && *pending_goal_ == goal))
+    cancelRunning();
+}
+
+void DncNode::cancelRunning()
 {
   cancel_ = true;
   std::lock_guard<std::mutex> lock(link_mutex_);
   if (link_)
     link_->interrupt();
+}
+
+void DncNode::actionWorker()
+{
+  for (;;)
+  {
+    GoalHandle goal;
+    {
+      std::unique_lock<std::mutex> lock(goal_mutex_);
+      goal_ready_.wait(lock, [this] { return stopping_ || pending_goal_; });
+      if (!pending_goal_)
+        return;  // stopping
+      current_goal_ = std::move(pending_goal_);
+      goal = *current_goal_;
+    }
+    bool cancelled = false;
+    TransferResult result;
+    if (cancel_)
+    {
+      cancelled = true;  // cancelled before it started
+      result.message = "cancelled before it started";
+    }
+    else
+    {
+      result = runReserved(
+          *goal.getGoal(), [&goal](const TransferFeedback& f) { goal.publishFeedback(f); }, cancelled);
+    }
+    {
+      std::lock_guard<std::mutex> lock(goal_mutex_);
+      current_goal_.reset();
+    }
+    // Free before the result goes out: a client may send its next goal as soon as it has it.
+    release();
+    if (result.success)
+      goal.setSucceeded(result, result.message);
+    else if (cancelled || !ros::ok())
+      goal.setCanceled(result, result.message);
+    else
+      goal.setAborted(result, result.message);
+  }
 }
 
 namespace

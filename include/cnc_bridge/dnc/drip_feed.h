@@ -57,6 +57,11 @@ struct DripOptions
   /// never runs dry while the host wakes up, and what is queued, plus one write, plus the character
   /// time the DC3 itself takes to arrive, never exceeds the allowance.
   size_t xoff_allowance = 10;
+  /// SCHED_FIFO priority for the thread running send(), for its length (the normal scheduler is
+  /// restored after); 0 = the normal scheduler. A paced sender must wake within a few character
+  /// times (0.4 ms at 115200) or the line runs dry; on a loaded machine only a real-time thread
+  /// does. Needs CAP_SYS_NICE; without it a warning and the normal scheduler.
+  int realtime_priority = 0;
   Milliseconds hold_timeout{0};  ///< held longer than this -> on_hold_timeout; 0 = wait forever
   HoldTimeoutAction on_hold_timeout = HoldTimeoutAction::kFail;
   bool wait_for_dc1 = false;            ///< send nothing until the control asks with DC1 (reader start)

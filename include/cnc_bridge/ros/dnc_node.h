@@ -1,19 +1,22 @@
 // dnc_node: NC programs to and from a control over its RS-232 port. The node owns the serial link
 // (opened per transfer or kept open, with a PortLock held while a transfer runs so a status poller
-// on the same line stays quiet), runs one transfer at a time, and dispatches each transfer to a
-// protocol handler by name. XModem (xmodem, xmodem-crc, xmodem-1k) is registered here; other
-// protocols (drip-feed, backup) register with registerProtocol() in the constructor.
+// on the same line stays quiet), runs one transfer at a time (a second request while one runs is
+// refused: a ~transfer goal is rejected with the reason, never preempts the running one), and
+// dispatches each transfer to a protocol handler by name. XModem (xmodem, xmodem-crc, xmodem-1k) is registered here;
+// other protocols (drip-feed, backup) register with registerProtocol() in the constructor.
 #pragma once
 
-#include <actionlib/server/simple_action_server.h>
+#include <actionlib/server/action_server.h>
 #include <ros/ros.h>
 
 #include <atomic>
+#include <condition_variable>
 #include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
 #include <string>
+#include <thread>
 
 #include "cnc_bridge/ReceiveProgram.h"
 #include "cnc_bridge/SendProgram.h"
@@ -50,16 +53,30 @@ class DncNode
 
   /// \brief Makes \p protocol available to ~transfer, ~send_program and ~receive_program.
   void registerProtocol(const std::string& protocol, ProtocolHandler handler);
+  /// \brief ~program_dir, for protocol services that read programs (~plan_drip).
+  const ProgramDirectory& programs() const { return *programs_; }
 
  private:
-  /// Runs a job start to end: refuses if busy or the file is outside ~program_dir, holds the port
-  /// lock, opens the link (if not open), updates state and diagnostics.
-  TransferResult run(TransferGoal goal, const std::function<void(const TransferFeedback&)>& feedback);
+  using Feedback = std::function<void(const TransferFeedback&)>;
+  /// Runs a job start to end for a service: refuses if busy, else as runReserved().
+  TransferResult run(TransferGoal goal, const Feedback& feedback);
+  /// Runs a job the caller has reserved the node for (tryReserve()): refuses a file outside
+  /// ~program_dir, holds the port lock, opens the link (if not open), updates state and
+  /// diagnostics. \p cancelled is set when the transfer ended because it was cancelled.
+  TransferResult runReserved(TransferGoal goal, const Feedback& feedback, bool& cancelled);
+  /// Takes the node for one transfer; false (and counted as refused) if one is running.
+  bool tryReserve();
+  void release();
+  std::string busyMessage() const;
   /// Opens the serial port if it is not open (the only place the link is opened).
   Transport& openLink();
   void closeLink();
-  void onGoal(const TransferGoalConstPtr& goal);
-  void onPreempt();
+  using GoalHandle = actionlib::ServerGoalHandle<TransferAction>;
+  void onGoal(GoalHandle goal);
+  void onCancel(GoalHandle goal);
+  /// The thread that runs accepted ~transfer goals, one at a time.
+  void actionWorker();
+  void cancelRunning();
   bool onSend(SendProgram::Request& request, SendProgram::Response& response);
   bool onReceive(ReceiveProgram::Request& request, ReceiveProgram::Response& response);
   void transferDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& status);
@@ -81,8 +98,9 @@ class DncNode
   std::unique_ptr<MachineStatePublisher> state_;
   PortLock port_lock_;
 
-  std::mutex busy_;        ///< held for the whole of a transfer (try_lock: a second one is refused)
-  std::mutex link_mutex_;  ///< guards link_ for onPreempt()
+  std::mutex busy_mutex_;
+  bool busy_ = false;      ///< a transfer runs (or an accepted goal waits for the worker)
+  std::mutex link_mutex_;  ///< guards link_ for cancelRunning()
   std::unique_ptr<SerialPort> link_;
   std::atomic<bool> cancel_{false};
 
@@ -96,6 +114,12 @@ class DncNode
 
   ros::ServiceServer send_srv_;
   ros::ServiceServer receive_srv_;
-  std::unique_ptr<actionlib::SimpleActionServer<TransferAction>> action_;
+  std::unique_ptr<actionlib::ActionServer<TransferAction>> action_;
+  std::mutex goal_mutex_;
+  std::condition_variable goal_ready_;
+  std::unique_ptr<GoalHandle> pending_goal_;  ///< accepted, not yet picked up by the worker
+  std::unique_ptr<GoalHandle> current_goal_;  ///< the goal the worker runs
+  bool stopping_ = false;
+  std::thread worker_;
 };
 }  // namespace cnc_bridge

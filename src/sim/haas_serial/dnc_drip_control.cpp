@@ -114,6 +114,8 @@ DripControlStats runDripControl(Transport& link, const DripControlOptions& optio
   bool xoff = false;
   uint64_t after = 0;
   unsigned percents = 0;
+  uint8_t last_char = 0;
+  Clock::time_point completed_at;
   auto last = Clock::now();
   uint8_t buffer[256];
   std::vector<uint8_t> masked;
@@ -165,7 +167,9 @@ DripControlStats runDripControl(Transport& link, const DripControlOptions& optio
       if (c == '%' && ++percents == 2)
       {
         stats.program_complete = true;
+        completed_at = Clock::now();
       }
+      last_char = c;
       crossed = crossed || (!xoff && buffered >= options.high_mark);
     }
     if (crossed)
@@ -209,7 +213,10 @@ DripControlStats runDripControl(Transport& link, const DripControlOptions& optio
       closeXoffEvent();
       link.writeByte(code(dnc::kDc1));
     }
-    if (stats.program_complete && options.stop_at_end)
+    // The program ends with the end of block after its closing '%' (LF, or CR alone: then the
+    // line falls quiet): take that too, so the next program starts clean.
+    if (stats.program_complete && options.stop_at_end &&
+        (last_char == '\n' || now - completed_at > std::chrono::milliseconds(50)))
     {
       break;
     }
