@@ -4,9 +4,13 @@
 //                  [--show-preamble | --preamble-file F] [drip options] FILE
 //   cnc_dnc backup --port DEV [serial options] [--timeout S] [--quiet S] FILE
 //
-// Ctrl-C cancels cleanly; drip then says which line it stopped at, for a restart.
+// Ctrl-C cancels cleanly; drip then says which line it stopped at, for a restart. A running drip
+// pauses on SIGUSR1 and resumes on SIGUSR2 (kill -USR1 PID; the PID is printed at the start).
+// --baud defaults to 115200, as for send/receive and dnc_node: set it to the control's setting.
+#include <signal.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <boost/program_options.hpp>
 #include <chrono>
@@ -38,7 +42,7 @@ po::options_description serialOptions()
 {
   po::options_description options("serial port");
   options.add_options()("help,h", "this help")("port,p", po::value<std::string>(), "serial device, e.g. /dev/ttyUSB0")(
-      "baud,b", po::value<unsigned>()->default_value(9600), "baud rate")(
+      "baud,b", po::value<unsigned>()->default_value(115200), "baud rate: the control's (as send/receive)")(
       "parity", po::value<std::string>()->default_value("none"), "none|even|odd (ISO tape code: even with 7 bits)")(
       "data-bits", po::value<unsigned>()->default_value(8), "7|8")("stop-bits", po::value<unsigned>()->default_value(1),
                                                                    "1|2");
@@ -95,16 +99,60 @@ Milliseconds seconds(double value)
   return Milliseconds(static_cast<int64_t>(value * 1000.0));
 }
 
-/// Drip-feed and backup detail: the line being moved, its N number, whether the control holds us.
-std::string dripDetail(uint64_t line, const std::string& block, bool held)
+/// Drip-feed and backup detail: the line being moved, its N number, whether the control holds us
+/// or the operator paused.
+std::string dripDetail(uint64_t line, const std::string& block, bool held, bool paused = false)
 {
   std::string detail = "line " + std::to_string(line);
   if (!block.empty())
     detail += " " + block;
-  if (held)
+  if (paused)
+    detail += " PAUSED (SIGUSR2 resumes)";
+  else if (held)
     detail += " HELD (XOFF)";
   return detail;
 }
+
+/// The feed SIGUSR1 pauses and SIGUSR2 resumes (DripSender::pause()/resume() only store an atomic
+/// flag, which a signal handler may do).
+std::atomic<dnc::DripSender*> signalled_sender{nullptr};
+
+void onPauseSignal(int signal)
+{
+  dnc::DripSender* sender = signalled_sender.load();
+  if (sender == nullptr)
+    return;
+  if (signal == SIGUSR1)
+    sender->pause();
+  else
+    sender->resume();
+}
+
+/// SIGUSR1/SIGUSR2 reach \p sender while this lives.
+class PauseSignals
+{
+ public:
+  explicit PauseSignals(dnc::DripSender& sender)
+  {
+    signalled_sender = &sender;
+    struct sigaction action
+    {
+    };
+    action.sa_handler = &onPauseSignal;
+    sigemptyset(&action.sa_mask);
+    action.sa_flags = SA_RESTART;
+    ::sigaction(SIGUSR1, &action, nullptr);
+    ::sigaction(SIGUSR2, &action, nullptr);
+  }
+  ~PauseSignals()
+  {
+    ::signal(SIGUSR1, SIG_DFL);
+    ::signal(SIGUSR2, SIG_DFL);
+    signalled_sender = nullptr;
+  }
+  PauseSignals(const PauseSignals&) = delete;
+  PauseSignals& operator=(const PauseSignals&) = delete;
+};
 }  // namespace
 
 int runDrip(const std::vector<std::string>& args)
@@ -125,7 +173,9 @@ int runDrip(const std::vector<std::string>& args)
       "preamble-file", po::value<std::string>(), "send these blocks before the restart point instead")(
       "wait-dc1", po::bool_switch(), "send nothing until the control asks with DC1")(
       "hold-timeout", po::value<double>()->default_value(0), "seconds held by XOFF before --hold-action (0: forever)")(
-      "hold-action", po::value<std::string>()->default_value("fail"), "fail|resume (assume the XON was lost)");
+      "hold-action", po::value<std::string>()->default_value("fail"), "fail|resume (assume the XON was lost)")(
+      "realtime", po::value<int>()->default_value(0),
+      "SCHED_FIFO priority while feeding (0: normal; keeps the pacing on time on a loaded machine)");
   po::variables_map vm;
   int status = 0;
   if (!parse("drip", args, options, vm, status))
@@ -142,6 +192,7 @@ int runDrip(const std::vector<std::string>& args)
   drip.add_percent = !vm["no-percent"].as<bool>();
   drip.rules.reject_lowercase = !vm["allow-lowercase"].as<bool>();
   drip.wait_for_dc1 = vm["wait-dc1"].as<bool>();
+  drip.realtime_priority = std::max(0, vm["realtime"].as<int>());
   drip.hold_timeout = seconds(vm["hold-timeout"].as<double>());
   const std::string hold_action = vm["hold-action"].as<std::string>();
   if (hold_action != "fail" && hold_action != "resume")
@@ -177,10 +228,17 @@ int runDrip(const std::vector<std::string>& args)
   drip.cancel = &cancel;
   SerialPort port(settings);
   dnc::DripSender sender(port, drip);
+  const PauseSignals pause_signals(sender);
+  std::cerr << "cnc_dnc drip: pause with kill -USR1 " << ::getpid() << ", resume with kill -USR2 " << ::getpid()
+            << "\n";
   cli::ProgressLine bar("drip " + file);
-  const auto result = sender.send(
-      plan, [&](const dnc::DripProgress& p) { bar.show(p.bytes, p.total, dripDetail(p.line, p.block, p.held)); });
+  const auto result = sender.send(plan, [&](const dnc::DripProgress& p)
+                                  { bar.show(p.bytes, p.total, dripDetail(p.line, p.block, p.held, p.paused)); });
   bar.finish();
+  if (result.xoff_events > 0)
+    std::cout << "cnc_dnc drip: " << result.xoff_events << " XOFF, largest output queue at an XOFF "
+              << result.max_queued_at_xoff << " characters (with one write: at most " << drip.xoff_allowance
+              << " may follow an XOFF)" << std::endl;
   if (result.completed())
   {
     std::cout << result.message << std::endl;
