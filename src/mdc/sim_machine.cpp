@@ -229,6 +229,45 @@ SimMachine::State SimMachine::stateAt(Clock::time_point now) const
   return state;
 }
 
+std::pair<double, double> SimMachine::lastCycles(Clock::time_point now) const
+{
+  // Cycles of one loop as (end, length), the end an offset into the loop. A cycle running across
+  // the loop's end is not counted.
+  std::vector<std::pair<double, double>> cycles;
+  std::string status = State().status;
+  double offset = 0;
+  std::optional<double> started;
+  for (const auto& phase : phases_)
+  {
+    if (phase.set.count("status"))
+      status = phase.set.at("status");
+    const bool running = status == "BUSY" || status == "FEED HOLD";
+    if (running && !started)
+      started = offset;
+    else if (!running && started)
+    {
+      cycles.emplace_back(offset, offset - *started);
+      started.reset();
+    }
+    offset += phase.seconds;
+  }
+  const double total = timelineSeconds();
+  const double elapsed = std::max(0.0, std::chrono::duration<double>(now - start_).count());
+  const long long loop = static_cast<long long>(std::floor(elapsed / total));
+  const double t = elapsed - static_cast<double>(loop) * total;
+  // Every cycle ended so far, newest last: those of earlier loops, then this loop's up to t.
+  std::vector<double> ended;
+  for (long long l = std::max(0LL, loop - 2); l < loop; ++l)
+    for (const auto& cycle : cycles)
+      ended.push_back(cycle.second);
+  for (const auto& cycle : cycles)
+    if (cycle.first <= t)
+      ended.push_back(cycle.second);
+  const double last = ended.empty() ? 0 : ended.back();
+  const double previous = ended.size() < 2 ? 0 : ended[ended.size() - 2];
+  return {last, previous};
+}
+
 bool SimMachine::dropDue(Clock::time_point now)
 {
   const State state = stateAt(now);
@@ -301,9 +340,9 @@ std::string SimMachine::answer(const std::string& raw, Clock::time_point now)
     case 301:
       return "C.S. TIME, " + hms(std::chrono::duration<double>(now - start_).count(), 5);
     case 303:
-      return "LAST CYCLE, " + hms(s.loop > 0 ? timelineSeconds() : 0, 3);
+      return "LAST CYCLE, " + hms(lastCycles(now).first, 3);
     case 304:
-      return "PREV CYCLE, " + hms(s.loop > 1 ? timelineSeconds() : 0, 3);
+      return "PREV CYCLE, " + hms(lastCycles(now).second, 3);
     case 402:
     case 403:
       return std::string(query->code == 402 ? "M30 #1, " : "M30 #2, ") + std::to_string(s.parts);

@@ -1,7 +1,8 @@
 // sim_haas_mdc: a simulated Haas control answering Machine Data Collection queries from a scripted
 // machine (mdc::SimMachine). TCP mode behaves like an NGC control with setting 143 set: at most two
 // connections, and every reply goes to every connection (a third connection is closed at once).
-// Serial mode (--link PATH) is a Classic control's RS-232 port on a pty, one peer.
+// Serial mode (--link PATH) is a Classic control's RS-232 port on a pty, one peer, silent during a
+// `drop` phase.
 //
 // usage: sim_haas_mdc [--script FILE] [--port N] [--host ADDR] [--link PATH] [--classic-framing]
 // First line: "sim_haas_mdc tcp <host>:<port>" or "sim_haas_mdc pty <path>".
@@ -191,7 +192,8 @@ class TcpSim
   uint64_t answered_ = 0;
 };
 
-// Serial mode: one peer on a pty; a `drop` phase discards what the host sent (a line outage).
+// Serial mode: one peer on a pty; a `drop` phase is a line outage (a control switched off, a cable
+// pulled): nothing the host sends is answered until the phase ends.
 int runSerial(SimMachine& machine, const std::string& link, bool classic)
 {
   auto& stop = cnc_bridge::sim::installStopHandler();
@@ -205,10 +207,9 @@ int runSerial(SimMachine& machine, const std::string& link, bool classic)
     {
       uint8_t buffer[256];
       const size_t n = pty.read(buffer, sizeof buffer, std::chrono::milliseconds(10));
-      if (machine.dropDue(SimMachine::Clock::now()))
+      if (machine.inDropPhase(SimMachine::Clock::now()))
       {
         partial.clear();
-        pty.discardInput();
         continue;
       }
       partial.append(reinterpret_cast<const char*>(buffer), n);

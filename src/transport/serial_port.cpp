@@ -250,7 +250,18 @@ void SerialPort::applySettings()
   tio.c_cc[VTIME] = 0;
   ::cfsetispeed(&tio, speedConstant(settings_.baud));
   ::cfsetospeed(&tio, speedConstant(settings_.baud));
-  if (::tcsetattr(fd, TCSANOW, &tio) != 0)
+  int result = ::tcsetattr(fd, TCSANOW, &tio);
+  struct stat device;
+  if (result != 0 && errno == EINVAL && ::fstat(fd, &device) == 0 && isPtySlave(device.st_rdev))
+  {
+    // A pty keeps 8 bits and no parity whatever it is told, and a request whose only changes are
+    // ones the pty ignores fails with EINVAL (a pty set up 7E1 before, reopened or set up again):
+    // ask for what a pty does emulate.
+    tio.c_cflag = (tio.c_cflag & ~(CSIZE | PARENB | PARODD)) | CS8;
+    tio.c_iflag &= ~INPCK;
+    result = ::tcsetattr(fd, TCSANOW, &tio);
+  }
+  if (result != 0)
   {
     const std::string reason = std::strerror(errno);
     throw LinkError(settings_.describe() + ": cannot configure: " + reason);

@@ -7,8 +7,12 @@
 #include <ros/ros.h>
 #include <sensor_msgs/JointState.h>
 
+#include <diagnostic_msgs/DiagnosticArray.h>
+
 #include <atomic>
 #include <condition_variable>
+#include <fstream>
+#include <map>
 #include <mutex>
 #include <thread>
 
@@ -17,6 +21,7 @@
 #include "cnc_bridge/MdcQuery.h"
 #include "cnc_bridge/MdcReadVariable.h"
 #include "cnc_bridge/MdcWriteVariable.h"
+#include "cnc_bridge/SendProgram.h"
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/transport/backoff.h"
 #include "cnc_bridge/transport/tcp.h"
@@ -30,6 +35,19 @@ const std::string kNgc = "/cell/haas_ngc";
 const std::string kClassic = "/cell/haas_classic";
 constexpr double kInch = 0.0254;
 
+// One report of a node's `mdc` diagnostics task.
+struct MdcDiagnostics
+{
+  ros::Time stamp;
+  std::map<std::string, std::string> values;
+
+  double number(const std::string& key) const
+  {
+    const auto it = values.find(key);
+    return it == values.end() ? -1.0 : std::stod(it->second);
+  }
+};
+
 // Everything the nodes publish, recorded from the start so no test misses a transition.
 struct Recorder
 {
@@ -37,6 +55,7 @@ struct Recorder
   std::condition_variable changed;
   std::vector<MachineState> ngc_states, classic_states;
   std::vector<CycleEvent> events;
+  std::vector<MdcDiagnostics> ngc_diagnostics, classic_diagnostics;
 
   template <class Predicate>
   bool waitFor(Predicate predicate, double seconds)
@@ -58,6 +77,8 @@ struct Recorder
 };
 Recorder* recorder = nullptr;
 int sim_port = 0;
+std::string program_dir;
+std::atomic<bool> other_client_connected{false};
 
 template <class Srv>
 bool call(const std::string& name, Srv& srv)
@@ -175,8 +196,9 @@ TEST(HaasMdcNode, CycleEndEventArrivesWhenPartsIncrease)
   EXPECT_EQ(end.program, "O00110");
   EXPECT_GE(start.part_count, 4523);
   EXPECT_EQ(end.part_count, start.part_count + 1);
-  // Busy 2 s + feed hold 0.5 s + busy 1 s in the script, seen through 0.25 s polls.
-  EXPECT_NEAR(end.cycle_time, 3.5, 0.6);
+  // Busy 2 s + feed hold 0.5 s + busy 1 s in the script: the control (Q303) says 3 s, in whole seconds.
+  EXPECT_DOUBLE_EQ(end.cycle_time, 3.0);
+  EXPECT_NE(end.text.find("cycle time from the control"), std::string::npos) << end.text;
   EXPECT_GE(end.header.stamp.toSec(), start.header.stamp.toSec() + 2.9);
 }
 
@@ -271,12 +293,174 @@ TEST(HaasMdcNode, ClassicSerialControlWithFramedRepliesIsFollowedToo)
   EXPECT_EQ(query.response.reply, "MODEL, VF2D");
 }
 
+TEST(HaasMdcNode, DiagnosticsCountOtherClientsRepliesLatencyAndUnansweredQueries)
+{
+  // The test's second MDC client polls all the while: its replies reach the node too.
+  MdcDiagnostics d;
+  ASSERT_TRUE(recorder->waitFor(
+      [&]
+      {
+        for (const auto& each : recorder->ngc_diagnostics)
+          if (each.number("other clients' replies") > 0 && each.number("answered") > 0)
+          {
+            d = each;
+            return true;
+          }
+        return false;
+      },
+      20.0));
+  for (const char* key : {"latency last (ms)", "latency mean (ms)", "latency max (ms)", "unanswered", "queries sent"})
+    ASSERT_TRUE(d.values.count(key)) << key;
+  // Against a local simulator a reply takes well under the 1 s reply timeout.
+  EXPECT_GT(d.number("latency mean (ms)"), 0.0);
+  EXPECT_LT(d.number("latency mean (ms)"), 1000.0);
+  EXPECT_GE(d.number("latency max (ms)"), d.number("latency mean (ms)"));
+  EXPECT_LE(d.number("latency max (ms)"), 1000.0 + 100.0);
+  EXPECT_GE(d.number("unanswered"), 0.0);
+  EXPECT_LE(d.number("unanswered") + d.number("answered"), d.number("queries sent"));
+}
+
+TEST(HaasMdcNode, TheSimulatedControlRefusesAThirdConnection)
+{
+  // The node and the test's second client hold the control's two MDC connections; a third is
+  // closed at once. A try counts only if both stayed connected throughout (the script drops every
+  // connection once per loop, which also closes ours); otherwise it is repeated.
+  bool refused = false;
+  for (int attempt = 0; attempt < 10 && !refused; ++attempt)
+  {
+    recorder->waitFor(
+        [&] { return !recorder->ngc_states.empty() && recorder->ngc_states.back().link == MachineState::LINK_UP; },
+        15.0);
+    size_t states_before;
+    {
+      std::lock_guard<std::mutex> lock(recorder->mutex);
+      states_before = recorder->ngc_states.size();
+    }
+    if (!other_client_connected)
+    {
+      ros::Duration(0.2).sleep();  // the other client reconnects
+      continue;
+    }
+    bool closed = false;
+    try
+    {
+      auto third = cnc_bridge::TcpConnection::connect("127.0.0.1", static_cast<uint16_t>(sim_port),
+                                                      cnc_bridge::Milliseconds(1000));
+      third->write(std::string("?Q100\r\n"));
+      uint8_t buffer[256];
+      // A reply would mean we were let in; a refused connection reads end-of-stream at once.
+      for (int i = 0; i < 10; ++i)
+        third->read(buffer, sizeof buffer, cnc_bridge::Milliseconds(100));
+    }
+    catch (const cnc_bridge::LinkError&)
+    {
+      closed = true;
+    }
+    // Give the node time to notice a drop (its next poll is within 0.25 s).
+    ros::Duration(0.5).sleep();
+    bool node_kept_its_link = true;
+    {
+      std::lock_guard<std::mutex> lock(recorder->mutex);
+      for (size_t i = states_before; i < recorder->ngc_states.size(); ++i)
+        if (recorder->ngc_states[i].link != MachineState::LINK_UP)
+          node_kept_its_link = false;
+    }
+    refused = closed && node_kept_its_link && other_client_connected;
+  }
+  EXPECT_TRUE(refused);
+}
+
+TEST(HaasMdcNode, SerialLinkLossAndReturn)
+{
+  // The script's 1 s line outage: no replies, so the Classic instance (0.2 s reply timeout, 2
+  // unanswered in a row) declares the link down, reopens the port and follows the machine again.
+  size_t down_at = 0;
+  ASSERT_TRUE(recorder->waitFor(
+      [&]
+      {
+        const auto& states = recorder->classic_states;
+        for (size_t i = 1; i < states.size(); ++i)
+          if (states[i - 1].link == MachineState::LINK_UP && states[i].link != MachineState::LINK_UP)
+          {
+            down_at = i;
+            return true;
+          }
+        return false;
+      },
+      25.0));
+  ASSERT_TRUE(recorder->waitFor(
+      [&]
+      {
+        const auto& states = recorder->classic_states;
+        for (size_t i = down_at; i < states.size(); ++i)
+          if (states[i].link == MachineState::LINK_UP && states[i].execution != MachineState::EXECUTION_UNKNOWN)
+            return true;
+        return false;
+      },
+      15.0));
+  std::lock_guard<std::mutex> lock(recorder->mutex);
+  EXPECT_EQ(recorder->classic_states[down_at].execution, MachineState::EXECUTION_UNKNOWN);
+}
+
+TEST(HaasMdcNode, ADncTransferOnTheSharedSerialLineSilencesThePoller)
+{
+  // dnc_node sends a program on the Classic instance's line; the simulator never asks for it, so
+  // the send holds the port lock for its 4 s start wait and then fails. Meanwhile haas_mdc_node
+  // must not send one query; afterwards it polls again, its settings reapplied.
+  {
+    std::ofstream program(program_dir + "/O01000.nc");
+    program << "%\nO01000\nG00 X0\nM30\n%\n";
+  }
+  cnc_bridge::SendProgram send;
+  send.request.file = "O01000.nc";
+  const std::string service = kClassic + "/dnc/dnc_node/send_program";
+  ASSERT_TRUE(ros::service::waitForService(service, ros::Duration(20.0)));
+  // Not during the script's line outage (the poller is then reopening the port): wait for polls.
+  ASSERT_TRUE(
+      recorder->sawState([](const MachineState& s)
+                         { return s.link == MachineState::LINK_UP && s.execution != MachineState::EXECUTION_UNKNOWN; },
+                         20.0, true));
+  const ros::Time started = ros::Time::now();
+  ASSERT_TRUE(ros::service::call(service, send));
+  const ros::Time ended = ros::Time::now();
+  EXPECT_FALSE(send.response.success);  // no receiver
+  // It got the port: the poller let go of it between two queries.
+  EXPECT_EQ(send.response.message.find("in use by another process"), std::string::npos) << send.response.message;
+  EXPECT_GE((ended - started).toSec(), 3.5);
+
+  // The diagnostics reported while the transfer held the line (after at most one query in flight
+  // and the 20 ms retry of the lock) show no query sent.
+  MdcDiagnostics after;
+  ASSERT_TRUE(recorder->waitFor(
+      [&]
+      {
+        for (const auto& d : recorder->classic_diagnostics)
+          if (d.stamp > ended && d.number("port regained after a DNC transfer") >= 1)
+          {
+            after = d;
+            return true;
+          }
+        return false;
+      },
+      20.0));
+  EXPECT_GT(after.number("polls skipped for a DNC transfer"), 0.0);
+  std::lock_guard<std::mutex> lock(recorder->mutex);
+  std::vector<double> sent_during;
+  for (const auto& d : recorder->classic_diagnostics)
+    if (d.stamp > started + ros::Duration(0.5) && d.stamp < ended - ros::Duration(0.1))
+      sent_during.push_back(d.number("queries sent"));
+  ASSERT_GE(sent_during.size(), 2u);
+  EXPECT_EQ(sent_during.front(), sent_during.back());
+  EXPECT_GT(after.number("queries sent"), sent_during.back());  // polling again
+}
+
 int main(int argc, char** argv)
 {
   testing::InitGoogleTest(&argc, argv);
   ros::init(argc, argv, "test_haas_mdc_node");
   ros::NodeHandle nh, pnh("~");
   pnh.param("tcp_port", sim_port, 15143);
+  pnh.param<std::string>("program_dir", program_dir, "/tmp");
   Recorder rec;
   recorder = &rec;
   auto record = [&](std::vector<MachineState>& into)
@@ -297,6 +481,25 @@ int main(int argc, char** argv)
                                            rec.events.push_back(*e);
                                            rec.changed.notify_all();
                                          });
+  auto diagnostics = nh.subscribe<diagnostic_msgs::DiagnosticArray>(
+      "/diagnostics", 100,
+      [&](const diagnostic_msgs::DiagnosticArray::ConstPtr& array)
+      {
+        for (const auto& status : array->status)
+        {
+          const bool ngc = status.name.find("haas_ngc/haas_mdc_node") != std::string::npos;
+          const bool classic = status.name.find("haas_classic/haas_mdc_node") != std::string::npos;
+          if ((!ngc && !classic) || status.name.find(": mdc") == std::string::npos)
+            continue;
+          MdcDiagnostics d;
+          d.stamp = array->header.stamp;
+          for (const auto& kv : status.values)
+            d.values[kv.key] = kv.value;
+          std::lock_guard<std::mutex> lock(rec.mutex);
+          (ngc ? rec.ngc_diagnostics : rec.classic_diagnostics).push_back(d);
+          rec.changed.notify_all();
+        }
+      });
   ros::AsyncSpinner spinner(2);
   spinner.start();
 
@@ -315,6 +518,11 @@ int main(int argc, char** argv)
           {
             auto link = cnc_bridge::TcpConnection::connect("127.0.0.1", static_cast<uint16_t>(sim_port),
                                                            cnc_bridge::Milliseconds(1000));
+            // Connected means answered: a third connection is accepted and then closed at once.
+            link->write(std::string("?Q100\r\n"));
+            uint8_t first[512];
+            link->read(first, sizeof first, cnc_bridge::Milliseconds(1000));
+            other_client_connected = true;
             while (!done)
             {
               link->write(std::string(queries[n++ % 5]));
@@ -324,6 +532,7 @@ int main(int argc, char** argv)
           }
           catch (const cnc_bridge::Error&)
           {
+            other_client_connected = false;
             pause.waitFor(cnc_bridge::Milliseconds(100));  // connection refused or dropped: retry
           }
         }

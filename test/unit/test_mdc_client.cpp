@@ -722,3 +722,20 @@ TEST(MdcPoller, CycleEndFallsBackToTheMeasuredTimeWhenTheControlHasNone)
   EXPECT_LT(events[1].cycle_time, 1.0);  // two 2 ms polls, not a control's value
   EXPECT_EQ(events[1].text.find("from the control"), std::string::npos);
 }
+
+TEST(MdcClient, ASevenBitSerialLineIsSetUpAgainAndReopened)
+{
+  // What the node does after a DNC transfer used the line (applySettings) and after a line outage
+  // (a new SerialPort), on a pty as in the tests: a pty keeps 8N1 whatever it is told.
+  PtyMaster control;
+  SerialSettings settings;
+  settings.device = control.slavePath();
+  settings.data_bits = 7;
+  settings.parity = Parity::kEven;
+  {
+    SerialPort port(settings);
+    EXPECT_NO_THROW(port.applySettings());
+    EXPECT_NO_THROW(port.applySettings());
+  }
+  EXPECT_NO_THROW(SerialPort again(settings));
+}

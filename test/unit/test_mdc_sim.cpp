@@ -126,3 +126,25 @@ TEST(MdcSim, ScriptErrorsNameTheLine)
   EXPECT_THROW(script("frobnicate\nphase 1\n"), ConfigError);
   EXPECT_NO_THROW(script("# comment only\nphase 1 status=IDLE # trailing comment\n"));
 }
+
+TEST(MdcSim, LastAndPreviousCycleTimesAreThoseOfTheCyclesThatEnded)
+{
+  // Two cycles per loop, 3 s and 2 s (a feed hold counts in the cycle), in a 9 s loop.
+  SimMachine m = script(
+      "phase 1 status=IDLE program=O1 parts=0\nphase 2 status=BUSY\nphase 1 status=FEED_HOLD\n"
+      "phase 1 status=IDLE parts+=1\nphase 2 status=BUSY\nphase 2 status=IDLE parts+=1\n");
+  const SimMachine::Clock::time_point t0{};
+  m.start(t0);
+  EXPECT_EQ(m.answer("?Q303", t0 + 3s), "LAST CYCLE, 000:00:00");  // none ended yet
+  EXPECT_EQ(m.answer("?Q303", t0 + 4500ms), "LAST CYCLE, 000:00:03");
+  EXPECT_EQ(m.answer("?Q304", t0 + 4500ms), "PREV CYCLE, 000:00:00");
+  EXPECT_EQ(m.answer("?Q303", t0 + 7500ms), "LAST CYCLE, 000:00:02");
+  EXPECT_EQ(m.answer("?Q304", t0 + 7500ms), "PREV CYCLE, 000:00:03");
+  EXPECT_EQ(m.answer("?Q303", t0 + 9s + 4500ms), "LAST CYCLE, 000:00:03");  // next loop
+  EXPECT_EQ(m.answer("?Q304", t0 + 9s + 4500ms), "PREV CYCLE, 000:00:02");
+  EXPECT_EQ(m.answer("?Q303", t0 + 9s + 500ms), "LAST CYCLE, 000:00:02");
+  // The cell's cycle: busy 2 s, feed hold 0.5 s, busy 1 s (whole seconds, as the control reports).
+  SimMachine c = cell();
+  c.start(t0);
+  EXPECT_EQ(c.answer("?Q303", t0 + 5100ms), "LAST CYCLE, 000:00:03");
+}

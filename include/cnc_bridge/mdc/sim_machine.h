@@ -48,6 +48,9 @@ class SimMachine
 
   /// \returns true once each time the timeline enters a phase with `drop`.
   bool dropDue(Clock::time_point now);
+  /// \returns true while the timeline is in a phase with `drop` (a serial line's outage lasts the
+  /// whole phase).
+  bool inDropPhase(Clock::time_point now) const { return phases_[stateAt(now).phase].drop; }
 
   /// \brief The state at \p now (for tests and the simulator's log).
   struct State
@@ -63,6 +66,10 @@ class SimMachine
   State stateAt(Clock::time_point now) const;
 
   double timelineSeconds() const;
+
+  /// \brief Lengths in s of the last and the one before last cycle (a run of BUSY / FEED_HOLD
+  /// phases) that ended by \p now: Q303 LAST CYCLE and Q304 PREV CYCLE. 0 when none yet.
+  std::pair<double, double> lastCycles(Clock::time_point now) const;
 
  private:
   struct Phase
