@@ -3,10 +3,15 @@
 // query as soon as the previous reply arrived), for a given time; prints queries per second and
 // reply latency. Run by bench/mdc/run.sh.
 //
-// usage: bench_mdc_poll HOST PORT SECONDS [VARIABLES]
+// With --port-lock the poller holds a port lock for each query, as on a serial line shared with
+// dnc_node (the lock's cost per query).
+//
+// usage: bench_mdc_poll HOST PORT SECONDS [VARIABLES] [--port-lock]
+#include <unistd.h>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <memory>
 #include <string>
 #include <thread>
 
@@ -18,13 +23,14 @@ int main(int argc, char** argv)
   using namespace cnc_bridge;
   if (argc < 4)
   {
-    std::fprintf(stderr, "usage: bench_mdc_poll HOST PORT SECONDS [VARIABLES]\n");
+    std::fprintf(stderr, "usage: bench_mdc_poll HOST PORT SECONDS [VARIABLES] [--port-lock]\n");
     return 2;
   }
   const std::string host = argv[1];
   const auto port = static_cast<uint16_t>(std::atoi(argv[2]));
   const double seconds = std::atof(argv[3]);
   const int variables = argc > 4 ? std::atoi(argv[4]) : 6;
+  const bool port_lock = argc > 5 && std::string(argv[5]) == "--port-lock";
   try
   {
     auto link = TcpConnection::connect(host, port, Milliseconds(3000));
@@ -33,7 +39,10 @@ int main(int argc, char** argv)
     const int positions[] = {5021, 5022, 5023, 5041, 5042, 5043, 4006, 3027};
     for (int i = 0; i < variables && i < 8; ++i)
       plan.variables.push_back(positions[i]);
-    mdc::MdcPoller poller(plan, Milliseconds(1000));
+    std::unique_ptr<PortLock> lock;
+    if (port_lock)
+      lock = std::make_unique<PortLock>("bench_mdc_poll_" + std::to_string(::getpid()));
+    mdc::MdcPoller poller(plan, Milliseconds(1000), lock.get());
     StopSignal stop;
     const auto start = std::chrono::steady_clock::now();
     std::thread runner([&] { poller.run(*link, stop); });
@@ -47,6 +56,11 @@ int main(int argc, char** argv)
         static_cast<unsigned long long>(stats.sent), static_cast<unsigned long long>(stats.answered),
         static_cast<unsigned long long>(stats.unanswered), elapsed, stats.answered / elapsed,
         stats.answered ? stats.total_latency_ms / stats.answered : 0.0, stats.max_latency_ms);
+    if (lock)
+    {
+      ::unlink(lock->lockFile().c_str());
+      ::unlink((lock->lockFile() + ".want").c_str());
+    }
     return 0;
   }
   catch (const std::exception& e)

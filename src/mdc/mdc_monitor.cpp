@@ -308,28 +308,33 @@ QueryScheduler PollPlan::scheduler() const
   {
     entries.emplace_back(q(code), counters_period);
   }
+  // A per-query period replaces its group's; 0 there removes the query (in the groups 0 means
+  // "as often as possible").
+  std::vector<bool> keep(entries.size(), true);
   for (const auto& [query, period] : query_periods)
   {
     bool found = false;
-    for (auto& entry : entries)
+    for (size_t i = 0; i < entries.size(); ++i)
     {
-      if (entry.first == query)
+      if (entries[i].first == query)
       {
-        entry.second = period;
+        entries[i].second = period;
+        keep[i] = period != Milliseconds(0);
         found = true;
       }
     }
-    if (!found)
+    if (!found && period != Milliseconds(0))
     {
       entries.emplace_back(query, period);
+      keep.push_back(true);
     }
   }
   QueryScheduler scheduler;
-  for (const auto& [query, period] : entries)
+  for (size_t i = 0; i < entries.size(); ++i)
   {
-    if (period != Milliseconds(0))
+    if (keep[i])
     {
-      scheduler.add(query, period);
+      scheduler.add(entries[i].first, entries[i].second);
     }
   }
   return scheduler;

@@ -538,6 +538,14 @@ TEST(MdcPollPlan, PerQueryPeriodsOverrideTheGroupsAddAndRemoveQueries)
   EXPECT_EQ(period.at("?Q304"), 2000ms);
   EXPECT_EQ(period.at("?Q100"), QueryScheduler::kOnce);
   EXPECT_EQ(entries.front().first, q(100));  // the groups' order is kept
+
+  // In the groups 0 is "as often as possible" (the benchmark's setting), not "never".
+  PollPlan flat;
+  flat.status_period = flat.variables_period = flat.counters_period = 0ms;
+  flat.identity = false;
+  const auto all = flat.scheduler().plan();
+  ASSERT_EQ(all.size(), 7u);  // Q500, Q104, Q201, Q303, Q304, Q402, Q200
+  EXPECT_EQ(all.front(), std::make_pair(q(500), Milliseconds(0)));
 }
 
 TEST(MdcPollPlan, QueryKeysMustBeReadOnlyQueries)
