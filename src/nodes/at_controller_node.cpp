@@ -252,6 +252,9 @@ class AtControllerNode
   /// \param which 0: command link, 1: report link. The state's link is the worse of the two.
   void linkChanged(int which, LinkState state, const std::string& why)
   {
+    // The two links' threads report at once when both come up; published out of order, a stale
+    // CONNECTING could land after UP and stay: one change at a time, published in order.
+    std::lock_guard<std::mutex> order(link_change_mutex_);
     LinkState combined;
     {
       std::lock_guard<std::mutex> lock(report_mutex_);
@@ -846,7 +849,8 @@ class AtControllerNode
   std::string command_error_;
   std::atomic<bool> stopping_{false};
 
-  std::mutex report_mutex_;  // guards report_conn_, reported_, position_valid_, links_
+  std::mutex report_mutex_;       // guards report_conn_, reported_, position_valid_, links_
+  std::mutex link_change_mutex_;  // serialises linkChanged(): its state updates stay in order
   std::shared_ptr<TcpConnection> report_conn_;
   std::array<int32_t, 3> reported_{};
   bool position_valid_ = false;
