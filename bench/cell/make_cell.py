@@ -19,7 +19,7 @@ def haas(i, base):
         "nodes": [
             {"launch": "haas_mdc_node", "args": {"host": "127.0.0.1", "tcp_port": base}},
             {"launch": "dnc_node", "remap": {"state": "dnc/state"},
-             "args": {"port": "/tmp/cnc_scale_%s_rs232" % name, "program_dir": "/tmp"}},
+             "args": {"port": "/tmp/cnc_scale_%s_rs232" % name, "program_dir": "/tmp", "keep_open": True}},
             {"launch": "dprnt_node", "remap": {"state": "dprnt/state"},
              "args": {"input": "tcp", "host": "127.0.0.1", "tcp_port": base + 1}},
         ],

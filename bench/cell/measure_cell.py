@@ -1,6 +1,8 @@
 #!/usr/bin/env python3
 """Measures a running cell: the rate of every machine's state topics, and the CPU and resident
-memory of every cnc_bridge process (nodes and simulators) over the same window.
+memory of every cnc_bridge process (nodes and simulators) over the same window. Fails (exit 1)
+if a state topic is below 9 Hz or any state in the window had its link not UP (every node of the
+cell keeps its link open, dnc_node with ~keep_open).
 
   measure_cell.py CELL_YAML SECONDS
 """
@@ -19,14 +21,19 @@ PAGE = os.sysconf("SC_PAGE_SIZE")
 
 
 def processes():
-    """pid -> (label, cpu ticks, rss bytes) of every process running a cnc_bridge program."""
+    """pid -> (label, cpu ticks, rss bytes) of every process running a cnc_bridge program under
+    this cell's ROS master (other cells and tests on a shared machine are not counted)."""
     found = {}
+    master = os.environ.get("ROS_MASTER_URI", "").encode()
     for pid in filter(str.isdigit, os.listdir("/proc")):
         try:
             with open("/proc/%s/cmdline" % pid, "rb") as f:
                 argv = f.read().split(b"\0")
             with open("/proc/%s/stat" % pid) as f:
                 stat = f.read().rsplit(")", 1)[1].split()
+            with open("/proc/%s/environ" % pid, "rb") as f:
+                if b"ROS_MASTER_URI=" + master not in f.read().split(b"\0"):
+                    continue
         except OSError:
             continue
         program = os.path.basename(argv[0].decode(errors="replace"))
@@ -52,14 +59,21 @@ def main():
     seconds = float(sys.argv[2]) if len(sys.argv) > 2 else 20.0
     rospy.init_node("measure_cell", anonymous=True)
     counts = collections.Counter()
+    not_up = collections.Counter()  # states in the window whose link was not UP
+
+    def on_state(state, topic):
+        counts.update([topic])
+        if state.link != MachineState.LINK_UP:
+            not_up.update([topic])
     topics = []
     for machine in description["machines"]:
         for node in machine["nodes"]:
             topic = "/%s/%s/%s" % (description.get("cell", "cell"), machine["name"], node.get("remap", {}).get("state", "state"))
             topics.append(topic)
-            rospy.Subscriber(topic, MachineState, lambda msg, t=topic: counts.update([t]))
+            rospy.Subscriber(topic, MachineState, lambda msg, t=topic: on_state(msg, t))
     time.sleep(3.0)  # connections
     counts.clear()
+    not_up.clear()
     before = processes()
     start = time.time()
     time.sleep(seconds)
@@ -67,9 +81,9 @@ def main():
     after = processes()
     rates = {t: counts[t] / elapsed for t in topics}
     print("state topics: %d, all publishing: %s" % (len(topics), all(r > 0 for r in rates.values())))
-    print("%-45s %8s" % ("topic", "Hz"))
+    print("%-45s %8s %8s" % ("topic", "Hz", "not UP"))
     for topic in topics:
-        print("%-45s %8.1f" % (topic, rates[topic]))
+        print("%-45s %8.1f %8d" % (topic, rates[topic], not_up[topic]))
     print()
     print("%-70s %7s %9s" % ("process", "CPU %", "RSS MB"))
     total_cpu = total_rss = 0.0
@@ -83,7 +97,9 @@ def main():
     print("%-70s %7.1f %9.1f" % ("total (%d processes)" % len(after), total_cpu, total_rss))
     slow = [t for t, r in rates.items() if r < 9.0]
     print("topics below 9 Hz: %s" % (", ".join(slow) if slow else "none"))
-    return 0 if not slow else 1
+    down = [t for t in topics if not_up[t] or not counts[t]]
+    print("links not UP during the window: %s" % (", ".join(down) if down else "none"))
+    return 0 if not slow and not down else 1
 
 
 if __name__ == "__main__":
