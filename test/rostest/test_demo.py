@@ -10,6 +10,7 @@ import glob
 import math
 import os
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -128,6 +129,7 @@ class Demo(unittest.TestCase):
             self.assertIsNotNone(trail, "no tool_path from %s" % machine)
             self.assertEqual(trail.header.frame_id, machine + "/machine")
             self.assertGreater(extent(trail), 0.1, "%s's tool_path hardly moved (%d poses)" % (machine, len(trail.poses)))
+        shutil.rmtree(out, ignore_errors=True)  # kept for a look when something failed
 
 
 if __name__ == "__main__":

@@ -12,7 +12,6 @@ one per machine, side by side (measured in the cell's view: four saddles of 750-
 three when one machine is hidden; the probe cloud and the toolbar's icons give blue regions below
 100 pixels or outside the scene).
 """
-import os
 import subprocess
 import sys
 import time
