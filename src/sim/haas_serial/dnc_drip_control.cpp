@@ -25,76 +25,10 @@ std::string DripControlStats::summary() const
   return out.str();
 }
 
-namespace
-{
 using Clock = std::chrono::steady_clock;
 
-/// The control's UART: how many characters it may take from the link now. With a line rate, no
-/// more than the line has carried since the previous character; after the link ran empty, the
-/// next character starts the line again when it arrives.
-class UartModel
-{
- public:
-  explicit UartModel(double line_cps) : cps_(line_cps) {}
-  bool modelled() const { return cps_ > 0; }
-  /// Characters the next read may take (>= 1), sleeping until the line has carried one.
-  size_t allowed(size_t limit)
-  {
-    if (!modelled() || idle_)
-    {
-      return idle_ && modelled() ? 1 : limit;  // waiting for the line to start: one character
-    }
-    accrue();
-    if (credit_ < 1)
-    {
-      std::this_thread::sleep_for(std::chrono::duration<double>((1 - credit_) / cps_));
-      accrue();
-    }
-    return static_cast<size_t>(std::min<double>(static_cast<double>(limit), std::max(1.0, std::floor(credit_))));
-  }
-  /// How long the read may wait: only when the line is empty (for the next character to arrive).
-  Milliseconds timeout() const { return !modelled() || idle_ ? Milliseconds(1) : Milliseconds(0); }
-  /// The read returned \p got of the \p wanted characters.
-  void took(size_t got, size_t wanted)
-  {
-    if (!modelled())
-    {
-      return;
-    }
-    if (idle_)
-    {
-      if (got > 0)
-      {
-        idle_ = false;  // it arrived now: the line carries the next one from here
-        credit_ = 0;
-        last_ = Clock::now();
-      }
-      return;
-    }
-    credit_ -= static_cast<double>(got);
-    if (got < wanted)
-    {
-      idle_ = true;  // the host had nothing more queued: the line went quiet
-      credit_ = 0;
-    }
-  }
-
- private:
-  void accrue()
-  {
-    const auto now = Clock::now();
-    credit_ += std::chrono::duration<double>(now - last_).count() * cps_;
-    last_ = now;
-  }
-  double cps_;
-  bool idle_ = true;
-  double credit_ = 0;
-  Clock::time_point last_ = Clock::now();
-};
-}  // namespace
-
 DripControlStats runDripControl(Transport& link, const DripControlOptions& options, StopSignal& stop,
-                                const std::function<void(const uint8_t*, size_t)>& sink)
+                                const std::function<void(const uint8_t*, size_t)>& sink, UartModel* line)
 {
   DripControlStats stats;
   if (options.realtime)
@@ -108,7 +42,8 @@ DripControlStats runDripControl(Transport& link, const DripControlOptions& optio
   {
     link.writeByte(code(dnc::kDc1));
   }
-  UartModel uart(options.line_cps);
+  UartModel own_uart(options.line_cps);
+  UartModel& uart = line != nullptr ? *line : own_uart;
   size_t buffered = 0;
   double credit = 0;  // characters the control could have executed but has not yet
   bool xoff = false;

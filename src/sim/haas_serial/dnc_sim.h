@@ -2,9 +2,13 @@
 // modes and for the unit tests that run them in-process on a pty. ROS-free.
 #pragma once
 
+#include <algorithm>
+#include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <functional>
 #include <string>
+#include <thread>
 
 #include "cnc_bridge/transport/backoff.h"
 #include "cnc_bridge/transport/transport.h"
@@ -59,10 +63,75 @@ struct DripControlStats
   std::string summary() const;
 };
 
+/// \brief The control's UART: how many characters it may take from the link now. With a line
+/// rate, no more than the line has carried since the previous character; after the link ran empty,
+/// the next character starts the line again when it arrives. One model can serve several
+/// runDripControl() runs (program after program), so that the time the simulator spends between
+/// two programs counts as time the line carried characters, as a real UART's would.
+class UartModel
+{
+ public:
+  explicit UartModel(double line_cps) : cps_(line_cps) {}
+  bool modelled() const { return cps_ > 0; }
+  /// Characters the next read may take (>= 1), sleeping until the line has carried one.
+  size_t allowed(size_t limit)
+  {
+    if (!modelled() || idle_)
+    {
+      return idle_ && modelled() ? 1 : limit;  // waiting for the line to start: one character
+    }
+    accrue();
+    if (credit_ < 1)
+    {
+      std::this_thread::sleep_for(std::chrono::duration<double>((1 - credit_) / cps_));
+      accrue();
+    }
+    return static_cast<size_t>(std::min<double>(static_cast<double>(limit), std::max(1.0, std::floor(credit_))));
+  }
+  /// How long the read may wait: only when the line is empty (for the next character to arrive).
+  Milliseconds timeout() const { return !modelled() || idle_ ? Milliseconds(1) : Milliseconds(0); }
+  /// The read returned \p got of the \p wanted characters.
+  void took(size_t got, size_t wanted)
+  {
+    if (!modelled())
+    {
+      return;
+    }
+    if (idle_)
+    {
+      if (got > 0)
+      {
+        idle_ = false;  // it arrived now: the line carries the next one from here
+        credit_ = 0;
+        last_ = std::chrono::steady_clock::now();
+      }
+      return;
+    }
+    credit_ -= static_cast<double>(got);
+    if (got < wanted)
+    {
+      idle_ = true;  // the host had nothing more queued: the line went quiet
+      credit_ = 0;
+    }
+  }
+
+ private:
+  void accrue()
+  {
+    const auto now = std::chrono::steady_clock::now();
+    credit_ += std::chrono::duration<double>(now - last_).count() * cps_;
+    last_ = now;
+  }
+  double cps_;
+  bool idle_ = true;
+  double credit_ = 0;
+  std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
+};
 /// \brief Runs the control until the program ends (stop_at_end), \p stop is signalled, or the link
-/// fails. \p sink receives every received character (parity masked) in order.
+/// fails. \p sink receives every received character (parity masked) in order. \p line: the UART
+/// model to use (kept across runs by the caller); nullptr = a new one of options.line_cps.
 DripControlStats runDripControl(Transport& link, const DripControlOptions& options, StopSignal& stop,
-                                const std::function<void(const uint8_t*, size_t)>& sink);
+                                const std::function<void(const uint8_t*, size_t)>& sink, UartModel* line = nullptr);
 
 /// \brief A control punching a program (backup): options of the `punch` mode.
 struct PunchOptions

@@ -85,16 +85,19 @@ int runDripMode(const std::vector<std::string>& args)
       output.open(output_path, std::ios::binary | std::ios::trunc);
     }
     bool bad = false;
+    UartModel uart(control.line_cps);  // one line across programs: writing the report takes time
     do
     {
-      const auto stats = runDripControl(link, control, stop,
-                                        [&](const uint8_t* data, size_t size)
-                                        {
-                                          if (output.is_open())
-                                          {
-                                            output.write(reinterpret_cast<const char*>(data), size);
-                                          }
-                                        });
+      const auto stats = runDripControl(
+          link, control, stop,
+          [&](const uint8_t* data, size_t size)
+          {
+            if (output.is_open())
+            {
+              output.write(reinterpret_cast<const char*>(data), size);
+            }
+          },
+          &uart);
       if (output.is_open())
       {
         output.flush();
