@@ -573,7 +573,9 @@ class EthernutNode : public ethernut::ClientListener
             m.points.push_back(path_.poses[i].pose.position);
           }
         }
-        array.markers.push_back(m);
+        // rviz refuses an empty line list (and shows the display in error); DELETEALL cleared it.
+        if (!m.points.empty())
+          array.markers.push_back(m);
       }
       return array;
     }

@@ -345,6 +345,16 @@ TEST(EthernutJob, ReportedPositionEndsAtTheLastCoordinate)
   EXPECT_NEAR(c.x, 0.012, 1e-6);
   EXPECT_NEAR(c.y, -0.004, 1e-6);
   EXPECT_NEAR(c.z, 0.001, 1e-6);
+  // A list of points is all feed moves: the preview has no rapid line list (rviz refuses an empty
+  // one and shows the display in error), and every line list it has holds lines.
+  for (const auto& m : watch->markers.markers)
+  {
+    EXPECT_NE(m.ns, "rapid");
+    if (m.type == visualization_msgs::Marker::LINE_LIST)
+    {
+      EXPECT_FALSE(m.points.empty()) << m.ns;
+    }
+  }
 }
 
 TEST(EthernutJob, PauseHoldsTheJobAndResumeFinishesIt)
