@@ -385,10 +385,10 @@ void Receiver::abort(const std::string& why, bool send_can, bool timeout)
   throw ProtocolError(message);
 }
 
-void Receiver::nak(uint8_t request)
+void Receiver::nak(uint8_t request, Milliseconds purge_limit)
 {
   // Whatever is left of a garbled packet must not be read as the start of the next one.
-  input_.purge(config_.purge_quiet);
+  input_.purge(config_.purge_quiet, purge_limit);
   link_.writeByte(request);
 }
 
@@ -427,7 +427,10 @@ std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
             true, false);
       }
       CNC_LOG_DEBUG("xmodem: " << what << " at block " << state.block + 1 << ", NAK");
-      nak(started ? kNak : request);
+      // Before the first packet the purge ends after one nak_interval at most: a control that is
+      // itself waiting to receive NAKs more often than purge_quiet, and would keep the line from
+      // ever going quiet (the rest of a block it sent before a cancel, then its NAKs).
+      nak(started ? kNak : request, started ? Milliseconds(10000) : config_.nak_interval);
     };
 
     for (;;)
@@ -517,6 +520,14 @@ std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
           // The sender did not get our ACK and sent the block again: ACK it, keep the first copy.
           ++stats_.duplicates;
           link_.writeByte(kAck);
+          continue;
+        }
+        if (!started)
+        {
+          // No block taken yet, so no position to disagree on: this is the rest of an earlier
+          // transfer (a control that was still sending a block when that transfer was cancelled).
+          ++stats_.garbled;
+          error("block " + std::to_string(packet.block) + " before block 1 (left from an earlier transfer)");
           continue;
         }
         abort("block " + std::to_string(packet.block) + " out of sequence (expected " + std::to_string(expected) +

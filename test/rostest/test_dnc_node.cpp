@@ -3,6 +3,7 @@
 // path escapes refused, and the state topic. Every wait is on a message, a service reply or an
 // inotify event with a deadline; nothing sleeps.
 #include <actionlib/client/simple_action_client.h>
+#include <dirent.h>
 #include <gtest/gtest.h>
 #include <poll.h>
 #include <ros/ros.h>
@@ -225,6 +226,87 @@ TEST_F(DncNodeTest, CancelStopsATransferAndASecondRequestMeanwhileIsRefused)
   again.request.file = "small.nc";
   ASSERT_TRUE(send_.call(again));
   EXPECT_TRUE(again.response.success) << again.response.message;
+}
+
+TEST_F(DncNodeTest, ReceivesAProgramThroughTheTransferAction)
+{
+  actionlib::SimpleActionClient<cnc_bridge::TransferAction> client(nh_, "dnc_node/transfer", true);
+  ASSERT_TRUE(client.waitForServer(ros::Duration(30)));
+  cnc_bridge::TransferGoal goal;
+  goal.direction = cnc_bridge::TransferGoal::DIRECTION_RECEIVE;
+  goal.file = "received_by_action.nc";
+  std::mutex m;
+  std::condition_variable cv;
+  std::vector<cnc_bridge::TransferFeedback> feedback;
+  client.sendGoal(goal, {}, {},
+                  [&](const cnc_bridge::TransferFeedbackConstPtr& f)
+                  {
+                    std::lock_guard<std::mutex> lock(m);
+                    feedback.push_back(*f);
+                    cv.notify_all();
+                  });
+  ASSERT_TRUE(client.waitForResult(ros::Duration(60)));
+  EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client.getState().getText();
+  const auto result = client.getResult();
+  EXPECT_TRUE(result->success) << result->message;
+  const std::string expected = readFile(param("program"));
+  EXPECT_EQ(readFile(program_dir_ + "/received_by_action.nc"), expected);
+  EXPECT_EQ(result->bytes, expected.size());
+  EXPECT_EQ(result->blocks, 8u);
+  // Feedback and result travel on different topics: the feedback may arrive after the result.
+  std::unique_lock<std::mutex> lock(m);
+  ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(10), [&] { return !feedback.empty(); }));
+  EXPECT_GE(feedback.front().block, 1u);
+  EXPECT_GT(feedback.front().bytes, 0u);
+  EXPECT_EQ(feedback.front().total, 0u);  // a receiver does not know the size
+}
+
+// Cancelling a RECEIVE through the action while blocks arrive (the slow control: ~1 s per block):
+// PREEMPTED, CANs to the control, and the destination as it was: the previous file, or none.
+TEST_F(DncNodeTest, CancellingAReceiveKeepsThePreviousFileOrNone)
+{
+  const std::string dir = param("slow_program_dir");
+  ros::NodeHandle slow(param("slow_namespace"));
+  actionlib::SimpleActionClient<cnc_bridge::TransferAction> client(slow, "dnc_node/transfer", true);
+  ASSERT_TRUE(client.waitForServer(ros::Duration(30)));
+  std::ofstream(dir + "/kept.nc", std::ios::binary) << "previous version\n";
+  for (const std::string file : {"kept.nc", "fresh.nc"})
+  {
+    cnc_bridge::TransferGoal goal;
+    goal.direction = cnc_bridge::TransferGoal::DIRECTION_RECEIVE;
+    goal.file = file;
+    std::mutex m;
+    std::condition_variable cv;
+    bool got_block = false;
+    client.sendGoal(goal, {}, {},
+                    [&](const cnc_bridge::TransferFeedbackConstPtr& f)
+                    {
+                      std::lock_guard<std::mutex> lock(m);
+                      got_block = got_block || f->block >= 1;
+                      cv.notify_all();
+                    });
+    {
+      std::unique_lock<std::mutex> lock(m);
+      ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(30), [&] { return got_block; })) << file;
+    }
+    client.cancelGoal();
+    ASSERT_TRUE(client.waitForResult(ros::Duration(20))) << file;
+    EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::PREEMPTED)
+        << file << ": " << client.getState().getText();
+    EXPECT_FALSE(client.getResult()->success);
+  }
+  EXPECT_EQ(readFile(dir + "/kept.nc"), "previous version\n");
+  EXPECT_FALSE(exists(dir + "/fresh.nc"));
+  // Nothing else in the directory: no temporary file of either cancelled receive.
+  std::vector<std::string> names;
+  if (DIR* d = ::opendir(dir.c_str()))
+  {
+    while (dirent* e = ::readdir(d))
+      if (std::string(e->d_name) != "." && std::string(e->d_name) != "..")
+        names.push_back(e->d_name);  // a temporary file is ".<name>.XXXXXX"
+    ::closedir(d);
+  }
+  EXPECT_EQ(names, std::vector<std::string>{"kept.nc"});
 }
 
 TEST_F(DncNodeTest, FilesOutsideTheProgramDirectoryAreRefused)

@@ -537,6 +537,29 @@ TEST(XmodemReceiver, AbortsWithCanOnABlockOutOfSequence)
   EXPECT_EQ(Bytes(written.end() - 3, written.end()), (Bytes{kCan, kCan, kCan}));
 }
 
+// A packet other than block 1 before any block was taken is the rest of an earlier, cancelled
+// transfer: NAKed and dropped, not an abort. After block 1 it is out of sequence (above).
+TEST(XmodemReceiver, ABlockLeftFromAnEarlierTransferIsNotTheStart)
+{
+  FakeTransport tx;
+  const Bytes stale = encodePacket(2, Bytes(128, 's').data(), 128, kBlockSize, CheckType::kChecksum);
+  const Bytes one = encodePacket(1, Bytes(3, '1').data(), 3, kBlockSize, CheckType::kChecksum);
+  std::vector<Bytes> script = {stale, one, {kEot}};
+  size_t next = 0;
+  tx.onWrite(
+      [&](FakeTransport& t, const Bytes&)
+      {
+        if (next < script.size())
+          t.feed(script[next++]);
+      });
+  Receiver receiver(tx, Mode::kChecksum, fastConfig());
+  Bytes data = receiver.receive();
+  stripSubPadding(data);
+  EXPECT_EQ(data, Bytes(3, '1'));
+  EXPECT_EQ(receiver.stats().garbled, 1u);
+  EXPECT_EQ(tx.written(), (Bytes{kNak, kNak, kAck, kAck}));
+}
+
 TEST(XmodemReceiver, NaksGarbledPacketsAndIgnoresALoneCan)
 {
   FakeTransport tx;

@@ -170,7 +170,7 @@ class Receiver
   const Stats& stats() const { return stats_; }
 
  private:
-  void nak(uint8_t request);
+  void nak(uint8_t request, Milliseconds purge_limit);
   void checkCancel();
   [[noreturn]] void abort(const std::string& why, bool send_can, bool timeout);
 
