@@ -6,7 +6,7 @@
 # bound (128 payload bytes per 133 on the wire). Builds nothing: runs binaries from $BUILD_DIR.
 #
 # Two rates per pair. "file": payload / (receiver start .. receiver exit with the whole file), what
-# a user waits for, start handshake and EOT included (cnc_dnc waits 250 ms of silence after EOT,
+# a user waits for, start handshake and EOT included (cnc_dnc waits 30 ms of silence after EOT,
 # lrzsz rx 1 s). "blocks": payload / (first block .. last block's ACK), as `cnc_dnc receive`
 # reports it; the bound is measured the same way (its rounds only), so blocks/bound compares like
 # with like. rx reports no such time, so pairs ending in rx have the file rate only.
