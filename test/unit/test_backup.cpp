@@ -21,46 +21,14 @@
 #include "cnc_bridge/transport/pty.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "dnc_sim.h"
+#include "temp_dir.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::dnc;
+using namespace cnc_bridge::test;
 
 namespace
 {
-class TempDir
-{
- public:
-  TempDir()
-  {
-    char pattern[] = "/tmp/test_backup.XXXXXX";
-    path_ = ::mkdtemp(pattern);
-  }
-  ~TempDir() { std::system(("rm -rf '" + path_ + "'").c_str()); }
-  std::string path(const std::string& name) const { return path_ + "/" + name; }
-  std::string write(const std::string& name, const std::string& content) const
-  {
-    std::ofstream(path(name), std::ios::binary) << content;
-    return path(name);
-  }
-
- private:
-  std::string path_;
-};
-
-std::string readFile(const std::string& path)
-{
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream out;
-  out << in.rdbuf();
-  return out.str();
-}
-
-bool exists(const std::string& path)
-{
-  struct stat info;
-  return ::stat(path.c_str(), &info) == 0;
-}
-
 const std::string kProgram =
     "%\n"
     "O0042 (BACKUP TEST)\n"
@@ -113,20 +81,20 @@ TEST(BackupParser, FinishClosesTheLastLineWithoutAClosingPercent)
 
 TEST(BackupReceiver, NoProgramWithinTheStartTimeoutLeavesNoFile)
 {
-  TempDir dir;
+  TempDir dir("test_backup");
   FakeTransport link;
   link.feed(std::string(10, '\0'));  // leader only
   BackupOptions options;
   options.start_timeout = Milliseconds(100);
   BackupReceiver receiver(link, options);
-  EXPECT_THROW(receiver.receive(dir.path("out.nc")), TimeoutError);
-  EXPECT_FALSE(exists(dir.path("out.nc")));
+  EXPECT_THROW(receiver.receive(dir.file("out.nc")), TimeoutError);
+  EXPECT_FALSE(exists(dir.file("out.nc")));
   EXPECT_EQ(std::vector<uint8_t>{kDc1}, link.written());  // it told the control it was ready
 }
 
 TEST(BackupReceiver, CancelKeepsTheOldFileIntact)
 {
-  TempDir dir;
+  TempDir dir("test_backup");
   const auto target = dir.write("out.nc", "old\n");
   FakeTransport link;
   BackupReceiver receiver(link, BackupOptions{});
@@ -155,14 +123,14 @@ TEST(BackupReceiver, CancelKeepsTheOldFileIntact)
 
 TEST(BackupReceiver, ABabblingLineIsRefused)
 {
-  TempDir dir;
+  TempDir dir("test_backup");
   FakeTransport link;
   link.feed("%\n" + std::string(5000, 'X'));
   BackupOptions options;
   options.max_bytes = 1000;
   BackupReceiver receiver(link, options);
-  EXPECT_THROW(receiver.receive(dir.path("out.nc")), ProtocolError);
-  EXPECT_FALSE(exists(dir.path("out.nc")));
+  EXPECT_THROW(receiver.receive(dir.file("out.nc")), ProtocolError);
+  EXPECT_FALSE(exists(dir.file("out.nc")));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -190,19 +158,19 @@ BackupResult punchAndReceive(const std::string& program_path, const sim::PunchOp
 
 TEST(BackupEndToEnd, StoredProgramEqualsThePunchedOneCrLfLeaderDcCodes)
 {
-  TempDir dir;
+  TempDir dir("test_backup");
   const auto program = dir.write("program.nc", kProgram);
   sim::PunchOptions punch;  // CR LF, 16 NULs, DC2/DC4, closing '%', waits for our DC1
-  const auto result = punchAndReceive(program, punch, SerialSettings{}, BackupOptions{}, dir.path("backup.nc"), 11520);
+  const auto result = punchAndReceive(program, punch, SerialSettings{}, BackupOptions{}, dir.file("backup.nc"), 11520);
   EXPECT_TRUE(result.ended_by_percent);
-  EXPECT_EQ(kProgram, readFile(dir.path("backup.nc")));
+  EXPECT_EQ(kProgram, readFile(dir.file("backup.nc")));
   EXPECT_EQ(kProgram.size(), result.bytes);
   EXPECT_EQ(9u, result.lines);
 }
 
 TEST(BackupEndToEnd, SevenE1Punch)
 {
-  TempDir dir;
+  TempDir dir("test_backup");
   const auto program = dir.write("program.nc", kProgram);
   sim::PunchOptions punch;
   punch.seven_e1 = true;
@@ -210,14 +178,14 @@ TEST(BackupEndToEnd, SevenE1Punch)
   SerialSettings settings;
   settings.data_bits = 7;
   settings.parity = Parity::kEven;
-  const auto result = punchAndReceive(program, punch, settings, BackupOptions{}, dir.path("backup.nc"), 960);
+  const auto result = punchAndReceive(program, punch, settings, BackupOptions{}, dir.file("backup.nc"), 960);
   EXPECT_TRUE(result.ended_by_percent);
-  EXPECT_EQ(kProgram, readFile(dir.path("backup.nc")));
+  EXPECT_EQ(kProgram, readFile(dir.file("backup.nc")));
 }
 
 TEST(BackupEndToEnd, WithoutTheClosingPercentTheQuietTimeoutEndsIt)
 {
-  TempDir dir;
+  TempDir dir("test_backup");
   // The file lacks '%' framing entirely; the control adds the opening one and, set so, no closing.
   const std::string body = "O0043\nG0 X1\nM30\n";
   const auto program = dir.write("program.nc", body);
@@ -225,8 +193,8 @@ TEST(BackupEndToEnd, WithoutTheClosingPercentTheQuietTimeoutEndsIt)
   punch.end_percent = false;
   BackupOptions options;
   options.quiet_timeout = Milliseconds(300);
-  const auto result = punchAndReceive(program, punch, SerialSettings{}, options, dir.path("backup.nc"), 11520);
+  const auto result = punchAndReceive(program, punch, SerialSettings{}, options, dir.file("backup.nc"), 11520);
   EXPECT_FALSE(result.ended_by_percent);
   EXPECT_NE(result.message.find("quiet"), std::string::npos);
-  EXPECT_EQ("%\n" + body, readFile(dir.path("backup.nc")));
+  EXPECT_EQ("%\n" + body, readFile(dir.file("backup.nc")));
 }

@@ -22,32 +22,14 @@
 #include "cnc_bridge/transport/serial_port.h"
 #include "dnc_sim.h"
 #include "simulated_line.h"
+#include "temp_dir.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::dnc;
+using namespace cnc_bridge::test;
 
 namespace
 {
-class TempDir
-{
- public:
-  TempDir()
-  {
-    char pattern[] = "/tmp/test_drip_feed.XXXXXX";
-    path_ = ::mkdtemp(pattern);
-  }
-  ~TempDir() { std::system(("rm -rf '" + path_ + "'").c_str()); }
-  std::string write(const std::string& name, const std::string& content) const
-  {
-    const std::string file = path_ + "/" + name;
-    std::ofstream(file, std::ios::binary) << content;
-    return file;
-  }
-
- private:
-  std::string path_;
-};
-
 // A mill program of \p blocks numbered blocks, framed with '%', LF line ends.
 std::string generateProgram(unsigned blocks)
 {
@@ -115,7 +97,7 @@ DripOptions fastOptions()
 
 TEST(DripSender, SendsFramingLeaderDcCodesAndConvertsEob)
 {
-  TempDir dir;
+  TempDir dir("test_drip_feed");
   const auto path = dir.write("p.nc", "G0 X1\r\nG1 Y2\n");
   DripOptions options = fastOptions();
   options.eob = parseEob("crlf");
@@ -137,7 +119,7 @@ TEST(DripSender, SendsFramingLeaderDcCodesAndConvertsEob)
 
 TEST(DripSender, ParityMaskedXoffStopsWithinOneChunkAndXonResumes)
 {
-  TempDir dir;
+  TempDir dir("test_drip_feed");
   const auto path = dir.write("p.nc", generateProgram(40));
   DripOptions options = fastOptions();
   FakeTransport link;
@@ -170,7 +152,7 @@ TEST(DripSender, ParityMaskedXoffStopsWithinOneChunkAndXonResumes)
 
 TEST(DripSender, WaitsForDc1WhenTheControlStartsTheReader)
 {
-  TempDir dir;
+  TempDir dir("test_drip_feed");
   const auto path = dir.write("p.nc", "%\nG0 X1\n%\n");
   DripOptions options = fastOptions();
   options.wait_for_dc1 = true;
@@ -188,7 +170,7 @@ TEST(DripSender, WaitsForDc1WhenTheControlStartsTheReader)
 
 TEST(DripSender, NoDc1WithinTheStartTimeoutFailsWithNothingSent)
 {
-  TempDir dir;
+  TempDir dir("test_drip_feed");
   DripOptions options = fastOptions();
   options.wait_for_dc1 = true;
   options.start_timeout = Milliseconds(60);
@@ -202,7 +184,7 @@ TEST(DripSender, NoDc1WithinTheStartTimeoutFailsWithNothingSent)
 
 TEST(DripSender, HoldTimeoutFailsOrResumesAsConfigured)
 {
-  TempDir dir;
+  TempDir dir("test_drip_feed");
   const auto path = dir.write("p.nc", generateProgram(20));
   for (const auto action : {HoldTimeoutAction::kFail, HoldTimeoutAction::kResume})
   {
@@ -239,7 +221,7 @@ TEST(DripSender, HoldTimeoutFailsOrResumesAsConfigured)
 
 TEST(DripSender, PauseResumeAndCancelReportWhereItStopped)
 {
-  TempDir dir;
+  TempDir dir("test_drip_feed");
   const auto path = dir.write("p.nc", generateProgram(200));
   DripOptions options = fastOptions();
   FakeTransport link;
@@ -281,7 +263,7 @@ TEST(DripSender, PauseResumeAndCancelReportWhereItStopped)
 
 TEST(DripSender, LinkFailureIsAResultNotACrash)
 {
-  TempDir dir;
+  TempDir dir("test_drip_feed");
   DripOptions options = fastOptions();
   FakeTransport link;
   link.disconnect();
@@ -391,7 +373,7 @@ class DripEndToEnd : public ::testing::TestWithParam<unsigned>
 TEST_P(DripEndToEnd, ProgramSeveralTimesTheBufferArrivesWholeInOrderWithoutOverrun)
 {
   const unsigned baud = GetParam();
-  TempDir dir;
+  TempDir dir("test_drip_feed");
   // About ten times the control's 256-character buffer.
   const std::string program = generateProgram(90);
   const auto path = dir.write("p.nc", program);
@@ -424,7 +406,7 @@ TEST_P(DripEndToEnd, ProgramSeveralTimesTheBufferArrivesWholeInOrderWithoutOverr
 TEST_P(DripEndToEnd, AtEveryXoffQueuedPlusLaterWritesStayWithinTheAllowance)
 {
   const unsigned baud = GetParam();
-  TempDir dir;
+  TempDir dir("test_drip_feed");
   const std::string program = generateProgram(baud <= 9600 ? 60 : 400);
   const auto path = dir.write("p.nc", program);
   DripOptions options;
@@ -453,7 +435,7 @@ INSTANTIATE_TEST_SUITE_P(Pacing, DripEndToEnd, ::testing::Values(9600u, 115200u)
 // and the control counts it after its XOFFs.
 TEST(DripEndToEndAllowance, AHostQueueingAheadOfTheLineIsCaught)
 {
-  TempDir dir;
+  TempDir dir("test_drip_feed");
   const std::string program = generateProgram(60);
   const auto path = dir.write("p.nc", program);
   DripOptions options;
@@ -472,7 +454,7 @@ TEST(DripEndToEndAllowance, AHostQueueingAheadOfTheLineIsCaught)
 
 TEST(DripEndToEnd7E1, ParityMaskedXoffIsHonouredOnA7E1Link)
 {
-  TempDir dir;
+  TempDir dir("test_drip_feed");
   const std::string program = generateProgram(100);  // 3 KB, 4 times the buffer
   const auto path = dir.write("p.nc", program);
   DripOptions options;
@@ -500,7 +482,7 @@ TEST(DripEndToEnd7E1, ParityMaskedXoffIsHonouredOnA7E1Link)
 
 TEST(DripEndToEndRestart, ControlReceivesTheRestatedModalBlockThenExactlyTheRest)
 {
-  TempDir dir;
+  TempDir dir("test_drip_feed");
   const std::string program = generateProgram(120);
   const auto path = dir.write("p.nc", program);
   DripOptions options;
@@ -536,7 +518,7 @@ TEST(DripEndToEndRestart, ControlReceivesTheRestatedModalBlockThenExactlyTheRest
 
 TEST(DripEndToEndCancel, CancelMidStreamReportsWhereAndTheLinkIsReusable)
 {
-  TempDir dir;
+  TempDir dir("test_drip_feed");
   const std::string program = generateProgram(400);
   const auto path = dir.write("p.nc", program);
   DripOptions options;

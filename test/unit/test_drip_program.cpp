@@ -12,32 +12,14 @@
 #include "cnc_bridge/dnc/dnc_codes.h"
 #include "cnc_bridge/dnc/drip_feed.h"
 #include "cnc_bridge/dnc/nc_program.h"
+#include "temp_dir.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::dnc;
+using namespace cnc_bridge::test;
 
 namespace
 {
-class TempDir
-{
- public:
-  TempDir()
-  {
-    char pattern[] = "/tmp/test_drip_program.XXXXXX";
-    path_ = ::mkdtemp(pattern);
-  }
-  ~TempDir() { std::system(("rm -rf '" + path_ + "'").c_str()); }
-  std::string write(const std::string& name, const std::string& content) const
-  {
-    const std::string file = path_ + "/" + name;
-    std::ofstream(file, std::ios::binary) << content;
-    return file;
-  }
-
- private:
-  std::string path_;
-};
-
 const char* kProgram =
     "%\n"
     "O1234 (RESTART TEST)\n"
@@ -61,7 +43,7 @@ const char* kProgram =
 
 TEST(LineReader, SplitsOnLfCrAndCrLfAlike)
 {
-  TempDir dir;
+  TempDir dir("test_drip_program");
   const auto path = dir.write("ends.nc", "A\nB\r\nC\rD\n\nE");
   LineReader reader(path);
   std::string line;
@@ -76,7 +58,7 @@ TEST(LineReader, SplitsOnLfCrAndCrLfAlike)
 
 TEST(LineReader, CrLfAcrossTheReadBufferBoundaryIsOneLineEnd)
 {
-  TempDir dir;
+  TempDir dir("test_drip_program");
   std::string content(64 * 1024 - 1, 'X');  // the CR is the last byte of the first 64 KiB read
   content += "\r\nY\n";
   const auto path = dir.write("boundary.nc", content);
@@ -91,7 +73,7 @@ TEST(LineReader, CrLfAcrossTheReadBufferBoundaryIsOneLineEnd)
 
 TEST(LineReader, OverlongLineIsRejectedWithItsNumber)
 {
-  TempDir dir;
+  TempDir dir("test_drip_program");
   const auto path = dir.write("long.nc", "G0\n" + std::string(100, 'X') + "\n");
   LineReader reader(path, 50);
   std::string line;
@@ -162,7 +144,7 @@ TEST(ModalTracker, LatheStyleToolWithoutM6)
 
 TEST(ScanProgram, FindsFramingAndRestartByLineWithModalPreamble)
 {
-  TempDir dir;
+  TempDir dir("test_drip_program");
   const auto path = dir.write("p.nc", kProgram);
   RestartPoint at_line;
   at_line.line = 11;  // N90, after the arc of N80
@@ -190,7 +172,7 @@ TEST(ScanProgram, FindsFramingAndRestartByLineWithModalPreamble)
 
 TEST(ScanProgram, RestartByBlockNumberIgnoresLeadingZeros)
 {
-  TempDir dir;
+  TempDir dir("test_drip_program");
   const auto path = dir.write("p.nc", kProgram);
   RestartPoint at_block;
   at_block.block = "N0130";
@@ -204,7 +186,7 @@ TEST(ScanProgram, RestartByBlockNumberIgnoresLeadingZeros)
 
 TEST(ScanProgram, RestartPointNotInTheFileIsAnError)
 {
-  TempDir dir;
+  TempDir dir("test_drip_program");
   const auto path = dir.write("p.nc", kProgram);
   RestartPoint missing;
   missing.block = "N9999";
@@ -216,7 +198,7 @@ TEST(ScanProgram, RestartPointNotInTheFileIsAnError)
 
 TEST(ScanProgram, PercentInTheMiddleIsReported)
 {
-  TempDir dir;
+  TempDir dir("test_drip_program");
   const auto path = dir.write("p.nc", "%\nG0 X1\n%\nG0 X2\n%\n");
   const auto scan = scanProgram(path, CharacterRules{}, {}, 1);
   ASSERT_EQ(1u, scan.issue_count);
@@ -226,7 +208,7 @@ TEST(ScanProgram, PercentInTheMiddleIsReported)
 
 TEST(PlanDrip, RefusesAProgramTheControlCannotTakeNamingTheLines)
 {
-  TempDir dir;
+  TempDir dir("test_drip_program");
   const auto path = dir.write("bad.nc", "%\nG0 X1\ng1 y2\nG0 X\xB0\n%\n");
   try
   {
@@ -244,7 +226,7 @@ TEST(PlanDrip, RefusesAProgramTheControlCannotTakeNamingTheLines)
 
 TEST(PlanDrip, AddsFramingOnlyWhenMissingAndCountsEveryByte)
 {
-  TempDir dir;
+  TempDir dir("test_drip_program");
   DripOptions options;
   options.eob = parseEob("crlf");
   options.leader_length = 5;
@@ -266,7 +248,7 @@ TEST(PlanDrip, AddsFramingOnlyWhenMissingAndCountsEveryByte)
 
 TEST(PlanDrip, ChecksAnEditedPreambleToo)
 {
-  TempDir dir;
+  TempDir dir("test_drip_program");
   RestartPoint restart;
   restart.line = 3;
   EXPECT_THROW(planDrip(dir.write("p.nc", kProgram), DripOptions{}, restart, "g90\n"), ConfigError);

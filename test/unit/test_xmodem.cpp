@@ -22,9 +22,11 @@
 #include "cnc_bridge/xmodem/file_transfer.h"
 #include "cnc_bridge/xmodem/packet.h"
 #include "cnc_bridge/xmodem/session.h"
+#include "temp_dir.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::xmodem;
+using namespace cnc_bridge::test;
 
 namespace
 {
@@ -36,23 +38,6 @@ Bytes fromHex(const std::string& hex)
   for (size_t i = 0; i + 1 < hex.size(); i += 2)
     out.push_back(static_cast<uint8_t>(std::stoi(hex.substr(i, 2), nullptr, 16)));
   return out;
-}
-
-std::string readFile(const std::string& path)
-{
-  std::ifstream in(path, std::ios::binary);
-  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-}
-
-void writeFile(const std::string& path, const std::string& contents)
-{
-  std::ofstream(path, std::ios::binary) << contents;
-}
-
-bool exists(const std::string& path)
-{
-  struct stat st;
-  return ::stat(path.c_str(), &st) == 0;
 }
 
 size_t filesIn(const std::string& dir)
@@ -67,17 +52,6 @@ size_t filesIn(const std::string& dir)
   }
   return n;
 }
-
-struct TempDir
-{
-  std::string path;
-  TempDir()
-  {
-    char templ[] = "/tmp/test_xmodem.XXXXXX";
-    path = ::mkdtemp(templ);
-  }
-  ~TempDir() { std::system(("rm -rf '" + path + "'").c_str()); }
-};
 
 struct CaptureEvent
 {
@@ -443,7 +417,7 @@ TEST(XmodemSender, AReceiverCancelledAtEotFailsTheSend)
   };
   for (const bool rule : {true, false})
   {
-    TempDir dir;
+    TempDir dir("test_xmodem");
     const std::string target = dir.path + "/O1000.nc";
     LinkPair link;
     std::atomic<bool> cancel{false};
@@ -666,7 +640,7 @@ TEST(XmodemReceiver, StopsOnTwoCansAndWhenTheSenderNeverStarts)
 
 TEST(XmodemReceiver, CancelFromAnotherThreadSendsCanAndLeavesNoFile)
 {
-  TempDir dir;
+  TempDir dir("test_xmodem");
   const std::string target = dir.path + "/O1000.nc";
   writeFile(target, "previous version\n");
   FakeTransport tx;
@@ -1011,7 +985,7 @@ Campaign faultCampaign(const std::string& dir, int transfers, uint32_t seed_base
 
 TEST(XmodemFaults, EveryTransferIsExactOrAClearErrorWithNoFile)
 {
-  TempDir dir;
+  TempDir dir("test_xmodem");
   const Campaign c = faultCampaign(dir.path, 220, 1000, false);
   // Only sources and delivered files remain: no temporary file of a failed transfer.
   EXPECT_EQ(filesIn(dir.path), static_cast<size_t>(c.transfers + c.delivered));
@@ -1026,7 +1000,7 @@ TEST(XmodemFaults, EveryTransferIsExactOrAClearErrorWithNoFile)
 // receiver that aborts near the end (too many errors, a block out of step) must still fail the send.
 TEST(XmodemFaults, HaasAnswerToEotNeverHidesAFailedReceive)
 {
-  TempDir dir;
+  TempDir dir("test_xmodem");
   const Campaign c = faultCampaign(dir.path, 80, 7000, true);
   EXPECT_EQ(filesIn(dir.path), static_cast<size_t>(c.transfers + c.delivered));
   EXPECT_EQ(c.delivered + c.failed, c.transfers);

@@ -24,39 +24,13 @@
 #include "cnc_bridge/transport/pty.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
+#include "temp_dir.h"
 
 using namespace cnc_bridge;
+using namespace cnc_bridge::test;
 
 namespace
 {
-struct TempDir
-{
-  std::string path;
-  TempDir()
-  {
-    char templ[] = "/tmp/test_xmodem_cli.XXXXXX";
-    path = ::mkdtemp(templ);
-  }
-  ~TempDir() { std::system(("rm -rf '" + path + "'").c_str()); }
-};
-
-std::string readFile(const std::string& path)
-{
-  std::ifstream in(path, std::ios::binary);
-  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-}
-
-void writeFile(const std::string& path, const std::string& contents)
-{
-  std::ofstream(path, std::ios::binary) << contents;
-}
-
-bool exists(const std::string& path)
-{
-  struct stat st;
-  return ::stat(path.c_str(), &st) == 0;
-}
-
 std::vector<std::string> filesIn(const std::string& dir)
 {
   std::vector<std::string> names;
@@ -262,7 +236,7 @@ constexpr auto kSimulatorReply = std::chrono::seconds(20);
 // ---------------------------------------------------------------------------------------------
 TEST(CncDncCli, SendStoresTheExactProgramOnTheSimulatedHaas)
 {
-  TempDir dir;
+  TempDir dir("test_xmodem_cli");
   const std::string memory = dir.path + "/haas";
   Simulator haas(memory, {});
   const std::string source = dir.path + "/O01234.nc";
@@ -288,7 +262,7 @@ TEST(CncDncCli, SendStoresTheExactProgramOnTheSimulatedHaas)
 
 TEST(CncDncCli, ReceiveStoresTheSimulatorsProgramExactly)
 {
-  TempDir dir;
+  TempDir dir("test_xmodem_cli");
   const std::string source = dir.path + "/O00777.nc";
   const std::string text = program(777, 3000);
   writeFile(source, text);
@@ -311,7 +285,7 @@ TEST(CncDncCli, ReceiveStoresTheSimulatorsProgramExactly)
 // asking before that gets nothing and gives up with one clear line; after SIGUSR1 it gets the program.
 TEST(CncDncCli, SimulatorSendsOnlyAfterSendIsPressed)
 {
-  TempDir dir;
+  TempDir dir("test_xmodem_cli");
   const std::string source = dir.path + "/O00042.nc";
   const std::string text = program(42, 2000);
   writeFile(source, text);
@@ -335,7 +309,7 @@ TEST(CncDncCli, SimulatorSendsOnlyAfterSendIsPressed)
 
 TEST(CncDncCli, FailuresExitOneWithOneErrorLineAndLeaveNoFile)
 {
-  TempDir dir;
+  TempDir dir("test_xmodem_cli");
   PtyMaster silent;  // a peer that never answers
   const std::string source = dir.path + "/O00001.nc";
   writeFile(source, program(1, 500));
@@ -363,7 +337,7 @@ TEST(CncDncCli, FailuresExitOneWithOneErrorLineAndLeaveNoFile)
 
 TEST(CncDncCli, BadCommandLineExitsTwo)
 {
-  TempDir dir;
+  TempDir dir("test_xmodem_cli");
   const std::vector<std::vector<std::string>> bad = {
       {},
       {"frobnicate"},
@@ -396,7 +370,7 @@ TEST(CncDncCli, BadCommandLineExitsTwo)
 // short enough for a test (the simulator's are scaled by 0.05).
 TEST(SimHaasSerialFaults, EveryTransferIsExactOrAClearErrorWithNoPartialFile)
 {
-  TempDir dir;
+  TempDir dir("test_xmodem_cli");
   const std::string memory = dir.path + "/haas";
   const std::string host = dir.path + "/host";
   ::mkdir(host.c_str(), 0755);

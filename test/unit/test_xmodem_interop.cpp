@@ -21,24 +21,15 @@
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
 #include "cnc_bridge/xmodem/session.h"
+#include "temp_dir.h"
 
 using namespace cnc_bridge;
+using cnc_bridge::test::TempDir;
 using namespace cnc_bridge::xmodem;
 
 namespace
 {
 using Bytes = std::vector<uint8_t>;
-
-struct TempDir
-{
-  std::string path;
-  TempDir()
-  {
-    char templ[] = "/tmp/test_xmodem_interop.XXXXXX";
-    path = ::mkdtemp(templ);
-  }
-  ~TempDir() { std::system(("rm -rf '" + path + "'").c_str()); }
-};
 
 Bytes randomBytes(size_t n, uint32_t seed)
 {
@@ -139,7 +130,7 @@ TextOptions binary()
 /// Our sender to a peer receiver.
 void sendTo(const std::vector<std::string>& peer_argv, bool peer_on_stdio, Mode mode, size_t size, bool expect_1k)
 {
-  TempDir dir;
+  TempDir dir("test_xmodem_interop");
   PtyMaster pty;
   const Bytes payload = randomBytes(size, static_cast<uint32_t>(size + 1));
   std::vector<std::string> argv = peer_argv;
@@ -179,7 +170,7 @@ void sendTo(const std::vector<std::string>& peer_argv, bool peer_on_stdio, Mode 
 /// A peer sender to our receiver.
 void receiveFrom(const std::vector<std::string>& peer_argv, bool peer_on_stdio, Mode mode, size_t size)
 {
-  TempDir dir;
+  TempDir dir("test_xmodem_interop");
   PtyMaster pty;
   const Bytes payload = randomBytes(size, static_cast<uint32_t>(size + 7));
   writeFile(dir.path + "/source", payload);
