@@ -1,10 +1,10 @@
 // bench_slave_bus: synchronous steps per second through the PC-side BusSession to a master on a
 // serial device (sim_slave_bus on a pty, or a real board), each step one 8-slave frame that waits
-// for every slave's answer. With --baud the PC's writes reach the link when a UART of that rate would
-// have finished them (LineTimedTransport; the simulator times its own with the same option), and the
-// result is compared with the line-rate bound two ways: the bytes that crossed the link over the
-// whole timed run against what the line carries in that time, and the median step against the line
-// time of one step's bytes.
+// for every slave's answer. With --baud the PC's writes reach the link when a UART of that rate
+// would have finished them (PacedTransport, Release::kWhenSent; the simulator times its own the
+// same way), and the result is compared with the line-rate bound two ways: the bytes that crossed
+// the link over the whole timed run against what the line carries in that time, and the median
+// step against the line time of one step's bytes.
 #include <algorithm>
 #include <boost/program_options.hpp>
 #include <chrono>
@@ -13,7 +13,6 @@
 #include <memory>
 
 #include "cnc_bridge/slave_bus/bus_session.h"
-#include "cnc_bridge/slave_bus/line_timed_transport.h"
 #include "cnc_bridge/slave_bus/value_codec.h"
 #include "cnc_bridge/transport/paced_transport.h"
 #include "cnc_bridge/transport/serial_port.h"
@@ -57,11 +56,11 @@ int main(int argc, char** argv)
     settings.baud = baud > 0 ? baud : 115200;
     SerialPort serial(settings);
     const double cps = baud / static_cast<double>(bitsPerCharacter(8, false, 1));
-    std::unique_ptr<LineTimedTransport> timed;
+    std::unique_ptr<PacedTransport> timed;
     Transport* link = &serial;
     if (baud > 0)
     {
-      timed = std::make_unique<LineTimedTransport>(serial, cps);
+      timed = std::make_unique<PacedTransport>(serial, cps, PacedTransport::Release::kWhenSent);
       link = timed.get();
     }
     BusSession session(*link, parseFraming(framing), slaves, Milliseconds(50),

@@ -10,7 +10,6 @@
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/log.h"
 #include "cnc_bridge/sim/sim_support.h"
-#include "cnc_bridge/slave_bus/line_timed_transport.h"
 #include "cnc_bridge/slave_bus/sim_master.h"
 #include "cnc_bridge/transport/paced_transport.h"
 #include "cnc_bridge/transport/pty.h"
@@ -129,11 +128,12 @@ int main(int argc, char** argv)
     PtyMaster pty(link);
     sim::onStop([&pty] { pty.interrupt(); });
     // The uplink reaches the PC when a UART at --baud would have finished each byte, not before.
-    std::unique_ptr<LineTimedTransport> timed;
+    std::unique_ptr<PacedTransport> timed;
     Transport* transport = &pty;
     if (baud > 0)
     {
-      timed = std::make_unique<LineTimedTransport>(pty, baud / static_cast<double>(bitsPerCharacter(8, false, 1)));
+      timed = std::make_unique<PacedTransport>(pty, baud / static_cast<double>(bitsPerCharacter(8, false, 1)),
+                                               PacedTransport::Release::kWhenSent);
       transport = timed.get();
     }
     if (vm.count("verbose"))

@@ -13,8 +13,8 @@ unsigned bitsPerCharacter(unsigned data_bits, bool parity, unsigned stop_bits)
   return 1 + data_bits + (parity ? 1 : 0) + stop_bits;
 }
 
-PacedTransport::PacedTransport(Transport& inner, double characters_per_second)
-    : ForwardingTransport(inner), rate_(characters_per_second), line_free_at_(Clock::now())
+PacedTransport::PacedTransport(Transport& inner, double characters_per_second, Release release)
+    : ForwardingTransport(inner), rate_(characters_per_second), release_(release), line_free_at_(Clock::now())
 {
 }
 
@@ -33,10 +33,10 @@ void PacedTransport::write(const uint8_t* data, size_t size, Milliseconds timeou
     {
       line_free_at_ = now;  // the line was idle: no credit for the time it sat unused
     }
-    // The slice leaves when the line has finished what was before it.
-    std::this_thread::sleep_until(line_free_at_);
-    inner_.write(data + done, n, timeout);
+    const auto line_starts_slice = line_free_at_;
     line_free_at_ += std::chrono::duration_cast<Clock::duration>(per_char * static_cast<double>(n));
+    std::this_thread::sleep_until(release_ == Release::kWhenSent ? line_free_at_ : line_starts_slice);
+    inner_.write(data + done, n, timeout);
     done += n;
   }
 }

@@ -7,7 +7,6 @@
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/slave_bus/bus_session.h"
-#include "cnc_bridge/slave_bus/line_timed_transport.h"
 #include "cnc_bridge/slave_bus/sim_master.h"
 #include "cnc_bridge/transport/fake_transport.h"
 #include "cnc_bridge/transport/pty.h"
@@ -289,40 +288,6 @@ TEST(SimMaster, SlaveIgnoresAPayloadItCannotDecode)
   master.pollSlaves();
   EXPECT_TRUE(link.written().empty());
   EXPECT_EQ(master.slaves()[0].rejected(), 1u);
-}
-
-/// Records when each write reached the link.
-class WriteClock : public ForwardingTransport
-{
- public:
-  using ForwardingTransport::ForwardingTransport;
-  using ForwardingTransport::write;
-  void write(const uint8_t* data, size_t size, Milliseconds timeout = kWaitForever) override
-  {
-    writes.emplace_back(std::chrono::steady_clock::now(), size);
-    inner_.write(data, size, timeout);
-  }
-  std::vector<std::pair<std::chrono::steady_clock::time_point, size_t>> writes;
-};
-
-TEST(LineTimedTransport, NoByteReachesTheLinkBeforeTheLineWouldHaveFinishedIt)
-{
-  // 1000 characters/s, slices of 2 characters: the k-th slice may leave no sooner than 2k ms after
-  // the write began (a slice handed over when the line starts it, as PacedTransport does, would
-  // leave the first one at 0 ms). Lower bounds only: a loaded machine can only make it later.
-  FakeTransport fake;
-  WriteClock clock(fake);
-  LineTimedTransport line(clock, 1000.0);
-  const auto start = std::chrono::steady_clock::now();
-  line.write(Bytes(10, 0x55));
-  ASSERT_EQ(clock.writes.size(), 5u);
-  size_t sent = 0;
-  for (const auto& w : clock.writes)
-  {
-    sent += w.second;
-    EXPECT_GE(w.first - start, std::chrono::milliseconds(sent)) << "after " << sent << " characters";
-  }
-  EXPECT_EQ(fake.written(), Bytes(10, 0x55));
 }
 
 TEST(BusSession, PadsToTheBusSizeAndRefusesMore)

@@ -25,6 +25,8 @@
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/transport/backoff.h"
 #include "cnc_bridge/transport/fake_transport.h"
+#include "cnc_bridge/transport/forwarding_transport.h"
+#include "cnc_bridge/transport/paced_transport.h"
 #include "cnc_bridge/transport/pty.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/transport/tcp.h"
@@ -659,4 +661,55 @@ TEST(Reconnector, RetriesUntilTheLinkComesUpAndReportsStates)
   stopping = true;
   reconnector.stop();
   EXPECT_EQ(reconnector.failures(), 2u);
+}
+
+namespace
+{
+/// Records when each write reached the link.
+class WriteClock : public ForwardingTransport
+{
+ public:
+  using ForwardingTransport::ForwardingTransport;
+  using ForwardingTransport::write;
+  void write(const uint8_t* data, size_t size, Milliseconds timeout = kWaitForever) override
+  {
+    writes.emplace_back(steady_clock::now(), size);
+    inner_.write(data, size, timeout);
+  }
+  std::vector<std::pair<steady_clock::time_point, size_t>> writes;
+};
+
+/// Writes 10 characters through a line of 1000 characters/s (slices of 2 characters) and checks
+/// that the slice after \p sent_before characters left no sooner than \p sent_before ms (or, when
+/// \p released_when_sent, no sooner than the end of its own characters). Lower bounds only: a
+/// loaded machine can only make a slice later.
+void expectPaced(PacedTransport::Release release, bool released_when_sent)
+{
+  FakeTransport fake;
+  WriteClock clock(fake);
+  PacedTransport line(clock, 1000.0, release);
+  const auto start = steady_clock::now();
+  line.write(std::vector<uint8_t>(10, 0x55));
+  ASSERT_EQ(clock.writes.size(), 5u);
+  size_t sent = 0;
+  for (const auto& w : clock.writes)
+  {
+    const size_t line_time_ms = released_when_sent ? sent + w.second : sent;
+    EXPECT_GE(w.first - start, std::chrono::milliseconds(line_time_ms)) << "after " << sent << " characters";
+    sent += w.second;
+  }
+  EXPECT_EQ(fake.written(), std::vector<uint8_t>(10, 0x55));
+}
+}  // namespace
+
+TEST(PacedTransport, EachSliceLeavesWhenTheLineIsFreeForIt)
+{
+  expectPaced(PacedTransport::Release::kWhenLineIsFree, false);
+}
+
+TEST(PacedTransport, WhenSentNoByteReachesTheLinkBeforeTheLineWouldHaveFinishedIt)
+{
+  // For stop-and-wait timing (the slave bus simulator and benchmark): a slice released when the
+  // line starts it would let the last slice of a message arrive up to one slice early.
+  expectPaced(PacedTransport::Release::kWhenSent, true);
 }

@@ -17,12 +17,24 @@ unsigned bitsPerCharacter(unsigned data_bits, bool parity, unsigned stop_bits);
 class PacedTransport : public ForwardingTransport
 {
  public:
+  /// When a slice of about 2 ms of line time is handed to the inner transport.
+  enum class Release
+  {
+    /// When the line would START sending it: keeps the average rate, for flow control and
+    /// streaming (a drip-feed host, a simulated control's output).
+    kWhenLineIsFree,
+    /// When the line would have FINISHED sending it (its last stop bit): for stop-and-wait
+    /// exchanges, where releasing at the start lets the last slice of every message arrive up to
+    /// a slice early and a round trip look faster than the line allows.
+    kWhenSent
+  };
+
   /// \param inner the link to pace; must outlive this object.
   /// \param characters_per_second e.g. 11520 for 115200 baud 8N1 (10 bits per character).
-  PacedTransport(Transport& inner, double characters_per_second);
+  PacedTransport(Transport& inner, double characters_per_second, Release release = Release::kWhenLineIsFree);
 
   using ForwardingTransport::write;
-  /// Writes in small slices, each at the time the line would have finished the previous one.
+  /// Writes in small slices, each released as \ref Release says.
   void write(const uint8_t* data, size_t size, Milliseconds timeout = kWaitForever) override;
   void drain() override;
   std::string describe() const override;
@@ -32,6 +44,7 @@ class PacedTransport : public ForwardingTransport
  private:
   using Clock = std::chrono::steady_clock;
   double rate_;
+  Release release_;
   Clock::time_point line_free_at_;  // when the simulated line has sent everything written so far
 };
 }  // namespace cnc_bridge
