@@ -7,8 +7,7 @@ then the new one.
 Lengths are millimetres here (~program_units mm). Every wait is on a message, with a timeout.
 """
 import os
-import threading
-import time
+import sys
 import unittest
 
 import rospy
@@ -18,29 +17,8 @@ from geometry_msgs.msg import PointStamped
 
 from cnc_bridge.msg import DprntLine, MachineState
 
-
-class Collector:
-    def __init__(self, topic, msg_type):
-        self.cv = threading.Condition()
-        self.messages = []
-        self.sub = rospy.Subscriber(topic, msg_type, self.on_message, queue_size=1000)
-
-    def wait_connected(self, timeout=20.0):
-        """A message published before the subscription is connected is lost: wait for the publisher."""
-        deadline = time.monotonic() + timeout
-        while self.sub.get_num_connections() == 0 and time.monotonic() < deadline:
-            time.sleep(0.01)  # polling the connection count: rospy offers no wait for it
-        return self.sub.get_num_connections() > 0
-
-    def on_message(self, msg):
-        with self.cv:
-            self.messages.append(msg)
-            self.cv.notify_all()
-
-    def wait(self, predicate, timeout=20.0):
-        with self.cv:
-            ok = self.cv.wait_for(lambda: any(predicate(m) for m in self.messages), timeout)
-            return next((m for m in self.messages if predicate(m)), None) if ok else None
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from topic_collector import Collector  # noqa: E402
 
 
 def dprnt_counter(array, key):

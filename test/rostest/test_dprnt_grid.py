@@ -13,7 +13,6 @@ import importlib.util
 import math
 import os
 import sys
-import threading
 import time
 import unittest
 
@@ -29,6 +28,7 @@ from cnc_bridge.srv import DprntSaveSurface
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import dprnt_png  # noqa: E402
+from topic_collector import Collector  # noqa: E402
 
 INCH = 0.0254  # m
 PITCH = 0.5 * INCH
@@ -51,33 +51,6 @@ def load_surface_mapper():
     module = importlib.util.module_from_spec(spec)
     loader.exec_module(module)
     return module
-
-
-class Collector:
-    def __init__(self, topic, msg_type):
-        self.cv = threading.Condition()
-        self.messages = []
-        self.sub = rospy.Subscriber(topic, msg_type, self.on_message, queue_size=10000)
-
-    def on_message(self, msg):
-        with self.cv:
-            self.messages.append(msg)
-            self.cv.notify_all()
-
-    def count(self):
-        with self.cv:
-            return len(self.messages)
-
-    def wait(self, predicate, timeout=30.0, start=0):
-        """The first message from index start on that satisfies predicate, or None after timeout s."""
-        found = []
-
-        def ready():
-            found[:] = [m for m in self.messages[start:] if predicate(m)][:1]
-            return bool(found)
-
-        with self.cv:
-            return found[0] if self.cv.wait_for(ready, timeout) else None
 
 
 def cloud_matches_the_surface(cloud):

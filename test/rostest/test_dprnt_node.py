@@ -10,7 +10,6 @@ by hand, not by our own formatter. Every wait is on a message or a service, with
 import math
 import os
 import sys
-import threading
 import unittest
 
 import rospy
@@ -27,42 +26,13 @@ from cnc_bridge.srv import DprntSaveSurface
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import dprnt_png  # noqa: E402
+from topic_collector import Collector  # noqa: E402
 
 INCH = 0.0254  # m
 
 
 def surface_inch(x, y):
     return -0.01 + 0.002 * x + 0.001 * y
-
-
-class Collector:
-    """Subscribes and keeps messages; wait(predicate) returns the first that satisfies it."""
-
-    def __init__(self, topic, msg_type):
-        self.cv = threading.Condition()
-        self.messages = []
-        self.sub = rospy.Subscriber(topic, msg_type, self.on_message, queue_size=10000)
-
-    def on_message(self, msg):
-        with self.cv:
-            self.messages.append(msg)
-            self.cv.notify_all()
-
-    def wait(self, predicate, timeout=30.0, start=0):
-        """The first message from index start on that satisfies predicate, or None after timeout s."""
-        deadline = rospy.get_time() + timeout
-        checked = start
-        with self.cv:
-            while not rospy.is_shutdown():
-                for msg in self.messages[checked:]:
-                    if predicate(msg):
-                        return msg
-                checked = len(self.messages)
-                remaining = deadline - rospy.get_time()
-                if remaining <= 0:
-                    return None
-                self.cv.wait(min(remaining, 0.5))
-        return None
 
 
 def dprnt_status(array):
