@@ -98,7 +98,6 @@ TEST(BackupReceiver, CancelKeepsTheOldFileIntact)
   const auto target = dir.write("out.nc", "old\n");
   FakeTransport link;
   BackupReceiver receiver(link, BackupOptions{});
-  BackupProgress seen;
   std::promise<void> started;
   bool signalled = false;
   auto done = std::async(std::launch::async,
