@@ -11,6 +11,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <future>
+#include <memory>
 #include <random>
 #include <thread>
 
@@ -38,6 +39,19 @@ Bytes fromHex(const std::string& hex)
   for (size_t i = 0; i + 1 < hex.size(); i += 2)
     out.push_back(static_cast<uint8_t>(std::stoi(hex.substr(i, 2), nullptr, 16)));
   return out;
+}
+
+/// A scripted peer: each write to \p link is answered with the next transmission of \p script
+/// (a receiver's NAK or ACK gets the sender's next packet), until the script runs out.
+void answerEachWriteWith(FakeTransport& link, std::vector<Bytes> script)
+{
+  auto next = std::make_shared<size_t>(0);
+  link.onWrite(
+      [script = std::move(script), next](FakeTransport& t, const Bytes&)
+      {
+        if (*next < script.size())
+          t.feed(script[(*next)++]);
+      });
 }
 
 size_t filesIn(const std::string& dir)
@@ -209,14 +223,8 @@ TEST(XmodemCapture, ReceiverReproducesTheProgramTheHaasSent)
   ASSERT_EQ(from_cnc.size(), 9u);  // 8 packets + EOT
 
   FakeTransport cnc("haas");
-  size_t next = 0;
   // The control answers each byte the PC writes with its next transmission, as in the capture.
-  cnc.onWrite(
-      [&](FakeTransport& t, const Bytes&)
-      {
-        if (next < from_cnc.size())
-          t.feed(from_cnc[next++]);
-      });
+  answerEachWriteWith(cnc, from_cnc);
   Receiver receiver(cnc, Mode::kChecksum, fastConfig());
   const Bytes payload = receiver.receive();
   const std::string program = fromWire(payload, TextOptions());
@@ -468,13 +476,7 @@ TEST(XmodemReceiver, AcksAndDropsADuplicateBlock)
   const Bytes one = encodePacket(1, Bytes(128, '1').data(), 128, kBlockSize, CheckType::kChecksum);
   const Bytes two = encodePacket(2, Bytes(5, '2').data(), 5, kBlockSize, CheckType::kChecksum);
   std::vector<Bytes> script = {one, one, two, {kEot}};
-  size_t next = 0;
-  tx.onWrite(
-      [&](FakeTransport& t, const Bytes&)
-      {
-        if (next < script.size())
-          t.feed(script[next++]);
-      });
+  answerEachWriteWith(tx, script);
   Receiver receiver(tx, Mode::kChecksum, fastConfig());
   Bytes data = receiver.receive();
   stripSubPadding(data);
@@ -489,13 +491,7 @@ TEST(XmodemReceiver, AbortsWithCanOnABlockOutOfSequence)
   const Bytes one = encodePacket(1, nullptr, 0, kBlockSize, CheckType::kChecksum);
   const Bytes three = encodePacket(3, nullptr, 0, kBlockSize, CheckType::kChecksum);
   std::vector<Bytes> script = {one, three};
-  size_t next = 0;
-  tx.onWrite(
-      [&](FakeTransport& t, const Bytes&)
-      {
-        if (next < script.size())
-          t.feed(script[next++]);
-      });
+  answerEachWriteWith(tx, script);
   Receiver receiver(tx, Mode::kChecksum, fastConfig());
   try
   {
@@ -519,13 +515,7 @@ TEST(XmodemReceiver, ABlockLeftFromAnEarlierTransferIsNotTheStart)
   const Bytes stale = encodePacket(2, Bytes(128, 's').data(), 128, kBlockSize, CheckType::kChecksum);
   const Bytes one = encodePacket(1, Bytes(3, '1').data(), 3, kBlockSize, CheckType::kChecksum);
   std::vector<Bytes> script = {stale, one, {kEot}};
-  size_t next = 0;
-  tx.onWrite(
-      [&](FakeTransport& t, const Bytes&)
-      {
-        if (next < script.size())
-          t.feed(script[next++]);
-      });
+  answerEachWriteWith(tx, script);
   Receiver receiver(tx, Mode::kChecksum, fastConfig());
   Bytes data = receiver.receive();
   stripSubPadding(data);
@@ -591,13 +581,7 @@ TEST(XmodemReceiver, AcceptsOneKBlocksInChecksumModeAndAGarbledEotIsNotTheEnd)
   fake_eot[0] = kEot;  // SOH garbled into EOT: the rest of the packet follows at once
   const Bytes two = encodePacket(2, Bytes(1, 'e').data(), 1, kBlockSize, CheckType::kChecksum);
   std::vector<Bytes> script = {big, fake_eot, two, {kEot}};
-  size_t next = 0;
-  tx.onWrite(
-      [&](FakeTransport& t, const Bytes&)
-      {
-        if (next < script.size())
-          t.feed(script[next++]);
-      });
+  answerEachWriteWith(tx, script);
   Receiver receiver(tx, Mode::kChecksum, fastConfig());
   Bytes data = receiver.receive();
   stripSubPadding(data);
@@ -779,13 +763,7 @@ TEST(XmodemReceiver, PacketsSplitOverManyReadsAreReassembled)
       script.emplace_back(packets.begin() + at, packets.begin() + at + size);
     }
     script.push_back({kEot});
-    size_t next = 0;
-    tx.onWrite(
-        [&](FakeTransport& t, const Bytes&)
-        {
-          if (next < script.size())
-            t.feed(script[next++]);
-        });
+    answerEachWriteWith(tx, script);
     Receiver receiver(tx, Mode::kCrc, fastConfig());
     EXPECT_EQ(receiver.receive(), payload) << "read chunk " << chunk;
     EXPECT_EQ(receiver.stats().garbled, 0u) << "read chunk " << chunk;
