@@ -14,6 +14,7 @@
 #include <fstream>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <thread>
 
 #include "cnc_bridge/CycleEvent.h"
@@ -242,40 +243,48 @@ TEST(HaasMdcNode, RawQueriesAreReadOnly)
   EXPECT_EQ(query.response.reply, "SERIAL NUMBER, 1234567");
 }
 
-TEST(HaasMdcNode, LinkLossAndReturn)
+// Waits in \p states (one instance's recorded state) for the link to go from UP to not UP, then
+// for it to be UP again with the machine followed; returns the state of the loss, or nothing.
+std::optional<MachineState> waitForLinkLossAndReturn(const std::vector<MachineState>& states)
 {
-  // The script drops every connection once per loop: the link goes down, then up again.
   size_t down_at = 0;
-  ASSERT_TRUE(recorder->waitFor(
+  const bool lost = recorder->waitFor(
       [&]
       {
-        for (size_t i = 0; i < recorder->ngc_states.size(); ++i)
-        {
-          if (i > 0 && recorder->ngc_states[i - 1].link == MachineState::LINK_UP &&
-              recorder->ngc_states[i].link != MachineState::LINK_UP)
+        for (size_t i = 1; i < states.size(); ++i)
+          if (states[i - 1].link == MachineState::LINK_UP && states[i].link != MachineState::LINK_UP)
           {
             down_at = i;
             return true;
           }
-        }
         return false;
       },
-      25.0));
-  ASSERT_TRUE(recorder->waitFor(
-      [&]
-      {
-        for (size_t i = down_at; i < recorder->ngc_states.size(); ++i)
-        {
-          const auto& s = recorder->ngc_states[i];
-          if (s.link == MachineState::LINK_UP && s.execution != MachineState::EXECUTION_UNKNOWN)
-            return true;
-        }
-        return false;
-      },
-      15.0));
+      25.0);
+  EXPECT_TRUE(lost) << "the link never went down";
+  const bool back = lost && recorder->waitFor(
+                                [&]
+                                {
+                                  for (size_t i = down_at; i < states.size(); ++i)
+                                    if (states[i].link == MachineState::LINK_UP &&
+                                        states[i].execution != MachineState::EXECUTION_UNKNOWN)
+                                      return true;
+                                  return false;
+                                },
+                                15.0);
+  EXPECT_TRUE(!lost || back) << "the link did not come back";
+  if (!back)
+    return std::nullopt;
   std::lock_guard<std::mutex> lock(recorder->mutex);
-  EXPECT_EQ(recorder->ngc_states[down_at].execution, MachineState::EXECUTION_UNKNOWN);
-  EXPECT_FALSE(recorder->ngc_states[down_at].position_valid);
+  return states[down_at];
+}
+
+TEST(HaasMdcNode, LinkLossAndReturn)
+{
+  // The script drops every connection once per loop: the link goes down, then up again.
+  const auto lost = waitForLinkLossAndReturn(recorder->ngc_states);
+  ASSERT_TRUE(lost);
+  EXPECT_EQ(lost->execution, MachineState::EXECUTION_UNKNOWN);
+  EXPECT_FALSE(lost->position_valid);
 }
 
 TEST(HaasMdcNode, ClassicSerialControlWithFramedRepliesIsFollowedToo)
@@ -374,32 +383,9 @@ TEST(HaasMdcNode, SerialLinkLossAndReturn)
 {
   // The script's 1 s line outage: no replies, so the Classic instance (0.2 s reply timeout, 2
   // unanswered in a row) declares the link down, reopens the port and follows the machine again.
-  size_t down_at = 0;
-  ASSERT_TRUE(recorder->waitFor(
-      [&]
-      {
-        const auto& states = recorder->classic_states;
-        for (size_t i = 1; i < states.size(); ++i)
-          if (states[i - 1].link == MachineState::LINK_UP && states[i].link != MachineState::LINK_UP)
-          {
-            down_at = i;
-            return true;
-          }
-        return false;
-      },
-      25.0));
-  ASSERT_TRUE(recorder->waitFor(
-      [&]
-      {
-        const auto& states = recorder->classic_states;
-        for (size_t i = down_at; i < states.size(); ++i)
-          if (states[i].link == MachineState::LINK_UP && states[i].execution != MachineState::EXECUTION_UNKNOWN)
-            return true;
-        return false;
-      },
-      15.0));
-  std::lock_guard<std::mutex> lock(recorder->mutex);
-  EXPECT_EQ(recorder->classic_states[down_at].execution, MachineState::EXECUTION_UNKNOWN);
+  const auto lost = waitForLinkLossAndReturn(recorder->classic_states);
+  ASSERT_TRUE(lost);
+  EXPECT_EQ(lost->execution, MachineState::EXECUTION_UNKNOWN);
 }
 
 TEST(HaasMdcNode, ADncTransferOnTheSharedSerialLineSilencesThePoller)
