@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# DNC drip-feed benchmark (issue 4), with dnc_drip_bench (bench/dnc/drip_bench.cpp): the sender
+# DNC drip-feed benchmark (docs/dnc_drip_feed.md), with dnc_drip_bench (bench/dnc/drip_bench.cpp): the sender
 # and the simulated control of sim_haas_serial drip on a pty in one process. Three measurements,
 # each printed beside its target as a ratio:
 #  1. resident memory while drip-feeding a generated 1 GB program vs a 1 MB one (growth < 5 MB);

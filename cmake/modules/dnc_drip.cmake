@@ -1,4 +1,4 @@
-# DNC drip-feed and program backup (issue 4): the streaming sender, the backup receiver, the
+# DNC drip-feed and program backup (docs/protocols/drip_feed.md): the streaming sender, the backup receiver, the
 # simulated control (sim_haas_serial drip / punch), their tests, and their part of dnc_node and
 # cnc_dnc. Included after dnc.cmake (XModem), whose targets it extends when they exist.
 cnc_core_module(cnc_bridge_drip

@@ -42,7 +42,7 @@ DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   // ~binary (bool, default false): move bytes exactly (no EOB conversion; received files keep the
   // SUB padding of the last block).
   pnh.param("binary", text_options_.binary, false);
-  // XModem timing (seconds) and limits; defaults are the protocol's (DESIGN section 6).
+  // XModem timing (seconds) and limits; defaults are the protocol's (docs/protocols/xmodem.md#timeouts-and-limits).
   // ~start_timeout: receiving, how long to wait for the control to start sending (the operator
   // starts the punch on the control), NAK repeated every ~nak_interval meanwhile.
   xmodem_config_.start_timeout = params::seconds(pnh, "start_timeout", 120.0);

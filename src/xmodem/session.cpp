@@ -1,7 +1,7 @@
 // XModem sender and receiver state machines (see session.h for the contract).
 //
 // Protocol as implemented (Forsberg's XMODEM/YMODEM reference, lrzsz, and the Haas capture in the
-// seed opendnc_haas_xmodem_dprnt.md, Appendix, extracted in fixtures/haas_xmodem_capture.json):
+// OpenDNC's RS-232 capture, test/data/xmodem/haas_xmodem_capture.json; docs/protocols/xmodem.md):
 //
 //   receiver                         sender
 //   NAK | 'C'  (again every nak_interval; 'C' crc_attempts times, then NAK)

@@ -196,7 +196,7 @@ TEST(SerialPort, PartialReadsReturnWhatIsThere)
   EXPECT_EQ(std::string(reinterpret_cast<char*>(buffer), total), "abc");
 }
 
-TEST(SerialPort, AcceptsEveryLineSettingTheSeedsUse)
+TEST(SerialPort, AcceptsEveryLineSettingTheControlsUse)
 {
   PtyMaster device;
   for (const unsigned baud : {1200u, 9600u, 19200u, 38400u, 57600u, 115200u, 230400u})

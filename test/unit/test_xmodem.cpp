@@ -1,5 +1,5 @@
 // XModem core: packet codec and check codes, end-of-block conversion, the sender and receiver
-// against the real Haas bytes of the seed's capture (test/data/xmodem/haas_xmodem_capture.json),
+// against the real Haas bytes of OpenDNC's capture (test/data/xmodem/haas_xmodem_capture.json),
 // protocol corner cases on a scripted FakeTransport, sender <-> receiver over an in-memory link,
 // and >= 200 transfers through the seeded FaultyTransport. No sleeps: every wait is a read with a
 // timeout or a FakeTransport condition variable.

@@ -1,6 +1,6 @@
 // Program backup: the control punches a program out of its memory (Fanuc PUNCH, Haas SEND RS-232)
 // and the host stores it. The control sends no length and no checksum: the program is what lies
-// between the first '%' and the second (seed: pc_dnc_drip_feed_fanuc.md, 4.2.4), or, for a control
+// between the first '%' and the second (docs/protocols/drip_feed.md#percent-framing), or, for a control
 // set not to send the closing '%', what arrives before the line goes quiet.
 #pragma once
 

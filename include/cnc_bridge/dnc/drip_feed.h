@@ -1,6 +1,6 @@
 // DNC drip-feed: the host streams an NC program to a control that executes it while it reads, so
-// a program far larger than the control's memory can run (seed: pc_dnc_drip_feed_fanuc.md; DESIGN
-// section 6). The control paces the host with XON/XOFF (or RTS/CTS); the host must stop within 10
+// a program far larger than the control's memory can run (docs/protocols/drip_feed.md). The control
+// paces the host with XON/XOFF (or RTS/CTS); the host must stop within 10
 // characters of an XOFF, so this sender writes a few characters at a time and looks for DC3
 // between writes instead of leaving flow control to the kernel.
 #pragma once
@@ -135,7 +135,7 @@ struct DripResult
 
 /// \brief Streams one plan to a control over a Transport.
 ///
-/// Wire format (Fanuc/Haas tape format, DESIGN section 6): [DC2] [leader] ['%' EOB] [preamble
+/// Wire format (Fanuc/Haas tape format, docs/protocols/drip_feed.md#wire-format): [DC2] [leader] ['%' EOB] [preamble
 /// blocks, each + EOB] [file lines from the start line to the last non-blank line, each + EOB]
 /// ['%' EOB] [trailer] [DC4]. The framing '%' lines are sent only when the file lacks them (or a
 /// restart skipped the file's first line). The control answers with DC3 (0x13, or 0x93 under 7E1

@@ -1,4 +1,4 @@
-// RS-232 serial port in raw mode with every line option the seeds use: Haas settings 11 (baud),
+// RS-232 serial port in raw mode with every line option the controls need: Haas settings 11 (baud),
 // 12 (parity), 13 (stop bits), 37 (data bits) and the flow control of DNC drip-feed.
 #pragma once
 

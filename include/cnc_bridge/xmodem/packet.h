@@ -47,7 +47,7 @@ constexpr size_t packetSize(size_t data_size, CheckType check)
 
 /// \brief Builds one packet.
 ///
-/// Wire format (Forsberg; seed opendnc_haas_xmodem_dprnt.md, "Standard", figure 8):
+/// Wire format (Forsberg; OpenDNC, "Standard", figure 8; docs/protocols/xmodem.md#packet):
 ///
 ///     SOH|STX  blk  255-blk  data[128|1024]  sum8 | crc16-hi crc16-lo
 ///

@@ -1,6 +1,6 @@
 // The two ends of an XModem transfer, as state machines over a Transport: the sender (PC -> CNC
 // upload) and the receiver (CNC -> PC download). They follow Forsberg's reference and lrzsz on
-// timeouts, retries and duplicates, and the real Haas of the seed's capture on its quirks.
+// timeouts, retries and duplicates, and a real Haas's capture on its quirks (docs/protocols/xmodem.md#haas-specifics).
 #pragma once
 
 #include <atomic>
@@ -28,7 +28,8 @@ const char* toString(Mode mode);
 /// \brief "checksum"|"xmodem", "crc"|"xmodem-crc", "1k"|"xmodem-1k". \throws ConfigError.
 Mode parseMode(const std::string& text);
 
-/// \brief Timeouts and limits (DESIGN section 6). Defaults are the protocol's; tests shorten them.
+/// \brief Timeouts and limits (docs/protocols/xmodem.md#timeouts-and-limits). Defaults are the protocol's; tests
+/// shorten them.
 struct Config
 {
   /// Receiver: NAK (or 'C') again after this long without the first packet.

@@ -409,7 +409,7 @@ void MacroProgram::run(MacroMachine& m, const std::function<bool(const std::stri
         if (probe && has_p && std::lround(p) == 9995)
         {
           // Single-surface Z probe (WIPS): the probe comes down at the current X Y and stops on the
-          // surface; the G54 Z offset (#5223) becomes the surface height, as in the seed's grid cycle.
+          // surface; the G54 Z offset (#5223) becomes the surface height, as in OpenDNC's grid cycle.
           const double z = m.surface(m.position[0], m.position[1]);
           m.variables[5223] = z;
           m.variables[5061] = m.position[0];
@@ -417,7 +417,7 @@ void MacroProgram::run(MacroMachine& m, const std::function<bool(const std::stri
           m.variables[5063] = z;
         }
         // Work position (#5041-#5043) and machine position (#5021-#5023): work plus the G54
-        // offset (#5221-#5223; the probe cycle above sets the Z offset, as in the seed).
+        // offset (#5221-#5223; the probe cycle above sets the Z offset, as in OpenDNC's).
         for (int axis = 0; axis < 3; ++axis)
         {
           m.variables[5041 + axis] = m.position[axis];

@@ -1,5 +1,5 @@
 // A small Haas macro interpreter for the DPRNT mode of sim_haas_serial: enough of the language to
-// run the probing programs DPRNT exists for (the seed's grid probing: G65 P9995 ...;
+// run the probing programs DPRNT exists for (docs/protocols/dprnt.md#surface-model: G65 P9995 ...;
 // DPRNT[#5223[44]]; G00 G91 X.5;) against a synthetic surface, and print with real Haas formatting.
 #pragma once
 
@@ -32,7 +32,7 @@ struct MacroMachine
 /// Supported (Haas mill programming manual, "Macros"): blocks separated by ';' or new lines;
 /// (comments); N numbers; '%' and O-number lines ignored; `#n = expr`; `DPRNT[...]`;
 /// `WHILE [expr] DOn` ... `ENDn`; `IF [expr] GOTOn` with `Nn` targets; G00/G01 X Y Z moves under
-/// G90/G91; `G65 P9995` single-surface Z probe (sets #5223, the G54 Z offset the seed prints, and
+/// G90/G91; `G65 P9995` single-surface Z probe (sets #5223, the G54 Z offset OpenDNC prints, and
 /// #5061..#5063, the probe trigger position); after every block #5041..#5043 hold the work position
 /// and #5021..#5023 the machine position (work position + G54 offset #5221..#5223);
 /// M30/M02/M99 end the program. Expressions: numbers,

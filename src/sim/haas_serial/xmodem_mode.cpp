@@ -1,5 +1,5 @@
 // sim_haas_serial xmodem: a Haas Classic Control's RS-232 port with setting 14 = XMODEM, as the
-// seed's capture shows it (opendnc_haas_xmodem_dprnt.md, Appendix): checksum mode only; while
+// OpenDNC's capture shows it (docs/protocols/xmodem.md#haas-specifics): checksum mode only; while
 // waiting to receive it NAKs every --nak-interval, so several NAKs are queued before a host starts
 // sending; it answers the host's EOT with CAN CAN CAN; programs it receives are stored in --dir
 // under their O number. It sends --program (NAK start; a 'C' is ignored, as a checksum-only
