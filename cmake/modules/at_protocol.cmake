@@ -1,4 +1,5 @@
-# at_protocol: the '@'-terminated controller protocol with 1 ms setpoint streaming (issue 7).
+# at_protocol: the '@'-terminated controller protocol with 1 ms setpoint streaming
+# (docs/protocols/at_protocol.md).
 # Core library (codec, sequencing rules, trajectory planner, sender thread), its unit tests, the
 # controller simulator, the streaming benchmark tool, the fuzz target, and at_controller_node.
 cnc_core_module(cnc_bridge_at_protocol

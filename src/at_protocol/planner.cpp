@@ -260,7 +260,7 @@ Setpoint Trajectory::toSetpoint(const Sample& sample) const
   for (int i = 0; i < 3; ++i)
   {
     setpoint.position[i] = static_cast<int32_t>(std::llround(sample.position[i]));
-    // Feed value: the seed's -255..255, read as a fraction of the axis' top speed.
+    // Feed value: the protocol's -255..255, read as a fraction of the axis' top speed.
     const double scaled = sample.velocity[i] / (limits_.max_speed[i] * kPulsesPerMm) * kMaxFeed;
     setpoint.feed[i] = static_cast<int>(std::clamp<long>(std::lround(scaled), -kMaxFeed, kMaxFeed));
   }

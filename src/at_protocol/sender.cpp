@@ -537,7 +537,7 @@ void SetpointSender::runJob(const std::shared_ptr<Job>& job)
   };
   try
   {
-    // Prologue in the order of seed 6: M1@ (1), P@ (5), tool change (7), spindle (8).
+    // Prologue in the order of at_protocol.md#sequence-of-one-machining: M1@ (1), P@ (5), tool (7), spindle (8).
     std::string prologue = encode(Machining{true}) + encode(StartOperation{operation.coolant});
     if (operation.tool)
     {
@@ -621,7 +621,7 @@ void SetpointSender::runJob(const std::shared_ptr<Job>& job)
       job->publish(setpoint, stream.sent(), stream.total());
       due += period_ns;
     }
-    // Epilogue: #@ ends the operation (coolant off, seed 6 step 16), M0@ the machining (spindle 0).
+    // Epilogue: #@ ends the operation (coolant off, step 16), M0@ the machining (spindle 0).
     write(encode(EndOperation{}) + encode(Machining{false}));
     commands_ += 2;
     endJob(outcome, message);

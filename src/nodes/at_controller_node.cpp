@@ -1,4 +1,4 @@
-// at_controller_node: ROS in the place of the seed's CAM add-in (esprit_at_protocol_controller.md),
+// at_controller_node: ROS in the place of the CAM add-in of docs/protocols/at_protocol.md,
 // driving a real-time controller over the '@'-protocol. Commands go out on one TCP socket (we are
 // the client of the controller's receive server); reports come back on another (we are its client,
 // or a server it connects to). Services change mode, spindle, tool and home; the ~follow_path action
@@ -44,9 +44,9 @@ class AtControllerNode
   {
     // ~host: address of the controller (both sockets in client mode).
     pnh.param<std::string>("host", host_, "127.0.0.1");
-    // ~tcp_port: the controller's command server (the seed's server_recv).
+    // ~tcp_port: the controller's command server (the paper's server_recv).
     command_port_ = port(pnh, "tcp_port", 5000);
-    // ~report_mode: "client" connects to the controller's report server (the seed's server_send,
+    // ~report_mode: "client" connects to the controller's report server (the paper's server_send,
     // like the add-in's ReceiveClient); "server" listens on ~listen_port for the controller.
     pnh.param<std::string>("report_mode", report_mode_, "client");
     if (report_mode_ != "client" && report_mode_ != "server")
@@ -69,7 +69,7 @@ class AtControllerNode
     {
       program_dir_ = std::make_unique<ProgramDirectory>(program_dir);
     }
-    // ~period: s, the controller's time loop (seed: 1 ms).
+    // ~period: s, the controller's time loop (1 ms in the paper).
     limits_.period = params::positive(pnh, "period", 0.001);
     // ~max_speed_x/y/z: m/s per axis; also the speed a feed value of 255 stands for.
     // ~max_accel_x/y/z: m/s^2 per axis.
@@ -478,7 +478,7 @@ class AtControllerNode
 
   bool coolant(std_srvs::SetBool::Request& req, std_srvs::SetBool::Response& res)
   {
-    // The protocol switches coolant only with an operation (P1@ / P0@, seed 6 steps 5-6 and 16).
+    // The protocol switches coolant only with an operation (P1@ / P0@, steps 5-6 and 16).
     coolant_ = req.data;
     res.success = true;
     res.message = std::string("coolant ") + (req.data ? "on (P1@)" : "off (P0@)") +
@@ -493,7 +493,7 @@ class AtControllerNode
     {
       return true;
     }
-    // The seed sends the tool length in whole millimetres.
+    // The protocol sends the tool length in whole millimetres.
     const long length_mm = std::lround(req.length * 1000.0);
     res.success = sendAll({ap::ToolChange{req.tool, static_cast<int>(length_mm)}}, res.message);
     if (res.success)
@@ -739,7 +739,7 @@ class AtControllerNode
                                                                        : MachineState::EXECUTION_STOPPED;
             s.mode = jog_axis_ >= 0 ? MachineState::MODE_MANUAL : MachineState::MODE_AUTO;
             s.coolant = false;
-            s.spindle_speed = 0.0;  // M0@ stops the spindle (seed 6 step 18)
+            s.spindle_speed = 0.0;  // M0@ stops the spindle (step 18)
             s.message = "follow_path " + std::string(ap::Job::toString(job->state())) + ": " + job->message();
           });
       switch (job->state())

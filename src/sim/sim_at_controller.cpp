@@ -1,9 +1,9 @@
-// sim_at_controller: the real-time Linux controller of seed esprit_at_protocol_controller.md
-// (sections 5 and 6), without the machine. It serves the command socket ('@'-terminated messages,
-// the seed's server_recv) and sends reports one per line (server_send), either as a server the
+// sim_at_controller: the real-time Linux controller of docs/protocols/at_protocol.md (its paper's
+// sections 5 and 6), without the machine. It serves the command socket ('@'-terminated messages,
+// the paper's server_recv) and sends reports one per line (server_send), either as a server the
 // node connects to or as a client of the node's report server. Every 1 ms time loop it takes one
 // setpoint and the axes follow it with a first-order lag; it reports position, mode, home and
-// emergency stop, and ignores jog requests while machining as the seed's controller does.
+// emergency stop, and ignores jog requests while machining as the original controller does.
 //
 // Emergency stop: stdin lines "estop on" / "estop off", SIGUSR1 (on) / SIGUSR2 (off), or a fault
 // script. Also on stdin: "auto", "jog X|Y|Z" (the mode selector), "home".
@@ -371,7 +371,7 @@ class SimController
     const std::string refusal = sequencer_.refusal(command);
     if (!refusal.empty())
     {
-      // Seed 6 step 2: "even if the jog mode is turned on from the mode selector, Linux will not go
+      // Step 2: "even if the jog mode is turned on from the mode selector, Linux will not go
       // to jog mode, it ignores the change". Other out-of-order messages are ignored the same way.
       ++ignored_;
       std::cerr << "sim_at_controller: ignored: " << refusal << std::endl;

@@ -1,5 +1,5 @@
-// The '@'-protocol codec: every message of seed esprit_at_protocol_controller.md section 4.2 in both
-// directions, byte-exact against the seed's own examples ("S150@", "JX@", "F150@", "T1 34@",
+// The '@'-protocol codec: every message of docs/protocols/at_protocol.md in both
+// directions, byte-exact against the paper's own examples ("S150@", "JX@", "F150@", "T1 34@",
 // "45334 34623 54934"), stream reassembly over split and merged reads, and malformed input.
 #include <gtest/gtest.h>
 
@@ -23,18 +23,18 @@ std::vector<CommandCase> commandCases()
 {
   return {
       {AutoMode{}, "A@"},
-      {JogMode{Axis::kX}, "JX@"},  // seed: "JX@" for jog mode in X
+      {JogMode{Axis::kX}, "JX@"},  // paper: "JX@" for jog mode in X
       {JogMode{Axis::kY}, "JY@"},
       {JogMode{Axis::kZ}, "JZ@"},
       {Machining{true}, "M1@"},
       {Machining{false}, "M0@"},
       {StartOperation{true}, "P1@"},
       {StartOperation{false}, "P0@"},
-      {Spindle{150}, "S150@"},  // seed example
+      {Spindle{150}, "S150@"},  // paper's example
       {Spindle{0}, "S0@"},
       {Spindle{255}, "S255@"},
-      {JogFeed{150}, "F150@"},        // seed example
-      {ToolChange{1, 34}, "T1 34@"},  // seed example
+      {JogFeed{150}, "F150@"},        // paper's example
+      {ToolChange{1, 34}, "T1 34@"},  // paper's example
       {Home{}, "H@"},
       {Setpoint{{12, -255, 0}, {3400, -5, 0}}, "12 3400 -255 -5 0 0@"},
       {Setpoint{{255, 0, -1}, {2147483647, -2147483647 - 1, 7}}, "255 2147483647 0 -2147483648 -1 7@"},
@@ -43,7 +43,7 @@ std::vector<CommandCase> commandCases()
 }
 }  // namespace
 
-TEST(AtCodec, EveryCommandEncodesToTheSeedsText)
+TEST(AtCodec, EveryCommandEncodesToThePapersText)
 {
   for (const auto& c : commandCases())
   {
@@ -78,7 +78,7 @@ TEST(AtCodec, DecodedValuesAreTheFieldsSent)
 TEST(AtCodec, OutOfRangeValuesNeverLeave)
 {
   EXPECT_THROW(encode(Spindle{256}), ProtocolError);
-  EXPECT_THROW(encode(Spindle{-1}), ProtocolError);  // clockwise only (seed 6 step 8)
+  EXPECT_THROW(encode(Spindle{-1}), ProtocolError);  // clockwise only (step 8)
   EXPECT_THROW(encode(JogFeed{300}), ProtocolError);
   EXPECT_THROW(encode(Setpoint{{256, 0, 0}, {0, 0, 0}}), ProtocolError);
   EXPECT_THROW(encode(Setpoint{{0, 0, -256}, {0, 0, 0}}), ProtocolError);
@@ -193,7 +193,7 @@ TEST(AtCodec, EveryReportEncodesAndParses)
       {JogModeReport{Axis::kY}, "JY\n"},
       {JogModeReport{Axis::kZ}, "JZ\n"},
       {HomeReport{}, "H\n"},
-      {PositionReport{{45334, 34623, 54934}}, "45334 34623 54934\n"},  // seed example
+      {PositionReport{{45334, 34623, 54934}}, "45334 34623 54934\n"},  // paper's example
       {PositionReport{{-1, 0, -2147483647 - 1}}, "-1 0 -2147483648\n"},
   };
   for (const auto& [report, wire] : cases)

@@ -1,4 +1,4 @@
-// The 1 ms sender: what it writes for an operation (seed section 6 order), commands queued between
+// The 1 ms sender: what it writes for an operation (at_protocol.md's step order), commands queued between
 // setpoints, cancel as a deceleration, abort on emergency stop, and a failing link. The "controller"
 // is a FakeTransport; the tests wait on the bytes it receives or on the job, never on sleeps.
 #include <gtest/gtest.h>
@@ -53,7 +53,7 @@ struct Fixture : ::testing::Test
 };
 }  // namespace
 
-TEST_F(Fixture, AnOperationIsWrittenInTheSeedsOrder)
+TEST_F(Fixture, AnOperationIsWrittenInTheProtocolsOrder)
 {
   Operation operation;
   operation.coolant = true;

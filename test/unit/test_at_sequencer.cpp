@@ -1,4 +1,4 @@
-// The sequencing rules of seed esprit_at_protocol_controller.md section 6 (steps 1-18).
+// The sequencing rules of docs/protocols/at_protocol.md#sequence-of-one-machining (steps 1-18).
 #include <gtest/gtest.h>
 
 #include "cnc_bridge/at_protocol/sequencer.h"
@@ -7,7 +7,7 @@
 using namespace cnc_bridge;
 using namespace cnc_bridge::at_protocol;
 
-TEST(AtSequencer, AWholeMachiningInTheSeedsOrder)
+TEST(AtSequencer, AWholeMachiningInTheProtocolsOrder)
 {
   Sequencer s;
   s.apply(JogMode{Axis::kY});

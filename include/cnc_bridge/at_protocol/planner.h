@@ -1,4 +1,4 @@
-// Trajectory planning for the '@'-protocol (seed esprit_at_protocol_controller.md, section 4.1):
+// Trajectory planning for the '@'-protocol (docs/protocols/at_protocol.md; its paper's section 4.1):
 // the add-in, not the controller, turns a tool path into "the required speed and position for each
 // axis at each time loop" of 1 ms, with acceleration and deceleration. This file holds that planner:
 // a polyline in pulses becomes a time-parametrised trapezoidal velocity profile along the path,
@@ -23,7 +23,7 @@ using Vec3 = std::array<double, 3>;
 /// the ROS layer converts from metres), times in seconds.
 struct PlannerLimits
 {
-  double period = 0.001;                ///< s, the controller's time loop (seed: 1 ms)
+  double period = 0.001;                ///< s, the controller's time loop (1 ms)
   Vec3 max_speed{50.0, 50.0, 25.0};     ///< mm/s per axis; also the speed a feed value of 255 means
   Vec3 max_accel{500.0, 500.0, 250.0};  ///< mm/s^2 per axis
   /// Share of each axis' acceleration budget kept for the change of direction at a corner. Along a

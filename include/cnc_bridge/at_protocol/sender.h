@@ -1,4 +1,4 @@
-// The 1 ms setpoint sender of the '@'-protocol node. The seed's controller runs a Xenomai loop that
+// The 1 ms setpoint sender of the '@'-protocol node. The original controller runs a Xenomai loop that
 // takes one setpoint per 1 ms time step from a pipe; the host must keep that pipe fed. This file
 // holds the dedicated thread that writes every message of the command socket: setpoints on an
 // absolute-time schedule, and commands queued by ROS callbacks, which only ever touch a short
@@ -48,11 +48,11 @@ class IntervalHistogram
   std::atomic<int64_t> max_ns_{0};
 };
 
-/// \brief What one `~follow_path` goal sends: M1@, P@, T@, S@, the setpoints, #@, M0@ (seed 6).
+/// \brief What one `~follow_path` goal sends: M1@, P@, T@, S@, the setpoints, #@, M0@ (at_protocol.md, steps).
 struct Operation
 {
   bool coolant = false;
-  std::optional<ToolChange> tool;  ///< sent after P@ (seed 6 step 7)
+  std::optional<ToolChange> tool;  ///< sent after P@ (step 7)
   std::optional<int> spindle;      ///< 0..255, sent after the tool change (step 8)
   std::shared_ptr<const Trajectory> trajectory;
 };

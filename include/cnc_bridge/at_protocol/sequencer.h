@@ -1,5 +1,5 @@
-// The order in which the '@'-protocol allows commands (seed esprit_at_protocol_controller.md,
-// section 6) as a state machine. The node checks every command it is about to send against it, so
+// The order in which the '@'-protocol allows commands (docs/protocols/at_protocol.md, "Sequence of
+// one machining") as a state machine. The node checks every command it is about to send against it, so
 // that a service call in the wrong phase is refused with the rule it breaks instead of confusing
 // the controller; the simulator runs the same machine to behave like the controller.
 #pragma once
@@ -17,19 +17,19 @@ namespace at_protocol
 enum class Phase
 {
   kIdle,       ///< no machining: jog, home and mode changes allowed
-  kMachining,  ///< after M1@, between operations: jog blocked (seed 6 step 2)
-  kOperation,  ///< after P0@/P1@ and before #@: setpoints are movements (seed 6 step 6)
+  kMachining,  ///< after M1@, between operations: jog blocked (step 2)
+  kOperation,  ///< after P0@/P1@ and before #@: setpoints are movements (step 6)
 };
 const char* toString(Phase phase);
 
-/// \brief The sequencing rules of seed section 6. Not thread-safe.
+/// \brief The sequencing rules of docs/protocols/at_protocol.md#sequence-of-one-machining. Not thread-safe.
 ///
 ///   idle --M1@--> machining --P0@/P1@--> operation --setpoints...--> operation --#@--> machining
 ///   machining --M0@--> idle (spindle to 0)
 ///
 /// - J<axis>@, F@ and H@ only when idle (the controller ignores a jog request while machining).
 /// - P@ only while machining and outside an operation; setpoints and #@ only inside one.
-/// - T@ outside an operation or inside one before its first setpoint (seed 6 step 7 changes the
+/// - T@ outside an operation or inside one before its first setpoint (step 7 changes the
 ///   tool after P@); S@ at any time (step 8 sets the operation's speed after P@; 4.2 allows it in
 ///   jog mode too).
 /// - M0@ only between operations (#@ closes the operation first); it stops the spindle (step 18).
