@@ -1,5 +1,5 @@
 %
-(qCNC seed phrasing: G90 implied, coordinates in mm; a rapid to the start, then a 150 mm square)
+(qCNC phrasing: G90 implied, coordinates in mm; a rapid to the start, then a 150 mm square)
 (and its diagonal cut at Z-1, and a rapid up)
 N10 G00 X0 Y0 Z5
 N20 G01 X150 Y0 Z5

@@ -1,4 +1,4 @@
-// Reader of the qCNC settings file (settings.h; format from the seed's section 8).
+// Reader of the qCNC settings file (settings.h; docs/protocols/ethernut.md#settings-file).
 #include "cnc_bridge/ethernut/settings.h"
 
 #include <charconv>
@@ -111,7 +111,7 @@ Settings parseSettings(std::istream& in, const std::string& source)
     }
     else if (name == "INET_DEL")
     {
-      // The seed writes "x ms"; accept a trailing "ms".
+      // qCNC's documentation writes "x ms"; accept a trailing "ms".
       std::string number = value;
       if (number.size() > 2 && number.compare(number.size() - 2, 2, "ms") == 0)
       {

@@ -31,7 +31,7 @@ namespace cnc_bridge
 {
 namespace
 {
-// The board's unit is the millimetre (the seed's coordinates are G-code values; our parser turns
+// The board's unit is the millimetre (qCNC's coordinates are G-code values; our parser turns
 // inches into mm); messages are in metres.
 constexpr double kMetresPerMm = 0.001;
 

@@ -452,7 +452,7 @@ TEST(EthernutJob, DiagnosticsReportRoundTripsResendsAndKeepalives)
   // Link round trips are sampled by alive requests, which go out while the idle board is silent.
   ASSERT_TRUE(watch->waitFor([] { return diag("link round trip samples") >= 1; }, 20.0));
   std::lock_guard<std::mutex> lock(watch->mutex);
-  EXPECT_GE(diag("resends"), 3);  // at least one in each of the seed, Haas and preemption jobs
+  EXPECT_GE(diag("resends"), 3);  // at least one in each of the qCNC-style, Haas and preemption jobs
   EXPECT_EQ(diag("keepalive misses"), 0);
   EXPECT_GE(diag("keepalive requests"), 1);
   EXPECT_GT(diag("coordinates acknowledged"), 100);

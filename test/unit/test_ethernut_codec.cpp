@@ -185,7 +185,7 @@ TEST(EthernutStream, FeedTakesOnlyWhatFits)
   EXPECT_EQ(taken % 20, 0u);
 }
 
-TEST(EthernutSettings, ReadsTheSeedsSettings)
+TEST(EthernutSettings, ReadsQcncsDocumentedSettings)
 {
   std::istringstream in(
       "# qCNC settings\n"

@@ -1,4 +1,4 @@
-// Unit tests of the G-code parser: the seed's Haas program (inch, G18/G17 arcs) end to end, arc
+// Unit tests of the G-code parser: OpenDNC's Haas program (inch, G18/G17 arcs) end to end, arc
 // geometry (IJK and R, every plane, chord tolerance), modal state, and malformed input with line
 // and column.
 #include <gtest/gtest.h>
@@ -150,7 +150,7 @@ TEST(GcodeFixture, HaasProgramParsesWithArcEndpointsAndStaysInsideThePart)
   }
 }
 
-TEST(GcodeParser, SeedPhrasingDefaultsToAbsoluteFeedMoves)
+TEST(GcodeParser, QcncPhrasingDefaultsToAbsoluteFeedMoves)
 {
   std::ifstream in(CNC_BRIDGE_FIXTURE_DIR "/seed_hello.nc", std::ios::binary);
   std::vector<Move> moves;

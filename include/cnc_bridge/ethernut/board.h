@@ -1,6 +1,6 @@
 // The board side of the ethernut protocol, as a ROS-free class: the heart of sim_ethernut, and a
 // peer for in-process tests and benchmarks. It answers every opcode of Table 1 the way client.h
-// reads the seed (pause-achieved from the board, resume by READYTOSEND), moves a simulated tool
+// reads the table (pause-achieved from the board, resume by READYTOSEND), moves a simulated tool
 // to each coordinate at a set speed, reports its position (status 4), and injects faults.
 #pragma once
 

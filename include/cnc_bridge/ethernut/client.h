@@ -1,4 +1,4 @@
-// The PC side of the ethernut protocol: the seed's TCP_control() as a session over a Transport.
+// The PC side of the ethernut protocol: qCNC's TCP_control() as a session over a Transport.
 // It connects (init request, ack), selects the board's mode, streams a job's coordinates one at a
 // time with NEXT/RESEND, keeps the link alive, and carries the operator's commands (pause,
 // resume, reset, kill, mode switch) to the board while a job runs.
@@ -20,7 +20,7 @@ namespace cnc_bridge
 {
 namespace ethernut
 {
-/// Where the session is in the seed's TCP_control() flow.
+/// Where the session is in qCNC's TCP_control() flow.
 enum class SessionState : uint8_t
 {
   kDisconnected,  ///< run() not running
@@ -68,11 +68,11 @@ struct ClientOptions
   Milliseconds reply_timeout{2000};
   /// After this long without any message from the board, send an alive request (row 17).
   Milliseconds keepalive_period{500};
-  /// After this long without any message from the board, the link is dead (the seed's INET_DEL).
+  /// After this long without any message from the board, the link is dead (qCNC's INET_DEL).
   Milliseconds dead_link_timeout{2000};
   /// RESENDs accepted for one coordinate before the job fails.
   unsigned max_resends = 5;
-  /// Kill commands (row 9) are refused unless this is set (the seed's PROG_CNCkill).
+  /// Kill commands (row 9) are refused unless this is set (qCNC's PROG_CNCkill).
   bool kill_enabled = false;
   /// Table 1 lists a global acknowledge as the response to a position report (row 4); off for
   /// boards that do not expect it.
@@ -128,7 +128,7 @@ class ClientListener
   virtual void onBoardError(float code) {}
 };
 
-/// \brief The PC/client task of the ethernut protocol (seed section 3.2, Function flow 1).
+/// \brief The PC/client task of the ethernut protocol (docs/protocols/ethernut.md#session).
 ///
 /// Protocol, as implemented (opcodes in protocol.h; every PC message is answered by exactly one
 /// board message, so one command is outstanding at a time and coordinates are stop-and-wait):
@@ -146,11 +146,11 @@ class ClientListener
 ///              as request and answer: the board sends pause-achieved once motion has stopped
 ///              (the "must be responded to (10)" of row 11 names the request it answers). A
 ///              pause-achieved that arrives unasked (a hold on the board's panel) pauses too.
-///   resume:    not in the table; the seed says resume "falls back into its previous state".
+///   resume:    not in the table; qCNC says resume "falls back into its previous state".
 ///              We resume with READYTOSEND (200,50) -> ack: the board continues the held move
 ///              and answers the coordinate in flight with NEXT as usual.
 ///   reset:     (99,0) -> ack; the job is cancelled, the board clears and goes to 0/0/0. The
-///              seed's "reset" and "clear" share this one opcode; we keep the link (clear).
+///              qCNC's "reset" and "clear" share this one opcode; we keep the link (clear).
 ///   kill:      (99,99) -> ack, then the board stops and drops the link (refused here unless
 ///              kill_enabled).
 ///   position:  the board's (4,x,y,z) at any time -> ack (if ack_position_reports).
@@ -195,7 +195,7 @@ class Client
   void kill();
   /// \brief Switches the board's mode. Standalone makes the board drop the link: run() returns.
   void setMode(BoardMode mode);
-  /// \brief Rows 2 and 3 ("TODO" on the seed's board): sent and acknowledged, meaning is the board's.
+  /// \brief Rows 2 and 3 ("TODO" on qCNC's board): sent and acknowledged, meaning is the board's.
   void syncOled(float x, float y, float z);
   void sendCommand(float x, float y, float z);
 

@@ -14,7 +14,7 @@ namespace cnc_bridge
 {
 namespace ethernut
 {
-/// \brief One protocol message, as the seed's `typedef struct { float x, y, z, status, error; }
+/// \brief One protocol message, as qCNC's `typedef struct { float x, y, z, status, error; }
 /// protocol;` (qCNC developer documentation, section 3.1 and Interfaces.h).
 ///
 /// Wire format, 20 bytes, no header, no checksum, no delimiter:
@@ -40,7 +40,7 @@ struct Message
 constexpr size_t kMessageSize = 20;
 using Frame = std::array<uint8_t, kMessageSize>;
 
-/// \brief The opcode table (seed section 3.4.1, Table 1), one enumerator per row, in row order.
+/// \brief The opcode table (docs/protocols/ethernut.md#opcode-table), one enumerator per row, in row order.
 enum class Opcode : uint8_t
 {
   kCoordinates = 1,     ///< status 1: a set of coordinates (PC -> board); answered NEXT/RESEND

@@ -1,4 +1,4 @@
-// A streaming G-code parser for the subset real CAM output and the qCNC seed use: it turns lines
+// A streaming G-code parser for the subset real CAM output and qCNC's converter use: it turns lines
 // of a part program into plain blocks and straight-line moves (arcs already cut into chords) in
 // millimetres, so that a job preview, a coordinate streamer (ethernut) and a path planner
 // (at_controller) all read programs the same way. Memory stays constant whatever the file size:
@@ -153,7 +153,7 @@ struct ParserOptions
   /// Skip blocks starting with '/' (the control's block-delete switch).
   bool block_delete = false;
   Units initial_units = Units::kMillimetres;
-  /// The qCNC seed's converter never writes G01/G90 ("default is G90 and G01"), so a program
+  /// qCNC's converter never writes G01/G90 ("default is G90 and G01", ethernut.md#g-code-phrasing), so a program
   /// that moves before any motion word is read as feed moves: the slower, safer reading.
   Motion initial_motion = Motion::kLinear;
   Vec3 initial_position;  ///< mm

@@ -1,5 +1,5 @@
 %
-(qCNC seed phrasing: G90 and G01 are implied, coordinates in mm)
+(qCNC phrasing: G90 and G01 are implied, coordinates in mm)
 N10 X0 Y0 Z5
 N20 X10 Y0 Z5
 N30 Z-1
