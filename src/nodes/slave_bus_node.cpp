@@ -108,7 +108,7 @@ class SlaveBusNode
       : nh_(nh), settings_(params::serialSettings(pnh, 115200)), state_(nh, pnh, settings_.describe())
   {
     std::string framing = "raw";
-    // ~framing: raw (the seed's bytes, for its stock master firmware) or framed (every frame in a
+    // ~framing: raw (the paper's bytes, for its stock master firmware) or framed (every frame in a
     // WirePacker frame with CRC-8, both directions; recommended where the firmware supports it).
     pnh.param("framing", framing, framing);
     framing_ = slave_bus::parseFraming(framing);
@@ -141,7 +141,7 @@ class SlaveBusNode
     max_queued_ = static_cast<size_t>(std::max(1, max_queued));
     loadSlaves(pnh);
     int bus_size = 0;
-    // ~bus_size: slaves in every frame (the seed's master firmware is built for a fixed count, e.g.
+    // ~bus_size: slaves in every frame (the paper's master firmware is built for a fixed count, e.g.
     // 8); 0 (default): the highest configured address.
     pnh.param("bus_size", bus_size, bus_size);
     if (bus_size == 0)

@@ -1,4 +1,4 @@
-// sim_slave_bus: a universal-CNC master board with its I2C slaves, on a pty. It runs the seed's
+// sim_slave_bus: a universal-CNC master board with its I2C slaves, on a pty. It runs the paper's
 // receive state machine on the serial link, forwards each payload to its slave as a WirePacker
 // frame, and while idle polls the slaves and writes their answers up the link (the uplink format of
 // include/cnc_bridge/slave_bus/array_protocol.h). First line: "sim_slave_bus pty <path>".
@@ -65,7 +65,7 @@ int main(int argc, char** argv)
   unsigned baud = 0, resync_gap_ms = 0, corrupt_every = 0, max_payload = 0;
   options.add_options()("help,h", "this help")("link", po::value(&link),
                                                "symbolic link to create to the pty device (default: none)")(
-      "framing", po::value(&framing)->default_value("raw"), "raw (the seed's bytes) or framed (WirePacker + CRC-8)")(
+      "framing", po::value(&framing)->default_value("raw"), "raw (the paper's bytes) or framed (WirePacker + CRC-8)")(
       "slave", po::value(&slave_specs)->composing(),
       "ADDR:ROLE[:ENCODING], repeatable, addresses 1..N in order; ROLE axis|tool|generic, ENCODING "
       "bytes|hundreds|be16|be16s (default: 3 be16s axes, a tool, 4 generic slaves)")(
@@ -73,7 +73,7 @@ int main(int argc, char** argv)
       "time the uplink as a line of this rate, 8N1: each byte reaches the PC when a UART would have finished "
       "it (0: unpaced)")(
       "resync-gap-ms", po::value(&resync_gap_ms)->default_value(0),
-      "silence after which a partial frame from the PC is dropped; raw: 0 = never (as the seed's firmware); "
+      "silence after which a partial frame from the PC is dropped; raw: 0 = never (as the paper's firmware); "
       "framed: always resynchronises, 0 = 100 ms")(
       "wirepacker-crc", po::value(&wirepacker_crc)->default_value("spec"),
       "spec (CRC over length and data, as the packet format documents) or library (data only, as the "

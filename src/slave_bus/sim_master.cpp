@@ -65,7 +65,7 @@ void SimSlave::receive(const std::vector<uint8_t>& i2c_frame)
       reply_ = encodeValues({tool_on_ ? 1 : 0}, encoding_);
       break;
     case SimRole::kGeneric:
-      // Echo, as the seed's slave sketch does, but no more than the master reads (nor than one of
+      // Echo, as the paper's slave sketch does, but no more than the master reads (nor than one of
       // the bus's frames carries).
       reply_.assign(payload.begin(), payload.begin() + static_cast<std::ptrdiff_t>(
                                                            std::min({payload.size(), kMaxReply, wire_.max_data})));
@@ -243,7 +243,7 @@ Milliseconds SimMaster::resyncGap() const
   {
     return kFramedResyncGap;
   }
-  return options_.resync_gap;  // raw: 0 = never, as the seed's firmware (it has no timeout)
+  return options_.resync_gap;  // raw: 0 = never, as the paper's firmware (it has no timeout)
 }
 
 void SimMaster::onSilence()
@@ -301,7 +301,7 @@ void SimMaster::serveOnce(std::vector<uint8_t>& buffer, std::chrono::steady_cloc
       onSilence();
     }
   }
-  // The seed's master polls its slaves only between frames.
+  // The paper's master polls its slaves only between frames.
   if (receiver_.idle())
   {
     pollSlaves();

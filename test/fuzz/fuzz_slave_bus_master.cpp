@@ -1,4 +1,4 @@
-// libFuzzer target: the simulated master (the seed's receive state machine, WirePacker to the slaves,
+// libFuzzer target: the simulated master (the paper's receive state machine, WirePacker to the slaves,
 // the slaves' value decoding) on arbitrary bytes from the PC, raw and framed. Invariant: no crash,
 // and whatever it writes up the link parses as whole uplink records.
 #include <cstddef>

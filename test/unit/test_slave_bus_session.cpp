@@ -85,7 +85,7 @@ class PtyBus
 const Milliseconds kReplyTimeout(2000);  // generous: a loaded CI box; a healthy step takes < 1 ms
 }  // namespace
 
-TEST(SimMaster, SeedFrameMovesAxesTogglesToolAndEchoes)
+TEST(SimMaster, PaperFrameMovesAxesTogglesToolAndEchoes)
 {
   FakeTransport link;
   SimMaster master(link, eightSlaves(), {});

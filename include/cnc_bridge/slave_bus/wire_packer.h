@@ -1,5 +1,5 @@
-// WirePacker framing: the packet format of the ESP32 I2C slave library that the universal-CNC seed
-// (universal_cnc_serial_i2c_protocol.md, "I2C packet format") uses between the master and its
+// WirePacker framing: the packet format of the ESP32 I2C slave library that the universal-CNC paper
+// (docs/protocols/slave_bus.md#wirepacker-frame) uses between the master and its
 // slaves. cnc_bridge uses the same framing on the serial link in its optional framed mode, so one
 // codec serves the simulated I2C bus and the PC <-> master link.
 #pragma once
@@ -19,8 +19,8 @@ uint8_t crc8Maxim(const uint8_t* data, size_t size, uint8_t crc = 0);
 
 /// \brief Which bytes of a frame the CRC covers.
 ///
-/// The packet format (the library's header comment, the seed's figure 17, DESIGN section 6) says
-/// "CRC8 of packet length and data". The released code of the library the seed cites
+/// The packet format (the library's header comment, the paper's figure 17, docs/protocols/slave_bus.md) says
+/// "CRC8 of packet length and data". The released code of the library the paper cites
 /// (gutierrezps/ESP32_I2C_Slave, src/WirePacker.cpp and src/WireCrc.h) computes something else:
 /// end() calls `crc8.calc(&length, 1)` and then returns `crc8.update(data, n)`, but update() starts
 /// from the member `seed` (0, set by calc()) and never stores its result, so the length byte's CRC
@@ -59,7 +59,7 @@ struct WireFormat
 
 /// \brief Packs and unpacks WirePacker frames.
 ///
-/// Wire format (seed figure 17; DESIGN section 6):
+/// Wire format (the paper's figure 17; docs/protocols/slave_bus.md#wirepacker-frame):
 /// \code
 ///   [0]     0x02            start byte (STX)
 ///   [1]     total length    every byte of the frame: data + 4, so 4..255
