@@ -1,4 +1,4 @@
-# Haas Machine Data Collection (issue 9): core library, haas_mdc_node, sim_haas_mdc, tests.
+# Haas Machine Data Collection (docs/protocols/haas_mdc.md): core library, haas_mdc_node, sim_haas_mdc, tests.
 cnc_core_module(cnc_bridge_mdc src/mdc/mdc_protocol.cpp src/mdc/mdc_client.cpp src/mdc/mdc_monitor.cpp
   src/mdc/sim_machine.cpp)
 cnc_tool(sim_haas_mdc src/sim/sim_haas_mdc.cpp)

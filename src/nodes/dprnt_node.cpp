@@ -31,7 +31,7 @@ namespace cnc_bridge
 {
 namespace
 {
-// Builds the input named by ~input, from the link parameters of DESIGN section 3.
+// Builds the input named by ~input, from the link parameters every node reads (docs/ROS_INTERFACE.md).
 std::unique_ptr<dprnt::DprntInput> makeInput(const ros::NodeHandle& pnh)
 {
   // ~input: where DPRNT output arrives: serial (Haas Classic, NGC with RS-232), tcp (NGC setting 261
@@ -288,7 +288,7 @@ void DprntNode::publishRule(const dprnt::RuleOutput& output, const std::string& 
     {
       geometry_msgs::PointStamped point;
       point.header.stamp = stamp;
-      // "machine" and "work" are this machine's frames (DESIGN section 3); anything else is taken as is.
+      // "machine" and "work" are this machine's frames (docs/ROS_INTERFACE.md); anything else is taken as is.
       point.header.frame_id = rule.frame == "machine" || rule.frame == "work" ? state_->frame(rule.frame) : rule.frame;
       point.point.x = output.x;  // m (the core converted from rule.units)
       point.point.y = output.y;

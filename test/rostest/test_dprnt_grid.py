@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The seed's grid probing cycle, as printed, becomes a height map (surface_mapper grid mode).
+"""OpenDNC's grid probing cycle, as printed, becomes a height map (surface_mapper grid mode).
 
 sim_haas_serial runs config/dprnt/seed_grid.nc: `CYCLE START O01001`, then for each of 10 x 10
 points `G65 P9995 W54. A20. H-1.; DPRNT[#5223[44]]; G00 G91 X.5;` (rows 0.5 in apart, raster),

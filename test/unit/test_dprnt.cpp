@@ -77,7 +77,7 @@ TEST(DprntFormat, ManualExampleStatement)
   EXPECT_EQ(formatStatement("***MEASURED*INSIDE*DIAMETER***", manualVariables), "   MEASURED INSIDE DIAMETER   ");
   // N4 DPRNT[]; only the line end.
   EXPECT_EQ(formatStatement("", manualVariables), "");
-  // The seed's grid probe line: DPRNT[#5223[44]];
+  // OpenDNC's grid probe line (docs/protocols/dprnt.md#surface-model): DPRNT[#5223[44]];
   EXPECT_EQ(formatStatement("#5223[44]", manualVariables), "  -0.0125");
   EXPECT_EQ(formatStatement("Z*OFFSET*IS*#5223[44]", manualVariables), "Z OFFSET IS   -0.0125");
 }

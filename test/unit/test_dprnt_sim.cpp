@@ -52,9 +52,9 @@ TEST(DprntSim, ExpressionsAndComments)
   EXPECT_EQ(machine.variables[6], 0.0);
 }
 
-TEST(DprntSim, SeedGridProbingOverAPlane)
+TEST(DprntSim, OpenDncGridProbingOverAPlane)
 {
-  // The seed's cycle: G65 P9995 ...; DPRNT[#5223[44]]; G00 G91 X.5; three points in a row.
+  // OpenDNC's cycle: G65 P9995 ...; DPRNT[#5223[44]]; G00 G91 X.5; three points in a row.
   MacroMachine machine;
   machine.surface = [](double x, double y) { return -0.01 + 0.002 * x + 0.001 * y; };
   const auto lines =

@@ -14,7 +14,7 @@ namespace dprnt
 {
 /// \brief Formats one macro variable value as `#var[wf]` prints it.
 ///
-/// Rules (Haas mill programming manual, "Formatted Output"; DESIGN section 6):
+/// Rules (Haas mill programming manual, "Formatted Output"; docs/protocols/dprnt.md#haas-number-format):
 ///   - w places are reserved for the whole part and f for the fraction; 1 <= w + f <= 8;
 ///   - the fraction is rounded to f places (half away from zero, on the decimal value), and printed
 ///     with trailing zeros; no decimal point when f = 0, and then the whole part is printed as is

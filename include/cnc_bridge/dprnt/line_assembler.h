@@ -41,7 +41,7 @@ struct LineEvent
 
 /// \brief Splits a DPRNT byte stream into lines. Not thread-safe (one reader thread feeds it).
 ///
-/// Byte handling (DESIGN section 6, seed "DPrint"):
+/// Byte handling (docs/protocols/dprnt.md#bytes-to-lines):
 ///   - bit 7 is cleared first when mask_parity is set (7E1/7O1 read as 8N1; DPRNT text is ASCII);
 ///   - CR, LF end a line; an LF right after a CR belongs to the same CR LF end;
 ///   - NUL, DC1..DC4 (reader/punch control, POPEN/PCLOS leaders), SUB (0x1A) and DEL (0x7F, tape

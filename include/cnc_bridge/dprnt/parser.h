@@ -21,7 +21,7 @@ struct LabeledValue
 
 /// \brief Parses one DPRNT line into label/value pairs. Thread-safe (no state).
 ///
-/// Grammar, as read from what controls print (Haas manual examples, DESIGN section 6):
+/// Grammar, as read from what controls print (Haas manual examples; docs/protocols/dprnt.md#lines-to-values):
 ///   - a number is [+-] digits [. digits] or [+-] . digits; "1." is 1. A sign separated from the
 ///     digits by spaces still belongs to them ("X - 1.5" is -1.5) because Haas pads after the label;
 ///   - a number glued to a word ("X1.5", "T1") is that word's value; "#5223" is a label

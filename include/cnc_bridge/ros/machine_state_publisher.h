@@ -1,4 +1,4 @@
-// What every cnc_bridge node publishes about its machine (DESIGN section 3): the latched `state`
+// What every cnc_bridge node publishes about its machine (docs/ROS_INTERFACE.md): the latched `state`
 // topic, `joint_states` for robot_state_publisher, the tf frames machine -> tool and machine ->
 // work, and diagnostics with the link status. Nodes change the state through update(); this class
 // decides when to publish.

@@ -1,5 +1,5 @@
 // Parameter helpers shared by the nodes: required parameters fail with the resolved name, ranges
-// are checked, and the link parameters have the same names in every node (DESIGN section 3).
+// are checked, and the link parameters have the same names in every node (docs/ROS_INTERFACE.md).
 #pragma once
 
 #include <ros/ros.h>
