@@ -235,7 +235,7 @@ TEST(EthernutJob, KillIsRefusedByDefault)
   EXPECT_TRUE(boardReady(5.0));  // nothing was sent: the link stays up
 }
 
-TEST(EthernutJob, SeedProgramStreamsEveryCoordinateInOrderDespiteResends)
+TEST(EthernutJob, QcncStyleProgramStreamsEveryCoordinateInOrderDespiteResends)
 {
   ASSERT_TRUE(boardReady());
   auto client = actionClient();
