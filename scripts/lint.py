@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """Style checks, written as JUnit XML: every C++ file clang-formatted (.clang-format), every
-launch file with a doc on each <arg>. (The core's freedom from ROS: scripts/check_ros_free.py.)
+launch file with a doc on each <arg>, the module table of docs/DEVELOPING.md matching the tree
+(scripts/check_module_table.py). (The core's freedom from ROS: scripts/check_ros_free.py.)
 
 The files come from git, or from a walk of the tree outside a git checkout (scripts/repo_files.py);
 finding no C++ or no launch file at all is a failure, not a pass over nothing."""
@@ -10,6 +11,7 @@ import subprocess
 import sys
 import xml.etree.ElementTree as ET
 
+import check_module_table
 from repo_files import git_files, repo_files, walked_files
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -65,6 +67,8 @@ def main():
         cases.append(("format", path, check_format(path)))
     for path in repo_files(ROOT, *LAUNCH):
         cases.append(("launch_args_documented", path, check_launch_args(path)))
+    table = check_module_table.problems()
+    cases.append(("module_table", check_module_table.GUIDE, "; ".join(table) if table else None))
     if os.path.exists(os.path.join(ROOT, "config/cell.yaml")):
         cases.append(("cell_launch_generated", "launch/cell.launch", check_cell_launch_generated("launch/cell.launch")))
     suite = ET.Element("testsuite", name="lint", tests=str(len(cases)))
