@@ -22,6 +22,14 @@ Board::Board(const BoardOptions& options) : options_(options), rng_(options.seed
       throw ConfigError("sim_ethernut: cannot open log " + options_.log_path);
     }
   }
+  if (!options_.message_log_path.empty())
+  {
+    message_log_.open(options_.message_log_path, std::ios::app);
+    if (!message_log_)
+    {
+      throw ConfigError("sim_ethernut: cannot open message log " + options_.message_log_path);
+    }
+  }
 }
 
 void Board::log(float x, float y, float z)
@@ -30,6 +38,14 @@ void Board::log(float x, float y, float z)
   {
     log_ << std::fixed << std::setprecision(4) << x << ' ' << y << ' ' << z << '\n';
     log_.flush();
+  }
+}
+
+void Board::logMessage(Opcode opcode)
+{
+  if (message_log_.is_open())
+  {
+    message_log_ << toString(opcode) << std::endl;
   }
 }
 
@@ -123,6 +139,7 @@ void Board::serve(Transport& link, StopSignal& stop)
             CNC_LOG_WARN("sim_ethernut: " << e.what());
             continue;
           }
+          logMessage(classify(m));
           switch (classify(m))
           {
             case Opcode::kInitRequest:

@@ -293,6 +293,8 @@ std::string SimMachine::answer(const std::string& raw, Clock::time_point now)
   const std::string command = upper(line);
   if (command.empty())
     return "";
+  if (query_log_)
+    *query_log_ << command << std::endl;
   const State s = stateAt(now);
 
   // A write: ?E<var> <value>.

@@ -47,6 +47,7 @@ struct Options
   std::array<int32_t, 3> home{0, 0, 0};
   std::string fault_script;
   std::string pid_file;
+  std::string command_log;  // every command message received, one per line, for tests to inspect
 };
 
 /// One fault-script line: after the n-th setpoint received, switch the emergency stop.
@@ -104,6 +105,14 @@ class SimController
   SimController(Options options, StopSignal& stop) : options_(std::move(options)), stop_(stop)
   {
     faults_ = readFaultScript(options_.fault_script);
+    if (!options_.command_log.empty())
+    {
+      command_log_.open(options_.command_log, std::ios::app);
+      if (!command_log_)
+      {
+        throw ConfigError("sim_at_controller: cannot open --command-log " + options_.command_log);
+      }
+    }
   }
 
   void run()
@@ -187,6 +196,7 @@ class SimController
           std::lock_guard<std::mutex> lock(mutex_);
           for (const auto& message : result.messages)
           {
+            logCommand(message);
             try
             {
               Command command = decodeCommand(message);
@@ -214,6 +224,16 @@ class SimController
       }
       std::lock_guard<std::mutex> lock(mutex_);
       last_arrival_ns_ = 0;
+    }
+  }
+
+  /// Appends a received message (as it arrived, without its '@') to --command-log; flushed at once
+  /// so a test reads what the controller has received so far.
+  void logCommand(const std::string& message)
+  {
+    if (command_log_.is_open())
+    {
+      command_log_ << message << std::endl;
     }
   }
 
@@ -538,6 +558,7 @@ class SimController
   std::mutex mutex_;  // guards queue_, console_, arrivals bookkeeping
   std::deque<Command> queue_;
   std::deque<std::string> console_;
+  std::ofstream command_log_;  // guarded by mutex_
   int64_t last_arrival_ns_ = 0;
   IntervalHistogram arrivals_;
   std::atomic<uint64_t> ignored_{0};
@@ -592,7 +613,8 @@ int main(int argc, char** argv)
                                                   "home position, pulses \"x,y,z\"")(
       "home-speed", po::value(&options.home_speed)->default_value(options.home_speed), "homing speed (mm/s)")(
       "fault-script", po::value(&options.fault_script), "file of \"setpoint <n> estop-on|estop-off\" lines")(
-      "pid-file", po::value(&options.pid_file), "write the process id here (for SIGUSR1/SIGUSR2 e-stop)");
+      "pid-file", po::value(&options.pid_file), "write the process id here (for SIGUSR1/SIGUSR2 e-stop)")(
+      "command-log", po::value(&options.command_log), "append every command message received to this file");
   try
   {
     po::variables_map vm;

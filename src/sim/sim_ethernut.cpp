@@ -34,8 +34,9 @@ int main(int argc, char** argv)
       ("silent-after", po::value(&options.silent_after)->default_value(0),
        "stop answering anything, keepalives included, at the Nth coordinate (once; 0: never)")  //
       ("mute-keepalive-after", po::value(&options.mute_keepalive_after)->default_value(0),
-       "stop answering alive requests (only those) once N coordinates were accepted (0: never)")  //
-      ("log", po::value(&options.log_path), "append every accepted coordinate to this file as 'x y z'");
+       "stop answering alive requests (only those) once N coordinates were accepted (0: never)")         //
+      ("log", po::value(&options.log_path), "append every accepted coordinate to this file as 'x y z'")  //
+      ("message-log", po::value(&options.message_log_path), "append the name of every message received to this file");
   po::variables_map vm;
   try
   {

@@ -237,14 +237,15 @@ int main(int argc, char** argv)
 {
   namespace po = boost::program_options;
   po::options_description options("sim_haas_mdc options");
-  std::string script, host, link;
+  std::string script, host, link, query_log;
   int port = 0;
   options.add_options()("help,h", "this help")("script", po::value(&script),
                                                "machine script (see include/cnc_bridge/mdc/sim_machine.h)")(
       "port", po::value(&port)->default_value(0), "TCP port (Haas setting 143); 0 picks a free one")(
       "host", po::value(&host)->default_value("127.0.0.1"), "address to listen on")(
       "link", po::value(&link), "serial mode: a pty, with this symbolic link to its device")(
-      "classic-framing", "frame replies as STX reply ETB CR LF '>' (older serial controls)");
+      "classic-framing", "frame replies as STX reply ETB CR LF '>' (older serial controls)")(
+      "query-log", po::value(&query_log), "append every query received to this file, one per line");
   po::variables_map vm;
   try
   {
@@ -278,6 +279,13 @@ int main(int argc, char** argv)
     }
     SimMachine machine = SimMachine::fromScript(*in, script.empty() ? "default script" : script);
     machine.start(SimMachine::Clock::now());
+    if (!query_log.empty())
+    {
+      auto log = std::make_shared<std::ofstream>(query_log, std::ios::app);
+      if (!*log)
+        throw cnc_bridge::ConfigError("cannot open --query-log " + query_log);
+      machine.logQueriesTo(log);
+    }
     // The timeline's start on the wall clock, so a benchmark can tell when each phase began.
     std::cerr << "sim_haas_mdc: timeline starts at " << std::fixed
               << std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count() << " ("

@@ -7,7 +7,7 @@ using namespace at_test;
 
 namespace
 {
-std::string node, ns;
+std::string node, ns, command_log;
 
 void expectRefusedNamingTheParameter(bool success, const std::string& message)
 {
@@ -18,16 +18,30 @@ void expectRefusedNamingTheParameter(bool success, const std::string& message)
 struct AtControllerDisabled : ::testing::Test
 {
   StateWatch state{ns + "/state"};
+  CommandLog received{command_log};
   void SetUp() override
   {
     ASSERT_TRUE(
         state.waitFor([](const auto& s) { return s.link == cnc_bridge::MachineState::LINK_UP && s.position_valid; }));
   }
+
+  /// Stops the spindle (always allowed) and returns what the controller received since \p mark,
+  /// the stop included: a refused request must have added nothing before it.
+  std::vector<std::string> receivedSinceThroughSpindleStop(size_t mark)
+  {
+    cnc_bridge::AtSpindle::Request stop;
+    stop.speed = 0;
+    EXPECT_TRUE(call<cnc_bridge::AtSpindle>(node + "/spindle", stop).success);
+    return received.linesUntil(mark, "S0");
+  }
 };
+
+const std::vector<std::string> kOnlyTheSpindleStop{"S0"};
 }  // namespace
 
 TEST_F(AtControllerDisabled, MotionServicesAreRefused)
 {
+  const size_t mark = received.lines().size();
   const auto jog = call<cnc_bridge::AtJog>(node + "/jog", jogRequest("x", 0.01));
   expectRefusedNamingTheParameter(jog.success, jog.message);
   const auto home = call<std_srvs::Trigger>(node + "/home");
@@ -41,16 +55,19 @@ TEST_F(AtControllerDisabled, MotionServicesAreRefused)
   tool.length = 0.05;
   const auto change = call<cnc_bridge::AtToolChange>(node + "/tool_change", tool);
   expectRefusedNamingTheParameter(change.success, change.message);
+  EXPECT_EQ(receivedSinceThroughSpindleStop(mark), kOnlyTheSpindleStop) << "the controller received a refused request";
 }
 
 TEST_F(AtControllerDisabled, FollowPathIsRefused)
 {
   FollowPathClient client(node + "/follow_path", true);
   ASSERT_TRUE(client.waitForServer(ros::Duration(10.0)));
+  const size_t mark = received.lines().size();
   client.sendGoal(lineGoal(0.01, 0, 0, 0.01, ""));
   ASSERT_TRUE(client.waitForResult(ros::Duration(10.0)));
   EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::ABORTED);
   expectRefusedNamingTheParameter(client.getResult()->success, client.getResult()->message);
+  EXPECT_EQ(receivedSinceThroughSpindleStop(mark), kOnlyTheSpindleStop) << "the controller received a refused path";
 }
 
 TEST_F(AtControllerDisabled, HarmlessRequestsGoThrough)
@@ -75,6 +92,7 @@ int main(int argc, char** argv)
   ros::NodeHandle pnh("~");
   pnh.getParam("node", node);
   pnh.getParam("namespace", ns);
+  pnh.getParam("command_log", command_log);
   ros::AsyncSpinner spinner(2);
   spinner.start();
   return RUN_ALL_TESTS();

@@ -11,12 +11,17 @@
 #include <std_srvs/Trigger.h>
 #include <visualization_msgs/MarkerArray.h>
 
+#include <algorithm>
 #include <array>
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <fstream>
 #include <map>
 #include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
 
 #include "cnc_bridge/MachineState.h"
 #include "cnc_bridge/RunJobAction.h"
@@ -30,7 +35,7 @@ using Client = actionlib::SimpleActionClient<RunJobAction>;
 
 namespace
 {
-std::string ns, prefix, sim_log, program_dir;
+std::string ns, prefix, sim_log, sim_messages, program_dir;
 
 // Everything the node publishes that the tests look at, in arrival order.
 struct Watch
@@ -143,6 +148,35 @@ std::vector<std::array<float, 3>> simLog()
   return lines;
 }
 
+// The names of the messages the simulated board received so far (its --message-log).
+std::vector<std::string> simMessages()
+{
+  std::vector<std::string> names;
+  std::ifstream in(sim_messages);
+  for (std::string name; std::getline(in, name);)
+  {
+    names.push_back(name);
+  }
+  return names;
+}
+
+// Waits until the board has received a message named \p name after its first \p from messages.
+bool waitForSimMessage(const std::string& name, size_t from, double seconds = 10.0)
+{
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+  do
+  {
+    const auto names = simMessages();
+    if (std::find(names.begin() + static_cast<long>(std::min(from, names.size())), names.end(), name) != names.end())
+    {
+      return true;
+    }
+    // The board writes the log from another process: the file is all there is to wait on.
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  } while (std::chrono::steady_clock::now() < deadline);
+  return false;
+}
+
 // The coordinates the node must send for a program: the end of every move, mm, as float; G53
 // moves left out (~g53_moves: skip), the program position kept across them.
 std::vector<std::array<float, 3>> expectedFor(const std::string& file)
@@ -228,11 +262,19 @@ RunJobGoal pointsGoal(const std::vector<std::array<double, 3>>& points_m)
 TEST(EthernutJob, KillIsRefusedByDefault)
 {
   ASSERT_TRUE(boardReady());
+  const size_t before = simMessages().size();
   std_srvs::Trigger::Response res;
   ASSERT_TRUE(call("kill", res));
   EXPECT_FALSE(res.success);
   EXPECT_NE(res.message.find(ns + "/ethernut_node/enable_kill"), std::string::npos) << res.message;
-  EXPECT_TRUE(boardReady(5.0));  // nothing was sent: the link stays up
+  EXPECT_TRUE(boardReady(5.0));  // a kill would have made the board drop the link
+  // An idle link carries the node's alive requests (one per keepalive period of silence); one
+  // that arrives after the refusal was sent after it, so a kill sent by the refusal is in the log
+  // before it.
+  ASSERT_TRUE(waitForSimMessage("alive-request", simMessages().size()));
+  const auto received = simMessages();
+  EXPECT_EQ(std::count(received.begin() + static_cast<long>(before), received.end(), "kill"), 0)
+      << "the board received a kill the node refused";
 }
 
 TEST(EthernutJob, QcncStyleProgramStreamsEveryCoordinateInOrderDespiteResends)
@@ -601,6 +643,7 @@ int main(int argc, char** argv)
   pnh.param<std::string>("namespace", ns, "");
   pnh.param<std::string>("tf_prefix", prefix, "");
   pnh.param<std::string>("sim_log", sim_log, "");
+  pnh.param<std::string>("sim_messages", sim_messages, "");
   pnh.param<std::string>("program_dir", program_dir, "");
   Watch w;
   watch = &w;

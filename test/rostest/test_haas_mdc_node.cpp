@@ -9,7 +9,9 @@
 
 #include <diagnostic_msgs/DiagnosticArray.h>
 
+#include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <fstream>
 #include <map>
@@ -35,6 +37,45 @@ namespace
 const std::string kNgc = "/cell/haas_ngc";
 const std::string kClassic = "/cell/haas_classic";
 constexpr double kInch = 0.0254;
+std::string ngc_queries, classic_queries;  // what each simulated control received (--query-log)
+
+std::vector<std::string> queriesReceived(const std::string& log)
+{
+  std::vector<std::string> lines;
+  std::ifstream in(log);
+  for (std::string line; std::getline(in, line);)
+    lines.push_back(line);
+  return lines;
+}
+
+// Waits until the control has received \p query after its first \p from queries.
+bool waitForQuery(const std::string& log, const std::string& query, size_t from, double seconds = 10.0)
+{
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+  do
+  {
+    const auto lines = queriesReceived(log);
+    if (std::find(lines.begin() + static_cast<long>(std::min(from, lines.size())), lines.end(), query) != lines.end())
+      return true;
+    // The simulator writes the log from another process: the file is all there is to wait on.
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  } while (std::chrono::steady_clock::now() < deadline);
+  return false;
+}
+
+// The writes (?E...) a control received after its first \p from queries, once a status poll
+// sent after this call has arrived: the node polls one query at a time over one connection, so
+// a write it sent before that poll was received before it.
+std::vector<std::string> writesReceivedSince(const std::string& log, size_t from)
+{
+  EXPECT_TRUE(waitForQuery(log, "?Q500", queriesReceived(log).size())) << "no status poll reached the control";
+  std::vector<std::string> writes;
+  const auto lines = queriesReceived(log);
+  for (size_t i = from; i < lines.size(); ++i)
+    if (lines[i].rfind("?E", 0) == 0)
+      writes.push_back(lines[i]);
+  return writes;
+}
 
 // One report of a node's `mdc` diagnostics task.
 struct MdcDiagnostics
@@ -94,15 +135,15 @@ bool call(const std::string& name, Srv& srv)
 template <class Srv>
 bool callWhenUp(const std::string& name, Srv& srv, bool classic = false)
 {
+  auto& states = classic ? recorder->classic_states : recorder->ngc_states;
+  size_t seen = 0;  // a retry waits for a state published after the failed call
   for (int attempt = 0; attempt < 5; ++attempt)
   {
-    recorder->waitFor(
-        [&]
-        {
-          const auto& states = classic ? recorder->classic_states : recorder->ngc_states;
-          return !states.empty() && states.back().link == MachineState::LINK_UP;
-        },
-        15.0);
+    recorder->waitFor([&] { return states.size() > seen && states.back().link == MachineState::LINK_UP; }, 15.0);
+    {
+      std::lock_guard<std::mutex> lock(recorder->mutex);
+      seen = states.size();
+    }
     if (!call(name, srv))
       return false;
     if (srv.response.success)
@@ -205,6 +246,8 @@ TEST(HaasMdcNode, CycleEndEventArrivesWhenPartsIncrease)
 
 TEST(HaasMdcNode, WritesOutsideTheAllowListAreRefused)
 {
+  const size_t ngc_mark = queriesReceived(ngc_queries).size();
+  const size_t classic_mark = queriesReceived(classic_queries).size();
   cnc_bridge::MdcWriteVariable write;
   write.request.variable = 5021;
   write.request.value = 1.0;
@@ -219,6 +262,10 @@ TEST(HaasMdcNode, WritesOutsideTheAllowListAreRefused)
   ASSERT_TRUE(call(kClassic + "/haas_mdc_node/write_variable", classic));
   EXPECT_FALSE(classic.response.success);
   EXPECT_NE(classic.response.message.find("disabled"), std::string::npos) << classic.response.message;
+  EXPECT_EQ(writesReceivedSince(ngc_queries, ngc_mark), std::vector<std::string>{})
+      << "a refused write reached the NGC";
+  EXPECT_EQ(writesReceivedSince(classic_queries, classic_mark), std::vector<std::string>{})
+      << "a refused write reached the Classic control";
 
   // An allowed one goes through and reads back.
   write.request.variable = 100;
@@ -228,6 +275,7 @@ TEST(HaasMdcNode, WritesOutsideTheAllowListAreRefused)
   read.request.variable = 100;
   ASSERT_TRUE(callWhenUp(kNgc + "/haas_mdc_node/read_variable", read)) << read.response.message;
   EXPECT_DOUBLE_EQ(read.response.value, 42.5);
+  EXPECT_EQ(writesReceivedSince(ngc_queries, ngc_mark), std::vector<std::string>{"?E100 42.5"});
 }
 
 TEST(HaasMdcNode, RawQueriesAreReadOnly)
@@ -325,8 +373,9 @@ TEST(HaasMdcNode, DiagnosticsCountOtherClientsRepliesLatencyAndUnansweredQueries
   EXPECT_LT(d.number("latency mean (ms)"), 1000.0);
   EXPECT_GE(d.number("latency max (ms)"), d.number("latency mean (ms)"));
   EXPECT_LE(d.number("latency max (ms)"), 1000.0 + 100.0);
-  EXPECT_GE(d.number("unanswered"), 0.0);
+  // One query at a time: every query sent is answered, unanswered, or the one still waiting.
   EXPECT_LE(d.number("unanswered") + d.number("answered"), d.number("queries sent"));
+  EXPECT_GE(d.number("unanswered") + d.number("answered") + 1, d.number("queries sent"));
 }
 
 TEST(HaasMdcNode, TheSimulatedControlRefusesAThirdConnection)
@@ -447,6 +496,8 @@ int main(int argc, char** argv)
   ros::NodeHandle nh, pnh("~");
   pnh.param("tcp_port", sim_port, 15143);
   pnh.param<std::string>("program_dir", program_dir, "/tmp");
+  pnh.param<std::string>("ngc_queries", ngc_queries, "");
+  pnh.param<std::string>("classic_queries", classic_queries, "");
   Recorder rec;
   recorder = &rec;
   auto record = [&](std::vector<MachineState>& into)

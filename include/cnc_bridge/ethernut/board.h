@@ -31,6 +31,9 @@ struct BoardOptions
   /// Stop answering alive requests (only those) once this many coordinates were accepted; 0: never.
   uint64_t mute_keepalive_after = 0;
   std::string log_path;  ///< append every accepted coordinate as "x y z" (mm)
+  /// Append the name of every message received (toString of its opcode), one per line, so a test
+  /// can check what the board was sent (e.g. that a refused kill never reached it).
+  std::string message_log_path;
 };
 
 /// \brief Simulated ethernut board. serve() runs one connection on the calling thread; the
@@ -49,10 +52,12 @@ class Board
 
  private:
   void log(float x, float y, float z);
+  void logMessage(Opcode opcode);
 
   BoardOptions options_;
   std::mt19937 rng_;
   std::ofstream log_;
+  std::ofstream message_log_;
   std::atomic<uint64_t> accepted_{0};
   std::atomic<uint64_t> received_{0};
   std::atomic<uint64_t> resends_{0};

@@ -6,7 +6,9 @@
 #include <chrono>
 #include <istream>
 #include <map>
+#include <memory>
 #include <optional>
+#include <ostream>
 #include <string>
 #include <vector>
 
@@ -46,6 +48,11 @@ class SimMachine
   /// malformed queries get "?, <query>" as the control does.
   std::string answer(const std::string& line, Clock::time_point now);
 
+  /// \brief Writes every query answer() is given (printable characters, upper case), one per
+  /// line, to \p log: what the control received, for tests that check a refused write never
+  /// reached it.
+  void logQueriesTo(std::shared_ptr<std::ostream> log) { query_log_ = std::move(log); }
+
   /// \returns true once each time the timeline enters a phase with `drop`.
   bool dropDue(Clock::time_point now);
   /// \returns true while the timeline is in a phase with `drop` (a serial line's outage lasts the
@@ -72,6 +79,7 @@ class SimMachine
   std::pair<double, double> lastCycles(Clock::time_point now) const;
 
  private:
+  std::shared_ptr<std::ostream> query_log_;
   struct Phase
   {
     double seconds = 1.0;
