@@ -12,8 +12,8 @@ Python scripts without the .py suffix, Python embedded in shell scripts) must be
 library's, the repository's own, or come from a listed package (PYTHON_MODULE_PACKAGE); every
 program the scripts and tests run that no Essential package provides must come from a listed
 package (PROGRAM_PACKAGES). An import of a module the table does not know fails the check, so a
-new dependency cannot slip in unlisted. Writes JUnit XML (one case per key, listed package,
-imported module and program).
+new dependency cannot slip in unlisted. Writes JUnit XML: one case per check (self test,
+key agreement, use, setup), each failure listing every package, module or program at fault.
 
 usage: check_packages.py [--junit FILE]
 """
@@ -24,6 +24,8 @@ import shutil
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
+
+from tool_cases import ToolCases
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -264,21 +266,17 @@ def main():
     parser.add_argument("--junit")
     args = parser.parse_args()
     listed = listed_packages(os.path.join(ROOT, "scripts/debian-packages.txt"))
-    results = (self_test() + problems(package_keys(os.path.join(ROOT, "package.xml")), listed)
-               + usage_problems(listed, used_modules(), local_modules()) + setup_check())
-    failed = [(name, problem) for name, problem in results if problem]
-    for name, problem in failed:
-        print(f"packages: {problem}")
+    tools = ToolCases("packages")
+    checks = [("self test", self_test()), ("package.xml keys and the Debian list agree",
+                                           problems(package_keys(os.path.join(ROOT, "package.xml")), listed)),
+              ("every import and program comes from a listed package",
+               usage_problems(listed, used_modules(), local_modules())),
+              ("setup.sh --check finds nothing missing", setup_check())]
+    for name, results in checks:
+        tools.add(name, results, checked=len(results))
     if args.junit:
-        suite = ET.Element("testsuite", name="packages", tests=str(len(results)), failures=str(len(failed)))
-        for name, problem in results:
-            case = ET.SubElement(suite, "testcase", classname="packages.consistent", name=name)
-            if problem:
-                ET.SubElement(case, "failure", message=problem)
-        os.makedirs(os.path.dirname(os.path.abspath(args.junit)), exist_ok=True)
-        ET.ElementTree(suite).write(args.junit)
-    print(f"packages: {len(results) - len(failed)} of {len(results)} checks passed")
-    return 1 if failed else 0
+        tools.write(args.junit)
+    return tools.report()
 
 
 if __name__ == "__main__":

@@ -18,9 +18,9 @@ import os
 import re
 import subprocess
 import sys
-import xml.etree.ElementTree as ET
 
 from repo_files import repo_files
+from tool_cases import ToolCases
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -106,19 +106,13 @@ def main():
     parser.add_argument("--build", help="build directory whose core executables are checked with ldd")
     args = parser.parse_args()
     results = cases(args.build)
-    failed = 0
-    suite = ET.Element("testsuite", name="ros_free_core", tests=str(len(results)))
-    for group, name, problem in results:
-        case = ET.SubElement(suite, "testcase", classname=f"ros_free_core.{group}", name=name)
-        if problem:
-            failed += 1
-            ET.SubElement(case, "failure", message=problem)
-            print(f"ros_free_core {group}: {name}: {problem}")
-    suite.set("failures", str(failed))
-    os.makedirs(os.path.dirname(os.path.abspath(args.junit)), exist_ok=True)
-    ET.ElementTree(suite).write(args.junit)
-    print(f"ros_free_core: {len(results) - failed} of {len(results)} checks passed")
-    return 1 if failed else 0
+    tools = ToolCases("ros_free_core")
+    # One case per check: the sources' includes, the binaries' libraries, the patterns themselves.
+    for group in dict.fromkeys(group for group, _, _ in results):
+        checked = [(name, problem) for each, name, problem in results if each == group]
+        tools.add(group, checked, checked=len(checked))
+    tools.write(args.junit)
+    return tools.report()
 
 
 if __name__ == "__main__":

@@ -13,6 +13,7 @@ import xml.etree.ElementTree as ET
 
 import check_module_table
 from repo_files import git_files, repo_files, walked_files
+from tool_cases import ToolCases
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CPP = ("*.cpp", "*.h")
@@ -62,28 +63,21 @@ def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--junit", required=True)
     args = parser.parse_args()
-    cases = found_cases()
-    for path in repo_files(ROOT, *CPP):
-        cases.append(("format", path, check_format(path)))
-    for path in repo_files(ROOT, *LAUNCH):
-        cases.append(("launch_args_documented", path, check_launch_args(path)))
+    tools = ToolCases("lint")
+    discovery = found_cases()
+    tools.add("file discovery", [(f"{check} {kind}", problem) for check, kind, problem in discovery],
+              checked=len(discovery))
+    cpp = repo_files(ROOT, *CPP)
+    tools.add("clang-format", [(path, check_format(path)) for path in cpp], checked=len(cpp))
+    launch = repo_files(ROOT, *LAUNCH)
+    tools.add("launch arg docs", [(path, check_launch_args(path)) for path in launch], checked=len(launch))
     table = check_module_table.problems()
-    cases.append(("module_table", check_module_table.GUIDE, "; ".join(table) if table else None))
+    tools.add("module table", [(check_module_table.GUIDE, problem) for problem in table], checked=1)
     if os.path.exists(os.path.join(ROOT, "config/cell.yaml")):
-        cases.append(("cell_launch_generated", "launch/cell.launch", check_cell_launch_generated("launch/cell.launch")))
-    suite = ET.Element("testsuite", name="lint", tests=str(len(cases)))
-    failed = 0
-    for check, path, problem in cases:
-        case = ET.SubElement(suite, "testcase", classname=f"lint.{check}", name=path)
-        if problem:
-            failed += 1
-            ET.SubElement(case, "failure", message=problem)
-            print(f"lint {check}: {path}: {problem}")
-    suite.set("failures", str(failed))
-    os.makedirs(os.path.dirname(args.junit), exist_ok=True)
-    ET.ElementTree(suite).write(args.junit)
-    print(f"lint: {len(cases) - failed} of {len(cases)} checks passed")
-    return 1 if failed else 0
+        tools.add("cell.launch generated", [("launch/cell.launch", check_cell_launch_generated("launch/cell.launch"))],
+                  checked=1)
+    tools.write(args.junit)
+    return tools.report()
 
 
 if __name__ == "__main__":

@@ -16,10 +16,17 @@ if [[ ! -f "$build/CMakeCache.txt" ]]; then
   CC=clang CXX=clang++ cmake -S "$root" -B "$build" -DCNC_BRIDGE_CORE_ONLY=ON -DCNC_BRIDGE_FUZZ=ON \
     -DCMAKE_BUILD_TYPE=Debug "${launcher[@]}" \
     -DCMAKE_CXX_FLAGS="-O1 -fsanitize=address,undefined,fuzzer-no-link -fno-sanitize-recover=undefined -fno-omit-frame-pointer" \
-    -DCMAKE_EXE_LINKER_FLAGS="-fsanitize=address,undefined" >"$build/configure.log" \
-    || { cat "$build/configure.log"; exit 1; }
+    -DCMAKE_EXE_LINKER_FLAGS="-fsanitize=address,undefined" >"$build/configure.log" 2>&1 \
+    || { cat "$build/configure.log"; rm -f "$build/CMakeCache.txt"
+         "$root/scripts/junit_step.py" failed "$results/asan_build.xml" asan_configure \
+           "the sanitizer build could not be configured (see $build/configure.log): no sanitizer or fuzz case ran"
+         exit 1; }
 fi
-cmake --build "$build" -- -j"${JOBS:-$(nproc)}" || exit 1
+if ! cmake --build "$build" -- -j"${JOBS:-$(nproc)}"; then
+  "$root/scripts/junit_step.py" failed "$results/asan_build.xml" asan_build \
+    "the sanitizer build failed (output above): no sanitizer or fuzz case ran"
+  exit 1
+fi
 
 status=0
 export ASAN_OPTIONS=detect_leaks=1:abort_on_error=0 UBSAN_OPTIONS=print_stacktrace=1
@@ -27,10 +34,22 @@ for test in "$build"/bin/test_*; do
   [[ -x "$test" ]] || continue
   name=$(basename "$test")
   # A hung test must not hold up the whole run: it fails after SANITIZER_TEST_TIMEOUT seconds.
-  timeout -k 10 "${SANITIZER_TEST_TIMEOUT:-600}" "$test" --gtest_output="xml:$results/asan_$name.xml" >"$build/$name.log" 2>&1 \
-    || { status=1; echo "sanitizer run failed: $name (log: $build/$name.log)"; tail -20 "$build/$name.log"; }
-  # A sanitizer abort leaves no XML: count it as a failure.
-  [[ -f "$results/asan_$name.xml" ]] || echo "<testsuite name=\"asan_$name\" errors=\"1\"></testsuite>" >"$results/asan_$name.xml"
+  rm -f "$results/asan_$name.xml"
+  timeout -k 10 "${SANITIZER_TEST_TIMEOUT:-600}" "$test" --gtest_output="xml:$results/asan_$name.xml" >"$build/$name.log" 2>&1
+  exit_status=$?
+  if [[ $exit_status -ne 0 ]]; then
+    status=1
+    echo "sanitizer run failed: $name, exit status $exit_status (log: $build/$name.log)"
+    tail -20 "$build/$name.log"
+  fi
+  if [[ -f "$results/asan_$name.xml" ]]; then
+    # LeakSanitizer reports after GoogleTest wrote an all-pass XML: the exit status tells.
+    "$root/scripts/junit_step.py" exit-status "$results/asan_$name.xml" "$exit_status" "$build/$name.log"
+  else
+    # A sanitizer abort leaves no XML: count it as a failure.
+    "$root/scripts/junit_step.py" failed "$results/asan_$name.xml" "$name" \
+      "died under the sanitizers with exit status $exit_status before writing results: see $build/$name.log"
+  fi
   # Prefix suite names so these results are told apart from the plain build's.
   sed -i "s/classname=\"/classname=\"asan./g" "$results/asan_$name.xml"
 done

@@ -4,9 +4,12 @@
 #   2. two hosts (network namespaces): a machine's state and tf cross to the cell's master;
 #   3. lint: clang-format on every C++ file, launch-file docs; the core free of ROS in its includes
 #      and in the libraries its executables load; package.xml and the Debian package list agree;
+#      the unit tests of these scripts themselves (test/scripts);
 #   4. the core and its unit tests again under AddressSanitizer + UndefinedBehaviorSanitizer,
 #      with the libFuzzer targets, each fuzzed for FUZZ_SECONDS (default 10).
-# Every step writes JUnit XML under .build/test_results; scripts/count_results.py counts it.
+# Every step writes JUnit XML under .build/test_results; a step that fails without writing any
+# counts as one failed case. scripts/count_results.py counts test cases (a lint tool is one case)
+# and prints a breakdown by kind above the closing line.
 # Exit status is non-zero if anything failed.
 set -uo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
@@ -20,8 +23,21 @@ step() { echo; echo "=== $*"; }
 # A step that cannot run at all is still counted: a JUnit file with one failed case.
 failed_step() {  # failed_step NAME MESSAGE
   mkdir -p "$results"
-  printf '<testsuite name="%s" tests="1" failures="1"><testcase classname="make_test" name="%s"><failure message="%s"/></testcase></testsuite>\n' \
-    "$1" "$1" "$2" >"$results/$1.xml"
+  "$root/scripts/junit_step.py" failed "$results/step_$1.xml" "$1" "$2"
+}
+
+# run_step NAME RESULT COMMAND...: a step that writes its own JUnit RESULT file(s). If it fails
+# without writing any (it crashed, or could not start), a failed case stands in for it.
+run_step() {
+  local name=$1 written=$2
+  shift 2
+  "$@"
+  local code=$?
+  if [[ $code -ne 0 ]]; then
+    status=1
+    compgen -G "$written" >/dev/null ||
+      failed_step "$name" "$name exited with status $code without writing its results (output above)"
+  fi
 }
 
 step "build"
@@ -41,18 +57,22 @@ rm -rf "$CNC_DEMO_DIR" && mkdir -p "$CNC_DEMO_DIR/programs" "$CNC_DEMO_DIR/haas_
 export CNC_BRIDGE_SCREENSHOT=$results/rviz_cell.png
 (cd "$build" && set +u && source devel/setup.bash &&
   xvfb-run -a -s "-screen 0 1280x900x24" make -j1 run_tests >"$build/run_tests.log" 2>&1) || status=1
+compgen -G "$results/gtest-*.xml" >/dev/null ||
+  failed_step run_tests "make run_tests wrote no unit test results: see $build/run_tests.log"
 grep -E '^\[ *(OK|FAILED|PASSED) *\]|^(SUMMARY|  \* RESULT|ERROR)' "$build/run_tests.log" | grep -vE 'OK \]' | tail -40
 
 step "distributed: a machine node on another host"
-"$root/test/net/test_two_hosts.sh" "$results/two_hosts.xml" || status=1
+run_step two_hosts "$results/two_hosts.xml" "$root/test/net/test_two_hosts.sh" "$results/two_hosts.xml"
 
 step "lint"
-python3 "$root/scripts/lint.py" --junit "$results/lint.xml" || status=1
-python3 "$root/scripts/check_ros_free.py" --build "$build" --junit "$results/ros_free_core.xml" || status=1
-python3 "$root/scripts/check_packages.py" --junit "$results/packages.xml" || status=1
+run_step lint "$results/lint.xml" python3 "$root/scripts/lint.py" --junit "$results/lint.xml"
+run_step ros_free_core "$results/ros_free_core.xml" \
+  python3 "$root/scripts/check_ros_free.py" --build "$build" --junit "$results/ros_free_core.xml"
+run_step packages "$results/packages.xml" python3 "$root/scripts/check_packages.py" --junit "$results/packages.xml"
+run_step scripts "$results/scripts.xml" python3 "$root/test/scripts/run_unittests.py" "$results/scripts.xml"
 
 step "sanitizers (ASan + UBSan) and fuzzing"
-"$root/scripts/sanitize_and_fuzz.sh" "$results" "$fuzz_seconds" || status=1
+run_step sanitizers "$results/asan_*.xml" "$root/scripts/sanitize_and_fuzz.sh" "$results" "$fuzz_seconds"
 
 step "results"
 python3 "$root/scripts/count_results.py" "$build/test_results" || status=1

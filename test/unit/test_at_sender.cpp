@@ -81,9 +81,10 @@ TEST_F(Fixture, AnOperationIsWrittenInTheProtocolsOrder)
   EXPECT_EQ(sender.sequencer().phase(), Phase::kIdle);
   EXPECT_EQ(sender.sequencer().spindle(), 0);
   EXPECT_EQ(sender.stats().setpoints, steps);
-  // Intervals were measured (their values depend on the machine's load: the benchmark reports them).
+  // Intervals were measured (their values depend on the machine's load, so how many setpoints went
+  // out late is not asserted here: the benchmark reports it); a stall is a run of late setpoints.
   EXPECT_GT(sender.stats().interval_max, 0.0);
-  EXPECT_LE(sender.stats().underruns, steps);
+  EXPECT_LE(sender.stats().stalls, sender.stats().underruns);
 }
 
 TEST_F(Fixture, AStalledWriteIsOneStallAndAnUnderrunPerSetpointDueMeanwhile)
