@@ -4,7 +4,6 @@
 // or a server it connects to). Services change mode, spindle, tool and home; the ~follow_path action
 // plans a G-code program or a nav_msgs/Path into 1 ms setpoints that a dedicated sender thread
 // streams; reports become state, joint_states and tf.
-#include <actionlib/server/simple_action_server.h>
 #include <nav_msgs/Path.h>
 #include <ros/ros.h>
 #include <std_srvs/SetBool.h>
@@ -26,6 +25,7 @@
 #include "cnc_bridge/gcode/gcode.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/params.h"
+#include "cnc_bridge/ros/single_goal_action_server.h"
 #include "cnc_bridge/transport/backoff.h"
 #include "cnc_bridge/transport/tcp.h"
 
@@ -40,7 +40,12 @@ class AtControllerNode
       : nh_(nh),
         pnh_(pnh),
         follow_path_(
-            pnh, "follow_path", [this](const AtFollowPathGoalConstPtr& goal) { followPath(goal); }, false)
+            pnh, "follow_path", [this](const AtFollowPathGoalConstPtr& goal) { followPath(goal); },
+            [](const AtFollowPathGoal& goal)
+            {
+              return goal.gcode_file.empty() ? "path of " + std::to_string(goal.path.poses.size()) + " poses"
+                                             : "program " + goal.gcode_file;
+            })
   {
     // ~host: address of the controller (both sockets in client mode).
     pnh.param<std::string>("host", host_, "127.0.0.1");
@@ -862,7 +867,7 @@ class AtControllerNode
   std::atomic<uint64_t> report_errors_{0};
   uint64_t underruns_seen_ = 0;
 
-  actionlib::SimpleActionServer<AtFollowPathAction> follow_path_;
+  SingleGoalActionServer<AtFollowPathAction> follow_path_;
   ros::ServiceServer set_auto_srv_, jog_srv_, spindle_srv_, coolant_srv_, tool_srv_, home_srv_;
   ros::Publisher path_pub_;
 };

@@ -130,13 +130,14 @@ DncNode::~DncNode()
   action_.reset();
 }
 
-bool DncNode::tryReserve()
+bool DncNode::tryReserve(const std::string& what)
 {
   {
     std::lock_guard<std::mutex> lock(busy_mutex_);
     if (!busy_)
     {
       busy_ = true;
+      running_ = what;
       cancel_ = false;  // a cancel for the previous transfer does not carry over
       return true;
     }
@@ -152,9 +153,15 @@ void DncNode::release()
   busy_ = false;
 }
 
-std::string DncNode::busyMessage() const
+std::string DncNode::busyMessage()
 {
-  return "refused: another transfer is running on " + serial_.device + " (one at a time)";
+  std::lock_guard<std::mutex> lock(busy_mutex_);
+  // One new-goal policy for everything that moves or cuts (docs/ROS_INTERFACE.md): name what
+  // runs and how to stop it; a running transfer is never replaced.
+  const bool goal = running_.rfind("goal ", 0) == 0;
+  return "refused: another transfer is running on " + serial_.device + " (one at a time): " + running_ +
+         (goal ? "; to replace it, cancel it first (" + pnh_.resolveName("transfer") + "/cancel with its goal id)"
+               : "; a service call runs to its end: wait for it");
 }
 
 void DncNode::registerProtocol(const std::string& protocol, ProtocolHandler handler)
@@ -193,7 +200,7 @@ void DncNode::closeLink()
 
 TransferResult DncNode::run(TransferGoal goal, const Feedback& feedback)
 {
-  if (!tryReserve())
+  if (!tryReserve("a " + goal.direction + "_program service call for " + goal.file))
   {
     TransferResult result;
     result.message = busyMessage();
@@ -364,7 +371,9 @@ TransferResult DncNode::runXmodem(Transport& link, const TransferJob& job,
 
 void DncNode::onGoal(GoalHandle goal)
 {
-  if (!tryReserve())
+  const auto& g = *goal.getGoal();
+  if (!tryReserve("goal " + goal.getGoalID().id + " (" + g.direction + " " + g.file + " by " +
+                  (g.protocol.empty() ? default_protocol_ : g.protocol) + ")"))
   {
     TransferResult result;
     result.message = busyMessage();

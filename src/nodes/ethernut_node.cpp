@@ -4,7 +4,6 @@
 // machine's reported and commanded position as state (the reported one as joint_states/tf), and a
 // preview of each job for rviz before it runs. The protocol itself lives in the ROS-free
 // cnc_bridge_ethernut library.
-#include <actionlib/server/simple_action_server.h>
 #include <nav_msgs/Path.h>
 #include <ros/ros.h>
 #include <std_srvs/Trigger.h>
@@ -24,6 +23,7 @@
 #include "cnc_bridge/gcode/gcode.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/params.h"
+#include "cnc_bridge/ros/single_goal_action_server.h"
 #include "cnc_bridge/transport/backoff.h"
 #include "cnc_bridge/transport/tcp.h"
 
@@ -162,7 +162,9 @@ class EthernutNode : public ethernut::ClientListener
       : nh_(nh),
         pnh_(pnh),
         action_(
-            pnh, "run_job", [this](const RunJobGoalConstPtr& goal) { execute(goal); }, false)
+            pnh, "run_job", [this](const RunJobGoalConstPtr& goal) { execute(goal); },
+            [](const RunJobGoal& goal)
+            { return goal.file.empty() ? std::to_string(goal.points.size()) + " points" : "job " + goal.file; })
   {
     readParameters();
     state_ = std::make_unique<MachineStatePublisher>(nh_, pnh_, host_ + ":" + std::to_string(port_));
@@ -780,23 +782,14 @@ class EthernutNode : public ethernut::ClientListener
       if (!cancelled && (action_.isPreemptRequested() || !ros::ok()))
       {
         cancelled = true;
-        if (action_.isNewGoalAvailable() && ros::ok())
+        // Cancel: hold the board first (it stops the move in progress), then stop streaming.
+        try
         {
-          // Replaced by a new goal: stop streaming without holding the board. The set in flight
-          // completes and the new job's first set follows its NEXT.
-          ROS_INFO_STREAM("run_job: " << program << " preempted by a new goal");
+          c->pause();
         }
-        else
+        catch (const Error& e)
         {
-          // Cancel: hold the board first (it stops the move in progress), then stop streaming.
-          try
-          {
-            c->pause();
-          }
-          catch (const Error& e)
-          {
-            ROS_WARN_STREAM("run_job: pause on cancel failed: " << e.what());
-          }
+          ROS_WARN_STREAM("run_job: pause on cancel failed: " << e.what());
         }
         c->cancelJob();
       }
@@ -961,7 +954,7 @@ class EthernutNode : public ethernut::ClientListener
   ros::Publisher path_pub_;
   ros::Publisher markers_pub_;
   ros::ServiceServer pause_srv_, resume_srv_, reset_srv_, kill_srv_, mode_srv_;
-  actionlib::SimpleActionServer<RunJobAction> action_;
+  SingleGoalActionServer<RunJobAction> action_;
 
   std::mutex mutex_;  // session_, hold_, stopping_, options_.initial_mode
   std::condition_variable hold_cv_;

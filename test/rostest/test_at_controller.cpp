@@ -1,6 +1,6 @@
 // at_controller_node on sim_at_controller with motion enabled: a G-code program is followed to
-// its end point, jog is refused while machining, cancel decelerates to a stop, an emergency stop
-// mid-path aborts the goal with the reason, and home returns to the home position.
+// its end point, a second goal is rejected while one runs, jog is refused while machining, cancel decelerates to a
+// stop, an emergency stop mid-path aborts the goal with the reason, and home returns to the home position.
 #include <signal.h>
 
 #include <atomic>
@@ -103,6 +103,29 @@ TEST_F(AtController, JogIsRefusedWhileMachiningAndCancelDecelerates)
   EXPECT_TRUE(state.waitFor([](const auto& s) { return s.mode == cnc_bridge::MachineState::MODE_MANUAL; }));
   EXPECT_TRUE(call<std_srvs::Trigger>(node + "/set_auto").success);
   EXPECT_TRUE(state.waitFor([](const auto& s) { return s.mode == cnc_bridge::MachineState::MODE_AUTO; }));
+}
+
+// A goal while another runs is rejected, naming the running goal and how to stop it; the running
+// path is not touched: the machine (as the simulator reports it) ends at its end point.
+TEST_F(AtController, ASecondGoalIsRejectedAndTheFirstRunsToItsEnd)
+{
+  const auto start = state.last().position;
+  client.sendGoal(lineGoal(start.x + 0.02, start.y, start.z, 0.02, prefix + "machine"));
+  ASSERT_TRUE(state.waitFor([](const auto& s) { return s.execution == cnc_bridge::MachineState::EXECUTION_ACTIVE; }));
+  FollowPathClient second{node + "/follow_path", false};
+  ASSERT_TRUE(second.waitForServer(ros::Duration(10.0)));
+  second.sendGoal(lineGoal(start.x - 0.05, start.y + 0.05, start.z, 0.02, prefix + "machine"));
+  ASSERT_TRUE(second.waitForResult(ros::Duration(10.0)));
+  EXPECT_EQ(second.getState(), actionlib::SimpleClientGoalState::REJECTED) << second.getState().getText();
+  const std::string text = second.getResult()->message;
+  EXPECT_NE(text.find(node + "/follow_path is running goal "), std::string::npos) << text;
+  EXPECT_NE(text.find("(path of 1 poses)"), std::string::npos) << text;
+  EXPECT_NE(text.find("cancel it first"), std::string::npos) << text;
+  EXPECT_FALSE(client.getState().isDone());
+  ASSERT_TRUE(client.waitForResult(ros::Duration(20.0)));
+  EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client.getState().getText();
+  EXPECT_TRUE(state.waitFor([&](const auto& s) { return near(s.position, start.x + 0.02, start.y, start.z, 1.5e-6); }))
+      << state.last().position;
 }
 
 TEST_F(AtController, EmergencyStopMidPathStopsMotionAndAbortsWithTheReason)

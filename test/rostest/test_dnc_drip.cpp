@@ -325,8 +325,11 @@ TEST(DncDrip, ASecondGoalWhileAFeedRunsIsRejectedAndTheFeedCompletes)
   second.sendGoal(goal);
   ASSERT_TRUE(second.waitForResult(ros::Duration(20)));
   EXPECT_EQ(actionlib::SimpleClientGoalState::REJECTED, second.getState().state_);
-  EXPECT_NE(second.getState().getText().find("refused: another transfer is running"), std::string::npos)
-      << second.getState().getText();
+  const std::string text = second.getState().getText();
+  EXPECT_NE(text.find("refused: another transfer is running"), std::string::npos) << text;
+  // It names the running goal and how to replace it (docs/ROS_INTERFACE.md, one new-goal policy).
+  EXPECT_NE(text.find("(send drip_rostest.nc by drip)"), std::string::npos) << text;
+  EXPECT_NE(text.find("cancel it first (" + ns + "/dnc_node/transfer/cancel"), std::string::npos) << text;
 
   // The running feed was not preempted: it completes, and the control has the program whole.
   ASSERT_TRUE(first.waitForResult(ros::Duration(60)));

@@ -64,10 +64,11 @@ class DncNode
   /// ~program_dir, holds the port lock, opens the link (if not open), updates state and
   /// diagnostics. \p cancelled is set when the transfer ended because it was cancelled.
   TransferResult runReserved(TransferGoal goal, const Feedback& feedback, bool& cancelled);
-  /// Takes the node for one transfer; false (and counted as refused) if one is running.
-  bool tryReserve();
+  /// Takes the node for one transfer, \p what (named in the refusal of another); false (and
+  /// counted as refused) if one is running.
+  bool tryReserve(const std::string& what);
   void release();
-  std::string busyMessage() const;
+  std::string busyMessage();
   /// Opens the serial port if it is not open (the only place the link is opened).
   Transport& openLink();
   void closeLink();
@@ -100,6 +101,7 @@ class DncNode
 
   std::mutex busy_mutex_;
   bool busy_ = false;      ///< a transfer runs (or an accepted goal waits for the worker)
+  std::string running_;    ///< what holds the node while busy_, for the refusal of another
   std::mutex link_mutex_;  ///< guards link_ for cancelRunning()
   std::unique_ptr<SerialPort> link_;
   std::atomic<bool> cancel_{false};

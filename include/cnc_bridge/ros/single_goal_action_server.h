@@ -1,0 +1,218 @@
+// SingleGoalActionServer: the one new-goal policy of every action that moves or cuts
+// (docs/ROS_INTERFACE.md, "A second goal"). actionlib's SimpleActionServer preempts the running
+// goal when a new one arrives, so a second client (a retry in orchestration code, a stray
+// `rostopic pub`) could replace a cutting job without anyone cancelling it. This server is built
+// on actionlib's ActionServer instead: while a goal runs, a new goal is rejected with a result
+// that names the running goal and how to stop it; replacing a job takes an explicit cancel first.
+#pragma once
+
+#include <actionlib/server/action_server.h>
+#include <ros/ros.h>
+
+#include <condition_variable>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+
+namespace cnc_bridge
+{
+/// \brief An action server that runs one goal at a time on its own thread and rejects a goal that
+/// arrives while another runs (never preempts). The API follows SimpleActionServer's so that a
+/// node's execute function reads the same. Thread-safe.
+///
+/// \tparam ActionSpec the generated action type (e.g. RunJobAction); its Result must have the
+///         fields `bool success` and `string message`.
+template <class ActionSpec>
+class SingleGoalActionServer
+{
+ public:
+  ACTION_DEFINITION(ActionSpec);
+  using GoalHandle = actionlib::ServerGoalHandle<ActionSpec>;
+  /// Runs one accepted goal to its end; must end it with setSucceeded/setAborted/setCanceled.
+  using Execute = std::function<void(const GoalConstPtr&)>;
+  /// Says in a few words what a goal does ("job part.nc"), for the rejection of another.
+  using Describe = std::function<std::string(const Goal&)>;
+
+  /// \param pnh node handle the action lives under (the action is <pnh>/<name>).
+  SingleGoalActionServer(ros::NodeHandle pnh, const std::string& name, Execute execute, Describe describe)
+      : execute_(std::move(execute)),
+        describe_(std::move(describe)),
+        name_(pnh.resolveName(name)),
+        server_(
+            pnh, name, [this](GoalHandle goal) { onGoal(goal); }, [this](GoalHandle goal) { onCancel(goal); }, false)
+  {
+  }
+
+  ~SingleGoalActionServer() { shutdown(); }
+
+  void start()
+  {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (started_)
+        return;
+      started_ = true;
+    }
+    worker_ = std::thread([this] { work(); });
+    server_.start();
+  }
+
+  /// \brief Cancels the running goal and waits for its execute function to return.
+  void shutdown()
+  {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      stopping_ = true;
+      cancel_ = true;
+    }
+    cv_.notify_all();
+    if (worker_.joinable())
+      worker_.join();
+  }
+
+  /// \brief True once the running goal was cancelled, or the node is shutting down.
+  bool isPreemptRequested() const
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return cancel_ || !ros::ok();
+  }
+
+  /// \brief Called (on the cancelling thread) when the running goal is cancelled, e.g. to
+  /// interrupt a blocking read. Set before start().
+  void setCancelCallback(std::function<void()> on_cancel) { on_cancel_ = std::move(on_cancel); }
+
+  void publishFeedback(const Feedback& feedback)
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (current_)
+      current_->publishFeedback(feedback);
+  }
+
+  void setSucceeded(const Result& result, const std::string& text = "") { finish(result, text, kSucceeded); }
+  void setAborted(const Result& result, const std::string& text = "") { finish(result, text, kAborted); }
+  /// \brief Ends the running goal as cancelled (PREEMPTED at a SimpleActionClient).
+  void setPreempted(const Result& result, const std::string& text = "") { finish(result, text, kCanceled); }
+
+  /// \brief The text a goal gets when it is rejected because \p running runs (exposed for tests).
+  static std::string rejection(const std::string& action, const std::string& running_id,
+                               const std::string& running_what)
+  {
+    return "rejected: " + action + " is running goal " + running_id + " (" + running_what +
+           "); one goal at a time: cancel it first (" + action + "/cancel with its id, or cancel at its client), " +
+           "then send this goal again";
+  }
+
+ private:
+  enum Outcome
+  {
+    kSucceeded,
+    kAborted,
+    kCanceled
+  };
+
+  void onGoal(GoalHandle goal)
+  {
+    std::unique_lock<std::mutex> lock(mutex_);
+    if (current_ || stopping_)
+    {
+      Result result;
+      result.success = false;
+      result.message =
+          stopping_ ? "rejected: the node is shutting down" : rejection(name_, current_->getGoalID().id, running_what_);
+      lock.unlock();
+      ROS_WARN_STREAM(name_ << ": goal " << goal.getGoalID().id << " " << result.message);
+      goal.setRejected(result, result.message);
+      return;
+    }
+    current_ = std::make_unique<GoalHandle>(goal);
+    running_what_ = describe_ ? describe_(*goal.getGoal()) : std::string("a goal");
+    cancel_ = false;
+    pending_ = true;
+    goal.setAccepted();
+    lock.unlock();
+    cv_.notify_all();
+  }
+
+  void onCancel(GoalHandle goal)
+  {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (!current_ || !(*current_ == goal))
+        return;
+      cancel_ = true;
+    }
+    if (on_cancel_)
+      on_cancel_();
+  }
+
+  void work()
+  {
+    for (;;)
+    {
+      GoalConstPtr goal;
+      {
+        std::unique_lock<std::mutex> lock(mutex_);
+        cv_.wait(lock, [this] { return pending_ || stopping_; });
+        if (!pending_)
+          return;
+        pending_ = false;
+        goal = current_->getGoal();
+        if (stopping_)
+        {
+          lock.unlock();
+          Result result;
+          result.message = "cancelled: the node is shutting down";
+          finish(result, result.message, kCanceled);
+          return;
+        }
+      }
+      execute_(goal);
+      Result result;
+      result.message = "the goal ended without a result (a bug in the node)";
+      finish(result, result.message, kAborted);  // no effect if execute_ ended it
+    }
+  }
+
+  // Frees the server before the result goes out: a client may send its next goal as soon as it
+  // has the result of this one.
+  void finish(const Result& result, const std::string& text, Outcome outcome)
+  {
+    std::unique_ptr<GoalHandle> goal;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      goal.swap(current_);
+    }
+    if (!goal)
+      return;
+    switch (outcome)
+    {
+      case kSucceeded:
+        goal->setSucceeded(result, text);
+        break;
+      case kAborted:
+        goal->setAborted(result, text);
+        break;
+      case kCanceled:
+        goal->setCanceled(result, text);
+        break;
+    }
+  }
+
+  Execute execute_;
+  Describe describe_;
+  std::function<void()> on_cancel_;
+  const std::string name_;
+  mutable std::mutex mutex_;
+  std::condition_variable cv_;
+  std::unique_ptr<GoalHandle> current_;  ///< the goal accepted and not yet ended
+  std::string running_what_;
+  bool pending_ = false;  ///< current_ accepted, not yet picked up by the worker
+  bool cancel_ = false;
+  bool stopping_ = false;
+  bool started_ = false;
+  std::thread worker_;
+  actionlib::ActionServer<ActionSpec> server_;  ///< last: destroyed first, no callback into a dead member
+};
+}  // namespace cnc_bridge
