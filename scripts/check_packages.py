@@ -15,6 +15,10 @@ package (PROGRAM_PACKAGES). An import of a module the table does not know fails 
 new dependency cannot slip in unlisted. Writes JUnit XML: one case per check (self test,
 key agreement, use, setup), each failure listing every package, module or program at fault.
 
+Also: every key is one rosdep resolves (a ROS package, or a system key of rosdep's base.yaml or
+python.yaml) or a documented exception; scripts/debian-runtime-packages.txt (what `setup.sh
+--runtime` installs on a machine computer) is exactly what package.xml's run-time keys need.
+
 usage: check_packages.py [--junit FILE]
 """
 import argparse
@@ -78,6 +82,55 @@ DEBIAN_OF_KEY = {
     "procps": ["procps"],
 }
 
+# Run-time key -> the Debian 12 packages a machine computer needs for it to run an installed
+# package (scripts/debian-runtime-packages.txt). Empty: nothing at run time (headers, or the
+# generated code carries it), or not on a machine computer (rviz shows the cell elsewhere).
+RUNTIME_DEBIAN_OF_KEY = {
+    "roscpp": ["libroscpp4d"],
+    "actionlib": ["libactionlib1d"],
+    "actionlib_msgs": ["python3-actionlib-msgs"],
+    "tf2": ["libtf2-2d"],
+    "tf2_ros": ["libtf2-ros1d"],
+    "tf2_geometry_msgs": [],
+    "diagnostic_updater": [],
+    "diagnostic_msgs": ["python3-diagnostic-msgs"],
+    "geometry_msgs": ["python3-geometry-msgs"],
+    "sensor_msgs": ["python3-sensor-msgs"],
+    "nav_msgs": ["python3-nav-msgs"],
+    "visualization_msgs": [],
+    "std_msgs": ["python3-std-msgs"],
+    "std_srvs": ["python3-std-srvs"],
+    "boost": ["libboost-thread1.74.0", "libboost-program-options1.74.0"],
+    "yaml-cpp": ["libyaml-cpp0.7"],
+    "message_runtime": [],
+    "roslaunch": ["python3-roslaunch"],
+    "rospy": ["python3-rospy"],
+    "rosbash": ["rosbash"],
+    "rosparam": ["python3-rosparam"],
+    "rosnode": ["python3-rosnode"],
+    "rostopic": ["python3-rostopic"],
+    "rosservice": ["python3-rosservice"],
+    "rosbag": ["python3-rosbag"],
+    "robot_state_publisher": ["ros-robot-state-publisher"],
+    "rviz": [],
+    "python3-numpy": ["python3-numpy"],
+    "python3-matplotlib": ["python3-matplotlib"],
+    "python3-yaml": ["python3-yaml"],
+}
+RUNTIME_TAGS = ("depend", "exec_depend")
+
+# System keys of rosdep (ros/rosdistro rosdep/base.yaml and rosdep/python.yaml) this package uses;
+# all resolve on Debian and Ubuntu. A new system key goes here once looked up there.
+ROSDEP_SYSTEM_KEYS = {
+    "boost", "yaml-cpp", "gtest", "socat", "rt-tests", "xvfb", "python3-pil", "clang", "clang-format",
+    "iproute2", "procps", "python3-numpy", "python3-matplotlib", "python3-yaml", "smbclient",
+}
+# Keys without a rosdep rule, with what a user does instead (docs/INSTALL.md says the same).
+ROSDEP_EXCEPTIONS = {
+    "lrzsz": "test peer (sx/rx); no rosdep key: apt-get install lrzsz",
+    "python3-xmodem": "test peer; no rosdep key: apt-get install python3-xmodem",
+}
+
 # Installed for building and running the scripts and benchmarks, not a dependency of the package.
 TOOLS = {"build-essential", "cmake", "ccache", "bc", "nodejs", "npm"}
 
@@ -134,9 +187,45 @@ IMPORT = re.compile(r"^\s*(?:from\s+([A-Za-z_]\w*)[\w.]*\s+import\b|import\s+([A
 DEPEND_TAGS = ("buildtool_depend", "depend", "build_depend", "build_export_depend", "exec_depend", "test_depend")
 
 
-def package_keys(path):
+def package_keys(path, tags=DEPEND_TAGS):
     root = ET.parse(path).getroot()
-    return sorted({element.text.strip() for tag in DEPEND_TAGS for element in root.findall(tag)})
+    return sorted({element.text.strip() for tag in tags for element in root.findall(tag)})
+
+
+def rosdep_problems(keys):
+    """(name, problem or None): every key is a ROS package (Debian installs its package.xml under
+    /usr/share, and the ROS distribution's rosdep index has it), a rosdep system key, or a
+    documented exception."""
+    results = []
+    for key in keys:
+        ros_package = os.path.exists(os.path.join("/usr/share", key, "package.xml"))
+        known = ros_package or key in ROSDEP_SYSTEM_KEYS or key in ROSDEP_EXCEPTIONS
+        results.append((f"rosdep {key}", None if known else
+                        f"'{key}' is neither a ROS package nor a rosdep system key known to scripts/check_packages.py "
+                        "(ROSDEP_SYSTEM_KEYS, after looking it up in ros/rosdistro rosdep/*.yaml) nor a documented "
+                        "exception (ROSDEP_EXCEPTIONS and docs/INSTALL.md)"))
+    return results
+
+
+def runtime_problems(runtime_keys, runtime_listed):
+    """(name, problem or None): the runtime list is exactly what the run-time keys need."""
+    results = []
+    needed = set()
+    for key in runtime_keys:
+        debian = RUNTIME_DEBIAN_OF_KEY.get(key)
+        if debian is None:
+            results.append((f"runtime key {key}", f"package.xml needs '{key}' at run time, which has no entry in "
+                                                  "RUNTIME_DEBIAN_OF_KEY of scripts/check_packages.py"))
+            continue
+        needed.update(debian)
+        missing = [name for name in debian if name not in runtime_listed]
+        results.append((f"runtime key {key}", f"'{key}' needs {', '.join(missing)} at run time, missing from "
+                                              "scripts/debian-runtime-packages.txt" if missing else None))
+    for name in runtime_listed:
+        results.append((f"runtime debian {name}", None if name in needed else
+                        f"scripts/debian-runtime-packages.txt installs '{name}', which no run-time key of package.xml "
+                        "asks for"))
+    return results
 
 
 def listed_packages(path):
@@ -234,9 +323,12 @@ def setup_check():
     setup = os.path.join(ROOT, "scripts/setup.sh")
     if not shutil.which("dpkg-query"):
         return []
-    result = subprocess.run([setup, "--check"], capture_output=True, text=True)
-    problem = None if result.returncode == 0 else (result.stdout + result.stderr).strip()
-    return [("setup --check", problem)]
+    results = []
+    for options in (["--check"], ["--runtime", "--check"]):
+        result = subprocess.run([setup] + options, capture_output=True, text=True)
+        problem = None if result.returncode == 0 else (result.stdout + result.stderr).strip()
+        results.append(("setup " + " ".join(options), problem))
+    return results
 
 
 def problems(keys, listed):
@@ -266,9 +358,14 @@ def main():
     parser.add_argument("--junit")
     args = parser.parse_args()
     listed = listed_packages(os.path.join(ROOT, "scripts/debian-packages.txt"))
+    runtime_listed = listed_packages(os.path.join(ROOT, "scripts/debian-runtime-packages.txt"))
+    manifest = os.path.join(ROOT, "package.xml")
+    keys = package_keys(manifest)
     tools = ToolCases("packages")
-    checks = [("self test", self_test()), ("package.xml keys and the Debian list agree",
-                                           problems(package_keys(os.path.join(ROOT, "package.xml")), listed)),
+    checks = [("self test", self_test()), ("package.xml keys and the Debian list agree", problems(keys, listed)),
+              ("every key resolves by rosdep or is a documented exception", rosdep_problems(keys)),
+              ("the runtime list is what the run-time keys need",
+               runtime_problems(package_keys(manifest, RUNTIME_TAGS), runtime_listed)),
               ("every import and program comes from a listed package",
                usage_problems(listed, used_modules(), local_modules())),
               ("setup.sh --check finds nothing missing", setup_check())]

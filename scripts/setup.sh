@@ -3,13 +3,22 @@
 # already installed, so a second run costs a second. Needs root or sudo for the install itself.
 # A package counts as present when it is installed or an installed package provides it (e.g.
 # NodeSource's nodejs provides npm and conflicts with Debian's npm).
-#   scripts/setup.sh           install what is missing
-#   scripts/setup.sh --check   only list what is missing; exit status 1 if anything is
+#   scripts/setup.sh                   install what is missing to build, test and run
+#   scripts/setup.sh --runtime         only what a machine computer needs to run an installed
+#                                      package (scripts/debian-runtime-packages.txt)
+#   scripts/setup.sh [--runtime] --check   only list what is missing; exit status 1 if anything is
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 check_only=0
-[[ "${1:-}" == "--check" ]] && check_only=1
-mapfile -t wanted < <(grep -vE '^\s*(#|$)' "$here/debian-packages.txt")
+list=debian-packages.txt
+for option in "$@"; do
+  case "$option" in
+    --check) check_only=1 ;;
+    --runtime) list=debian-runtime-packages.txt ;;
+    *) echo "usage: setup.sh [--runtime] [--check]" >&2; exit 2 ;;
+  esac
+done
+mapfile -t wanted < <(grep -vE '^\s*(#|$)' "$here/$list")
 
 # Installed packages and the names they provide, one per line ("npm (= 9.2)" -> "npm").
 present=$(dpkg-query -W -f='${db:Status-Abbrev} ${Package} ${Provides}\n' 2>/dev/null |

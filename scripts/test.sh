@@ -2,6 +2,7 @@
 # Runs every test of cnc_bridge and ends with one line "N passed, N failed":
 #   1. catkin build, then `make run_tests` (GoogleTest unit tests, rostests, launch-file checks);
 #   2. two hosts (network namespaces): a machine's state and tf cross to the cell's master;
+#      the package installed into a temporary prefix and run from there (test/install);
 #   3. lint: clang-format on every C++ file, launch-file docs; the core free of ROS in its includes
 #      and in the libraries its executables load; package.xml and the Debian package list agree;
 #      the unit tests of these scripts themselves (test/scripts);
@@ -63,6 +64,12 @@ grep -E '^\[ *(OK|FAILED|PASSED) *\]|^(SUMMARY|  \* RESULT|ERROR)' "$build/run_t
 
 step "distributed: a machine node on another host"
 run_step two_hosts "$results/two_hosts.xml" "$root/test/net/test_two_hosts.sh" "$results/two_hosts.xml"
+
+step "install space: the package installed, run with only the install space sourced"
+if ! "$root/test/install/test_install_space.py" --build "$build" --junit "$results/install_space.xml"; then
+  status=1
+  [[ -f "$results/install_space.xml" ]] || failed_step install_space "test/install/test_install_space.py wrote no result"
+fi
 
 step "lint"
 run_step lint "$results/lint.xml" python3 "$root/scripts/lint.py" --junit "$results/lint.xml"
