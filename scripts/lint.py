@@ -1,12 +1,14 @@
 #!/usr/bin/env python3
 """Style checks, written as JUnit XML: every C++ file clang-formatted (.clang-format), every
-launch file with a doc on each <arg>, the module table of docs/DEVELOPING.md matching the tree
+launch file with a doc on each <arg>, no citation of a document a reader of the repository cannot
+open, the module table of docs/DEVELOPING.md matching the tree
 (scripts/check_module_table.py). (The core's freedom from ROS: scripts/check_ros_free.py.)
 
 The files come from git, or from a walk of the tree outside a git checkout (scripts/repo_files.py);
 finding no C++ or no launch file at all is a failure, not a pass over nothing."""
 import argparse
 import os
+import re
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -17,6 +19,17 @@ from tool_cases import ToolCases
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CPP = ("*.cpp", "*.h")
+# Text that cites what a reader of the repository cannot open: the project's internal source
+# documents, their design notes, issue numbers. Cite docs/ (docs/protocols/ for the wire
+# protocols), manuals by name and public projects instead.
+UNOPENABLE = re.compile(
+    r"\bseeds/|shared/(?:seeds|fixtures)|\.\./shared/"
+    r"|\b(?:opendnc_haas_xmodem_dprnt|pc_dnc_drip_feed_fanuc|qcnc_ethernut_opcode_client|esprit_at_protocol_controller"
+    r"|universal_cnc_serial_i2c_protocol)\.md"
+    r"|\b[Tt]he seed(?:'s|s'|s\b| document| section)|(?<![-~\w])[Ss]eed (?:section|figure|document|\d)|\(seed\b[ :]"
+    r"|\bDESIGN(?: section| §| \d|\.md)|\b[Ii]ssue \d+")
+REFERENCED = ("src/*", "include/*", "test/*", "scripts/*", "bench/*", "docs/*", "cmake/*", "launch/*", "config/*",
+              "CMakeLists.txt", "README.md", "package.xml", "Makefile")
 LAUNCH = ("launch/*.launch",)
 
 
@@ -47,6 +60,22 @@ def check_launch_args(path):
     return f"<arg> without doc: {', '.join(missing)}" if missing else None
 
 
+def check_references(paths):
+    """(file:line, problem) for every citation of something a reader of the repository cannot open."""
+    found = []
+    for path in paths:
+        try:
+            with open(os.path.join(ROOT, path), encoding="utf-8") as f:
+                lines = f.read().splitlines()
+        except (UnicodeDecodeError, IsADirectoryError):
+            continue  # binary files cite nothing
+        for number, line in enumerate(lines, 1):
+            match = UNOPENABLE.search(line)
+            if match:
+                found.append((f"{path}:{number}", f"cites {match.group(0)!r}: cite docs/ or a named public source"))
+    return found
+
+
 def check_cell_launch_generated(path):
     """launch/cell.launch must be what scripts/cell_launch.py makes of config/cell.yaml."""
     result = subprocess.run([sys.executable, "scripts/cell_launch.py", "config/cell.yaml"], cwd=ROOT,
@@ -71,6 +100,8 @@ def main():
     tools.add("clang-format", [(path, check_format(path)) for path in cpp], checked=len(cpp))
     launch = repo_files(ROOT, *LAUNCH)
     tools.add("launch arg docs", [(path, check_launch_args(path)) for path in launch], checked=len(launch))
+    text = repo_files(ROOT, *REFERENCED)
+    tools.add("references resolvable", check_references(text), checked=len(text))
     table = check_module_table.problems()
     tools.add("module table", [(check_module_table.GUIDE, problem) for problem in table], checked=1)
     if os.path.exists(os.path.join(ROOT, "config/cell.yaml")):

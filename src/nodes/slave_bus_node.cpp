@@ -1,4 +1,4 @@
-// slave_bus_node: drives a universal-CNC master board (universal_cnc_serial_i2c_protocol.md) over
+// slave_bus_node: drives a universal-CNC master board (docs/protocols/slave_bus.md) over
 // its serial link. Each step is one serial array frame that carries a payload for every slave, so
 // all slaves get their data together; the slaves' answers come back as per-slave topics, and axis
 // slaves' positions feed state, joint_states and tf. The protocol lives in the core
