@@ -79,6 +79,7 @@ Reply MdcClient::request(const Query& query, Milliseconds timeout)
     }
     if (answers(query, *reply))
     {
+      reply->answered = query;
       const double latency = std::chrono::duration<double, std::milli>(Clock::now() - started).count();
       stats_.last_latency_ms = latency;
       stats_.max_latency_ms = std::max(stats_.max_latency_ms, latency);
@@ -114,7 +115,7 @@ Reply MdcClient::requestValue(const Query& query, Milliseconds timeout)
 
 double MdcClient::readVariable(int variable, Milliseconds timeout)
 {
-  return macroOf(requestValue(macroQuery(variable), timeout)).second;
+  return macroOf(requestValue(macroQuery(variable), timeout)).value;
 }
 
 void MdcClient::writeVariable(int variable, double value, Milliseconds timeout)

@@ -42,6 +42,7 @@ void QueryScheduler::reset(Clock::time_point now)
   {
     slot.due = now;
     slot.finished = false;
+    slot.rejections = 0;
   }
 }
 
@@ -100,6 +101,19 @@ void QueryScheduler::unanswered(Clock::time_point now, Milliseconds retry_after)
   if (best && best->period == kOnce)
   {
     // Asked once per connection, so a lost reply must not lose the value for the whole connection.
+    best->due = now + retry_after;
+    return;
+  }
+  done(now);
+}
+
+void QueryScheduler::rejected(Clock::time_point now, Milliseconds retry_after)
+{
+  Slot* best = current();
+  if (best && best->period == kOnce && best->rejections++ == 0)
+  {
+    // The Haas NGC MDC page: "For the initial connection, ?Q100 may have to be entered twice."
+    // The first answer on a fresh connection can be a rejection; only a second one is final.
     best->due = now + retry_after;
     return;
   }
@@ -177,7 +191,15 @@ std::vector<CycleEventData> MdcMonitor::apply(const Reply& reply, Clock::time_po
         break;
       case ReplyKind::kMacro:
       {
-        const auto [variable, value] = macroOf(reply);
+        const MacroReading reading = macroOf(reply);
+        if (!reading.variable)
+        {
+          // An NGC "MACRO, value" that answered another client's query: which variable it holds
+          // cannot be told, so it is not folded in.
+          return events;
+        }
+        const int variable = *reading.variable;
+        const double value = reading.value;
         status_.variables[variable] = value;
         for (size_t axis = 0; axis < axes_.size() && axis < 3; ++axis)
         {
@@ -559,7 +581,10 @@ void MdcPoller::run(Transport& transport, StopSignal& stop)
       const Reply reply = client.request(next->first, reply_timeout_);
       unanswered_in_a_row = 0;
       notify(reply);
-      scheduler.done(Clock::now());
+      if (reply.kind == ReplyKind::kUnknownQuery)
+        scheduler.rejected(Clock::now(), plan_.counters_period);
+      else
+        scheduler.done(Clock::now());
       deliverHeldEvents(client);
     }
     catch (const TimeoutError& e)

@@ -58,27 +58,51 @@ struct KeyEntry
   ReplyKind kind;
 };
 
-// First field of each reply, as the Haas MDC documentation lists them.
+// First field of each reply, as the Haas MDC documentation lists them, compared with their spaces
+// removed (see keyOf).
 constexpr KeyEntry kKeys[] = {
-    {"SERIAL NUMBER", ReplyKind::kSerialNumber},
-    {"SOFTWARE VERSION", ReplyKind::kSoftwareVersion},
-    {"SOFTWARE VER", ReplyKind::kSoftwareVersion},
+    {"SERIALNUMBER", ReplyKind::kSerialNumber},
+    {"SOFTWAREVERSION", ReplyKind::kSoftwareVersion},
+    {"SOFTWAREVER", ReplyKind::kSoftwareVersion},
     {"MODEL", ReplyKind::kModel},
     {"MODE", ReplyKind::kMode},
-    {"TOOL CHANGES", ReplyKind::kToolChanges},
-    {"USING TOOL", ReplyKind::kToolInUse},
-    {"P.O. TIME", ReplyKind::kPowerOnTime},
-    {"C.S. TIME", ReplyKind::kMotionTime},
-    {"LAST CYCLE", ReplyKind::kLastCycle},
-    {"PREV CYCLE", ReplyKind::kPreviousCycle},
-    {"M30 #1", ReplyKind::kPartsCounter1},
-    {"M30 #2", ReplyKind::kPartsCounter2},
+    {"TOOLCHANGES", ReplyKind::kToolChanges},
+    {"USINGTOOL", ReplyKind::kToolInUse},
+    {"P.O.TIME", ReplyKind::kPowerOnTime},
+    {"C.S.TIME", ReplyKind::kMotionTime},
+    {"LASTCYCLE", ReplyKind::kLastCycle},
+    {"PREVCYCLE", ReplyKind::kPreviousCycle},
+    {"M30#1", ReplyKind::kPartsCounter1},
+    {"M30#2", ReplyKind::kPartsCounter2},
     {"PROGRAM", ReplyKind::kProgramStatus},
     {"STATUS", ReplyKind::kProgramStatus},
     {"MACRO", ReplyKind::kMacro},
     {"?", ReplyKind::kUnknownQuery},
+    // The Classic serial port's answers to a query it does not know or cannot read (Haas operator's
+    // manual, Setting 143; the Atsora Pomamo Haas serial module reads both).
+    {"UNKNOWN", ReplyKind::kUnknownQuery},
+    {"INVALIDNUMBER", ReplyKind::kUnknownQuery},
     {"!", ReplyKind::kWriteAck},
 };
+
+// A reply key as compared with kKeys: upper case, no spaces, no trailing full stop. Real replies
+// and client code spell the same key "C.S. TIME" and "C.S.TIME", and the manual quotes "UNKNOWN.".
+std::string keyOf(const std::string& field)
+{
+  std::string key;
+  for (char c : normalise(field))
+    if (c != ' ')
+      key.push_back(c);
+  if (key.size() > 1 && key.back() == '.')
+    key.pop_back();
+  return key;
+}
+
+// A rejection that names no query: the Classic "UNKNOWN" / "INVALID NUMBER".
+bool isUnnamedRejection(const Reply& reply)
+{
+  return reply.kind == ReplyKind::kUnknownQuery && keyOf(reply.fields[0]) != "?";
+}
 
 // Length of a query echo at the start of \p text ("?Q500", "?Q600 5021", "Q104"), or 0 if none.
 // An echo is the query letter and digits, optionally preceded by '?', optionally followed by one
@@ -161,6 +185,15 @@ std::string formatNumber(double value)
     return text;
   }
   return buffer;
+}
+
+// A Q500 status as sent, upper case, without the full stop the manual writes after "STATUS, BUSY.".
+std::string statusText(const std::string& field)
+{
+  std::string text = normalise(field);
+  if (!text.empty() && text.back() == '.')
+    text = normalise(text.substr(0, text.size() - 1));
+  return text;
 }
 
 void requireKind(const Reply& reply, ReplyKind kind)
@@ -293,9 +326,15 @@ std::optional<Reply> parseReply(const std::string& raw)
     start = comma + 1;
   }
   reply.fields[0] = normalise(reply.fields[0]);
+  if (reply.fields.size() == 1 && reply.fields[0].rfind("STATUS ", 0) == 0)
+  {
+    // "STATUS BUSY" without its comma, as one MTConnect Haas adapter expects it.
+    reply.fields = {"STATUS", reply.fields[0].substr(7)};
+  }
+  const std::string key = keyOf(reply.fields[0]);
   for (const auto& entry : kKeys)
   {
-    if (reply.fields[0] == entry.key)
+    if (key == entry.key)
     {
       reply.kind = entry.kind;
       break;
@@ -345,6 +384,8 @@ bool answers(const Query& query, const Reply& reply)
 {
   if (reply.kind == ReplyKind::kUnknownQuery)
   {
+    if (isUnnamedRejection(reply))
+      return true;  // only a Classic serial port says this, and it has one peer: the query in flight
     if (reply.fields.size() < 2)
       return false;
     const auto named = queryNamed(reply.fields[1]);
@@ -364,6 +405,8 @@ bool answers(const Query& query, const Reply& reply)
   {
     if (!query.argument || reply.fields.size() < 2)
       return false;
+    if (reply.fields.size() == 2)
+      return true;  // NGC: "MACRO, value" names no variable (see answers() in the header)
     try
     {
       return parseNumber(reply.fields[1]) == *query.argument;
@@ -409,10 +452,19 @@ int64_t integerOf(const Reply& reply)
   return static_cast<int64_t>(value);
 }
 
-std::pair<int, double> macroOf(const Reply& reply)
+MacroReading macroOf(const Reply& reply)
 {
   requireKind(reply, ReplyKind::kMacro);
-  if (reply.fields.size() < 3)
+  MacroReading reading;
+  if (reply.fields.size() == 2)
+  {
+    // NGC: "MACRO, value"; the variable is the one the matched query asked for.
+    reading.value = parseNumber(reply.fields[1]);
+    if (reply.answered && reply.answered->code == 600 && reply.answered->argument)
+      reading.variable = static_cast<int>(*reply.answered->argument);
+    return reading;
+  }
+  if (reply.fields.size() != 3)
   {
     throw ProtocolError("macro reply without a value: \"" + reply.line + "\"");
   }
@@ -421,7 +473,9 @@ std::pair<int, double> macroOf(const Reply& reply)
   {
     throw ProtocolError("bad macro number in \"" + reply.line + "\"");
   }
-  return {static_cast<int>(number), parseNumber(reply.fields[2])};
+  reading.variable = static_cast<int>(number);
+  reading.value = parseNumber(reply.fields[2]);
+  return reading;
 }
 
 ProgramStatus toProgramStatus(const Reply& reply)
@@ -434,14 +488,14 @@ ProgramStatus toProgramStatus(const Reply& reply)
     // "STATUS, BUSY": a program runs; the control says nothing of program or parts.
     if (f.size() < 2 || f[1].empty())
       throw ProtocolError("status reply without a status: \"" + reply.line + "\"");
-    status.status = normalise(f[1]);
+    status.status = statusText(f[1]);
     return status;
   }
   // "PROGRAM, O00110, IDLE, PARTS, 4523"
   if (f.size() < 3)
     throw ProtocolError("program reply too short: \"" + reply.line + "\"");
   status.program = f[1];
-  status.status = normalise(f[2]);
+  status.status = statusText(f[2]);
   for (size_t i = 3; i + 1 < f.size(); ++i)
   {
     if (normalise(f[i]) == "PARTS")
@@ -510,7 +564,7 @@ Mode mapMode(const std::string& raw)
     return Mode::kMdi;
   if (s == "JOG" || s == "HAND JOG" || s == "HANDLE" || s == "HANDLE JOG")
     return Mode::kManual;
-  if (s == "ZERO RET" || s == "ZERO RETURN" || s == "HOME")
+  if (s == "ZERO RET" || s == "ZERO RETURN" || s == "ZERO" || s == "HOME")
     return Mode::kHoming;
   if (s == "EDIT" || s == "LIST PROG" || s == "LIST")
     return Mode::kEdit;

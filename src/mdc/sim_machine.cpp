@@ -320,9 +320,10 @@ std::string SimMachine::answer(const std::string& raw, Clock::time_point now)
     }
     return "?, " + command;
   }
+  const std::string unknown = classic_ ? "UNKNOWN" : "?, " + command;
   const auto query = parseReadOnlyQuery(command);
   if (!query)
-    return "?, " + command;
+    return unknown;
   switch (query->code)
   {
     case 100:
@@ -355,7 +356,7 @@ std::string SimMachine::answer(const std::string& raw, Clock::time_point now)
     case 600:
     {
       if (!query->argument || *query->argument != std::floor(*query->argument) || *query->argument < 0)
-        return "?, " + command;
+        return unknown;
       const int n = static_cast<int>(*query->argument);
       double value = 0;
       const double work[3] = {s.x - work_[0], s.y - work_[1], s.z - work_[2]};
@@ -371,10 +372,12 @@ std::string SimMachine::answer(const std::string& raw, Clock::time_point now)
         value = static_cast<double>(s.parts);
       else if (variables_.count(n))
         value = variables_[n];
-      return "MACRO, " + std::to_string(n) + ", " + number(value, 6);
+      if (classic_)
+        return "MACRO, " + std::to_string(n) + ", " + number(value, 6);
+      return "MACRO, " + number(value, 6);
     }
     default:
-      return "?, " + command;
+      return unknown;
   }
 }
 }  // namespace mdc

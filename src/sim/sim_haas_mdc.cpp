@@ -37,13 +37,14 @@ phase 2.0 status=BUSY x=8 y=6 z=-3 spindle=8000
 phase 1.0 status=IDLE parts+=1 x=0 y=0 z=0 spindle=0
 )";
 
-// How a reply is framed on the wire. NGC (TCP): ">" prompt, reply, CR LF. Classic serial as the
-// older manuals describe it: STX, reply, ETB, CR LF, then the ">" prompt.
+// How a reply is framed on the wire (test/data/mdc/README.md has the sources). NGC (TCP): ">",
+// reply, CR LF, and the ">" prompt, as clients in use against NGC controls wait for it. Classic
+// serial as the operator's manual describes it: STX, reply, ETB, CR LF, then the ">" prompt.
 std::string frame(const std::string& reply, bool classic)
 {
   if (classic)
     return "\x02" + reply + "\x17\r\n>";
-  return ">" + reply + "\r\n";
+  return ">" + reply + "\r\n>";
 }
 
 class TcpSim
@@ -244,7 +245,8 @@ int main(int argc, char** argv)
       "port", po::value(&port)->default_value(0), "TCP port (Haas setting 143); 0 picks a free one")(
       "host", po::value(&host)->default_value("127.0.0.1"), "address to listen on")(
       "link", po::value(&link), "serial mode: a pty, with this symbolic link to its device")(
-      "classic-framing", "frame replies as STX reply ETB CR LF '>' (older serial controls)")(
+      "classic-framing",
+      "reply as a Classic serial control: STX reply ETB CR LF '>', \"MACRO, n, value\", \"UNKNOWN\"")(
       "query-log", po::value(&query_log), "append every query received to this file, one per line");
   po::variables_map vm;
   try
@@ -291,6 +293,7 @@ int main(int argc, char** argv)
               << std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count() << " ("
               << machine.timelineSeconds() << " s per loop)" << std::endl;
     const bool classic = vm.count("classic-framing") > 0;
+    machine.setClassic(classic);
     if (!link.empty())
       return runSerial(machine, link, classic);
 

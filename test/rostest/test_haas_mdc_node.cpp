@@ -170,10 +170,10 @@ TEST(HaasMdcNode, StateFollowsTheScriptedMachineThroughIdleBusyHoldAndAlarm)
       },
       20.0));
   // The alarm carries its Haas status in plain words.
-  EXPECT_TRUE(
-      recorder->sawState([](const MachineState& s)
-                         { return s.execution == MachineState::EXECUTION_ALARM && s.message == "Haas status ALARM"; },
-                         20.0));
+  EXPECT_TRUE(recorder->sawState(
+      [](const MachineState& s)
+      { return s.execution == MachineState::EXECUTION_ALARM && s.message == "Haas status ALARM ON"; },
+      20.0));
   // Tool 3 during the cycle, spindle at 8000 rpm.
   EXPECT_TRUE(recorder->sawState([](const MachineState& s) { return s.tool == 3 && s.spindle_speed == 8000.0; }, 20.0));
 }
@@ -546,7 +546,9 @@ int main(int argc, char** argv)
   std::thread other_client(
       [&]
       {
-        const char* queries[] = {"?Q500\r\n", "?Q104\r\n", "?Q600 5022\r\n", "?Q201\r\n", "?Q999\r\n"};
+        // No Q600: an NGC control's macro reply names no variable, so a second client reading
+        // variables makes every client's readings ambiguous (docs/haas_mdc_node.md).
+        const char* queries[] = {"?Q500\r\n", "?Q104\r\n", "?Q303\r\n", "?Q201\r\n", "?Q999\r\n"};
         size_t n = 0;
         cnc_bridge::StopSignal pause;
         while (!done)

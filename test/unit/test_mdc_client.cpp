@@ -557,17 +557,21 @@ TEST(MdcPollPlan, QueryKeysMustBeReadOnlyQueries)
   EXPECT_THROW(parseQueryKey(""), ConfigError);
 }
 
-TEST(MdcPoller, IdentityQueriesLeftUnansweredAreAskedAgain)
+TEST(MdcPoller, IdentityQueriesLeftUnansweredOrFirstRejectedAreAskedAgain)
 {
-  // The Haas documentation: the first ?Q100 after connecting may go unanswered.
+  // The Haas NGC MDC page: "For the initial connection, ?Q100 may have to be entered twice." The
+  // first ?Q100 here goes unanswered, the second is rejected, the third answered; Q102 is rejected
+  // every time: asked twice (a first rejection may be the new connection's), then never again.
   FakeTransport fake;
   scriptedControl(fake,
                   [](const std::string& query, int asked) -> std::string
                   {
                     if (query == "?Q100")
-                      return asked == 0 ? "" : "SERIAL NUMBER, 1234567";
+                      return asked == 0 ? "" : asked == 1 ? "?, ?Q100" : "SERIAL NUMBER, 1234567";
+                    if (query == "?Q101")
+                      return "SOFTWARE VERSION, 100.17.000.2037";
                     if (query == "?Q102")
-                      return "?, ?Q102";  // rejected: finished, not asked again
+                      return "?, ?Q102";
                     if (query == "?Q500")
                       return "PROGRAM, O1, IDLE, PARTS, 1";
                     return "";
@@ -582,19 +586,49 @@ TEST(MdcPoller, IdentityQueriesLeftUnansweredAreAskedAgain)
   reported.listen(poller);
   StopSignal stop;
   std::thread thread([&] { poller.run(fake, stop); });
-  EXPECT_TRUE(reported.waitFor([&] { return reported.status.serial_number == "1234567"; }));
-  stop.stop();
-  thread.join();
-  const std::string sent = text(fake.written());
-  auto count = [&](const std::string& what)
+  auto count = [&](const std::string& sent, const std::string& what)
   {
     size_t n = 0;
     for (size_t at = sent.find(what); at != std::string::npos; at = sent.find(what, at + 1))
       ++n;
     return n;
   };
-  EXPECT_EQ(count("?Q100\r\n"), 2u);
-  EXPECT_EQ(count("?Q102\r\n"), 1u);
+  EXPECT_TRUE(reported.waitFor([&] { return reported.status.serial_number == "1234567"; }));
+  // Then 50 more status polls at 2 ms (well past the 20 ms retry wait) after the second Q102.
+  EXPECT_TRUE(reported.waitFor(
+      [&]
+      {
+        const std::string sent = text(fake.written());
+        const size_t last_q102 = sent.rfind("?Q102\r\n");
+        return count(sent, "?Q102\r\n") >= 2 && count(sent.substr(last_q102), "?Q500\r\n") >= 50;
+      }));
+  stop.stop();
+  thread.join();
+  const std::string sent = text(fake.written());
+  EXPECT_EQ(count(sent, "?Q100\r\n"), 3u);
+  EXPECT_EQ(count(sent, "?Q101\r\n"), 1u);
+  EXPECT_EQ(count(sent, "?Q102\r\n"), 2u);
+}
+
+TEST(MdcMonitor, AnNgcMacroReplyCountsOnlyForTheQueryItAnswered)
+{
+  // "MACRO, value" names no variable: the client's match supplies it; another client's such reply
+  // cannot be placed and changes nothing.
+  MdcMonitor monitor;
+  const Clock::time_point t0{};
+  Reply foreign = *parseReply(">MACRO, 2.5");
+  monitor.apply(foreign, t0);
+  EXPECT_TRUE(monitor.status().variables.empty());
+  Reply ours = foreign;
+  ours.answered = macroQuery(5021);
+  monitor.apply(ours, t0);
+  ASSERT_EQ(monitor.status().variables.count(5021), 1u);
+  EXPECT_EQ(monitor.status().variables.at(5021), 2.5);
+
+  FakeTransport fake;
+  answerWith(fake, {">MACRO, -0.125\r\n>"});
+  MdcClient client(fake);
+  EXPECT_EQ(client.readVariable(5022, 1000ms), -0.125);
 }
 
 TEST(MdcPoller, HoldsThePortLockForEachQueryAndReleasesItBetween)

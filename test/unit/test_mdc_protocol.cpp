@@ -1,8 +1,9 @@
 // Haas MDC reply parsing, matching and state mapping. The reply lines are written in the formats
 // the Haas "Machine Data Collection" documentation shows (SERIAL NUMBER, 1234567; MODE, (MEM);
-// PROGRAM, O00110, IDLE, PARTS, 4523; STATUS, BUSY; MACRO, n, value; ?, ?Q105), with the variants
-// a tolerant host must accept: the '>' prompt on either side, Classic STX/ETB framing, an echoed
-// query, extra spaces, lower case and 7-bit lines read with the parity bit set.
+// PROGRAM, O00110, IDLE, PARTS, 4523; STATUS, BUSY; MACRO, value and MACRO, n, value; ?, ?Q105),
+// with the variants a tolerant host must accept: the '>' prompt on either side, Classic STX/ETB
+// framing, an echoed query, extra spaces, lower case and 7-bit lines read with the parity bit set.
+// Replies of real controls, byte by byte: test_mdc_fixtures.cpp.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -121,7 +122,8 @@ TEST(MdcParser, EchoWithArgumentIsRemoved)
   const Reply reply = parsed("?Q600 5021 MACRO, 5021, 1.5");
   EXPECT_EQ(reply.echoed, "?Q600 5021");
   EXPECT_EQ(reply.kind, ReplyKind::kMacro);
-  EXPECT_EQ(macroOf(reply), std::make_pair(5021, 1.5));
+  EXPECT_EQ(macroOf(reply).variable, 5021);
+  EXPECT_EQ(macroOf(reply).value, 1.5);
 }
 
 TEST(MdcParser, BusyStatusHasNoProgramOrParts)
@@ -140,7 +142,9 @@ TEST(MdcParser, MalformedValuesAreProtocolErrors)
   EXPECT_THROW(toProgramStatus(parsed("PROGRAM, O1, IDLE, PARTS, -3")), ProtocolError);
   EXPECT_THROW(toProgramStatus(parsed("STATUS")), ProtocolError);
   EXPECT_THROW(toProgramStatus(parsed("MODE, (MEM)")), ProtocolError);
-  EXPECT_THROW(macroOf(parsed("MACRO, 5021")), ProtocolError);
+  EXPECT_THROW(macroOf(parsed("MACRO")), ProtocolError);
+  EXPECT_THROW(macroOf(parsed("MACRO, x")), ProtocolError);
+  EXPECT_THROW(macroOf(parsed("MACRO, 1, 2, 3")), ProtocolError);
   EXPECT_THROW(macroOf(parsed("MACRO, x, 1")), ProtocolError);
   EXPECT_THROW(macroOf(parsed("MACRO, 1.5, 1")), ProtocolError);
   EXPECT_THROW(macroOf(parsed("MACRO, 100, nan")), ProtocolError);
@@ -171,6 +175,12 @@ TEST(MdcMatching, RepliesMatchTheirQueryByContent)
   EXPECT_TRUE(answers(macroQuery(5021), parsed("MACRO, 5021.000, 1.0")));
   EXPECT_FALSE(answers(macroQuery(5021), parsed("MACRO, 5022, 1.0")));
   EXPECT_FALSE(answers(q(600), parsed("MACRO, 5021, 1.0")));
+  // NGC: "MACRO, value" names no variable, so it answers whichever Q600 is in flight.
+  EXPECT_TRUE(answers(macroQuery(5021), parsed("MACRO, 1.0")));
+  EXPECT_FALSE(answers(q(500), parsed("MACRO, 1.0")));
+  // A Classic rejection names no query: it answers the one in flight.
+  EXPECT_TRUE(answers(q(105), parsed("\x02UNKNOWN\x17")));
+  EXPECT_TRUE(answers(macroQuery(99999), parsed("INVALID NUMBER")));
   EXPECT_TRUE(answers(q(105), parsed("?, ?Q105")));
   EXPECT_FALSE(answers(q(104), parsed("?, ?Q105")));
   EXPECT_TRUE(answers(macroQuery(99999), parsed("?, ?Q600 99999")));

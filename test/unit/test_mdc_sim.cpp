@@ -41,14 +41,14 @@ TEST(MdcSim, AnswersInTheHaasFormats)
   EXPECT_EQ(m.answer("?Q500", t0 + 2s), "STATUS, BUSY");
   EXPECT_EQ(m.answer("?Q500", t0 + 3700ms), "PROGRAM, O00110, FEED HOLD, PARTS, 4523");
   EXPECT_EQ(m.answer("?Q500", t0 + 5100ms), "PROGRAM, O00110, IDLE, PARTS, 4524");
-  EXPECT_EQ(m.answer("?Q500", t0 + 6600ms), "PROGRAM, O00110, ALARM, PARTS, 4524");
+  EXPECT_EQ(m.answer("?Q500", t0 + 6600ms), "PROGRAM, O00110, ALARM ON, PARTS, 4524");
   EXPECT_EQ(m.answer("?Q104", t0 + 6600ms), "MODE, (MDI)");
   EXPECT_EQ(m.answer("?Q500", t0 + 9s + 5100ms), "PROGRAM, O00110, IDLE, PARTS, 4525");  // second loop
   EXPECT_EQ(m.answer("?Q201", t0 + 2s), "USING TOOL, 3");
   EXPECT_EQ(m.answer("?Q105", t0), "?, ?Q105");
   EXPECT_EQ(m.answer("hello", t0), "?, HELLO");
   EXPECT_EQ(m.answer("", t0), "");
-  EXPECT_EQ(m.answer("?Q600 4006", t0), "MACRO, 4006, 20.000000");
+  EXPECT_EQ(m.answer("?Q600 4006", t0), "MACRO, 20.000000");  // NGC: no variable number
   // Every reply the simulator gives is one our parser recognises.
   for (const char* query : {"?Q100", "?Q101", "?Q102", "?Q104", "?Q200", "?Q201", "?Q300", "?Q301", "?Q303", "?Q304",
                             "?Q402", "?Q403", "?Q500", "?Q600 5021"})
@@ -59,15 +59,32 @@ TEST(MdcSim, AnswersInTheHaasFormats)
   }
 }
 
+TEST(MdcSim, ClassicDialectNamesTheVariableAndSaysUnknown)
+{
+  // As the Classic serial port answers (test/data/mdc/classic_serial.mdcwire).
+  SimMachine m = cell();
+  m.setClassic(true);
+  const SimMachine::Clock::time_point t0{};
+  m.start(t0);
+  EXPECT_EQ(m.answer("?Q600 4006", t0), "MACRO, 4006, 20.000000");
+  EXPECT_EQ(m.answer("?Q105", t0), "UNKNOWN");
+  EXPECT_EQ(m.answer("?Q600 x", t0), "UNKNOWN");
+  const auto reply = parseReply(m.answer("?Q600 5021", t0 + 2500ms));
+  ASSERT_TRUE(reply);
+  EXPECT_TRUE(answers(macroQuery(5021), *reply));
+  EXPECT_FALSE(answers(macroQuery(5022), *reply));
+  EXPECT_EQ(macroOf(*reply).variable, 5021);
+}
+
 TEST(MdcSim, AxesMoveLinearlyAndWorkPositionsFollow)
 {
   SimMachine m = cell();
   const SimMachine::Clock::time_point t0{};
   m.start(t0);
   // Phase 2 (1.5 s .. 3.5 s) moves X from 0 to 8 in: half way at 2.5 s.
-  EXPECT_NEAR(macroOf(*parseReply(m.answer("?Q600 5021", t0 + 2500ms))).second, 4.0, 1e-6);
-  EXPECT_NEAR(macroOf(*parseReply(m.answer("?Q600 5041", t0 + 2500ms))).second, 4.0 - 5.0, 1e-6);
-  EXPECT_NEAR(macroOf(*parseReply(m.answer("?Q600 5023", t0 + 3500ms))).second, -3.0, 1e-6);
+  EXPECT_NEAR(macroOf(*parseReply(m.answer("?Q600 5021", t0 + 2500ms))).value, 4.0, 1e-6);
+  EXPECT_NEAR(macroOf(*parseReply(m.answer("?Q600 5041", t0 + 2500ms))).value, 4.0 - 5.0, 1e-6);
+  EXPECT_NEAR(macroOf(*parseReply(m.answer("?Q600 5023", t0 + 3500ms))).value, -3.0, 1e-6);
 }
 
 TEST(MdcSim, WritesOnlyToUserVariables)
@@ -76,7 +93,7 @@ TEST(MdcSim, WritesOnlyToUserVariables)
   const SimMachine::Clock::time_point t0{};
   m.start(t0);
   EXPECT_EQ(m.answer("?E100 2.5", t0), "!");
-  EXPECT_EQ(m.answer("?Q600 100", t0), "MACRO, 100, 2.500000");
+  EXPECT_EQ(m.answer("?Q600 100", t0), "MACRO, 2.500000");
   EXPECT_EQ(m.answer("?E5021 1", t0), "?, ?E5021 1");
   EXPECT_EQ(m.answer("?E100", t0), "?, ?E100");
 }

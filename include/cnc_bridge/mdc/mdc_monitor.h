@@ -44,6 +44,10 @@ class QueryScheduler
   /// \brief The query next() returned went unanswered at \p now: a periodic one is scheduled as by
   /// done(); a once-only one is not finished but tried again at \p now + \p retry_after.
   void unanswered(Clock::time_point now, Milliseconds retry_after);
+  /// \brief The query next() returned was rejected by the control ("?, ?Q100") at \p now: as done(),
+  /// except that a once-only query rejected for the first time since reset() is asked again at
+  /// \p now + \p retry_after (the first ?Q100 on a new connection may be refused).
+  void rejected(Clock::time_point now, Milliseconds retry_after);
   size_t size() const { return slots_.size(); }
 
   /// \brief The queries and their periods, in the order added.
@@ -56,6 +60,7 @@ class QueryScheduler
     Milliseconds period;
     Clock::time_point due;
     bool finished = false;
+    unsigned rejections = 0;  ///< since reset()
   };
   Slot* current();
   std::vector<Slot> slots_;

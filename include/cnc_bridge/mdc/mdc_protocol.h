@@ -50,8 +50,8 @@ enum class ReplyKind
   kPartsCounter1,    ///< Q402 "M30 #1, 553"
   kPartsCounter2,    ///< Q403 "M30 #2, 553"
   kProgramStatus,    ///< Q500 "PROGRAM, O00110, IDLE, PARTS, 4523" or "STATUS, BUSY"
-  kMacro,            ///< Q600 "MACRO, 5021, -1.2345"
-  kUnknownQuery,     ///< "?, ?Q105": the control did not understand the query
+  kMacro,            ///< Q600 "MACRO, 0.0" (NGC, no variable number) or "MACRO, 5021, -1.2345" (Classic)
+  kUnknownQuery,     ///< "?, ?Q105" (NGC), "UNKNOWN" or "INVALID NUMBER" (Classic): not understood
   kWriteAck,         ///< "!" after an E command (see docs/haas_mdc_node.md on this reading)
   kOther             ///< a line we do not recognise (kept, counted, never fatal)
 };
@@ -64,19 +64,25 @@ struct Reply
   std::vector<std::string> fields;  ///< comma-separated fields, trimmed, first one upper-cased
   std::string echoed;               ///< the query the control echoed before the reply, if any ("?Q500")
   std::string line;                 ///< the line as received, without framing
+  /// The query this reply was taken to answer (set by MdcClient::request; empty for a reply read
+  /// as another client's). An NGC macro reply names no variable, so only this says which it is.
+  std::optional<Query> answered;
 };
 
 /// \brief Parses one reply line, tolerantly.
 ///
 /// Accepted: the `>` prompt before or after the reply (any number), STX/ETB framing bytes of the
 /// Classic serial port, an echo of the query before the reply (`?Q500 PROGRAM, ...` or a line of
-/// its own), spaces around fields and commas, lower case.
+/// its own), spaces around fields and commas, lower case, keys written without their inner spaces
+/// ("C.S.TIME"), a trailing full stop ("UNKNOWN."), "STATUS BUSY" without its comma. The replies
+/// seen from real controls are in test/data/mdc/ (README.md there names their sources).
 /// \returns nullopt for a line with nothing in it (a bare prompt, an echo alone).
 std::optional<Reply> parseReply(const std::string& line);
 
 /// \brief Whether \p reply answers \p query. Replies are matched by content, not by order: a second
-/// MDC client's replies arrive on our connection too. Q600 matches on the variable number as well;
-/// "?, ?Q105" matches the query it names.
+/// MDC client's replies arrive on our connection too. A Classic Q600 reply matches on its variable
+/// number; an NGC one ("MACRO, value") names none and so matches any Q600. "?, ?Q105" matches the
+/// query it names; a rejection that names none ("UNKNOWN") matches any query.
 bool answers(const Query& query, const Reply& reply);
 
 /// \brief The Q code a reply kind answers (100 for kSerialNumber ...); 0 for none.
@@ -96,8 +102,14 @@ ProgramStatus toProgramStatus(const Reply& reply);
 std::string valueOf(const Reply& reply);
 /// \returns the number after the key as an integer ("USING TOOL, 1" -> 1). \throws ProtocolError.
 int64_t integerOf(const Reply& reply);
-/// \brief Q600: variable number and value. \throws ProtocolError.
-std::pair<int, double> macroOf(const Reply& reply);
+/// \brief A Q600 reply decoded.
+struct MacroReading
+{
+  std::optional<int> variable;  ///< from the reply (Classic) or from Reply::answered (NGC); absent if neither
+  double value = 0.0;
+};
+/// \brief Q600: variable number (when known) and value. \throws ProtocolError.
+MacroReading macroOf(const Reply& reply);
 /// \brief "00027:50:59" or "000:00:00" (hours:minutes:seconds; hours may be long) -> seconds.
 /// \throws ProtocolError.
 double parseDuration(const std::string& text);

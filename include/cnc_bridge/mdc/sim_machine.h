@@ -44,8 +44,12 @@ class SimMachine
   /// \brief Starts the timeline at \p start.
   void start(Clock::time_point start) { start_ = start; }
 
-  /// \brief The reply lines (without framing) to one line from a client at \p now. Unknown or
-  /// malformed queries get "?, <query>" as the control does.
+  /// \brief Which control's reply dialect to speak. NGC (the default): Q600 answers "MACRO, value"
+  /// and an unknown query gets "?, <query>". Classic serial: Q600 answers "MACRO, n, value" and an
+  /// unknown query gets "UNKNOWN". test/data/mdc/README.md names the sources of both.
+  void setClassic(bool classic) { classic_ = classic; }
+
+  /// \brief The reply lines (without framing) to one line from a client at \p now.
   std::string answer(const std::string& line, Clock::time_point now);
 
   /// \brief Writes every query answer() is given (printable characters, upper case), one per
@@ -92,6 +96,7 @@ class SimMachine
 
   std::string serial_ = "1234567", software_ = "100.20.000.1200", model_ = "VF2D";
   bool inch_ = true;
+  bool classic_ = false;
   double work_[3] = {0, 0, 0};
   std::map<int, double> variables_;
   std::vector<Phase> phases_;
