@@ -165,7 +165,9 @@ int withPort(const po::variables_map& vm, const std::function<std::string(Transp
 {
   static std::atomic<bool> cancel{false};
   sim::installStopHandler();
-  SerialPort port(serialSettings(vm));
+  // A start request the receiver sent before this program opened the port is kept: it is the one
+  // the transfer needs (a receiver repeats it only after its NAK interval, 10 s for lrzsz rx).
+  SerialPort port(serialSettings(vm), InputOnOpen::kKeep);
   sim::onStop(
       [&port]
       {

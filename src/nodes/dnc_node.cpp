@@ -177,7 +177,9 @@ Transport& DncNode::openLink()
     state_->setLink(LinkState::kConnecting, "opening " + serial_.describe());
     try
     {
-      link_ = std::make_unique<SerialPort>(serial_);
+      // What the control sent while the port was closed stays, as it does in a port kept open
+      // (~keep_open): a receiving control's NAK, queued before a send starts, is its start request.
+      link_ = std::make_unique<SerialPort>(serial_, InputOnOpen::kKeep);
     }
     catch (const Error& e)
     {

@@ -183,7 +183,7 @@ tcflag_t characterSize(unsigned data_bits)
 }
 }  // namespace
 
-SerialPort::SerialPort(SerialSettings settings) : settings_(std::move(settings))
+SerialPort::SerialPort(SerialSettings settings, InputOnOpen on_open) : settings_(std::move(settings))
 {
   settings_.validate();
   speedConstant(settings_.baud);  // an unsupported rate fails before the port is opened
@@ -209,8 +209,10 @@ SerialPort::SerialPort(SerialSettings settings) : settings_(std::move(settings))
     device_number_ = opened.st_rdev;
   }
   next_device_check_ = std::chrono::steady_clock::now() + kDeviceCheckInterval;
-  // Bytes left in the driver from before we opened belong to nobody.
-  discardInput();
+  if (on_open == InputOnOpen::kDiscard)
+  {
+    discardInput();
+  }
 }
 
 void SerialPort::applySettings()

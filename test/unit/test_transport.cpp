@@ -170,6 +170,31 @@ TEST(SerialPort, RawModeKeepsEveryByteValue)
   EXPECT_EQ(back, all);
 }
 
+// A byte the device sent while nobody had the port open (an XModem receiver's start request) is
+// kept for the program that opens the port when it asks (InputOnOpen::kKeep), dropped otherwise.
+TEST(SerialPort, InputQueuedBeforeTheOpenIsKeptOnlyWhenAsked)
+{
+  for (const InputOnOpen on_open : {InputOnOpen::kKeep, InputOnOpen::kDiscard})
+  {
+    PtyMaster device;
+    device.write(std::string("\x15"));  // NAK, before the port is opened
+    {
+      // The pty hands bytes over through a kernel worker: wait until the NAK is readable on the
+      // slave, so that the open below finds it queued (a second descriptor that reads nothing).
+      const int probe = ::open(device.slavePath().c_str(), O_RDONLY | O_NOCTTY | O_NONBLOCK);
+      ASSERT_GE(probe, 0);
+      pollfd ready{probe, POLLIN, 0};
+      ASSERT_EQ(::poll(&ready, 1, 10000), 1) << "the NAK never reached the slave";
+      ::close(probe);
+    }
+    SerialPort port(ptySettings(device), on_open);
+    if (on_open == InputOnOpen::kKeep)
+      EXPECT_EQ(port.readByte(Milliseconds(2000)), 0x15) << "the queued NAK was lost on open";
+    else
+      EXPECT_EQ(port.readByte(Milliseconds(200)), -1) << "a byte from before the open was read";
+  }
+}
+
 TEST(SerialPort, ReadTimesOutWithNothingToRead)
 {
   PtyMaster device;

@@ -14,10 +14,14 @@
 #include <unistd.h>
 
 #include <dirent.h>
+#include <atomic>
 #include <chrono>
+#include <condition_variable>
 #include <fstream>
+#include <mutex>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "cnc_bridge/common/error.h"
@@ -449,4 +453,137 @@ TEST(SimHaasSerialFaults, EveryTransferIsExactOrAClearErrorWithNoPartialFile)
   std::cout << "sim_haas_serial --faults: " << ok << " transfers exact, " << failed << " failed cleanly, " << repaired
             << " blocks resent or NAKed by this side\n"
             << haas.seen();
+}
+
+// ---------------------------------------------------------------------------------------------
+// A user starts lrzsz `rx` first, then `cnc_dnc send`: rx's NAK reaches the port before cnc_dnc
+// has opened it. That NAK is the start: block 1 must follow it without rx having to NAK again (rx
+// repeats its request only after 10 s). The two programs talk through this process, which relays
+// every byte between their ptys and records who sent what.
+namespace
+{
+/// Relays bytes between two pty masters in both directions and keeps a record of each direction.
+class Tap
+{
+ public:
+  Tap(Transport& a, Transport& b)
+      : a_(a), b_(b), a_to_b_([this] { pump(a_, b_, from_a_); }), b_to_a_([this] { pump(b_, a_, from_b_); })
+  {
+  }
+  ~Tap()
+  {
+    stop_ = true;
+    a_to_b_.join();
+    b_to_a_.join();
+  }
+  std::string fromA() const { return copy(from_a_); }
+  std::string fromB() const { return copy(from_b_); }
+  /// Waits until side A has sent at least \p n bytes.
+  bool waitForA(size_t n, Milliseconds timeout) const
+  {
+    std::unique_lock<std::mutex> lock(mutex_);
+    return changed_.wait_for(lock, timeout, [&] { return from_a_.size() >= n; });
+  }
+
+ private:
+  void pump(Transport& from, Transport& to, std::string& record)
+  {
+    uint8_t buffer[4096];
+    while (!stop_)
+    {
+      size_t n = 0;
+      try
+      {
+        n = from.read(buffer, sizeof(buffer), Milliseconds(50));
+        if (n > 0)
+          to.write(buffer, n, Milliseconds(5000));
+      }
+      catch (const Error&)
+      {
+        return;
+      }
+      if (n > 0)
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        record.append(reinterpret_cast<const char*>(buffer), n);
+        changed_.notify_all();
+      }
+    }
+  }
+  std::string copy(const std::string& s) const
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return s;
+  }
+
+  Transport& a_;
+  Transport& b_;
+  mutable std::mutex mutex_;
+  mutable std::condition_variable changed_;
+  std::string from_a_, from_b_;
+  std::atomic<bool> stop_{false};
+  std::thread a_to_b_, b_to_a_;
+};
+
+/// Starts lrzsz `rx FILE` in \p dir with its stdin and stdout on \p tty.
+pid_t startRx(const std::string& tty, const std::string& dir, const std::string& file)
+{
+  const pid_t pid = ::fork();
+  if (pid == 0)
+  {
+    const int fd = ::open(tty.c_str(), O_RDWR | O_NOCTTY);
+    if (fd < 0 || ::chdir(dir.c_str()) != 0)
+      ::_exit(126);
+    ::dup2(fd, 0);
+    ::dup2(fd, 1);
+    const int null = ::open("/dev/null", O_WRONLY);
+    ::dup2(null, 2);
+    ::execl("/usr/bin/rx", "rx", file.c_str(), static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  return pid;
+}
+}  // namespace
+
+TEST(CncDncCli, SendStartsOnTheNakRxSentBeforeThePortWasOpened)
+{
+  TempDir dir("test_xmodem_cli");
+  const std::string payload = program(4321, 3 * 128 + 40);
+  writeFile(dir.path + "/O04321.nc", payload);
+  PtyMaster rx_side, dnc_side;
+  Tap tap(rx_side, dnc_side);
+  const pid_t rx = startRx(rx_side.slavePath(), dir.path, "received.nc");
+  ASSERT_TRUE(tap.waitForA(1, Milliseconds(20000))) << "rx sent no start request";
+  ASSERT_EQ(tap.fromA(), "\x15") << "rx's first request is one NAK (checksum mode)";
+  {
+    // The NAK is now queued on cnc_dnc's side of the link, where nobody has the port open yet.
+    const int probe = ::open(dnc_side.slavePath().c_str(), O_RDONLY | O_NOCTTY | O_NONBLOCK);
+    ASSERT_GE(probe, 0);
+    pollfd ready{probe, POLLIN, 0};
+    ASSERT_EQ(::poll(&ready, 1, 10000), 1) << "the NAK never reached cnc_dnc's port";
+    ::close(probe);
+  }
+  // --retries 1: rx's ACK of EOT may be lost (below), and nobody answers a second EOT.
+  const ToolRun send = cncDnc({"send", "--port", dnc_side.slavePath(), "--mode", "checksum", "--binary", "--timeout",
+                               "30", "--retries", "1", dir.path + "/O04321.nc"},
+                              dir.path);
+  const int rx_status = exitStatus(rx);
+  // rx flushes its tty as it exits, so its ACK of EOT can be lost (cnc_dnc then says exactly that).
+  EXPECT_TRUE(send.status == 0 ||
+              (send.status == 1 && send.err.find("every block was acknowledged but EOT was not") != std::string::npos))
+      << send.status << ": " << send.err;
+  EXPECT_EQ(rx_status, 0);
+  const std::string from_rx = tap.fromA(), from_dnc = tap.fromB();
+  ASSERT_GE(from_dnc.size(), 132u);
+  EXPECT_EQ(from_dnc[0], '\x01') << "cnc_dnc's first byte is not SOH";
+  EXPECT_EQ(from_dnc[1], '\x01') << "cnc_dnc's first packet is not block 1";
+  // After its one NAK rx sent only ACKs, one per block (and the ACK of EOT when it was not lost):
+  // no second start request was needed, and no block was NAKed.
+  const size_t blocks = (payload.size() + 127) / 128;
+  const std::string expected = std::string("\x15") + std::string(blocks, '\x06');
+  EXPECT_TRUE(from_rx == expected || from_rx == expected + '\x06') << "rx had to ask again, or NAKed a block";
+  const std::string received = readFile(dir.path + "/received.nc");
+  ASSERT_GE(received.size(), payload.size());
+  EXPECT_EQ(received.substr(0, payload.size()), payload);
+  EXPECT_EQ(received.find_first_not_of('\x1a', payload.size()), std::string::npos) << "more than SUB padding";
 }

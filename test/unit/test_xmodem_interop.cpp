@@ -8,8 +8,11 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <poll.h>
+
 #include <condition_variable>
 #include <fstream>
+#include <future>
 #include <memory>
 #include <mutex>
 #include <random>
@@ -291,7 +294,8 @@ class CountingTransport : public ForwardingTransport
 // The cell case (dnc_node -> sim_haas_serial xmodem): a control waiting to receive NAKs on a fixed
 // schedule, so a dozen NAKs are queued when the host starts to send: in the pty while no host has
 // the device open (dnc_node opens the port per transfer; the open discards them), or in the host's
-// open port (~keep_open). The sender takes a NAK as the start and must not take a queued or
+// open port (~keep_open). dnc_node opens its port per transfer and keeps what is queued
+// (InputOnOpen::kKeep). The sender takes a NAK as the start and must not take a queued or
 // in-flight NAK as a NAK of block 1: every block goes once and the control gets exactly the file.
 void sendAfterQueuedNaks(bool port_open_while_queued)
 {
@@ -324,7 +328,7 @@ void sendAfterQueuedNaks(bool port_open_while_queued)
   // Wait until 12 NAKs are queued on the host's side.
   ASSERT_TRUE(control_side.waitForWritten(12, Milliseconds(20000)));
   if (!port)
-    port = std::make_unique<SerialPort>(settings);
+    port = std::make_unique<SerialPort>(settings, InputOnOpen::kKeep);
 
   const Bytes payload = randomBytes(3 * kBlockSize + 17, 12);
   Config config;
@@ -348,4 +352,48 @@ TEST(HaasCell, SendAfterNaksQueuedWhileThePortWasClosed)
 TEST(HaasCell, SendAfterNaksQueuedInTheOpenPort)
 {
   sendAfterQueuedNaks(true);
+}
+
+// A receiver that sent its start requests before the sender opened the port (started first, as a
+// user starts the receiver and then the sender): the first queued request is the start, the rest
+// are dropped, and block 1 follows without the receiver asking again. The receiver here is a
+// script on the pty: it writes nothing but its three early NAKs and one ACK per packet it read.
+TEST(XmodemStart, RequestsQueuedBeforeThePortWasOpenedStartTheSendOnce)
+{
+  PtyMaster receiver;
+  receiver.write(Bytes{kNak, kNak, kNak});
+  {
+    // The pty hands bytes over through a kernel worker: wait until they are queued on the slave.
+    const int probe = ::open(receiver.slavePath().c_str(), O_RDONLY | O_NOCTTY | O_NONBLOCK);
+    ASSERT_GE(probe, 0);
+    pollfd ready{probe, POLLIN, 0};
+    ASSERT_EQ(::poll(&ready, 1, 10000), 1);
+    ::close(probe);
+  }
+  SerialSettings settings;
+  settings.device = receiver.slavePath();
+  settings.baud = 115200;
+  SerialPort port(settings, InputOnOpen::kKeep);
+  Config config;
+  config.start_wait = Milliseconds(5000);
+  const Bytes payload = randomBytes(2 * kBlockSize + 5, 21);
+  Sender sender(port, Mode::kChecksum, config);
+  auto sent = std::async(std::launch::async, [&] { return sender.send(payload); });
+
+  for (uint8_t block = 1; block <= 3; ++block)
+  {
+    Bytes packet(packetSize(kBlockSize, CheckType::kChecksum));
+    ASSERT_EQ(receiver.readExactly(packet.data(), packet.size(), Milliseconds(10000)), packet.size())
+        << "block " << int(block) << " did not come: the queued start request was lost";
+    const Packet decoded = decodePacket(packet.data(), packet.size(), CheckType::kChecksum);
+    ASSERT_EQ(decoded.status, PacketStatus::kOk);
+    EXPECT_EQ(decoded.block, block) << "block 1 went once per queued NAK";
+    receiver.writeByte(kAck);
+  }
+  EXPECT_EQ(receiver.readByte(Milliseconds(10000)), kEot);
+  receiver.writeByte(kAck);
+  const Stats stats = sent.get();
+  EXPECT_EQ(stats.blocks, 3u);
+  EXPECT_EQ(stats.retries, 0u);
+  EXPECT_EQ(receiver.readByte(Milliseconds(100)), -1) << "the sender wrote more than three packets and EOT";
 }

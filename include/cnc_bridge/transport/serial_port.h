@@ -49,13 +49,21 @@ FlowControl parseFlowControl(const std::string& text);  ///< none|xonxoff|rtscts
 const char* toString(Parity parity);
 const char* toString(FlowControl flow);
 
+/// \brief What SerialPort does with the bytes the driver holds when the port is opened.
+enum class InputOnOpen
+{
+  kDiscard,  ///< drop them: a poller's stale replies belong to no query of this port
+  kKeep,     ///< keep them: a control's request sent before the open (an XModem receiver's NAK or
+             ///< 'C', a DC3, the start of a punch) is meant for whoever opens the port next
+};
+
 /// \brief A serial port (or pty slave) opened raw. Thread-safe only for interrupt().
 class SerialPort : public AsioStreamTransport<boost::asio::serial_port>
 {
  public:
   /// \brief Opens and configures the port.
   /// \throws ConfigError for invalid settings, LinkError if the device cannot be opened.
-  explicit SerialPort(SerialSettings settings);
+  explicit SerialPort(SerialSettings settings, InputOnOpen on_open = InputOnOpen::kDiscard);
   ~SerialPort() override;
 
   /// \brief Reads as every transport does; about twice a second it also checks that the
