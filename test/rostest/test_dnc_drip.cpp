@@ -2,7 +2,9 @@
 // N number, bytes, percent, held), dnc/current_line, state.block, the control receiving every byte
 // in order without overrun, a restart from an N number, ~plan_drip, a second goal rejected while
 // a feed runs, ~pause/~resume, cancel, refusals; and a backup through the action of a second node
-// against sim_haas_serial punch.
+// against sim_haas_serial punch. The simulated control's buffer (256 characters, DC3 at 192, DC1
+// at 64) is this project's choice, not a manual's: test/data/dnc_drip/README.md lists which
+// control behaviour comes from which manual.
 #include <actionlib/client/simple_action_client.h>
 #include <gtest/gtest.h>
 #include <ros/ros.h>

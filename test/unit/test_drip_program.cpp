@@ -1,6 +1,8 @@
 // Unit tests of the program side of drip-feed: line reading with any line end, the character
 // check (with line numbers), modal-state tracking, restart points and the send plan. The programs
 // are written by the tests themselves (small Fanuc-style mill programs).
+// The manual behind each refusal (lowercase, DC codes in the text, a % inside the program) and the
+// EOB patterns: the table in test/data/dnc_drip/README.md.
 #include <gtest/gtest.h>
 #include <unistd.h>
 

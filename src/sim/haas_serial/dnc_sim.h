@@ -28,7 +28,9 @@ namespace sim
 /// overruns, which a real Fanuc answers with an alarm. When this process is scheduled late it
 /// catches up at the line rate: the characters the line would have carried meanwhile arrived
 /// before the XOFF it then sends. Characters that arrive with the buffer full are lost (counted
-/// as overflow).
+/// as overflow). Which of these behaviours a manual states (DC1/DC3, the ten characters after DC3)
+/// and which are this model's own choices (buffer size, marks, execution rate, one stop bit): the
+/// table in test/data/dnc_drip/README.md.
 struct DripControlOptions
 {
   size_t buffer_size = 1024;    ///< characters the control can hold
