@@ -108,7 +108,9 @@ class AtControllerNode
         [&](MachineState& s)
         {
           s.spindle_speed = 0.0;
-          s.coolant = false;
+          // Nothing is known until the controller reports (E0/E1) and an operation sets coolant.
+          s.coolant = MachineState::COOLANT_UNKNOWN;
+          s.estop = MachineState::ESTOP_UNKNOWN;
           s.execution = MachineState::EXECUTION_UNKNOWN;
         });
 
@@ -269,6 +271,12 @@ class AtControllerNode
                                                                                   : LinkState::kConnecting;
     }
     state_->setLink(combined, why.empty() ? "" : (which == 0 ? "command link: " : "report link: ") + why);
+    if (which == 1 && state != LinkState::kUp)
+    {
+      // Without reports the e-stop is not known any more: motion waits for the next E0.
+      estop_ = MachineState::ESTOP_UNKNOWN;
+      state_->update([](MachineState& s) { s.estop = MachineState::ESTOP_UNKNOWN; });
+    }
   }
 
   void readReports()
@@ -312,7 +320,7 @@ class AtControllerNode
   {
     if (const auto* estop = std::get_if<ap::EStopReport>(&report))
     {
-      estop_ = estop->active;
+      estop_ = estop->active ? MachineState::ESTOP_ON : MachineState::ESTOP_OFF;
       if (estop->active)
       {
         sender_->abortRunning("emergency stop reported by the controller (E1)");
@@ -320,7 +328,7 @@ class AtControllerNode
       state_->update(
           [&](MachineState& s)
           {
-            s.estop = estop->active;
+            s.estop = estop->active ? MachineState::ESTOP_ON : MachineState::ESTOP_OFF;
             s.execution = estop->active ? MachineState::EXECUTION_ALARM : MachineState::EXECUTION_READY;
             s.message = estop->active ? "emergency stop (E1)" : "emergency stop released (E0)";
           });
@@ -379,9 +387,16 @@ class AtControllerNode
       return what + " refused: motion is disabled; set the parameter " + pnh_.resolveName("enable_motion") +
              " to true to allow it";
     }
-    if (estop_)
+    if (estop_ == MachineState::ESTOP_ON)
     {
       return what + " refused: the controller reports an emergency stop (E1)";
+    }
+    if (estop_ != MachineState::ESTOP_OFF)
+    {
+      // Unknown is not clear: the controller has not said E0 on this report connection.
+      return what +
+             " refused: the controller's emergency stop state is unknown (no E0/E1 report on the report link "
+             "yet); motion starts once it reports E0";
     }
     return "";
   }
@@ -708,7 +723,7 @@ class AtControllerNode
           {
             s.execution = MachineState::EXECUTION_ACTIVE;
             s.mode = MachineState::MODE_DNC;
-            s.coolant = operation.coolant;
+            s.coolant = operation.coolant ? MachineState::COOLANT_ON : MachineState::COOLANT_OFF;
             s.program = has(goal->gcode_file) ? goal->gcode_file : "nav_msgs/Path";
             if (operation.tool)
             {
@@ -739,12 +754,12 @@ class AtControllerNode
       state_->update(
           [&](MachineState& s)
           {
-            s.execution = estop_                                       ? MachineState::EXECUTION_ALARM
+            s.execution = estop_ == MachineState::ESTOP_ON             ? MachineState::EXECUTION_ALARM
                           : job->state() == ap::Job::State::kSucceeded ? MachineState::EXECUTION_READY
                                                                        : MachineState::EXECUTION_STOPPED;
             s.mode = jog_axis_ >= 0 ? MachineState::MODE_MANUAL : MachineState::MODE_AUTO;
-            s.coolant = false;
-            s.spindle_speed = 0.0;  // M0@ stops the spindle (step 18)
+            s.coolant = MachineState::COOLANT_OFF;  // #@ ends the operation's coolant
+            s.spindle_speed = 0.0;                  // M0@ stops the spindle (step 18)
             s.message = "follow_path " + std::string(ap::Job::toString(job->state())) + ": " + job->message();
           });
       switch (job->state())
@@ -798,9 +813,13 @@ class AtControllerNode
   {
     const auto stats = sender_->stats();
     const auto sequencer = sender_->sequencer();
-    if (estop_)
+    if (estop_ == MachineState::ESTOP_ON)
     {
       status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "emergency stop (E1)");
+    }
+    else if (estop_ != MachineState::ESTOP_OFF)
+    {
+      status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "emergency stop state unknown (no E0/E1 report yet)");
     }
     else if (stats.underruns > underruns_seen_)
     {
@@ -861,7 +880,7 @@ class AtControllerNode
   bool position_valid_ = false;
   LinkState links_[2] = {LinkState::kDown, LinkState::kDown};
 
-  std::atomic<bool> estop_{false};
+  std::atomic<uint8_t> estop_{MachineState::ESTOP_UNKNOWN};  ///< as last reported; unknown without a report link
   std::atomic<bool> at_home_{false};
   std::atomic<int> jog_axis_{-1};
   std::atomic<uint64_t> report_errors_{0};

@@ -227,6 +227,7 @@ class HaasMdcNode
               m.mode = MachineState::MODE_UNKNOWN;
               m.execution = MachineState::EXECUTION_UNKNOWN;
               m.position_valid = false;
+              m.estop = MachineState::ESTOP_UNKNOWN;
             });
       }
       state_->setLink(link, why);
@@ -265,6 +266,25 @@ class HaasMdcNode
     link_ = link;
   }
 
+  // The emergency stop as far as Q500 tells it: a status naming it is ON; a status that is no alarm
+  // (idle, running, feed hold, stopped) is OFF, since a Haas in e-stop reports ALARM; an alarm that
+  // does not name it, or a status we do not know, leaves it UNKNOWN.
+  static uint8_t estopFrom(const mdc::MachineStatus& s)
+  {
+    std::string text = s.status_text;
+    std::transform(text.begin(), text.end(), text.begin(), [](unsigned char c) { return std::toupper(c); });
+    if (text.find("ESTOP") != std::string::npos || text.find("E-STOP") != std::string::npos ||
+        text.find("EMERGENCY") != std::string::npos)
+    {
+      return MachineState::ESTOP_ON;
+    }
+    if (s.execution == mdc::Execution::kAlarm || s.execution == mdc::Execution::kUnknown)
+    {
+      return MachineState::ESTOP_UNKNOWN;
+    }
+    return MachineState::ESTOP_OFF;
+  }
+
   // Called by the poller after each reply, under its lock.
   void onStatus(const mdc::MachineStatus& s, const std::vector<mdc::CycleEventData>& events)
   {
@@ -280,6 +300,7 @@ class HaasMdcNode
           m.part_count = s.parts.value_or(-1);
           m.tool = s.tool ? static_cast<int32_t>(*s.tool) : -1;
           m.message = s.execution == mdc::Execution::kAlarm ? "Haas status " + s.status_text : "";
+          m.estop = estopFrom(s);
           if (spindle_var_ > 0 && s.variables.count(spindle_var_))
           {
             // #3027 is in rev/min, the unit of MachineState.spindle_speed.

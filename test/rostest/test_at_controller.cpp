@@ -34,8 +34,12 @@ struct AtController : ::testing::Test
   void SetUp() override
   {
     ASSERT_TRUE(client.waitForServer(ros::Duration(10.0)));
-    ASSERT_TRUE(state.waitFor([](const auto& s)
-                              { return s.link == cnc_bridge::MachineState::LINK_UP && s.position_valid && !s.estop; }))
+    ASSERT_TRUE(state.waitFor(
+        [](const auto& s)
+        {
+          return s.link == cnc_bridge::MachineState::LINK_UP && s.position_valid &&
+                 s.estop == cnc_bridge::MachineState::ESTOP_OFF;
+        }))
         << "link " << int(state.last().link);
   }
 };
@@ -59,8 +63,8 @@ TEST_F(AtController, FollowsAGcodeProgramToItsEndPoint)
                   });
   ASSERT_TRUE(state.waitFor([](const auto& s) { return s.execution == cnc_bridge::MachineState::EXECUTION_ACTIVE; }));
   const auto running = state.last();
-  EXPECT_TRUE(running.coolant);                   // M08 in the program: P1@
-  EXPECT_NEAR(running.spindle_speed, 12000, 50);  // S12000 M03 -> S128@ of 24000 rev/min
+  EXPECT_EQ(running.coolant, cnc_bridge::MachineState::COOLANT_ON);  // M08 in the program: P1@
+  EXPECT_NEAR(running.spindle_speed, 12000, 50);                     // S12000 M03 -> S128@ of 24000 rev/min
   EXPECT_EQ(running.tool, 3);
   ASSERT_TRUE(client.waitForResult(ros::Duration(40.0)));
   EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client.getState().getText();
@@ -75,8 +79,8 @@ TEST_F(AtController, FollowsAGcodeProgramToItsEndPoint)
   // Reported position converges to the program's end point X5 Y5 Z-1 (mm), to the pulse.
   EXPECT_TRUE(state.waitFor([](const auto& s) { return near(s.position, 0.005, 0.005, -0.001, 1.5e-6); }))
       << state.last().position;
-  EXPECT_FALSE(state.last().coolant);
-  EXPECT_EQ(state.last().spindle_speed, 0.0);  // M0@ stops the spindle
+  EXPECT_EQ(state.last().coolant, cnc_bridge::MachineState::COOLANT_OFF);  // #@
+  EXPECT_EQ(state.last().spindle_speed, 0.0);                              // M0@ stops the spindle
 }
 
 TEST_F(AtController, JogIsRefusedWhileMachiningAndCancelDecelerates)
@@ -139,7 +143,7 @@ TEST_F(AtController, EmergencyStopMidPathStopsMotionAndAbortsWithTheReason)
   ASSERT_TRUE(client.waitForResult(ros::Duration(10.0)));
   EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::ABORTED);
   EXPECT_NE(client.getResult()->message.find("emergency stop"), std::string::npos) << client.getResult()->message;
-  ASSERT_TRUE(state.waitFor([](const auto& s) { return s.estop; }));
+  ASSERT_TRUE(state.waitFor([](const auto& s) { return s.estop == cnc_bridge::MachineState::ESTOP_ON; }));
   EXPECT_EQ(state.last().execution, cnc_bridge::MachineState::EXECUTION_ALARM);
   // Motion stopped. The simulator reports every 10 ms while moving; these are measurement windows
   // (asserting that nothing moves needs a span of time), not waits for an event.
@@ -157,7 +161,7 @@ TEST_F(AtController, EmergencyStopMidPathStopsMotionAndAbortsWithTheReason)
   ros::WallDuration(0.5).sleep();
   EXPECT_NEAR(state.last().position.x, stopped_x, 1e-9);
   ASSERT_EQ(kill(pid, SIGUSR2), 0);  // released
-  ASSERT_TRUE(state.waitFor([](const auto& s) { return !s.estop; }));
+  ASSERT_TRUE(state.waitFor([](const auto& s) { return s.estop == cnc_bridge::MachineState::ESTOP_OFF; }));
 }
 
 TEST_F(AtController, HomeReturnsToTheHomePosition)

@@ -174,6 +174,23 @@ TEST(HaasMdcNode, StateFollowsTheScriptedMachineThroughIdleBusyHoldAndAlarm)
       [](const MachineState& s)
       { return s.execution == MachineState::EXECUTION_ALARM && s.message == "Haas status ALARM ON"; },
       20.0));
+  // E-stop from the status: a status that is no alarm says it is released; an alarm that does not
+  // name the e-stop leaves it unknown (a Haas in e-stop reports ALARM too).
+  EXPECT_TRUE(
+      recorder->sawState([](const MachineState& s)
+                         { return s.execution == MachineState::EXECUTION_READY && s.estop == MachineState::ESTOP_OFF; },
+                         20.0));
+  EXPECT_TRUE(recorder->sawState(
+      [](const MachineState& s)
+      { return s.execution == MachineState::EXECUTION_ALARM && s.estop == MachineState::ESTOP_UNKNOWN; },
+      20.0));
+  EXPECT_FALSE(recorder->sawState(
+      [](const MachineState& s)
+      {
+        return s.execution != MachineState::EXECUTION_ALARM && s.estop != MachineState::ESTOP_OFF &&
+               s.link == MachineState::LINK_UP && s.execution != MachineState::EXECUTION_UNKNOWN;
+      },
+      0.0));
   // Tool 3 during the cycle, spindle at 8000 rpm.
   EXPECT_TRUE(recorder->sawState([](const MachineState& s) { return s.tool == 3 && s.spindle_speed == 8000.0; }, 20.0));
 }
