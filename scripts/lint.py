@@ -11,6 +11,7 @@ import os
 import re
 import subprocess
 import sys
+import tempfile
 import xml.etree.ElementTree as ET
 
 import check_module_table
@@ -76,15 +77,24 @@ def check_references(paths):
     return found
 
 
-def check_cell_launch_generated(path):
-    """launch/cell.launch must be what scripts/cell_launch.py makes of config/cell.yaml."""
-    result = subprocess.run([sys.executable, "scripts/cell_launch.py", "config/cell.yaml"], cwd=ROOT,
-                            capture_output=True, text=True)
-    if result.returncode != 0:
-        return "scripts/cell_launch.py failed: " + result.stderr.strip()
-    with open(os.path.join(ROOT, path)) as f:
-        if f.read() != result.stdout:
-            return "out of date: run scripts/cell_launch.py config/cell.yaml -o launch/cell.launch"
+def check_cell_launch_generated(path, rviz_path="rviz/cell.rviz"):
+    """launch/cell.launch and rviz/cell.rviz must be what scripts/cell_launch.py makes of
+    config/cell.yaml."""
+    with tempfile.TemporaryDirectory() as scratch:
+        rviz = os.path.join(scratch, "cell.rviz")
+        result = subprocess.run([sys.executable, "scripts/cell_launch.py", "config/cell.yaml", "--rviz", rviz],
+                                cwd=ROOT, capture_output=True, text=True)
+        if result.returncode != 0:
+            return "scripts/cell_launch.py failed: " + result.stderr.strip()
+        with open(rviz) as f:
+            rviz_text = f.read()
+    # The launch file names the configuration it was written with: here the package's own.
+    launch_text = result.stdout.replace(rviz, "$(find cnc_bridge)/" + rviz_path)
+    for name, text in ((path, launch_text), (rviz_path, rviz_text)):
+        with open(os.path.join(ROOT, name)) as f:
+            if f.read() != text:
+                return (f"{name} out of date: run scripts/cell_launch.py config/cell.yaml -o launch/cell.launch "
+                        f"--rviz rviz/cell.rviz")
     return None
 
 

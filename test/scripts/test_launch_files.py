@@ -1,0 +1,203 @@
+"""The launch behaviour of a cell, checked with roslaunch's own loader (no master needed): every
+node launch file takes params_file:= (loaded over its defaults, under the arguments given) and
+respawn:=, no node is required, and scripts/cell_launch.py places the cell in its root frame,
+passes each machine's profile to its nodes and writes an rviz configuration of the cell's own
+machines."""
+import glob
+import os
+import subprocess
+import sys
+import tempfile
+import unittest
+import xml.etree.ElementTree as ET
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+# $(find cnc_bridge) in the launch files: this checkout, before any installed or built copy.
+os.environ["ROS_PACKAGE_PATH"] = ROOT + ":/usr/share"
+import roslaunch.config  # noqa: E402  (after ROS_PACKAGE_PATH, which rospkg reads)
+import roslaunch.xmlloader  # noqa: E402
+
+import yaml  # noqa: E402
+
+LAUNCH = os.path.join(ROOT, "launch")
+# Launch files that start one node of this package, named after it.
+NODE_LAUNCH_FILES = sorted(
+    path for path in glob.glob(os.path.join(LAUNCH, "*.launch"))
+    if [node.get("type") for node in ET.parse(path).getroot().iter("node") if node.get("pkg") == "cnc_bridge"]
+    == [os.path.basename(path)[:-len(".launch")]])
+
+
+def load(path, *argv):
+    """(params {name: value}, nodes) roslaunch would set and start for `path` with `argv`."""
+    config = roslaunch.config.ROSLaunchConfig()
+    roslaunch.xmlloader.XmlLoader().load(path, config, argv=list(argv), verbose=False)
+    return {name: param.value for name, param in config.params.items()}, config.nodes
+
+
+def parameter_file(values):
+    handle = tempfile.NamedTemporaryFile("w", suffix=".yaml", delete=False)
+    yaml.safe_dump(values, handle)
+    handle.close()
+    return handle.name
+
+
+class NodeLaunchFiles(unittest.TestCase):
+    def test_the_node_launch_files_are_found(self):
+        names = {os.path.basename(path) for path in NODE_LAUNCH_FILES}
+        for expected in ("dnc_node.launch", "dprnt_node.launch", "haas_mdc_node.launch", "ethernut_node.launch",
+                         "at_controller_node.launch", "slave_bus_node.launch", "surface_mapper.launch"):
+            self.assertIn(expected, names)
+
+    def test_no_node_is_required(self):
+        for path in glob.glob(os.path.join(LAUNCH, "*.launch")):
+            for node in ET.parse(path).getroot().iter("node"):
+                self.assertNotEqual(node.get("required", "false").lower(), "true",
+                                    "%s: node %s is required: its exit would stop the whole cell"
+                                    % (os.path.basename(path), node.get("name")))
+
+    def test_respawn_is_an_argument(self):
+        for path in NODE_LAUNCH_FILES:
+            with self.subTest(path=os.path.basename(path)):
+                _, nodes = load(path)
+                self.assertFalse(nodes[0].respawn)
+                _, nodes = load(path, "respawn:=true", "respawn_delay:=5")
+                self.assertTrue(nodes[0].respawn)
+                self.assertEqual(nodes[0].respawn_delay, 5.0)
+
+    def test_params_file_lies_between_defaults_and_arguments(self):
+        for path in NODE_LAUNCH_FILES:
+            with self.subTest(path=os.path.basename(path)):
+                node = os.path.basename(path)[:-len(".launch")]
+                defaults, _ = load(path)
+                self.assertEqual(load(path, "params_file:=")[0], defaults, "an empty params_file changes nothing")
+                # The first two parameters the launch file sets: one from the file, one from both.
+                first, second = sorted(name for name in defaults if not isinstance(defaults[name], (dict, list)))[:2]
+                ours = {"%s" % first.split("/")[-1]: self.other_than(defaults[first]),
+                        "%s" % second.split("/")[-1]: self.other_than(defaults[second]), "profile_only": 42}
+                with_file, _ = load(path, "params_file:=" + parameter_file(ours))
+                self.assertEqual(with_file[first], ours[first.split("/")[-1]], "the file's value over the default")
+                self.assertEqual(with_file["/%s/profile_only" % node], 42)
+                argument = self.other_than(ours[second.split("/")[-1]])
+                given, _ = load(path, "params_file:=" + parameter_file(ours), "%s:=%s" % (second.split("/")[-1],
+                                                                                       argument))
+                self.assertEqual(str(given[second]).lower(), str(argument).lower(), "the argument over the file")
+                untouched = [name for name in defaults if name not in (first, second)]
+                self.assertEqual({n: given[n] for n in untouched}, {n: defaults[n] for n in untouched})
+
+    @staticmethod
+    def other_than(value):
+        if isinstance(value, bool):
+            return not value
+        if isinstance(value, (int, float)):
+            return value + 3
+        return str(value) + "_x"
+
+    def test_dnc_node_takes_a_serial_profile_and_keeps_given_arguments(self):
+        path = os.path.join(LAUNCH, "dnc_node.launch")
+        profile = parameter_file({"baud": 4800, "data_bits": 7, "parity": "even", "stop_bits": 2})
+        params, _ = load(path, "params_file:=" + profile, "baud:=9600", "port:=/dev/ttyS3")
+        self.assertEqual((params["/dnc_node/baud"], params["/dnc_node/data_bits"], params["/dnc_node/parity"],
+                          params["/dnc_node/stop_bits"], params["/dnc_node/port"]), (9600, 7, "even", 2, "/dev/ttyS3"))
+        self.assertEqual(params["/dnc_node/eob"], "lf", "a default the profile does not set stays")
+
+
+# The control profiles of config/controls/ and the nodes each is written for.
+PROFILE_NODES = {
+    "haas_classic_rs232": ["dnc_node", "dprnt_node", "haas_mdc_node"],
+    "haas_classic_rs232_7e1": ["dnc_node", "dprnt_node", "haas_mdc_node"],
+    "haas_ngc_ethernet": ["haas_mdc_node", "dprnt_node"],
+    "fanuc_0i_rs232": ["dnc_node"],
+    "grbl_class_board": ["slave_bus_node"],
+    "qcnc_ethernut": ["ethernut_node"],
+    "at_controller": ["at_controller_node"],
+}
+
+
+def node_sources(node):
+    """The C++ sources of a node and of the ROS helpers every node uses."""
+    return glob.glob(os.path.join(ROOT, "src", "nodes", node.replace("_node", "") + "*.cpp")) + \
+        glob.glob(os.path.join(ROOT, "src", "ros", "*.cpp"))
+
+
+class ControlProfiles(unittest.TestCase):
+    def test_every_profile_is_known(self):
+        found = sorted(os.path.basename(p)[:-len(".yaml")] for p in glob.glob(os.path.join(ROOT, "config", "controls",
+                                                                                           "*.yaml")))
+        self.assertEqual(found, sorted(PROFILE_NODES))
+
+    def test_each_profile_loads_into_its_nodes(self):
+        for profile, nodes in PROFILE_NODES.items():
+            path = os.path.join(ROOT, "config", "controls", profile + ".yaml")
+            with open(path) as f:
+                values = yaml.safe_load(f)
+            self.assertIsInstance(values, dict, path)
+            sources = ""
+            for source in {source for node in nodes for source in node_sources(node)}:
+                with open(source) as f:
+                    sources += f.read()
+            for key in values:
+                # A setting no node of the family reads is a typo or a dead line.
+                self.assertIn('"%s"' % key, sources, "%s: no node of %s reads '%s'" % (profile, nodes, key))
+            for node in nodes:
+                with self.subTest(profile=profile, node=node):
+                    params, _ = load(os.path.join(LAUNCH, node + ".launch"), "params_file:=" + path)
+                    for key, value in values.items():
+                        self.assertEqual(params["/%s/%s" % (node, key)], value)
+
+
+class CellLaunch(unittest.TestCase):
+    CELL = {
+        "cell": "shop",
+        "root_frame": "map",
+        "simulate": False,
+        "machines": [
+            {"name": "lathe", "position": [0.0, 0.0, 0.0], "profile": "fanuc_0i_rs232",
+             "nodes": [{"launch": "dnc_node", "args": {"port": "/dev/ttyUSB3"}}]},
+            {"name": "router", "position": [3.0, 0.0, 0.0],
+             "nodes": [{"launch": "ethernut_node", "args": {"host": "10.0.0.7"}}]},
+        ],
+    }
+
+    def generate(self, description):
+        with tempfile.TemporaryDirectory() as scratch:
+            cell_yaml = os.path.join(scratch, "shop.yaml")
+            with open(cell_yaml, "w") as f:
+                yaml.safe_dump(description, f)
+            rviz = os.path.join(scratch, "shop.rviz")
+            launch = os.path.join(scratch, "shop.launch")
+            subprocess.run([sys.executable, os.path.join(ROOT, "scripts", "cell_launch.py"), cell_yaml, "-o", launch,
+                            "--rviz", rviz], check=True)
+            with open(rviz) as f:
+                rviz_config = yaml.safe_load(f)
+            params, nodes = load(launch, "gui:=true")
+            return params, nodes, rviz_config, rviz
+
+    def test_root_frame_profile_and_rviz_of_the_cell(self):
+        params, nodes, rviz, rviz_path = self.generate(self.CELL)
+        frame = [node for node in nodes if node.name == "cell_frame"][0]
+        self.assertEqual(frame.args.split()[-2:], ["map", "shop"])
+        self.assertEqual(rviz["Visualization Manager"]["Global Options"]["Fixed Frame"], "map")
+        # The lathe's profile reaches its node; the arguments of the YAML win over it.
+        self.assertEqual(params["/shop/lathe/dnc_node/port"], "/dev/ttyUSB3")
+        self.assertEqual(params["/shop/lathe/dnc_node/stop_bits"], 2)
+        self.assertEqual(params["/shop/router/ethernut_node/host"], "10.0.0.7")
+        # rviz shows this cell's machines and what their nodes publish, opened by gui:=true.
+        displays = {d["Name"]: d for d in rviz["Visualization Manager"]["Displays"]}
+        self.assertEqual(displays["lathe"]["Robot Description"], "shop/lathe/robot_description")
+        self.assertEqual(displays["router job path"]["Topic"], "/shop/router/job/path")
+        self.assertEqual(displays["router tool path"]["Topic"], "/shop/router/tool_path")
+        self.assertNotIn("haas_vf2", displays)
+        viewer = [node for node in nodes if node.package == "rviz"][0]
+        self.assertIn(rviz_path, viewer.args)
+
+    def test_root_frame_defaults_to_world(self):
+        description = dict(self.CELL)
+        del description["root_frame"]
+        _, nodes, rviz, _ = self.generate(description)
+        frame = [node for node in nodes if node.name == "cell_frame"][0]
+        self.assertEqual(frame.args.split()[-2:], ["world", "shop"])
+        self.assertEqual(rviz["Visualization Manager"]["Global Options"]["Fixed Frame"], "world")
+
+
+if __name__ == "__main__":
+    unittest.main()
