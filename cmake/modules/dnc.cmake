@@ -51,3 +51,8 @@ if(NOT CNC_BRIDGE_CORE_ONLY)
     add_dependencies(test_dnc_node dnc_node sim_haas_serial ${PROJECT_NAME}_generate_messages_cpp)
   endif()
 endif()
+
+# The serial control profiles of config/controls/ through dnc_node.launch onto a pty.
+if(NOT CNC_BRIDGE_CORE_ONLY AND CATKIN_ENABLE_TESTING)
+  add_rostest(test/rostest/control_profiles.test DEPENDENCIES dnc_node ${PROJECT_NAME}_generate_messages_py)
+endif()
