@@ -14,7 +14,6 @@ import tempfile
 import termios
 import unittest
 
-import rospkg
 import rospy
 import yaml
 
@@ -28,7 +27,7 @@ DNC_PROFILES = ["haas_classic_rs232", "haas_classic_rs232_7e1", "fanuc_0i_rs232"
 
 class ControlProfilesOnAPty(unittest.TestCase):
     def setUp(self):
-        self.package = rospkg.RosPack().get_path("cnc_bridge")
+        self.package = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
         self.scratch = tempfile.mkdtemp(prefix="cnc_profiles_")
 
     def start_node(self, namespace, profile, link):
