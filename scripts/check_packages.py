@@ -65,6 +65,9 @@ DEBIAN_OF_KEY = {
     "rviz": ["rviz"],
     "boost": ["libboost-dev", "libboost-system-dev", "libboost-thread-dev", "libboost-program-options-dev"],
     "yaml-cpp": ["libyaml-cpp-dev"],
+    "libsmbclient-dev": ["libsmbclient-dev"],
+    "samba": ["samba"],
+    "smbclient": ["smbclient"],
     "gtest": ["libgtest-dev", "googletest"],
     "python3-numpy": ["python3-numpy"],
     "python3-matplotlib": ["python3-matplotlib"],
@@ -170,6 +173,8 @@ PROGRAM_PACKAGES = {
     "cyclictest": ["rt-tests"],
     "ip": ["iproute2"],  # the two-host test's network namespaces
     "pgrep": ["procps"],
+    "smbd": ["samba"], "smbpasswd": ["samba"],  # the SMB tests' server
+    "smbclient": ["smbclient"],  # the SMB tests' control and bench/share's reference
     "clang": ["clang", "libclang-rt-14-dev"],  # sanitizers and libFuzzer
     "clang-format": ["clang-format"],
     "cmake": ["cmake"], "cc": ["build-essential"], "ccache": ["ccache"],

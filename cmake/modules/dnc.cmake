@@ -24,7 +24,7 @@ endif()
 
 # cnc_dnc: the ROS-free transfer tool (subcommands in a table in src/cli/cnc_dnc.cpp).
 cnc_tool(cnc_dnc src/cli/cnc_dnc.cpp)
-target_link_libraries(cnc_dnc cnc_bridge_xmodem)
+target_link_libraries(cnc_dnc cnc_bridge_xmodem cnc_bridge_programs)
 
 # The tools as a user runs them: cnc_dnc and sim_haas_serial xmodem as processes over a pty.
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
@@ -43,7 +43,7 @@ target_link_libraries(sim_haas_serial cnc_bridge_xmodem)
 
 if(NOT CNC_BRIDGE_CORE_ONLY)
   cnc_node(dnc_node src/nodes/dnc_node.cpp)
-  target_link_libraries(dnc_node cnc_bridge_xmodem)
+  target_link_libraries(dnc_node cnc_bridge_xmodem cnc_bridge_programs)
   if(CATKIN_ENABLE_TESTING)
     find_package(rostest REQUIRED)
     add_rostest_gtest(test_dnc_node test/rostest/dnc_node.test test/rostest/test_dnc_node.cpp)

@@ -23,6 +23,7 @@
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
 #include "progress_line.h"
+#include "protected_options.h"
 #include "serial_options.h"
 
 namespace po = boost::program_options;
@@ -188,6 +189,7 @@ int runSend(const std::vector<std::string>& args)
       "ack-turnaround", po::value<unsigned>()->default_value(0),
       "milliseconds of quiet after each ACK before the next block (rx flushes after ACKs too; 0 is "
       "what sx does)");
+  cli::addProtectedOptions(options);
   const po::variables_map vm = parse("send", args, options);
   const xmodem::Mode mode = parsed(vm, "mode", &xmodem::parseMode);
   xmodem::TextOptions text;
@@ -197,6 +199,7 @@ int runSend(const std::vector<std::string>& args)
   config.turnaround = Milliseconds(vm["turnaround"].as<unsigned>());
   config.ack_turnaround = Milliseconds(vm["ack-turnaround"].as<unsigned>());
   const std::string file = vm["file"].as<std::string>();
+  cli::checkProtected(vm, file);  // before the port is opened: the control receives nothing
   return withPort(vm,
                   [&](Transport& port, std::atomic<bool>& cancel)
                   {

@@ -28,6 +28,7 @@
 #include "cnc_bridge/sim/sim_support.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "progress_line.h"
+#include "protected_options.h"
 #include "serial_options.h"
 
 namespace po = boost::program_options;
@@ -176,10 +177,12 @@ int runDrip(const std::vector<std::string>& args)
       "hold-action", po::value<std::string>()->default_value("fail"), "fail|resume (assume the XON was lost)")(
       "realtime", po::value<int>()->default_value(0),
       "SCHED_FIFO priority while feeding (0: normal; keeps the pacing on time on a loaded machine)");
+  addProtectedOptions(options);
   po::variables_map vm;
   int status = 0;
   if (!parse("drip", args, options, vm, status))
     return status;
+  checkProtected(vm, vm["file"].as<std::string>());  // before the port is opened
   const SerialSettings settings = serialSettings(vm);
   dnc::DripOptions drip;
   drip.eob = dnc::parseEob(vm["eob"].as<std::string>());

@@ -27,6 +27,14 @@ DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   std::error_code ignored;
   std::filesystem::create_directories(program_dir, ignored);  // ProgramDirectory reports what fails
   programs_ = std::make_unique<ProgramDirectory>(program_dir);
+  // ~protected_programs (string, default "O08000-O09999"; "" for none): program numbers never
+  // sent (by any protocol) unless ~allow_protected_programs (bool, default false) is set. A Haas
+  // keeps its probing/WIPS and OEM macros there. The number is taken from the file name (by
+  // ~name_pattern, default "O%05d.nc") and from the program's first block.
+  protected_ = std::make_unique<programs::ProtectedRange>(pnh.param<std::string>("protected_programs", "O08000-O09999"),
+                                                          pnh.param("allow_protected_programs", false),
+                                                          "~allow_protected_programs");
+  name_pattern_ = std::make_unique<programs::NamePattern>(pnh.param<std::string>("name_pattern", "O%05d.nc"));
   // ~xmodem_mode (string, default "xmodem"): protocol when a request leaves it empty. A Haas
   // speaks XModem checksum only (xmodem); xmodem-crc and xmodem-1k suit PC-based controls.
   pnh.param<std::string>("xmodem_mode", default_protocol_, "xmodem");
@@ -240,10 +248,19 @@ TransferResult DncNode::runReserved(TransferGoal goal, const Feedback& feedback,
   try
   {
     job.path = job.send ? programs_->resolveExisting(goal.file) : programs_->resolveForWrite(goal.file);
+    if (job.send)
+      programs::checkProtectedFile(*protected_, *name_pattern_, job.path, goal.file);
   }
   catch (const ConfigError& e)
   {
     result.message = std::string("refused: ") + e.what();
+    return result;
+  }
+  catch (const Error& e)  // DisabledError ("refused: ..."), or the file cannot be read
+  {
+    result.message = e.what();
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    ++counters_.refused;
     return result;
   }
 

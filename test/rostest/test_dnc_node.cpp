@@ -336,6 +336,32 @@ TEST_F(DncNodeTest, FilesOutsideTheProgramDirectoryAreRefused)
   EXPECT_NE(bad_protocol.response.message.find("unknown protocol"), std::string::npos);
 }
 
+// O08000-O09999 (Haas probing/WIPS and OEM macros) is refused by every protocol, by the file's
+// name or by the program's own O number, and the control (ready and NAKing) stores nothing.
+TEST_F(DncNodeTest, ProtectedProgramsAreRefusedAndTheControlReceivesNothing)
+{
+  std::string contents = readFile(param("program"));
+  contents.replace(contents.find("O05555"), 6, "O09002");
+  writeProgram("O09002.nc", contents);
+  writeProgram("wips.nc", contents);
+  for (const std::string protocol : {"", "drip"})
+  {
+    for (const std::string name : {"O09002.nc", "wips.nc"})
+    {
+      cnc_bridge::SendProgram srv;
+      srv.request.file = name;
+      srv.request.protocol = protocol;
+      ASSERT_TRUE(send_.call(srv));
+      EXPECT_FALSE(srv.response.success) << name;
+      EXPECT_EQ(srv.response.message.rfind("refused", 0), 0u) << srv.response.message;
+      EXPECT_NE(srv.response.message.find("O08000-O09999"), std::string::npos) << srv.response.message;
+      EXPECT_NE(srv.response.message.find("~allow_protected_programs"), std::string::npos) << srv.response.message;
+      EXPECT_EQ(srv.response.bytes, 0u);
+    }
+  }
+  EXPECT_FALSE(exists(control_dir_ + "/O09002.nc"));  // the service returns after the transfer would have ended
+}
+
 int main(int argc, char** argv)
 {
   ::testing::InitGoogleTest(&argc, argv);

@@ -339,6 +339,36 @@ TEST(CncDncCli, FailuresExitOneWithOneErrorLineAndLeaveNoFile)
   EXPECT_EQ(filesIn(dir.path), (std::vector<std::string>{"O00001.nc", "kept.nc", "tool.err", "tool.out"}));
 }
 
+// Haas keeps probing/WIPS and OEM macros in O08000-O09999: send and drip refuse those numbers
+// (by file name or by the program's O number) before the port is opened, unless --allow-protected.
+TEST(CncDncCli, ProtectedProgramIsRefusedAndTheControlReceivesNothing)
+{
+  TempDir dir("test_xmodem_cli");
+  const std::string memory = dir.path + "/haas";
+  Simulator haas(memory, {});
+  const std::string source = dir.path + "/probe.nc";
+  const std::string text = program(9001, 2000);
+  writeFile(source, text);
+  const ToolRun refused =
+      cncDnc({"send", "--port", haas.port(), "--mode", "checksum", "--timeout", "20", source}, dir.path);
+  expectOneErrorLine(refused, "send", "in the protected range O08000-O09999");
+  EXPECT_NE(refused.err.find("--allow-protected"), std::string::npos) << refused.err;
+  EXPECT_FALSE(exists(memory + "/O09001.nc"));
+
+  PtyMaster line;  // the drip-fed control: any byte cnc_dnc wrote would be waiting here
+  writeFile(dir.path + "/O08500.nc", program(100, 500));
+  expectOneErrorLine(cncDnc({"drip", "--port", line.slavePath(), "--no-pace", dir.path + "/O08500.nc"}, dir.path),
+                     "drip", "O08500");
+  uint8_t byte = 0;
+  EXPECT_EQ(line.read(&byte, 1, Milliseconds(0)), 0u);
+
+  const ToolRun allowed = cncDnc(
+      {"send", "--port", haas.port(), "--mode", "checksum", "--timeout", "20", "--allow-protected", source}, dir.path);
+  ASSERT_EQ(allowed.status, 0) << allowed.err;
+  EXPECT_NE(haas.waitFor("received " + memory + "/O09001.nc", kSimulatorReply), "") << haas.seen();
+  EXPECT_EQ(readFile(memory + "/O09001.nc"), text);
+}
+
 TEST(CncDncCli, BadCommandLineExitsTwo)
 {
   TempDir dir("test_xmodem_cli");

@@ -23,6 +23,7 @@
 #include "cnc_bridge/TransferAction.h"
 #include "cnc_bridge/common/port_lock.h"
 #include "cnc_bridge/common/program_dir.h"
+#include "cnc_bridge/programs/program_name.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
@@ -89,6 +90,8 @@ class DncNode
   ros::NodeHandle pnh_;
   SerialSettings serial_;
   std::unique_ptr<ProgramDirectory> programs_;
+  std::unique_ptr<programs::ProtectedRange> protected_;  ///< refused on send unless allowed
+  std::unique_ptr<programs::NamePattern> name_pattern_;
   std::string default_protocol_;
   bool keep_open_ = false;
   xmodem::Config xmodem_config_;

@@ -1,0 +1,28 @@
+# share module: programs over Ethernet. cnc_bridge_programs (no SMB: program names and numbers,
+# the protected range, the ProgramStore interface and the local store), used by every wire;
+# cnc_bridge_share (the SMB store on Samba's libsmbclient); their tests and fuzz target.
+cnc_core_module(cnc_bridge_programs
+  src/programs/program_name.cpp
+  src/programs/program_store.cpp)
+
+find_path(SMBCLIENT_INCLUDE_DIR libsmbclient.h PATH_SUFFIXES samba-4.0)
+find_library(SMBCLIENT_LIBRARY smbclient)
+if(NOT SMBCLIENT_INCLUDE_DIR OR NOT SMBCLIENT_LIBRARY)
+  message(FATAL_ERROR "libsmbclient not found: install the Debian package libsmbclient-dev")
+endif()
+cnc_core_module(cnc_bridge_share src/share/smb_store.cpp)
+target_include_directories(cnc_bridge_share PRIVATE ${SMBCLIENT_INCLUDE_DIR})
+target_link_libraries(cnc_bridge_share PUBLIC cnc_bridge_programs ${SMBCLIENT_LIBRARY})
+
+if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
+  cnc_core_gtest(test_program_name test/unit/test_program_name.cpp)
+  target_link_libraries(test_program_name cnc_bridge_programs)
+  # Against a real Samba server (smbd started by the test on a free loopback port).
+  cnc_core_gtest(test_smb_store test/unit/test_smb_store.cpp)
+  target_link_libraries(test_smb_store cnc_bridge_share)
+endif()
+
+cnc_fuzz_target(fuzz_program_name test/fuzz/fuzz_program_name.cpp)
+if(CNC_BRIDGE_FUZZ)
+  target_link_libraries(fuzz_program_name cnc_bridge_programs)
+endif()

@@ -1,0 +1,123 @@
+// Where programs live: a folder the bridge reads programs from and writes them to, whether it is
+// a local directory or a control's (or a file server's) SMB share. Nodes and the cnc_dnc tool
+// move programs through this interface, so the wire a machine uses does not change their code.
+//
+// Every implementation writes atomically as the control sees it: the program is written under a
+// temporary name in the same folder and renamed to its name only when complete, so a control
+// polling the folder never opens a partial program, and a failed write leaves the previous
+// version in place.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "cnc_bridge/common/error.h"
+#include "cnc_bridge/programs/program_name.h"
+
+namespace cnc_bridge::programs
+{
+/// \brief One file of a program folder.
+struct ProgramEntry
+{
+  std::string name;   ///< relative to the store's folder
+  uint64_t size = 0;  ///< bytes
+  int64_t mtime = 0;  ///< modification time, seconds since the epoch
+};
+
+/// \brief The named file does not exist in the store (other failures are Error/LinkError).
+class NotFoundError : public Error
+{
+ public:
+  using Error::Error;
+};
+
+/// \brief Bytes moved so far and the total (0 when unknown). Called after each chunk.
+using StoreProgress = std::function<void(uint64_t done, uint64_t total)>;
+
+/// \brief A folder of programs. Names are relative to the folder: '/'-separated, no empty, '.' or
+/// '..' component (checkName()). Implementations are thread-safe (calls are serialised).
+class ProgramStore
+{
+ public:
+  virtual ~ProgramStore() = default;
+
+  /// \brief Where the store is, for messages ("/srv/programs", "smb://cnc1:445/memory").
+  virtual std::string describe() const = 0;
+  /// \brief The files of the folder (not its subfolders), temporary files of unfinished writes
+  /// left out, sorted by name.
+  virtual std::vector<ProgramEntry> list() = 0;
+  /// \throws NotFoundError if \p name does not exist.
+  virtual ProgramEntry stat(const std::string& name) = 0;
+  /// \brief The whole file. \throws NotFoundError, Error, CancelledError (when \p cancel is set).
+  virtual std::string read(const std::string& name, const StoreProgress& progress = nullptr,
+                           const std::atomic<bool>* cancel = nullptr) = 0;
+  /// \brief At most the first \p bytes of the file (for listings). \throws as read().
+  virtual std::string readHead(const std::string& name, size_t bytes) = 0;
+  /// \brief Replaces (or creates) \p name with \p data atomically (see the file comment).
+  /// \throws Error, CancelledError; the previous version is in place and no temporary file remains
+  /// unless the server vanished (then the next connection removes it).
+  virtual void write(const std::string& name, const std::string& data, const StoreProgress& progress = nullptr,
+                     const std::atomic<bool>* cancel = nullptr) = 0;
+  /// \brief Renames \p from to \p to, replacing \p to if it exists.
+  virtual void rename(const std::string& from, const std::string& to) = 0;
+  /// \throws NotFoundError if \p name does not exist.
+  virtual void remove(const std::string& name) = 0;
+};
+
+/// \brief Refuses a name that is empty, absolute, has an empty, '.' or '..' component, or a
+/// control character. \throws ConfigError naming it.
+void checkName(const std::string& name);
+/// \brief Whether \p name is one of the temporary names writes use (hidden from list()).
+bool isTemporaryName(const std::string& name);
+/// \brief A temporary name beside \p name: `.<name>.<tag>.partial` in the same folder.
+std::string temporaryName(const std::string& name, const std::string& tag);
+
+/// \brief A local directory (the `~program_dir` of the nodes).
+class LocalProgramStore : public ProgramStore
+{
+ public:
+  /// \throws ConfigError if \p root is not a directory.
+  explicit LocalProgramStore(const std::string& root);
+  std::string describe() const override { return root_; }
+  std::vector<ProgramEntry> list() override;
+  ProgramEntry stat(const std::string& name) override;
+  std::string read(const std::string& name, const StoreProgress& progress = nullptr,
+                   const std::atomic<bool>* cancel = nullptr) override;
+  std::string readHead(const std::string& name, size_t bytes) override;
+  void write(const std::string& name, const std::string& data, const StoreProgress& progress = nullptr,
+             const std::atomic<bool>* cancel = nullptr) override;
+  void rename(const std::string& from, const std::string& to) override;
+  void remove(const std::string& name) override;
+
+ private:
+  std::string path(const std::string& name) const;
+  std::string root_;
+};
+
+/// \brief A program as a listing shows it: the file, and its O number and first comment.
+struct ProgramListing
+{
+  ProgramEntry entry;
+  std::optional<uint32_t> name_number;  ///< from the file name (by the store's name pattern)
+  ProgramHeader header;                 ///< from the head of the file
+};
+
+/// \brief The store's files with their numbers and first comments. \throws as list().
+std::vector<ProgramListing> listPrograms(ProgramStore& store, const NamePattern& pattern);
+
+/// \brief Sends the local file \p local_path to \p store as \p name (its base name if empty),
+/// refusing a protected program before a byte is written. \returns the bytes written.
+/// \throws DisabledError (protected), ConfigError, Error, CancelledError.
+uint64_t putProgram(ProgramStore& store, const std::string& local_path, std::string name, const ProtectedRange& range,
+                    const NamePattern& pattern, const StoreProgress& progress = nullptr,
+                    const std::atomic<bool>* cancel = nullptr);
+/// \brief Fetches \p name from \p store into \p local_path atomically (a failed fetch leaves the
+/// local file as it was). \returns the bytes written.
+uint64_t getProgram(ProgramStore& store, const std::string& name, const std::string& local_path,
+                    const StoreProgress& progress = nullptr, const std::atomic<bool>* cancel = nullptr);
+}  // namespace cnc_bridge::programs

@@ -1,0 +1,236 @@
+// Name checks shared by every store, and the local-directory store (AtomicFileWriter for writes).
+#include "cnc_bridge/programs/program_store.h"
+
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+
+#include "cnc_bridge/common/atomic_file.h"
+
+namespace cnc_bridge::programs
+{
+namespace fs = std::filesystem;
+
+namespace
+{
+constexpr size_t kChunk = 64 * 1024;
+
+void throwIfCancelled(const std::atomic<bool>* cancel, const std::string& what)
+{
+  if (cancel != nullptr && cancel->load())
+    throw CancelledError(what + " cancelled");
+}
+}  // namespace
+
+void checkName(const std::string& name)
+{
+  if (name.empty() || name[0] == '/')
+    throw ConfigError("program name '" + name + "' must be a relative name inside the program folder");
+  size_t start = 0;
+  while (start <= name.size())
+  {
+    size_t end = name.find('/', start);
+    if (end == std::string::npos)
+      end = name.size();
+    const std::string part = name.substr(start, end - start);
+    if (part.empty() || part == "." || part == "..")
+      throw ConfigError("program name '" + name + "' has an empty, '.' or '..' part: refused");
+    start = end + 1;
+  }
+  for (const char c : name)
+  {
+    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f || c == '\\')
+      throw ConfigError("program name '" + name + "' holds a control character or a backslash: refused");
+  }
+}
+
+bool isTemporaryName(const std::string& name)
+{
+  const auto slash = name.find_last_of('/');
+  const std::string base = slash == std::string::npos ? name : name.substr(slash + 1);
+  // `.<name>.<tag>.partial` (temporaryName) or `.<name>.partial.XXXXXX` (AtomicFileWriter)
+  return base.size() > 1 && base[0] == '.' && base.find(".partial") != std::string::npos;
+}
+
+std::string temporaryName(const std::string& name, const std::string& tag)
+{
+  const auto slash = name.find_last_of('/');
+  const std::string folder = slash == std::string::npos ? "" : name.substr(0, slash + 1);
+  const std::string base = slash == std::string::npos ? name : name.substr(slash + 1);
+  return folder + "." + base + "." + tag + ".partial";
+}
+
+LocalProgramStore::LocalProgramStore(const std::string& root) : root_(root)
+{
+  std::error_code error;
+  if (!fs::is_directory(root_, error))
+    throw ConfigError("program directory '" + root_ + "' does not exist or is not a directory");
+}
+
+std::string LocalProgramStore::path(const std::string& name) const
+{
+  checkName(name);
+  return root_ + "/" + name;
+}
+
+std::vector<ProgramEntry> LocalProgramStore::list()
+{
+  std::vector<ProgramEntry> entries;
+  std::error_code error;
+  for (const auto& item : fs::directory_iterator(root_, error))
+  {
+    const std::string name = item.path().filename().string();
+    if (!item.is_regular_file(error) || isTemporaryName(name))
+      continue;
+    entries.push_back(stat(name));
+  }
+  if (error)
+    throw Error("cannot list " + root_ + ": " + error.message());
+  std::sort(entries.begin(), entries.end(), [](const auto& a, const auto& b) { return a.name < b.name; });
+  return entries;
+}
+
+ProgramEntry LocalProgramStore::stat(const std::string& name)
+{
+  struct stat info;
+  if (::stat(path(name).c_str(), &info) != 0)
+  {
+    if (errno == ENOENT)
+      throw NotFoundError("no program '" + name + "' in " + root_);
+    throw Error("cannot stat " + path(name) + ": " + std::strerror(errno));
+  }
+  ProgramEntry entry;
+  entry.name = name;
+  entry.size = static_cast<uint64_t>(info.st_size);
+  entry.mtime = info.st_mtime;
+  return entry;
+}
+
+std::string LocalProgramStore::read(const std::string& name, const StoreProgress& progress,
+                                    const std::atomic<bool>* cancel)
+{
+  const uint64_t total = stat(name).size;
+  std::ifstream in(path(name), std::ios::binary);
+  if (!in)
+    throw Error("cannot read " + path(name));
+  std::string data;
+  std::string chunk(kChunk, '\0');
+  while (in)
+  {
+    throwIfCancelled(cancel, "reading " + name);
+    in.read(chunk.data(), static_cast<std::streamsize>(chunk.size()));
+    data.append(chunk.data(), static_cast<size_t>(in.gcount()));
+    if (progress)
+      progress(data.size(), total);
+  }
+  if (in.bad())
+    throw Error("reading " + path(name) + " failed");
+  return data;
+}
+
+void LocalProgramStore::write(const std::string& name, const std::string& data, const StoreProgress& progress,
+                              const std::atomic<bool>* cancel)
+{
+  AtomicFileWriter writer(path(name));
+  for (size_t done = 0; done < data.size();)
+  {
+    throwIfCancelled(cancel, "writing " + name);
+    const size_t n = std::min(kChunk, data.size() - done);
+    writer.write(reinterpret_cast<const uint8_t*>(data.data()) + done, n);
+    done += n;
+    if (progress)
+      progress(done, data.size());
+  }
+  if (data.empty() && progress)
+    progress(0, 0);
+  writer.commit();
+}
+
+void LocalProgramStore::rename(const std::string& from, const std::string& to)
+{
+  if (::rename(path(from).c_str(), path(to).c_str()) != 0)
+  {
+    if (errno == ENOENT)
+      throw NotFoundError("no program '" + from + "' in " + root_);
+    throw Error("cannot rename " + path(from) + " to " + path(to) + ": " + std::strerror(errno));
+  }
+}
+
+void LocalProgramStore::remove(const std::string& name)
+{
+  if (::unlink(path(name).c_str()) != 0)
+  {
+    if (errno == ENOENT)
+      throw NotFoundError("no program '" + name + "' in " + root_);
+    throw Error("cannot remove " + path(name) + ": " + std::strerror(errno));
+  }
+}
+}  // namespace cnc_bridge::programs
+
+namespace cnc_bridge::programs
+{
+std::string LocalProgramStore::readHead(const std::string& name, size_t bytes)
+{
+  stat(name);  // NotFoundError
+  std::ifstream in(path(name), std::ios::binary);
+  std::string head(bytes, '\0');
+  in.read(head.data(), static_cast<std::streamsize>(bytes));
+  head.resize(static_cast<size_t>(in.gcount()));
+  return head;
+}
+
+std::vector<ProgramListing> listPrograms(ProgramStore& store, const NamePattern& pattern)
+{
+  std::vector<ProgramListing> listing;
+  for (const ProgramEntry& entry : store.list())
+  {
+    ProgramListing item;
+    item.entry = entry;
+    item.name_number = pattern.number(entry.name);
+    try
+    {
+      item.header = readHeader(store.readHead(entry.name, 4096));
+    }
+    catch (const NotFoundError&)
+    {
+      continue;  // removed since the listing
+    }
+    listing.push_back(item);
+  }
+  return listing;
+}
+
+uint64_t putProgram(ProgramStore& store, const std::string& local_path, std::string name, const ProtectedRange& range,
+                    const NamePattern& pattern, const StoreProgress& progress, const std::atomic<bool>* cancel)
+{
+  if (name.empty())
+  {
+    const auto slash = local_path.find_last_of('/');
+    name = slash == std::string::npos ? local_path : local_path.substr(slash + 1);
+  }
+  checkName(name);
+  std::ifstream in(local_path, std::ios::binary);
+  if (!in)
+    throw ConfigError("cannot read " + local_path + ": " + std::strerror(errno));
+  const std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  range.check(local_path + " (as " + name + ")", pattern.number(name), readHeader(data).number);
+  store.write(name, data, progress, cancel);
+  return data.size();
+}
+
+uint64_t getProgram(ProgramStore& store, const std::string& name, const std::string& local_path,
+                    const StoreProgress& progress, const std::atomic<bool>* cancel)
+{
+  AtomicFileWriter writer(local_path);
+  const std::string data = store.read(name, progress, cancel);
+  writer.write(data);
+  writer.commit();
+  return data.size();
+}
+}  // namespace cnc_bridge::programs

@@ -1,0 +1,573 @@
+// SmbProgramStore on libsmbclient's context API (one SMBCCTX per store, its calls serialised).
+// The steps of an atomic write and their repair are described in smb_store.h.
+#include "cnc_bridge/share/smb_store.h"
+
+#include <libsmbclient.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <fstream>
+
+#include "cnc_bridge/common/log.h"
+
+namespace cnc_bridge::share
+{
+using programs::NotFoundError;
+using programs::ProgramEntry;
+
+namespace
+{
+// Large requests let libsmbclient keep several SMB2 reads/writes in flight, as smbclient does.
+constexpr size_t kChunk = 1024 * 1024;
+
+std::string trimmed(const std::string& text)
+{
+  const auto first = text.find_first_not_of(" \t\r");
+  if (first == std::string::npos)
+    return "";
+  return text.substr(first, text.find_last_not_of(" \t\r") - first + 1);
+}
+
+std::string octalMode(mode_t mode)
+{
+  char text[8];
+  std::snprintf(text, sizeof(text), "%04o", static_cast<unsigned>(mode & 07777));
+  return text;
+}
+
+/// libsmbclient asks for credentials per server and share; every share gets the store's.
+void authenticate(SMBCCTX* context, const char* /*server*/, const char* /*share*/, char* workgroup, int workgroup_size,
+                  char* user, int user_size, char* password, int password_size)
+{
+  const auto* store = static_cast<SmbProgramStore*>(smbc_getOptionUserData(context));
+  const SmbCredentials& c = store->credentials();
+  auto copy = [](const std::string& value, char* out, int size)
+  {
+    if (size > 0)
+    {
+      std::strncpy(out, value.c_str(), static_cast<size_t>(size) - 1);
+      out[size - 1] = '\0';
+    }
+  };
+  if (!c.domain.empty())
+    copy(c.domain, workgroup, workgroup_size);
+  copy(c.guest ? "guest" : c.username, user, user_size);
+  copy(c.guest ? "" : c.password, password, password_size);
+}
+
+/// libsmbclient keeps process-wide state (its talloc stack frames) that two threads must not use at
+/// once, even through separate contexts, and Debian's build does not export smbc_thread_posix():
+/// every call of every store takes this one lock.
+std::recursive_mutex& libraryMutex()
+{
+  static std::recursive_mutex mutex;
+  return mutex;
+}
+
+void throwIfCancelled(const std::atomic<bool>* cancel, const std::string& what)
+{
+  if (cancel != nullptr && cancel->load())
+    throw CancelledError(what + " cancelled");
+}
+}  // namespace
+
+SmbUrl SmbUrl::parse(const std::string& url)
+{
+  const std::string scheme = "smb://";
+  const std::string form = " (expected smb://[user@]host[:port]/share[/folder])";
+  if (url.compare(0, scheme.size(), scheme) != 0)
+    throw ConfigError("'" + url + "' is not an SMB address" + form);
+  std::string rest = url.substr(scheme.size());
+  SmbUrl result;
+  const auto slash = rest.find('/');
+  std::string authority = rest.substr(0, slash);
+  std::string path = slash == std::string::npos ? "" : rest.substr(slash + 1);
+  const auto at = authority.rfind('@');
+  if (at != std::string::npos)
+  {
+    result.user = authority.substr(0, at);
+    authority = authority.substr(at + 1);
+    if (result.user.empty() || result.user.find(':') != std::string::npos)
+      throw ConfigError("'" + url + "': a password never goes in the address; put it in a credentials file" + form);
+  }
+  const auto colon = authority.rfind(':');
+  result.host = authority.substr(0, colon);
+  if (colon != std::string::npos)
+  {
+    const std::string port = authority.substr(colon + 1);
+    char* end = nullptr;
+    const unsigned long value = std::strtoul(port.c_str(), &end, 10);
+    if (port.empty() || *end != '\0' || value == 0 || value > 65535)
+      throw ConfigError("'" + url + "': port '" + port + "' is not 1-65535" + form);
+    result.port = static_cast<unsigned>(value);
+  }
+  if (result.host.empty())
+    throw ConfigError("'" + url + "' names no host" + form);
+  while (!path.empty() && path.back() == '/')
+    path.pop_back();
+  const auto share_end = path.find('/');
+  result.share = path.substr(0, share_end);
+  result.folder = share_end == std::string::npos ? "" : path.substr(share_end + 1);
+  if (result.share.empty())
+    throw ConfigError("'" + url + "' names no share" + form);
+  if (!result.folder.empty())
+    programs::checkName(result.folder);
+  return result;
+}
+
+std::string SmbUrl::describe() const
+{
+  return "smb://" + host + ":" + std::to_string(port) + "/" + share + (folder.empty() ? "" : "/" + folder);
+}
+
+std::string SmbUrl::pathOf(const std::string& name) const
+{
+  return describe() + (name.empty() ? "" : "/" + name);
+}
+
+SmbCredentials SmbCredentials::fromFile(const std::string& path)
+{
+  struct stat info;
+  if (::stat(path.c_str(), &info) != 0)
+    throw ConfigError("credentials file " + path + ": " + std::strerror(errno));
+  if ((info.st_mode & 077) != 0)
+  {
+    throw ConfigError("credentials file " + path + " has mode " + octalMode(info.st_mode) +
+                      ": it may be read or changed by others than its owner; refused (chmod 600 " + path + ")");
+  }
+  std::ifstream in(path);
+  if (!in)
+    throw ConfigError("credentials file " + path + " cannot be read");
+  SmbCredentials credentials;
+  credentials.guest = false;
+  std::string line;
+  int number = 0;
+  while (std::getline(in, line))
+  {
+    ++number;
+    const std::string text = trimmed(line);
+    if (text.empty() || text[0] == '#' || text[0] == ';')
+      continue;
+    const auto equals = text.find('=');
+    if (equals == std::string::npos)
+      throw ConfigError("credentials file " + path + " line " + std::to_string(number) + ": expected 'key = value'");
+    const std::string key = trimmed(text.substr(0, equals));
+    const std::string value = trimmed(text.substr(equals + 1));
+    if (key == "username")
+      credentials.username = value;
+    else if (key == "password")
+      credentials.password = value;
+    else if (key == "domain")
+      credentials.domain = value;
+    else
+      throw ConfigError("credentials file " + path + " line " + std::to_string(number) + ": unknown key '" + key +
+                        "' (username, password, domain)");
+  }
+  return credentials;
+}
+
+SmbProgramStore::SmbProgramStore(const std::string& url, SmbCredentials credentials, std::chrono::milliseconds timeout)
+    : url_(SmbUrl::parse(url)), credentials_(std::move(credentials)), timeout_(timeout)
+{
+  if (!url_.user.empty())
+  {
+    credentials_.username = url_.user;
+    credentials_.guest = false;
+  }
+  if (!credentials_.guest && credentials_.username.empty())
+    throw ConfigError("no user name for " + url_.describe() + ": give one in the credentials file or the address");
+}
+
+SmbProgramStore::~SmbProgramStore()
+{
+  std::lock_guard<std::recursive_mutex> lock(libraryMutex());
+  dropContext();
+}
+
+void SmbProgramStore::dropContext()
+{
+  if (context_ != nullptr)
+  {
+    smbc_free_context(context_, 1);  // 1: close its connections even with files open
+    context_ = nullptr;
+  }
+}
+
+SMBCCTX* SmbProgramStore::context()
+{
+  if (context_ != nullptr)
+    return context_;
+  SMBCCTX* context = smbc_new_context();
+  if (context == nullptr)
+    throw Error("libsmbclient: cannot create a context: " + std::string(std::strerror(errno)));
+  smbc_setOptionUserData(context, this);
+  smbc_setFunctionAuthDataWithContext(context, &authenticate);
+  smbc_setTimeout(context, static_cast<int>(timeout_.count()));
+  smbc_setPort(context, static_cast<uint16_t>(url_.port));
+  // A wrong password must fail as such, not fall back to an anonymous login.
+  smbc_setOptionNoAutoAnonymousLogin(context, credentials_.guest ? 0 : 1);
+  smbc_setOptionUseKerberos(context, 0);
+  smbc_setDebug(context, 0);
+  if (smbc_init_context(context) == nullptr)
+  {
+    const int error = errno;
+    smbc_free_context(context, 1);
+    throw Error("libsmbclient: cannot initialise a context: " + std::string(std::strerror(error)));
+  }
+  context_ = context;
+  // Connect and check the share and folder now, so that their errors say so.
+  struct stat info;
+  if (smbc_getFunctionStat(context_)(context_, url_.pathOf("").c_str(), &info) != 0)
+  {
+    const int error = errno;
+    dropContext();
+    std::string reason;
+    switch (error)
+    {
+      case EACCES:
+      case EPERM:
+        reason = credentials_.guest ? "access denied to a guest: the share needs a user (give a credentials file)"
+                                    : "access denied for user '" + credentials_.username +
+                                          "': wrong user name or password, or the user may not use this share";
+        break;
+      case ENOENT:
+      case ENODEV:
+      case ENOTDIR:
+        reason = url_.folder.empty() ? "no share '" + url_.share + "' on " + url_.host
+                                     : "no share '" + url_.share + "' or no folder '" + url_.folder + "' in it";
+        break;
+      case ECONNREFUSED:
+        reason = "connection refused: no SMB server answers on " + url_.host + ":" + std::to_string(url_.port);
+        break;
+      case ETIMEDOUT:
+        reason = "no answer within " + std::to_string(timeout_.count() / 1000.0).substr(0, 4) + " s";
+        break;
+      default:
+        reason = std::strerror(error);
+    }
+    throw LinkError("cannot open " + url_.describe() + ": " + reason);
+  }
+  if (!S_ISDIR(info.st_mode))
+  {
+    dropContext();
+    throw LinkError("cannot open " + url_.describe() + ": '" + url_.folder + "' is not a folder");
+  }
+  repairLocked();
+  return context_;
+}
+
+void SmbProgramStore::fail(const std::string& action, const std::string& name, int error)
+{
+  if (error == ENOENT)
+    throw NotFoundError("no program '" + name + "' in " + url_.describe());
+  std::string reason = std::strerror(error);
+  if (error == ETIMEDOUT)
+    reason = "no answer within " + std::to_string(timeout_.count()) + " ms";
+  if (error == EACCES || error == EPERM)
+    throw Error(action + " " + name + " on " + url_.describe() + ": access denied");
+  if (error == EEXIST)
+    throw Error(action + " " + name + " on " + url_.describe() + ": " + reason);
+  // Anything else: assume the connection is gone; the next call connects anew.
+  dropContext();
+  throw LinkError(action + " " + name + " on " + url_.describe() + " failed: " + reason);
+}
+
+ProgramEntry SmbProgramStore::statLocked(const std::string& name)
+{
+  programs::checkName(name);
+  SMBCCTX* ctx = context();
+  struct stat info;
+  if (smbc_getFunctionStat(ctx)(ctx, url_.pathOf(name).c_str(), &info) != 0)
+    fail("stat of", name, errno);
+  ProgramEntry entry;
+  entry.name = name;
+  entry.size = static_cast<uint64_t>(info.st_size);
+  entry.mtime = info.st_mtime;
+  return entry;
+}
+
+bool SmbProgramStore::existsLocked(const std::string& name)
+{
+  try
+  {
+    statLocked(name);
+    return true;
+  }
+  catch (const NotFoundError&)
+  {
+    return false;
+  }
+}
+
+void SmbProgramStore::renameLocked(const std::string& from, const std::string& to)
+{
+  SMBCCTX* ctx = context();
+  if (smbc_getFunctionRename(ctx)(ctx, url_.pathOf(from).c_str(), ctx, url_.pathOf(to).c_str()) != 0)
+    fail("rename of", from + " to " + to, errno);
+}
+
+void SmbProgramStore::unlinkLocked(const std::string& name)
+{
+  SMBCCTX* ctx = context();
+  if (smbc_getFunctionUnlink(ctx)(ctx, url_.pathOf(name).c_str()) != 0)
+    fail("removal of", name, errno);
+}
+
+void SmbProgramStore::repairLocked()
+{
+  auto pending = std::move(repairs_);
+  repairs_.clear();
+  for (auto& repair : pending)
+  {
+    try
+    {
+      if (!repair.previous.empty() && existsLocked(repair.previous))
+      {
+        if (existsLocked(repair.name))
+          unlinkLocked(repair.previous);
+        else
+          renameLocked(repair.previous, repair.name);  // the write never replaced it: back in place
+      }
+      if (!repair.temporary.empty() && existsLocked(repair.temporary))
+        unlinkLocked(repair.temporary);
+      CNC_LOG_INFO("removed what an interrupted write of " << repair.name << " left on " << url_.describe());
+    }
+    catch (const Error& e)
+    {
+      repairs_.push_back(repair);
+      CNC_LOG_WARN("cannot yet repair the interrupted write of " << repair.name << ": " << e.what());
+      if (context_ == nullptr)
+        return;  // the link is gone again
+    }
+  }
+}
+
+void SmbProgramStore::check()
+{
+  list();
+}
+
+std::vector<ProgramEntry> SmbProgramStore::list()
+{
+  std::lock_guard<std::recursive_mutex> lock(libraryMutex());
+  SMBCCTX* ctx = context();
+  SMBCFILE* dir = smbc_getFunctionOpendir(ctx)(ctx, url_.pathOf("").c_str());
+  if (dir == nullptr)
+    fail("listing of", url_.folder.empty() ? "/" : url_.folder, errno);
+  std::vector<ProgramEntry> entries;
+  errno = 0;
+  struct stat info;
+  while (const libsmb_file_info* file = smbc_getFunctionReaddirPlus2(ctx)(ctx, dir, &info))
+  {
+    const std::string name = file->name;
+    if (S_ISDIR(info.st_mode) || (file->attrs & 0x10) != 0 || programs::isTemporaryName(name))
+      continue;
+    ProgramEntry entry;
+    entry.name = name;
+    entry.size = file->size;
+    entry.mtime = file->mtime_ts.tv_sec;
+    entries.push_back(entry);
+  }
+  const int error = errno;
+  smbc_getFunctionClosedir(ctx)(ctx, dir);
+  if (error != 0 && error != ENOENT)
+    fail("listing of", url_.folder.empty() ? "/" : url_.folder, error);
+  std::sort(entries.begin(), entries.end(), [](const auto& a, const auto& b) { return a.name < b.name; });
+  return entries;
+}
+
+ProgramEntry SmbProgramStore::stat(const std::string& name)
+{
+  std::lock_guard<std::recursive_mutex> lock(libraryMutex());
+  return statLocked(name);
+}
+
+std::string SmbProgramStore::read(const std::string& name, const programs::StoreProgress& progress,
+                                  const std::atomic<bool>* cancel)
+{
+  std::lock_guard<std::recursive_mutex> lock(libraryMutex());
+  const uint64_t total = statLocked(name).size;
+  SMBCCTX* ctx = context();
+  SMBCFILE* file = smbc_getFunctionOpen(ctx)(ctx, url_.pathOf(name).c_str(), O_RDONLY, 0);
+  if (file == nullptr)
+    fail("opening", name, errno);
+  std::string data;
+  data.reserve(total);
+  std::string chunk(kChunk, '\0');
+  try
+  {
+    for (;;)
+    {
+      throwIfCancelled(cancel, "reading " + name);
+      const ssize_t n = smbc_getFunctionRead(ctx)(ctx, file, chunk.data(), chunk.size());
+      if (n < 0)
+        fail("reading", name, errno);
+      if (n == 0)
+        break;
+      data.append(chunk.data(), static_cast<size_t>(n));
+      if (progress)
+        progress(data.size(), total);
+    }
+  }
+  catch (...)
+  {
+    if (context_ != nullptr)
+      smbc_getFunctionClose(ctx)(ctx, file);
+    throw;
+  }
+  smbc_getFunctionClose(ctx)(ctx, file);
+  if (data.empty() && progress)
+    progress(0, 0);
+  return data;
+}
+
+std::string SmbProgramStore::readHead(const std::string& name, size_t bytes)
+{
+  std::lock_guard<std::recursive_mutex> lock(libraryMutex());
+  programs::checkName(name);
+  SMBCCTX* ctx = context();
+  SMBCFILE* file = smbc_getFunctionOpen(ctx)(ctx, url_.pathOf(name).c_str(), O_RDONLY, 0);
+  if (file == nullptr)
+    fail("opening", name, errno);
+  std::string head(bytes, '\0');
+  size_t got = 0;
+  while (got < bytes)
+  {
+    const ssize_t n = smbc_getFunctionRead(ctx)(ctx, file, head.data() + got, bytes - got);
+    if (n < 0)
+    {
+      const int error = errno;
+      smbc_getFunctionClose(ctx)(ctx, file);
+      fail("reading", name, error);
+    }
+    if (n == 0)
+      break;
+    got += static_cast<size_t>(n);
+  }
+  smbc_getFunctionClose(ctx)(ctx, file);
+  head.resize(got);
+  return head;
+}
+
+void SmbProgramStore::write(const std::string& name, const std::string& data, const programs::StoreProgress& progress,
+                            const std::atomic<bool>* cancel)
+{
+  std::lock_guard<std::recursive_mutex> lock(libraryMutex());
+  programs::checkName(name);
+  char host[64] = "host";
+  ::gethostname(host, sizeof(host) - 1);
+  const std::string tag = std::string(host) + "-" + std::to_string(::getpid()) + "-" + std::to_string(++counter_);
+  Repair repair{name, programs::temporaryName(name, tag), programs::temporaryName(name, tag + ".previous")};
+  SMBCCTX* ctx = context();
+
+  // 1. Upload under the temporary name.
+  try
+  {
+    SMBCFILE* file =
+        smbc_getFunctionOpen(ctx)(ctx, url_.pathOf(repair.temporary).c_str(), O_WRONLY | O_CREAT | O_EXCL, 0644);
+    if (file == nullptr)
+      fail("creating", repair.temporary, errno);
+    try
+    {
+      for (size_t done = 0; done < data.size();)
+      {
+        throwIfCancelled(cancel, "writing " + name);
+        const size_t n = std::min(kChunk, data.size() - done);
+        const ssize_t written = smbc_getFunctionWrite(ctx)(ctx, file, data.data() + done, n);
+        if (written <= 0)
+          fail("writing", repair.temporary, written < 0 ? errno : EIO);
+        done += static_cast<size_t>(written);
+        if (progress)
+          progress(done, data.size());
+      }
+    }
+    catch (...)
+    {
+      if (context_ != nullptr)
+        smbc_getFunctionClose(ctx)(ctx, file);
+      throw;
+    }
+    if (smbc_getFunctionClose(ctx)(ctx, file) != 0)
+      fail("closing", repair.temporary, errno);
+    if (data.empty() && progress)
+      progress(0, 0);
+  }
+  catch (...)
+  {
+    repair.previous.clear();
+    repairs_.push_back(repair);
+    if (context_ != nullptr)
+      repairLocked();  // the link still works: remove the temporary file now
+    throw;
+  }
+
+  // 2. Move the old version aside, 3. the new one in, 4. delete the old one.
+  bool replaced = false;
+  try
+  {
+    replaced = existsLocked(name);
+    if (replaced)
+      renameLocked(name, repair.previous);
+    renameLocked(repair.temporary, name);
+  }
+  catch (...)
+  {
+    repairs_.push_back(repair);
+    if (context_ != nullptr)
+      repairLocked();  // puts the old version back and removes the new one
+    throw;
+  }
+  if (replaced)
+  {
+    try
+    {
+      unlinkLocked(repair.previous);
+    }
+    catch (const Error& e)
+    {
+      repair.temporary.clear();
+      repairs_.push_back(repair);
+      CNC_LOG_WARN(name << " written to " << url_.describe() << ", but its previous version stays as "
+                        << repair.previous << " until the next connection: " << e.what());
+    }
+  }
+}
+
+void SmbProgramStore::rename(const std::string& from, const std::string& to)
+{
+  std::lock_guard<std::recursive_mutex> lock(libraryMutex());
+  programs::checkName(from);
+  programs::checkName(to);
+  if (!existsLocked(from))
+    throw NotFoundError("no program '" + from + "' in " + url_.describe());
+  // As write(): never ask libsmbclient to replace (it deletes the target before the rename).
+  if (existsLocked(to))
+    unlinkLocked(to);
+  renameLocked(from, to);
+}
+
+void SmbProgramStore::remove(const std::string& name)
+{
+  std::lock_guard<std::recursive_mutex> lock(libraryMutex());
+  programs::checkName(name);
+  unlinkLocked(name);
+}
+
+std::unique_ptr<programs::ProgramStore> openStore(const std::string& address, const std::string& credentials_file,
+                                                  std::chrono::milliseconds timeout)
+{
+  if (address.compare(0, 6, "smb://") == 0)
+  {
+    SmbCredentials credentials;
+    if (!credentials_file.empty())
+      credentials = SmbCredentials::fromFile(credentials_file);
+    return std::make_unique<SmbProgramStore>(address, credentials, timeout);
+  }
+  if (!credentials_file.empty())
+    throw ConfigError("a credentials file is for smb:// addresses, not for the local directory " + address);
+  return std::make_unique<programs::LocalProgramStore>(address);
+}
+}  // namespace cnc_bridge::share

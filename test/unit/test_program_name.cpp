@@ -1,0 +1,106 @@
+// Program names and numbers, program heads, the protected range and the local program store.
+#include <gtest/gtest.h>
+
+#include "cnc_bridge/programs/program_name.h"
+#include "cnc_bridge/programs/program_store.h"
+#include "temp_dir.h"
+
+using namespace cnc_bridge;
+using namespace cnc_bridge::programs;
+
+TEST(NamePattern, FormatsAndParses)
+{
+  const NamePattern haas("O%05d.nc");
+  EXPECT_EQ(haas.format(1234), "O01234.nc");
+  EXPECT_EQ(haas.number("O01234.nc"), 1234u);
+  EXPECT_EQ(haas.number("o01234.NC"), 1234u);
+  EXPECT_EQ(haas.number("O1234.nc"), 1234u);
+  EXPECT_FALSE(haas.number("O01234.txt"));
+  EXPECT_FALSE(haas.number("O.nc"));
+  EXPECT_FALSE(haas.number("O123456789.nc"));
+  EXPECT_FALSE(haas.number("XO01234.nc"));
+  const NamePattern fanuc("%d");
+  EXPECT_EQ(fanuc.format(7), "7");
+  EXPECT_EQ(fanuc.number("0007"), 7u);
+  EXPECT_EQ(NamePattern("P%%%04d.min").format(12), "P%0012.min");
+  EXPECT_EQ(NamePattern("P%%%04d.min").number("P%0012.min"), 12u);
+  for (const char* bad : {"O.nc", "O%s.nc", "O%d%d", "O%09d", "a/%d", "%"})
+    EXPECT_THROW(NamePattern{bad}, ConfigError) << bad;
+}
+
+TEST(ProgramHeader, NumberAndFirstComment)
+{
+  // The head of the Haas capture in test/data/xmodem (a program punched by a Haas VF-2).
+  auto h = readHeader("%\nO05555(CS390_Test_NC)\n(Using G0 which travels along dogleg path.)\n");
+  EXPECT_EQ(h.number, 5555u);
+  EXPECT_EQ(h.comment, "CS390_Test_NC");
+  h = readHeader("\r\n%\r\n:0100\r\nG0 X1 (MOVE)\r\n");
+  EXPECT_EQ(h.number, 100u);
+  EXPECT_EQ(h.comment, "MOVE");
+  h = readHeader("G0 X1\nO1234 (LATE)\n");
+  EXPECT_FALSE(h.number.has_value());  // only the first block carries the program number
+  EXPECT_EQ(h.comment, "LATE");
+  h = readHeader("%\nO12 (UNCLOSED");
+  EXPECT_EQ(h.comment, "UNCLOSED");
+  EXPECT_FALSE(readHeader("").number.has_value());
+}
+
+TEST(ProtectedRange, RefusesInsideUnlessAllowed)
+{
+  const ProtectedRange range("O08000-O09999", false, "~allow_protected_programs");
+  EXPECT_TRUE(range.contains(8000));
+  EXPECT_TRUE(range.contains(9999));
+  EXPECT_FALSE(range.contains(7999));
+  EXPECT_FALSE(range.contains(10000));
+  EXPECT_NO_THROW(range.check("a", 1234, std::nullopt));
+  try
+  {
+    range.check("O09010.nc", std::nullopt, 9010);
+    FAIL();
+  }
+  catch (const DisabledError& e)
+  {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("O09010"), std::string::npos) << what;
+    EXPECT_NE(what.find("O08000-O09999"), std::string::npos) << what;
+    EXPECT_NE(what.find("~allow_protected_programs"), std::string::npos) << what;
+  }
+  EXPECT_NO_THROW(ProtectedRange("O08000-O09999", true, "x").check("a", 9000, 9000));
+  EXPECT_NO_THROW(ProtectedRange("", false, "x").check("a", 9000, 9000));
+  EXPECT_TRUE(ProtectedRange("100-200", false, "x").contains(150));
+  for (const char* bad : {"O9-O8", "O8000", "x-y", "O8000-"})
+    EXPECT_THROW(ProtectedRange(bad, false, "x"), ConfigError) << bad;
+}
+
+TEST(ProgramNames, CheckedAndTemporary)
+{
+  for (const char* bad : {"", "/etc/passwd", "../x", "a/../../x", "a//b", "a/./b", "a\nb"})
+    EXPECT_THROW(checkName(bad), ConfigError) << bad;
+  EXPECT_NO_THROW(checkName("requests/O1.nc"));
+  EXPECT_TRUE(isTemporaryName(temporaryName("O01234.nc", "host-1-2")));
+  EXPECT_TRUE(isTemporaryName(".O01234.nc.partial.Ab12Cd"));  // AtomicFileWriter's
+  EXPECT_FALSE(isTemporaryName("O01234.nc"));
+  EXPECT_EQ(temporaryName("sub/O1.nc", "t"), "sub/.O1.nc.t.partial");
+}
+
+TEST(LocalProgramStore, WritesAtomicallyAndLists)
+{
+  test::TempDir dir;
+  LocalProgramStore store(dir.path);
+  store.write("O00001.nc", "%\nO00001 (ONE)\n%\n");
+  store.write("O00002.nc", "two");
+  test::writeFile(dir.file(".O00003.nc.partial.XXXX"), "half");
+  const auto listing = listPrograms(store, NamePattern());
+  ASSERT_EQ(listing.size(), 2u);
+  EXPECT_EQ(listing[0].header.comment, "ONE");
+  EXPECT_EQ(listing[1].entry.size, 3u);
+  std::atomic<bool> cancel{true};
+  EXPECT_THROW(store.write("O00002.nc", std::string(200000, 'x'), nullptr, &cancel), CancelledError);
+  EXPECT_EQ(store.read("O00002.nc"), "two");
+  EXPECT_THROW(store.read("O00009.nc"), NotFoundError);
+  store.rename("O00002.nc", "O00001.nc");
+  EXPECT_EQ(store.read("O00001.nc"), "two");
+  store.remove("O00001.nc");
+  EXPECT_EQ(store.list().size(), 0u);
+  EXPECT_THROW(store.write("../escape.nc", "x"), ConfigError);
+}
