@@ -26,3 +26,15 @@ cnc_fuzz_target(fuzz_program_name test/fuzz/fuzz_program_name.cpp)
 if(CNC_BRIDGE_FUZZ)
   target_link_libraries(fuzz_program_name cnc_bridge_programs)
 endif()
+
+# cnc_dnc send/receive --share and cnc_dnc list, and their test against smbd.
+target_sources(cnc_dnc PRIVATE src/cli/cnc_dnc_share.cpp)
+target_link_libraries(cnc_dnc cnc_bridge_share)
+if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
+  cnc_core_gtest(test_share_cli test/unit/test_share_cli.cpp)
+  if(TARGET test_share_cli)
+    target_compile_definitions(test_share_cli PRIVATE CNC_DNC="$<TARGET_FILE:cnc_dnc>"
+                               LSAN_SUPPRESSIONS="${PROJECT_SOURCE_DIR}/test/unit/lsan_libsmbclient.supp")
+    add_dependencies(test_share_cli cnc_dnc)
+  endif()
+endif()

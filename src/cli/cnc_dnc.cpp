@@ -8,6 +8,9 @@
 //   cnc_dnc receive --port DEV [serial options] [--mode checksum|crc] [--timeout S] FILE
 //   cnc_dnc drip    --port DEV [serial options] [--start-line N] FILE   (cnc_dnc_drip.cpp)
 //   cnc_dnc backup  --port DEV [serial options] FILE                    (cnc_dnc_drip.cpp)
+//   cnc_dnc send    --share URL [--credentials FILE] [--allow-protected] FILE (cnc_dnc_share.cpp)
+//   cnc_dnc receive --share URL [--credentials FILE] NAME OUT
+//   cnc_dnc list    --share URL [--credentials FILE]
 #include <unistd.h>
 
 #include <boost/program_options.hpp>
@@ -33,8 +36,12 @@ namespace cnc_bridge
 {
 namespace cli
 {
-int runDrip(const std::vector<std::string>& args);    // cnc_dnc_drip.cpp
-int runBackup(const std::vector<std::string>& args);  // cnc_dnc_drip.cpp
+int runDrip(const std::vector<std::string>& args);          // cnc_dnc_drip.cpp
+int runBackup(const std::vector<std::string>& args);        // cnc_dnc_drip.cpp
+int runShareSend(const std::vector<std::string>& args);     // cnc_dnc_share.cpp
+int runShareReceive(const std::vector<std::string>& args);  // cnc_dnc_share.cpp
+int runList(const std::vector<std::string>& args);          // cnc_dnc_share.cpp
+bool namesShare(const std::vector<std::string>& args);      // cnc_dnc_share.cpp
 }  // namespace cli
 }  // namespace cnc_bridge
 
@@ -181,6 +188,8 @@ int withPort(const po::variables_map& vm, const std::function<std::string(Transp
 
 int runSend(const std::vector<std::string>& args)
 {
+  if (cli::namesShare(args))
+    return cli::runShareSend(args);
   po::options_description options = serialOptions();
   addTransferOptions(options, "checksum");
   options.add_options()("turnaround", po::value<unsigned>()->default_value(10),
@@ -213,6 +222,8 @@ int runSend(const std::vector<std::string>& args)
 
 int runReceive(const std::vector<std::string>& args)
 {
+  if (cli::namesShare(args))
+    return cli::runShareReceive(args);
   po::options_description options = serialOptions();
   addTransferOptions(options, "crc");
   options.add_options()("file-eob", po::value<std::string>()->default_value("lf"),
@@ -253,6 +264,7 @@ const Command kCommands[] = {
     {"receive", "receive a program by XModem (the control sends)", &runReceive},
     {"drip", "drip-feed a program while the control runs it (DNC, XON/XOFF)", &cli::runDrip},
     {"backup", "store a program the control punches (from '%' to '%')", &cli::runBackup},
+    {"list", "list the programs of a share (--share URL): name, O number, size, time, first comment", &cli::runList},
 };
 
 void usage(std::ostream& out)

@@ -1,0 +1,200 @@
+// cnc_dnc's transfers to and from a program folder over the network (an SMB share) or on disk:
+//
+//   cnc_dnc send    --share URL [--credentials FILE] [--name NAME] [--allow-protected] FILE
+//   cnc_dnc receive --share URL [--credentials FILE] NAME OUT
+//   cnc_dnc list    --share URL [--credentials FILE]
+//
+// URL is smb://[user@]host[:port]/share[/folder] or a local directory. Credentials only come from
+// a file in smbclient's authentication-file format (mode 0600); without one the share is opened as
+// guest. Exit status 0 only when the whole program arrived; otherwise one error line, status 1
+// (2 for a bad command line), as for the serial transfers.
+#include <boost/program_options.hpp>
+#include <chrono>
+#include <cstdio>
+#include <ctime>
+#include <iostream>
+#include <string>
+#include <vector>
+
+#include "cnc_bridge/common/error.h"
+#include "cnc_bridge/share/smb_store.h"
+#include "cnc_bridge/sim/sim_support.h"
+#include "progress_line.h"
+#include "protected_options.h"
+
+namespace po = boost::program_options;
+
+namespace cnc_bridge
+{
+namespace cli
+{
+namespace
+{
+po::options_description shareOptions()
+{
+  po::options_description options("program folder");
+  options.add_options()("help,h", "this help")("share,s", po::value<std::string>(),
+                                               "smb://[user@]host[:port]/share[/folder], or a local directory")(
+      "credentials,A", po::value<std::string>()->default_value(""),
+      "smbclient authentication file (username = ..., password = ..., domain = ...; mode 0600); guest if none")(
+      "timeout,t", po::value<double>()->default_value(10.0), "seconds allowed for each SMB request");
+  return options;
+}
+
+/// Parses; \returns false after printing usage (\p status 0 for --help, 2 for an error).
+bool parse(const std::string& command, const std::string& operands, const std::vector<std::string>& args,
+           po::options_description options, const std::vector<std::string>& positional_names, po::variables_map& vm,
+           int& status)
+{
+  po::options_description all(options);
+  po::positional_options_description positional;
+  for (const auto& name : positional_names)
+  {
+    all.add_options()(name.c_str(), po::value<std::string>(), "");
+    positional.add(name.c_str(), 1);
+  }
+  const std::string usage = "usage: cnc_dnc " + command + " --share URL [options] " + operands + "\n";
+  try
+  {
+    po::store(po::command_line_parser(args).options(all).positional(positional).run(), vm);
+    po::notify(vm);
+  }
+  catch (const po::error& e)
+  {
+    std::cerr << "cnc_dnc " << command << ": " << e.what() << "\n" << usage << options;
+    status = 2;
+    return false;
+  }
+  if (vm.count("help"))
+  {
+    std::cout << usage << options;
+    status = 0;
+    return false;
+  }
+  bool complete = vm.count("share") > 0;
+  for (const auto& name : positional_names)
+    complete = complete && vm.count(name) > 0;
+  if (!complete)
+  {
+    std::cerr << "cnc_dnc " << command << ": --share and " << operands << " are required\n" << usage << options;
+    status = 2;
+    return false;
+  }
+  return true;
+}
+
+std::unique_ptr<programs::ProgramStore> openStore(const po::variables_map& vm)
+{
+  const double timeout = vm["timeout"].as<double>();
+  if (timeout <= 0)
+    throw ConfigError("--timeout must be positive");
+  return share::openStore(vm["share"].as<std::string>(), vm["credentials"].as<std::string>(),
+                          std::chrono::milliseconds(static_cast<int64_t>(timeout * 1000)));
+}
+
+/// "1048576 bytes in 0.052 s (20.2 MB/s)"
+std::string rate(uint64_t bytes, std::chrono::steady_clock::time_point start)
+{
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  char text[96];
+  std::snprintf(text, sizeof(text), "%llu bytes in %.3f s (%.1f MB/s)", static_cast<unsigned long long>(bytes), seconds,
+                seconds > 0 ? bytes / seconds / 1e6 : 0.0);
+  return text;
+}
+
+programs::StoreProgress showOn(ProgressLine& line)
+{
+  return [&line](uint64_t done, uint64_t total) { line.show(done, total, "", total > 0 && done >= total); };
+}
+
+/// Ctrl-C cancels between chunks (the previous version stays on the share).
+const std::atomic<bool>* cancelOnStop()
+{
+  static std::atomic<bool> cancel{false};
+  sim::installStopHandler();
+  sim::onStop([] { cancel = true; });
+  return &cancel;
+}
+}  // namespace
+
+int runShareSend(const std::vector<std::string>& args)
+{
+  po::options_description options = shareOptions();
+  options.add_options()("name", po::value<std::string>()->default_value(""),
+                        "the program's name in the folder (default: FILE's base name)");
+  addProtectedOptions(options);
+  po::variables_map vm;
+  int status = 0;
+  if (!parse("send", "FILE", args, options, {"file"}, vm, status))
+    return status;
+  const std::string file = vm["file"].as<std::string>();
+  const std::string name = vm["name"].as<std::string>();
+  auto store = openStore(vm);
+  const auto start = std::chrono::steady_clock::now();
+  ProgressLine progress("send " + file);
+  const uint64_t bytes = programs::putProgram(*store, file, name, protectedRange(vm),
+                                              programs::NamePattern(vm["name-pattern"].as<std::string>()),
+                                              showOn(progress), cancelOnStop());
+  progress.finish();
+  const std::string sent_name = name.empty() ? file.substr(file.find_last_of('/') + 1) : name;
+  std::cout << "sent " << file << " to " << store->describe() << "/" << sent_name << ": " << rate(bytes, start)
+            << std::endl;
+  return 0;
+}
+
+int runShareReceive(const std::vector<std::string>& args)
+{
+  po::variables_map vm;
+  int status = 0;
+  if (!parse("receive", "NAME OUT", args, shareOptions(), {"name", "out"}, vm, status))
+    return status;
+  const std::string name = vm["name"].as<std::string>();
+  const std::string out = vm["out"].as<std::string>();
+  auto store = openStore(vm);
+  const auto start = std::chrono::steady_clock::now();
+  ProgressLine progress("receive " + name);
+  const uint64_t bytes = programs::getProgram(*store, name, out, showOn(progress), cancelOnStop());
+  progress.finish();
+  std::cout << "received " << store->describe() << "/" << name << " as " << out << ": " << rate(bytes, start)
+            << std::endl;
+  return 0;
+}
+
+int runList(const std::vector<std::string>& args)
+{
+  po::options_description options = shareOptions();
+  options.add_options()("name-pattern", po::value<std::string>()->default_value("O%05d.nc"),
+                        "how the control names program files (printf style, one %d or %0Nd)");
+  po::variables_map vm;
+  int status = 0;
+  if (!parse("list", "", args, options, {}, vm, status))
+    return status;
+  auto store = openStore(vm);
+  const programs::NamePattern pattern(vm["name-pattern"].as<std::string>());
+  // One program a line: name, O number (from the program, else from the name; "-" if none),
+  // bytes, modification time (UTC), first comment. Tab-separated for scripts.
+  for (const programs::ProgramListing& item : programs::listPrograms(*store, pattern))
+  {
+    const auto number = item.header.number ? item.header.number : item.name_number;
+    char when[32];
+    const std::time_t mtime = static_cast<std::time_t>(item.entry.mtime);
+    std::tm tm{};
+    ::gmtime_r(&mtime, &tm);
+    std::strftime(when, sizeof(when), "%Y-%m-%dT%H:%M:%SZ", &tm);
+    std::cout << item.entry.name << "\t" << (number ? programs::programLabel(*number) : "-") << "\t" << item.entry.size
+              << "\t" << when << "\t" << item.header.comment << "\n";
+  }
+  return 0;
+}
+
+bool namesShare(const std::vector<std::string>& args)
+{
+  for (const auto& arg : args)
+  {
+    if (arg == "--share" || arg == "-s" || arg.rfind("--share=", 0) == 0)
+      return true;
+  }
+  return false;
+}
+}  // namespace cli
+}  // namespace cnc_bridge
