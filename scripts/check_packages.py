@@ -105,6 +105,7 @@ RUNTIME_DEBIAN_OF_KEY = {
     "std_srvs": ["python3-std-srvs"],
     "boost": ["libboost-thread1.74.0", "libboost-program-options1.74.0"],
     "yaml-cpp": ["libyaml-cpp0.7"],
+    "libsmbclient-dev": ["libsmbclient"],
     "message_runtime": [],
     "roslaunch": ["python3-roslaunch"],
     "rospy": ["python3-rospy"],
@@ -132,6 +133,8 @@ ROSDEP_SYSTEM_KEYS = {
 ROSDEP_EXCEPTIONS = {
     "lrzsz": "test peer (sx/rx); no rosdep key: apt-get install lrzsz",
     "python3-xmodem": "test peer; no rosdep key: apt-get install python3-xmodem",
+    "libsmbclient-dev": "Samba's client library (the SMB program store); no rosdep key: apt-get install libsmbclient-dev",
+    "samba": "test peer (smbd, smbpasswd); no rosdep key: apt-get install samba",
 }
 
 # Installed for building and running the scripts and benchmarks, not a dependency of the package.
