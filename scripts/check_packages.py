@@ -83,6 +83,8 @@ DEBIAN_OF_KEY = {
     "clang-format": ["clang-format"],
     "iproute2": ["iproute2"],
     "procps": ["procps"],
+    # LinuxCNC's rs274 (the reference G-code interpreter test_gcode_rs274 compares with)
+    "linuxcnc-uspace": ["linuxcnc-uspace"],
 }
 
 # Run-time key -> the Debian 12 packages a machine computer needs for it to run an installed
@@ -187,6 +189,7 @@ PROGRAM_PACKAGES = {
     "rviz": ["rviz"],
     "bc": ["bc"],  # bench/dprnt
     "node": ["nodejs"], "npm": ["npm"],  # bench/gcode's peer, npm gcode-parser
+    "rs274": ["linuxcnc-uspace"],  # test_gcode_rs274's reference interpreter
 }
 
 SCANNED_FOLDERS = ("scripts", "test", "bench")

@@ -1,6 +1,10 @@
 // The G-code parser: a single pass over each line's characters with no regex and no allocation
 // once the block's move buffer has grown to the longest arc; numbers through std::from_chars
 // (locale-independent, no exponent: 'E' is a word letter in G-code, not part of a number).
+// A line is scanned into words (scanLine), the words are applied to a copy of the modal state in
+// the RS-274 order of execution (applyWords), and the motion they ask for becomes moves: straight
+// (moveStraight), arcs cut into chords (moveArc), canned cycles (runCycle, gcode_cycles.cpp),
+// G28/G30 (referenceReturn). Cutter compensation offsets the moves (gcode_comp.cpp).
 #include "cnc_bridge/gcode/gcode.h"
 
 #include <algorithm>
@@ -9,94 +13,14 @@
 #include <cstring>
 #include <sstream>
 
+#include "gcode_internal.h"
+
 namespace cnc_bridge
 {
 namespace gcode
 {
 namespace
 {
-constexpr double kMmPerInch = 25.4;
-constexpr double kPi = 3.14159265358979323846;
-
-// Words one block may carry; each letter at most once (G and M have their own lists).
-enum Word : uint8_t
-{
-  kX,
-  kY,
-  kZ,
-  kI,
-  kJ,
-  kK,
-  kR,
-  kF,
-  kS,
-  kT,
-  kP,
-  kH,
-  kD,
-  kWordCount
-};
-
-int wordIndex(char letter)
-{
-  switch (letter)
-  {
-    case 'X':
-      return kX;
-    case 'Y':
-      return kY;
-    case 'Z':
-      return kZ;
-    case 'I':
-      return kI;
-    case 'J':
-      return kJ;
-    case 'K':
-      return kK;
-    case 'R':
-      return kR;
-    case 'F':
-      return kF;
-    case 'S':
-      return kS;
-    case 'T':
-      return kT;
-    case 'P':
-      return kP;
-    case 'H':
-      return kH;
-    case 'D':
-      return kD;
-    default:
-      return -1;
-  }
-}
-
-double& axis(Vec3& v, int i)
-{
-  return i == 0 ? v.x : (i == 1 ? v.y : v.z);
-}
-
-// (u, v, normal) axis indices of each plane, and the centre-offset words along u and v.
-struct PlaneAxes
-{
-  int u, v, w;
-  int offset_u, offset_v;
-};
-PlaneAxes planeAxes(Plane plane)
-{
-  switch (plane)
-  {
-    case Plane::kXY:
-      return {0, 1, 2, kI, kJ};
-    case Plane::kZX:
-      return {2, 0, 1, kK, kI};
-    case Plane::kYZ:
-    default:
-      return {1, 2, 0, kJ, kK};
-  }
-}
-
 std::string describeChar(char c)
 {
   const auto byte = static_cast<unsigned char>(c);
@@ -113,128 +37,46 @@ inline bool isSpace(char c)
   return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v';
 }
 
-// The words of one line as scanned, before they are applied.
-struct Scan
+std::string gName(int tenths)
 {
-  double value[kWordCount];
-  uint32_t column[kWordCount];
-  uint16_t present = 0;  // bit per Word
-  // G codes in tenths (G91.1 -> 911) with their columns.
-  std::array<int, 8> g{};
-  std::array<uint32_t, 8> g_column{};
-  uint8_t g_count = 0;
-  std::array<uint16_t, Block::kMaxMCodes> m{};
-  std::array<uint32_t, Block::kMaxMCodes> m_column{};
-  uint8_t m_count = 0;
-  bool has(Word w) const { return present & (1u << w); }
-};
-}  // namespace
-
-const char* toString(Motion motion)
-{
-  switch (motion)
+  std::string name = "G" + std::to_string(tenths / 10);
+  if (tenths % 10)
   {
-    case Motion::kNone:
-      return "none";
-    case Motion::kRapid:
-      return "rapid";
-    case Motion::kLinear:
-      return "linear";
-    case Motion::kArcCw:
-      return "arc-cw";
-    case Motion::kArcCcw:
-      return "arc-ccw";
+    name += "." + std::to_string(tenths % 10);
   }
-  return "?";
+  return name;
 }
 
-const char* toString(Plane plane)
+bool isCycle(int tenths)
 {
-  switch (plane)
+  switch (tenths)
   {
-    case Plane::kXY:
-      return "XY";
-    case Plane::kZX:
-      return "ZX";
-    case Plane::kYZ:
-      return "YZ";
+    case 730:
+    case 740:
+    case 760:
+    case 810:
+    case 820:
+    case 830:
+    case 840:
+    case 850:
+    case 860:
+    case 890:
+      return true;
+    default:
+      return false;
   }
-  return "?";
 }
 
-static std::string formatParseError(uint32_t line, uint32_t column, const std::string& reason)
+// Scans one line into words. Returns false for a tape marker or a deleted block (block says which).
+bool scanLine(std::string_view text, const ParserOptions& options, uint32_t line, Scan& scan, Block& block)
 {
-  std::ostringstream out;
-  out << "G-code line " << line << ", column " << column << ": " << reason;
-  return out.str();
-}
-
-ParseError::ParseError(uint32_t line, uint32_t column, const std::string& reason)
-    : ProtocolError(formatParseError(line, column, reason)), line_(line), column_(column), reason_(reason)
-{
-}
-
-void Bounds::add(const Vec3& p)
-{
-  min.x = std::min(min.x, p.x);
-  min.y = std::min(min.y, p.y);
-  min.z = std::min(min.z, p.z);
-  max.x = std::max(max.x, p.x);
-  max.y = std::max(max.y, p.y);
-  max.z = std::max(max.z, p.z);
-}
-
-Parser::Parser(const ParserOptions& options) : options_(options)
-{
-  if (!(options_.chord_tolerance_mm > 0.0) || !std::isfinite(options_.chord_tolerance_mm))
-  {
-    throw ConfigError("G-code chord tolerance must be a positive number of millimetres");
-  }
-  if (options_.max_arc_segments < 1)
-  {
-    throw ConfigError("G-code max_arc_segments must be at least 1");
-  }
-  reset();
-}
-
-void Parser::reset()
-{
-  state_ = ModalState();
-  state_.units = options_.initial_units;
-  state_.motion = options_.initial_motion;
-  position_ = options_.initial_position;
-  line_ = 0;
-  block_.moves.clear();
-}
-
-const Block& Parser::parseLine(std::string_view text)
-{
-  ++line_;
-  const uint32_t line = line_;
-  Block& block = block_;
-  block.line = line;
-  block.block_number = -1;
-  block.program_number = -1;
-  block.tape_marker = false;
-  block.deleted = false;
-  block.has_words = false;
-  block.m_count = 0;
-  block.tool_change = false;
-  block.program_stop = false;
-  block.program_end = false;
-  block.dwell_s = -1.0;
-  block.moves.clear();
-
   auto fail = [line](size_t index, const std::string& reason) -> ParseError
   { return ParseError(line, static_cast<uint32_t>(index + 1), reason); };
 
-  if (text.size() > options_.max_line_length)
+  if (text.size() > options.max_line_length)
   {
-    throw fail(options_.max_line_length, "line longer than " + std::to_string(options_.max_line_length) + " bytes");
+    throw fail(options.max_line_length, "line longer than " + std::to_string(options.max_line_length) + " bytes");
   }
-
-  // ---- Scan: letters and numbers into Scan, comments skipped. ----
-  Scan scan;
   const char* const data = text.data();
   const size_t size = text.size();
   size_t i = 0;
@@ -246,14 +88,14 @@ const Block& Parser::parseLine(std::string_view text)
   {
     // A tape marker line; anything after '%' on it is a comment by convention.
     block.tape_marker = true;
-    return block;
+    return false;
   }
   if (i < size && data[i] == '/')
   {
-    if (options_.block_delete)
+    if (options.block_delete)
     {
       block.deleted = true;
-      return block;
+      return false;
     }
     ++i;
   }
@@ -327,6 +169,7 @@ const Block& Parser::parseLine(std::string_view text)
       throw fail(letter_index, std::string("word ") + letter + " has no number");
     }
     i = static_cast<size_t>(result.ptr - data);
+    const bool decimal = std::memchr(data + number_start, '.', i - number_start) != nullptr;
     if (negative)
     {
       value = -value;
@@ -397,68 +240,316 @@ const Block& Parser::parseLine(std::string_view text)
         {
           throw fail(letter_index, std::string("word ") + letter + " is not supported");
         }
-        if (scan.present & (1u << w))
+        if (scan.has(static_cast<Word>(w)))
         {
           throw fail(letter_index, std::string("word ") + letter + " appears twice in one block");
         }
-        scan.present |= static_cast<uint16_t>(1u << w);
+        scan.present |= 1u << w;
+        if (decimal)
+        {
+          scan.decimal |= 1u << w;
+        }
         scan.value[w] = value;
         scan.column[w] = static_cast<uint32_t>(letter_index + 1);
         break;
       }
     }
   }
+  return true;
+}
+}  // namespace
 
-  // ---- Apply, in the RS-274 order of execution, on a copy so that an error changes nothing. ----
-  ModalState next = state_;
-  bool motion_word = false;
-  bool machine_coordinates = false;
-  bool dwell = false;
-  int motion_column = 0;
-  bool seen_group[4] = {false, false, false, false};  // motion, plane, units, distance
+const char* toString(Motion motion)
+{
+  switch (motion)
+  {
+    case Motion::kNone:
+      return "none";
+    case Motion::kRapid:
+      return "rapid";
+    case Motion::kLinear:
+      return "linear";
+    case Motion::kArcCw:
+      return "arc-cw";
+    case Motion::kArcCcw:
+      return "arc-ccw";
+  }
+  return "?";
+}
+
+const char* toString(Plane plane)
+{
+  switch (plane)
+  {
+    case Plane::kXY:
+      return "XY";
+    case Plane::kZX:
+      return "ZX";
+    case Plane::kYZ:
+      return "YZ";
+  }
+  return "?";
+}
+
+const char* toString(Dialect dialect)
+{
+  switch (dialect)
+  {
+    case Dialect::kHaas:
+      return "haas";
+    case Dialect::kFanuc:
+      return "fanuc";
+    case Dialect::kLinuxCnc:
+      return "linuxcnc";
+  }
+  return "?";
+}
+
+Dialect parseDialect(const std::string& name)
+{
+  std::string lower;
+  for (char c : name)
+  {
+    lower += static_cast<char>(c >= 'A' && c <= 'Z' ? c - 'A' + 'a' : c);
+  }
+  if (lower == "haas")
+  {
+    return Dialect::kHaas;
+  }
+  if (lower == "fanuc")
+  {
+    return Dialect::kFanuc;
+  }
+  if (lower == "linuxcnc")
+  {
+    return Dialect::kLinuxCnc;
+  }
+  throw ConfigError("G-code dialect \"" + name + "\" is not one of haas, fanuc, linuxcnc");
+}
+
+static std::string formatParseError(uint32_t line, uint32_t column, const std::string& reason)
+{
+  std::ostringstream out;
+  out << "G-code line " << line << ", column " << column << ": " << reason;
+  return out.str();
+}
+
+ParseError::ParseError(uint32_t line, uint32_t column, const std::string& reason)
+    : ProtocolError(formatParseError(line, column, reason)), line_(line), column_(column), reason_(reason)
+{
+}
+
+void Bounds::add(const Vec3& p)
+{
+  min.x = std::min(min.x, p.x);
+  min.y = std::min(min.y, p.y);
+  min.z = std::min(min.z, p.z);
+  max.x = std::max(max.x, p.x);
+  max.y = std::max(max.y, p.y);
+  max.z = std::max(max.z, p.z);
+}
+
+Parser::Parser(const ParserOptions& options) : options_(options)
+{
+  if (!(options_.chord_tolerance_mm > 0.0) || !std::isfinite(options_.chord_tolerance_mm))
+  {
+    throw ConfigError("G-code chord tolerance must be a positive number of millimetres");
+  }
+  if (options_.max_arc_segments < 1)
+  {
+    throw ConfigError("G-code max_arc_segments must be at least 1");
+  }
+  reset();
+}
+
+void Parser::reset()
+{
+  state_ = ModalState();
+  state_.units = options_.initial_units;
+  state_.motion = options_.initial_motion;
+  position_ = options_.initial_position;
+  line_ = 0;
+  block_.moves.clear();
+  comp_ = std::make_shared<Comp>();
+}
+
+double Parser::dwellSeconds(const Scan& scan, int word) const
+{
+  const double value = scan.value[word];
+  const uint32_t column = scan.column[word];
+  if (value < 0)
+  {
+    throw ParseError(line_, column, "negative dwell time");
+  }
+  switch (options_.dialect)
+  {
+    case Dialect::kHaas:
+      // Haas: P with a decimal point is seconds (P1.5), without one milliseconds (P1500).
+      return scan.hasDecimal(static_cast<Word>(word)) ? value : value / 1000.0;
+    case Dialect::kFanuc:
+      if (word == kX)
+      {
+        return value;  // G04 X: seconds
+      }
+      if (scan.hasDecimal(static_cast<Word>(word)))
+      {
+        throw ParseError(line_, column,
+                         "a Fanuc dwell P is a whole number of milliseconds (P1500 = 1.5 s); write G04 X1.5 for "
+                         "seconds, or choose the haas dialect");
+      }
+      return value / 1000.0;
+    case Dialect::kLinuxCnc:
+    default:
+      return value;  // seconds
+  }
+}
+
+const Block& Parser::parseLine(std::string_view text)
+{
+  ++line_;
+  const uint32_t line = line_;
+  Block& block = block_;
+  block.line = line;
+  block.block_number = -1;
+  block.program_number = -1;
+  block.tape_marker = false;
+  block.deleted = false;
+  block.has_words = false;
+  block.m_count = 0;
+  block.tool_change = false;
+  block.program_stop = false;
+  block.program_end = false;
+  block.dwell_s = -1.0;
+  block.moves.clear();
+  block.call = SubprogramCall();
+  block.subprogram_end = false;
+
+  Scan scan;
+  if (!scanLine(text, options_, line, scan, block))
+  {
+    return block;
+  }
+  // Applied on a copy, so that an error changes nothing.
+  Step step{block, state_, position_, *comp_};
+  step.line = line;
+  try
+  {
+    applyWords(scan, step);
+  }
+  catch (...)
+  {
+    block.moves.clear();
+    throw;
+  }
+  state_ = step.next;
+  position_ = step.position;
+  *comp_ = step.comp;
+  return block;
+}
+
+void Parser::applyWords(const Scan& scan, Step& st)
+{
+  const uint32_t line = st.line;
+  Block& block = st.block;
+  ModalState& next = st.next;
+  auto fail = [line](uint32_t column, const std::string& reason) { return ParseError(line, column, reason); };
+
+  // ---- G words: modal groups and non-modal codes. ----
+  bool seen_group[8] = {};  // motion, plane, units, distance, retract, comp, path mode, G92 family
   auto group = [&](int g, uint32_t column)
   {
     if (seen_group[g])
     {
-      throw ParseError(line, column, "two G codes of the same modal group in one block");
+      throw fail(column, "two G codes of the same modal group in one block");
     }
     seen_group[g] = true;
   };
+  auto nonModal = [&](int code, uint32_t column)
+  {
+    if (st.non_modal)
+    {
+      throw fail(column, gName(code) + " and " + gName(st.non_modal) + " in one block: give each its own block");
+    }
+    st.non_modal = code;
+    st.non_modal_column = column;
+  };
+  auto motion = [&](Motion m, uint16_t cycle, uint32_t column)
+  {
+    group(0, column);
+    next.motion = m;
+    if (cycle && next.canned_cycle == 0)
+    {
+      next.cycle.initial_z = st.position.z;  // the G98 level of this series of cycles
+    }
+    next.canned_cycle = cycle;
+    st.motion_word = true;
+    st.motion_column = column;
+  };
+  int comp_code = 0;
+  uint32_t comp_column = 0;
   for (uint8_t k = 0; k < scan.g_count; ++k)
   {
     const uint32_t column = scan.g_column[k];
-    switch (scan.g[k])
+    const int code = scan.g[k];
+    switch (code)
     {
       case 0:
-        group(0, column);
-        next.motion = Motion::kRapid;
-        motion_word = true;
-        motion_column = column;
+        motion(Motion::kRapid, 0, column);
         break;
       case 10:
-        group(0, column);
-        next.motion = Motion::kLinear;
-        motion_word = true;
-        motion_column = column;
+        motion(Motion::kLinear, 0, column);
         break;
       case 20:
-        group(0, column);
-        next.motion = Motion::kArcCw;
-        motion_word = true;
-        motion_column = column;
+        motion(Motion::kArcCw, 0, column);
         break;
       case 30:
-        group(0, column);
-        next.motion = Motion::kArcCcw;
-        motion_word = true;
-        motion_column = column;
+        motion(Motion::kArcCcw, 0, column);
         break;
       case 800:
         group(0, column);
         next.motion = Motion::kNone;
+        next.canned_cycle = 0;
         break;
+      case 730:
+      case 740:
+      case 810:
+      case 820:
+      case 830:
+      case 840:
+      case 850:
+      case 860:
+      case 890:
+        motion(Motion::kNone, static_cast<uint16_t>(code / 10), column);
+        break;
+      case 760:
+        if (options_.dialect == Dialect::kLinuxCnc)
+        {
+          throw fail(column,
+                     "G76 is LinuxCNC's lathe threading cycle, which is not supported; for a fine boring "
+                     "cycle (Haas/Fanuc G76) choose the haas or fanuc dialect");
+        }
+        motion(Motion::kNone, 76, column);
+        break;
+      case 870:
+      case 880:
+        throw fail(column, gName(code) +
+                               " (back boring / manual boring cycle) is not supported; expand it into "
+                               "G00/G01 moves");
       case 40:
-        dwell = true;
+        nonModal(40, column);
+        break;
+      case 280:
+        nonModal(280, column);
+        break;
+      case 300:
+        nonModal(300, column);
+        break;
+      case 920:
+      case 921:
+      case 922:
+      case 923:
+        group(7, column);
+        nonModal(code, column);
         break;
       case 170:
         group(1, column);
@@ -488,43 +579,79 @@ const Block& Parser::parseLine(std::string_view text)
         group(3, column);
         next.distance = DistanceMode::kIncremental;
         break;
-      case 530:
-        machine_coordinates = true;
+      case 980:
+        group(4, column);
+        next.retract = RetractMode::kInitialLevel;
         break;
-      // Accepted without effect on the programmed geometry: cutter compensation off (G40), tool
-      // length offset (G43/G49: the offset values are in the control), work offsets (G54..G59:
-      // likewise), feed per minute (G94, the only feed mode we support).
+      case 990:
+        group(4, column);
+        next.retract = RetractMode::kRPlane;
+        break;
       case 400:
+      case 410:
+      case 420:
+        group(5, column);
+        comp_code = code;
+        comp_column = column;
+        break;
+      case 610:
+        group(6, column);
+        next.path_mode = PathMode::kExactStop;
+        break;
+      case 640:
+        group(6, column);
+        next.path_mode = PathMode::kBlend;
+        next.path_tolerance_mm = scan.has(kP) ? scan.value[kP] : 0.0;  // scaled below with the units
+        break;
+      case 1870:
+        // Haas G187: P1/P2/P3 rough/medium/finish smoothing, E corner tolerance; bare G187: default.
+        group(6, column);
+        next.path_mode = PathMode::kBlend;
+        next.smoothing_level = scan.has(kP) ? static_cast<int32_t>(scan.value[kP]) : 0;
+        next.path_tolerance_mm = scan.has(kE) ? scan.value[kE] : 0.0;
+        break;
+      case 1030:
+        // Haas G103: limit look-ahead to P blocks (P0 or none: the control's maximum).
+        next.lookahead_blocks = scan.has(kP) ? static_cast<int32_t>(scan.value[kP]) : 0;
+        break;
+      case 530:
+        st.machine_coordinates = true;
+        break;
+      // Accepted without effect on the programmed geometry: tool length offset (G43/G49: the
+      // offset values are in the control), work offsets (G54..G59: likewise), feed per minute
+      // (G94, the only feed mode we support), and the cancel codes CAM posts put in their safe
+      // start line: polar coordinates off (G15), mirror image off (G50.1), rotation off (G69), and
+      // incremental arc centres (G91.1), the only centre mode we read.
+      case 911:
+      case 150:
       case 430:
       case 490:
+      case 501:
       case 540:
       case 550:
       case 560:
       case 570:
       case 580:
       case 590:
+      case 690:
       case 940:
         break;
       default:
-      {
-        std::ostringstream what;
-        what << "G" << scan.g[k] / 10;
-        if (scan.g[k] % 10)
-        {
-          what << "." << scan.g[k] % 10;
-        }
-        what << " is not supported";
-        throw ParseError(line, column, what.str());
-      }
+        throw fail(column, gName(code) + " is not supported");
     }
   }
+  const double scale = st.scale();
+  if (next.path_mode == PathMode::kBlend && (seen_group[6]))
+  {
+    next.path_tolerance_mm *= scale;
+  }
 
-  const double scale = next.units == Units::kInches ? kMmPerInch : 1.0;
+  // ---- F S T, M codes (spindle, tool, coolant; stops and calls are reported). ----
   if (scan.has(kF))
   {
     if (scan.value[kF] < 0)
     {
-      throw ParseError(line, scan.column[kF], "negative feed rate");
+      throw fail(scan.column[kF], "negative feed rate");
     }
     next.feed_mm_per_min = scan.value[kF] * scale;
   }
@@ -532,7 +659,7 @@ const Block& Parser::parseLine(std::string_view text)
   {
     if (scan.value[kS] < 0)
     {
-      throw ParseError(line, scan.column[kS], "negative spindle speed");
+      throw fail(scan.column[kS], "negative spindle speed");
     }
     next.spindle_rpm = scan.value[kS];
   }
@@ -540,13 +667,15 @@ const Block& Parser::parseLine(std::string_view text)
   {
     if (scan.value[kT] < 0 || scan.value[kT] != std::floor(scan.value[kT]) || scan.value[kT] > 1e9)
     {
-      throw ParseError(line, scan.column[kT], "malformed T tool number");
+      throw fail(scan.column[kT], "malformed T tool number");
     }
     next.selected_tool = static_cast<int32_t>(scan.value[kT]);
   }
+  bool l_used = false;
   for (uint8_t k = 0; k < scan.m_count; ++k)
   {
     block.m_codes[block.m_count++] = scan.m[k];
+    const uint32_t column = scan.m_column[k];
     switch (scan.m[k])
     {
       case 0:
@@ -577,240 +706,583 @@ const Block& Parser::parseLine(std::string_view text)
       case 9:
         next.coolant = false;
         break;
+      case 97:
+      case 98:
+      {
+        const bool local = scan.m[k] == 97;
+        if (local && options_.dialect != Dialect::kHaas)
+        {
+          throw fail(column,
+                     "M97 (local subprogram call) is a Haas code; choose the haas dialect, or call an O "
+                     "subprogram with M98");
+        }
+        if (block.call.kind != CallKind::kNone)
+        {
+          throw fail(column, "two subprogram calls in one block");
+        }
+        if (!scan.has(kP) || scan.value[kP] < 0 || scan.value[kP] != std::floor(scan.value[kP]) ||
+            scan.value[kP] > 1e12)
+        {
+          throw fail(column, std::string(local ? "M97 needs P, the N number" : "M98 needs P, the O number") +
+                                 " of the subprogram to call");
+        }
+        auto p = static_cast<int64_t>(scan.value[kP]);
+        uint32_t repeats = 1;
+        // Fanuc: M98 P00021000 runs O1000 twice (the digits before the last four count the runs).
+        if (!local && options_.dialect == Dialect::kFanuc && p > 9999 && !scan.has(kL))
+        {
+          repeats = static_cast<uint32_t>(p / 10000);
+          p %= 10000;
+        }
+        if (scan.has(kL))
+        {
+          const double l = scan.value[kL];
+          if (l < 0 || l != std::floor(l) || l > 9999)
+          {
+            throw fail(scan.column[kL], "L (subprogram repeats) must be a whole number 0..9999");
+          }
+          repeats = static_cast<uint32_t>(l);
+          l_used = true;
+        }
+        block.call.kind = local ? CallKind::kLocal : CallKind::kSubprogram;
+        block.call.label = p;
+        block.call.repeats = repeats;
+        block.call.column = column;
+        break;
+      }
+      case 99:
+        if (scan.has(kP))
+        {
+          throw fail(scan.column[kP],
+                     "M99 P (a jump to a block) is not supported: only M99 returning from a "
+                     "subprogram");
+        }
+        block.subprogram_end = true;
+        break;
       default:
         break;  // machine-specific: reported in m_codes
     }
   }
-  if (dwell)
+
+  // ---- Dwell, plane-independent non-modal codes. ----
+  if (st.non_modal == 40)
   {
-    if (!scan.has(kP) || scan.value[kP] < 0)
+    const bool fanuc_x = options_.dialect == Dialect::kFanuc && scan.has(kX) && !scan.has(kP);
+    if (!scan.has(kP) && !fanuc_x)
     {
-      throw fail(0, "G04 needs a P word (dwell seconds)");
+      throw fail(st.non_modal_column,
+                 std::string("G04 needs a P word (dwell ") +
+                     (options_.dialect == Dialect::kHaas
+                          ? "seconds with a decimal point, milliseconds without)"
+                          : (options_.dialect == Dialect::kFanuc ? "milliseconds, or X in seconds)" : "seconds)")));
     }
-    block.dwell_s = scan.value[kP];
+    block.dwell_s = dwellSeconds(scan, fanuc_x ? kX : kP);
+    if (scan.has(kY) || scan.has(kZ) || (scan.has(kX) && !fanuc_x))
+    {
+      throw fail(st.non_modal_column, "G04 with axis words: put the move in its own block");
+    }
+    if (st.motion_word || scan.has(kI) || scan.has(kJ) || scan.has(kK) || scan.has(kR))
+    {
+      throw fail(st.non_modal_column, "G04 with motion words: put the move in its own block");
+    }
   }
 
-  const bool has_axis = scan.has(kX) || scan.has(kY) || scan.has(kZ);
-  const bool has_offset = scan.has(kI) || scan.has(kJ) || scan.has(kK) || scan.has(kR);
-  if (dwell && has_axis)
+  // ---- Cutter compensation on/off (G40/G41/G42). ----
+  if (comp_code == 400)
   {
-    throw fail(0, "G04 with axis words");
+    next.cutter_comp = CutterComp::kOff;
+    next.comp_radius_mm = 0.0;
+    st.comp_changed = true;
   }
-  Vec3 start = position_;
-  if (has_axis && !dwell)
+  else if (comp_code)
+  {
+    if (!options_.tool_table)
+    {
+      throw fail(comp_column, gName(comp_code) +
+                                  " cutter compensation needs the tool's radius: give a tool table (~tool_table: "
+                                  "a LinuxCNC .tbl or YAML file with the diameter of the D tool)");
+    }
+    if (next.plane != Plane::kXY)
+    {
+      throw fail(comp_column, gName(comp_code) + " cutter compensation is supported in the XY plane (G17) only");
+    }
+    int32_t tool = next.tool;
+    if (scan.has(kD))
+    {
+      const double d = scan.value[kD];
+      if (d < 0 || d != std::floor(d) || d > 1e9)
+      {
+        throw fail(scan.column[kD], "malformed D offset number");
+      }
+      tool = static_cast<int32_t>(d);
+    }
+    else if (options_.dialect != Dialect::kLinuxCnc)
+    {
+      throw fail(comp_column, gName(comp_code) + " needs D, the offset (tool number) whose radius to use");
+    }
+    const double radius = tool == 0 ? 0.0 : options_.tool_table->radius(tool);
+    if (radius < 0)
+    {
+      throw fail(scan.has(kD) ? scan.column[kD] : comp_column,
+                 "tool " + std::to_string(tool) + " is not in the tool table: add its diameter there");
+    }
+    next.cutter_comp = comp_code == 410 ? CutterComp::kLeft : CutterComp::kRight;
+    next.comp_radius_mm = radius;
+    st.comp_changed = true;
+  }
+
+  // ---- G92 family: shift the program's numbers (the moves stay in the starting frame). ----
+  if (st.non_modal >= 920 && st.non_modal <= 923)
+  {
+    if (st.non_modal == 920)
+    {
+      if (!scan.hasAxis())
+      {
+        throw fail(st.non_modal_column, "G92 needs the axes to set (X, Y and/or Z)");
+      }
+      const Word axes[3] = {kX, kY, kZ};
+      for (int a = 0; a < 3; ++a)
+      {
+        if (scan.has(axes[a]))
+        {
+          // The current point is to read as the given number from now on.
+          axis(next.g92_offset, a) = axis(st.position, a) - scan.value[axes[a]] * scale;
+        }
+      }
+      next.g92_saved = next.g92_offset;
+    }
+    else
+    {
+      if (scan.hasAxis())
+      {
+        throw fail(st.non_modal_column, gName(st.non_modal) + " takes no axis words");
+      }
+      if (st.non_modal == 921)
+      {
+        next.g92_offset = Vec3();
+        next.g92_saved = Vec3();
+      }
+      else if (st.non_modal == 922)
+      {
+        next.g92_offset = Vec3();
+      }
+      else
+      {
+        next.g92_offset = next.g92_saved;
+      }
+    }
+    if (st.motion_word)
+    {
+      throw fail(st.motion_column, "a motion code in a G92 block: give the move its own block");
+    }
+    return finishBlock(scan, st, l_used);
+  }
+
+  // ---- Motion. ----
+  if (st.non_modal == 280 || st.non_modal == 300)
+  {
+    if (st.motion_word)
+    {
+      throw fail(st.motion_column, "a motion code in a G28/G30 block: give the move its own block");
+    }
+    referenceReturn(scan, st, st.non_modal == 300);
+    return finishBlock(scan, st, l_used);
+  }
+  const bool has_axis = scan.hasAxis() && st.non_modal != 40;
+  if (next.canned_cycle && (has_axis || (st.motion_word && scan.has(kR))))
+  {
+    if (st.machine_coordinates)
+    {
+      throw fail(st.motion_column ? st.motion_column : 1, "G53 with a canned cycle");
+    }
+    runCycle(scan, st);
+    l_used = true;
+    return finishBlock(scan, st, l_used);
+  }
+  const bool has_offset = scan.has(kI) || scan.has(kJ) || scan.has(kK) || scan.has(kR);
+  if (has_axis)
   {
     if (next.motion == Motion::kNone)
     {
-      throw ParseError(line, scan.column[scan.has(kX) ? kX : (scan.has(kY) ? kY : kZ)],
-                       "axis words without a motion mode (after G80)");
+      throw fail(scan.column[scan.has(kX) ? kX : (scan.has(kY) ? kY : kZ)],
+                 "axis words without a motion mode (after G80)");
     }
-    Vec3 target = start;
+    Vec3 target = st.position;
     const Word axes[3] = {kX, kY, kZ};
     for (int a = 0; a < 3; ++a)
     {
       if (scan.has(axes[a]))
       {
         const double v = scan.value[axes[a]] * scale;
-        if (next.distance == DistanceMode::kIncremental && !machine_coordinates)
+        if (st.machine_coordinates)
+        {
+          axis(target, a) = v;  // G53: machine numbers, no G92 shift, never incremental
+        }
+        else if (next.distance == DistanceMode::kIncremental)
         {
           axis(target, a) += v;
         }
         else
         {
-          axis(target, a) = v;
+          axis(target, a) = v + axis(next.g92_offset, a);
         }
       }
     }
-    Move proto;
-    proto.motion = next.motion;
-    proto.start = start;
-    proto.end = target;
-    proto.feed_mm_per_min = next.feed_mm_per_min;
-    proto.spindle_rpm = next.spindle_rpm;
-    proto.spindle = next.spindle;
-    proto.tool = next.tool;
-    proto.coolant = next.coolant;
-    proto.machine_coordinates = machine_coordinates;
-    proto.line = line;
-    proto.block_number = block.block_number;
-
     if (next.motion == Motion::kRapid || next.motion == Motion::kLinear)
     {
       if (has_offset)
       {
         const Word w = scan.has(kI) ? kI : (scan.has(kJ) ? kJ : (scan.has(kK) ? kK : kR));
-        throw ParseError(line, scan.column[w], "I/J/K/R words need G02 or G03");
+        throw fail(scan.column[w], "I/J/K/R words need G02 or G03");
       }
-      // A G53 move is in another frame: equal numbers are no proof that the tool stays put.
-      const bool report_anyway = machine_coordinates && options_.separate_machine_moves;
-      if (report_anyway || target.x != start.x || target.y != start.y || target.z != start.z)
-      {
-        block.moves.push_back(proto);
-      }
+      moveStraight(scan, st, target);
     }
     else
     {
-      if (machine_coordinates)
+      if (st.machine_coordinates)
       {
-        throw ParseError(line, static_cast<uint32_t>(motion_column ? motion_column : 1), "G53 with an arc");
+        throw fail(st.motion_column ? st.motion_column : 1, "G53 with an arc");
       }
-      const PlaneAxes p = planeAxes(next.plane);
-      const double su = axis(start, p.u), sv = axis(start, p.v);
-      const double eu = axis(target, p.u), ev = axis(target, p.v);
-      const bool cw = next.motion == Motion::kArcCw;
-      double cu = 0.0, cv = 0.0;
-      double sweep = 0.0;
-      const uint32_t arc_column = static_cast<uint32_t>(motion_column ? motion_column : 1);
-      if (scan.has(kR))
-      {
-        // Another plane's offset word next to R is ambiguous: reject rather than guess.
-        if (scan.has(kI) || scan.has(kJ) || scan.has(kK))
-        {
-          throw ParseError(line, scan.column[kR], "arc with both R and I/J/K");
-        }
-        const double r = scan.value[kR] * scale;
-        const double du = eu - su, dv = ev - sv;
-        const double d = std::hypot(du, dv);
-        if (d < 1e-9)
-        {
-          throw ParseError(line, scan.column[kR], "R-form arc with end point equal to start point");
-        }
-        const double radius = std::fabs(r);
-        if (radius < 1e-9)
-        {
-          throw ParseError(line, scan.column[kR], "arc radius R is zero");
-        }
-        double h2 = radius * radius - d * d / 4.0;
-        if (h2 < 0)
-        {
-          if (d / 2.0 - radius > options_.arc_radius_tolerance_mm)
-          {
-            throw ParseError(line, scan.column[kR], "arc radius R is smaller than half the distance to the end point");
-          }
-          h2 = 0;
-        }
-        const double h = std::sqrt(h2);
-        // Going counter-clockwise round a centre, the centre is on the left of the chord; a
-        // clockwise arc has it on the right. Negative R (the long way round) swaps sides.
-        double side = cw ? -1.0 : 1.0;
-        if (r < 0)
-        {
-          side = -side;
-        }
-        const double mu = (su + eu) / 2.0, mv = (sv + ev) / 2.0;
-        cu = mu + side * h * (-dv / d);
-        cv = mv + side * h * (du / d);
-      }
-      else
-      {
-        cu = su + (scan.has(static_cast<Word>(p.offset_u)) ? scan.value[p.offset_u] * scale : 0.0);
-        cv = sv + (scan.has(static_cast<Word>(p.offset_v)) ? scan.value[p.offset_v] * scale : 0.0);
-        // The offset word along the normal axis makes no sense in this plane.
-        const int normal_offset = kI + p.w;
-        if (scan.has(static_cast<Word>(normal_offset)))
-        {
-          throw ParseError(line, scan.column[normal_offset],
-                           std::string("offset word not in the ") + toString(next.plane) + " plane of the arc");
-        }
-        if (!scan.has(static_cast<Word>(p.offset_u)) && !scan.has(static_cast<Word>(p.offset_v)))
-        {
-          throw ParseError(line, arc_column,
-                           std::string("arc without I/J/K or R in the ") + toString(next.plane) + " plane");
-        }
-      }
-      const double rs = std::hypot(su - cu, sv - cv);
-      const double re = std::hypot(eu - cu, ev - cv);
-      if (rs < 1e-9)
-      {
-        throw ParseError(line, arc_column, "arc radius is zero");
-      }
-      if (std::fabs(rs - re) > std::max(options_.arc_radius_tolerance_mm, 0.001 * rs))
-      {
-        std::ostringstream what;
-        what << "arc end point is not on the circle (start radius " << rs << " mm, end radius " << re << " mm)";
-        throw ParseError(line, arc_column, what.str());
-      }
-      const double a0 = std::atan2(sv - cv, su - cu);
-      const double a1 = std::atan2(ev - cv, eu - cu);
-      sweep = a1 - a0;
-      const bool closed = std::fabs(eu - su) < 1e-9 && std::fabs(ev - sv) < 1e-9;
-      if (cw)
-      {
-        while (sweep >= -1e-12)
-        {
-          sweep -= 2 * kPi;
-        }
-        if (!closed && sweep < -2 * kPi + 1e-12)
-        {
-          sweep += 2 * kPi;
-        }
-      }
-      else
-      {
-        while (sweep <= 1e-12)
-        {
-          sweep += 2 * kPi;
-        }
-        if (!closed && sweep > 2 * kPi - 1e-12)
-        {
-          sweep -= 2 * kPi;
-        }
-      }
-      if (closed)
-      {
-        sweep = cw ? -2 * kPi : 2 * kPi;
-      }
-      // Chord count from the sagitta: a chord spanning angle t deviates r (1 - cos(t/2)).
-      const double r_max = std::max(rs, re);
-      const double tol = options_.chord_tolerance_mm;
-      const double max_step = tol >= r_max ? kPi : 2.0 * std::acos(1.0 - tol / r_max);
-      double count = std::ceil(std::fabs(sweep) / max_step - 1e-9);
-      count = std::max(1.0, std::min(count, static_cast<double>(options_.max_arc_segments)));
-      const uint32_t n = static_cast<uint32_t>(count);
-      const double sw0 = axis(start, p.w), sw1 = axis(target, p.w);
-      Vec3 prev = start;
-      for (uint32_t s = 1; s <= n; ++s)
-      {
-        Vec3 point;
-        if (s == n)
-        {
-          point = target;  // exactly the programmed end point, no accumulated rounding
-        }
-        else
-        {
-          const double f = static_cast<double>(s) / n;
-          const double angle = a0 + sweep * f;
-          const double radius = rs + (re - rs) * f;  // a slight spiral if the radii differ
-          axis(point, p.u) = cu + radius * std::cos(angle);
-          axis(point, p.v) = cv + radius * std::sin(angle);
-          axis(point, p.w) = sw0 + (sw1 - sw0) * f;
-        }
-        Move m = proto;
-        m.start = prev;
-        m.end = point;
-        m.segment = s - 1;
-        m.segment_count = n;
-        block.moves.push_back(m);
-        prev = point;
-      }
-      position_ = target;
-    }
-    if (!(machine_coordinates && options_.separate_machine_moves))
-    {
-      position_ = target;
+      moveArc(scan, st, target);
     }
   }
   else if (has_offset)
   {
     const Word w = scan.has(kI) ? kI : (scan.has(kJ) ? kJ : (scan.has(kK) ? kK : kR));
-    if (motion_word && (next.motion == Motion::kArcCw || next.motion == Motion::kArcCcw))
+    if (st.motion_word && (next.motion == Motion::kArcCw || next.motion == Motion::kArcCcw))
     {
-      throw ParseError(line, scan.column[w], "arc without an end point (X/Y/Z)");
+      throw fail(scan.column[w], "arc without an end point (X/Y/Z)");
     }
-    throw ParseError(line, scan.column[w], "I/J/K/R words without an arc");
+    throw fail(scan.column[w], "I/J/K/R words without an arc");
   }
-  state_ = next;
-  return block;
+  else if (st.comp_changed && next.cutter_comp == CutterComp::kOff)
+  {
+    compensationOff(st, false);
+  }
+  else if (st.comp_changed)
+  {
+    compensationOn(st);
+  }
+  return finishBlock(scan, st, l_used);
+}
+
+void Parser::finishBlock(const Scan& scan, Step& st, bool l_used)
+{
+  if (scan.has(kL) && !l_used && st.block.call.kind == CallKind::kNone)
+  {
+    throw ParseError(st.line, scan.column[kL], "L (repeats) without a canned cycle or a subprogram call");
+  }
+  if (scan.has(kQ) && !st.next.canned_cycle)
+  {
+    throw ParseError(st.line, scan.column[kQ], "Q without a canned cycle");
+  }
+  if (st.block.program_end && st.next.cutter_comp != CutterComp::kOff)
+  {
+    // Ending with compensation on would leave the last offset move unfinished.
+    compensationOff(st, true);
+  }
+}
+
+void Parser::emitRaw(Step& st, const Move& move)
+{
+  st.block.moves.push_back(move);
+}
+
+Move Parser::proto(const Step& st, Motion motion) const
+{
+  Move m;
+  m.motion = motion;
+  m.start = st.position;
+  m.end = st.position;
+  m.feed_mm_per_min = st.next.feed_mm_per_min;
+  m.spindle_rpm = st.next.spindle_rpm;
+  m.spindle = st.next.spindle;
+  m.tool = st.next.tool;
+  m.coolant = st.next.coolant;
+  m.line = st.line;
+  m.block_number = st.block.block_number;
+  return m;
+}
+
+void Parser::moveStraight(const Scan&, Step& st, const Vec3& target)
+{
+  Move m = proto(st, st.next.motion);
+  m.end = target;
+  m.machine_coordinates = st.machine_coordinates;
+  // A G53 move is in another frame: equal numbers are no proof that the tool stays put.
+  const bool report_anyway = st.machine_coordinates && options_.separate_machine_moves;
+  const bool moves = target.x != st.position.x || target.y != st.position.y || target.z != st.position.z;
+  if (st.machine_coordinates)
+  {
+    if (st.comp.on || st.next.cutter_comp != CutterComp::kOff)
+    {
+      throw ParseError(st.line, st.motion_column ? st.motion_column : 1,
+                       "G53 with cutter compensation on: cancel it with G40 first");
+    }
+    if (report_anyway || moves)
+    {
+      emitRaw(st, m);
+    }
+    if (!options_.separate_machine_moves)
+    {
+      st.position = target;
+    }
+    return;
+  }
+  if (st.comp.on || st.comp_changed || st.next.cutter_comp != CutterComp::kOff)
+  {
+    compensatedStraight(st, m);
+    return;
+  }
+  if (moves)
+  {
+    emitRaw(st, m);
+  }
+  st.position = target;
+}
+
+void Parser::referenceReturn(const Scan& scan, Step& st, bool g30)
+{
+  const uint32_t column = st.non_modal_column;
+  if (st.comp.on || st.next.cutter_comp != CutterComp::kOff)
+  {
+    throw ParseError(st.line, column,
+                     std::string(g30 ? "G30" : "G28") + " with cutter compensation on: cancel it with G40 first");
+  }
+  if (st.machine_coordinates)
+  {
+    throw ParseError(st.line, column, "G53 with G28/G30");
+  }
+  const Vec3& home = g30 ? options_.g30_position : options_.g28_position;
+  const double scale = st.scale();
+  bool named[3] = {scan.has(kX), scan.has(kY), scan.has(kZ)};
+  if (!scan.hasAxis())
+  {
+    if (options_.dialect == Dialect::kFanuc)
+    {
+      return;  // Fanuc: only the named axes return; a bare G28 moves nothing
+    }
+    named[0] = named[1] = named[2] = true;  // Haas, LinuxCNC: every axis, straight to the point
+  }
+  else
+  {
+    // First to the intermediate point, given in program coordinates.
+    Vec3 via = st.position;
+    const Word axes[3] = {kX, kY, kZ};
+    for (int a = 0; a < 3; ++a)
+    {
+      if (named[a])
+      {
+        const double v = scan.value[axes[a]] * scale;
+        axis(via, a) =
+            st.next.distance == DistanceMode::kIncremental ? axis(via, a) + v : v + axis(st.next.g92_offset, a);
+      }
+    }
+    if (via.x != st.position.x || via.y != st.position.y || via.z != st.position.z)
+    {
+      Move m = proto(st, Motion::kRapid);
+      m.end = via;
+      emitRaw(st, m);
+      st.position = via;
+    }
+  }
+  // Then to the reference point, in machine coordinates, as a G53 move would be.
+  Move m = proto(st, Motion::kRapid);
+  for (int a = 0; a < 3; ++a)
+  {
+    if (named[a])
+    {
+      axis(m.end, a) = axis(home, a);
+    }
+  }
+  m.machine_coordinates = true;
+  m.reference_return = true;
+  const bool moves = m.end.x != st.position.x || m.end.y != st.position.y || m.end.z != st.position.z;
+  if (options_.separate_machine_moves || moves)
+  {
+    emitRaw(st, m);
+  }
+  if (!options_.separate_machine_moves)
+  {
+    st.position = m.end;
+  }
+}
+
+Arc Parser::arcGeometry(const Scan& scan, const Step& st, const Vec3& start, const Vec3& target) const
+{
+  const uint32_t line = st.line;
+  const double scale = st.scale();
+  const PlaneAxes p = planeAxes(st.next.plane);
+  const double su = axis(start, p.u), sv = axis(start, p.v);
+  const double eu = axis(target, p.u), ev = axis(target, p.v);
+  const bool cw = st.next.motion == Motion::kArcCw;
+  double cu = 0.0, cv = 0.0;
+  const uint32_t arc_column = st.motion_column ? st.motion_column : 1;
+  if (scan.has(kR))
+  {
+    // Another plane's offset word next to R is ambiguous: reject rather than guess.
+    if (scan.has(kI) || scan.has(kJ) || scan.has(kK))
+    {
+      throw ParseError(line, scan.column[kR], "arc with both R and I/J/K");
+    }
+    const double r = scan.value[kR] * scale;
+    const double du = eu - su, dv = ev - sv;
+    const double d = std::hypot(du, dv);
+    if (d < 1e-9)
+    {
+      throw ParseError(line, scan.column[kR], "R-form arc with end point equal to start point");
+    }
+    const double radius = std::fabs(r);
+    if (radius < 1e-9)
+    {
+      throw ParseError(line, scan.column[kR], "arc radius R is zero");
+    }
+    double h2 = radius * radius - d * d / 4.0;
+    if (h2 < 0)
+    {
+      if (d / 2.0 - radius > options_.arc_radius_tolerance_mm)
+      {
+        throw ParseError(line, scan.column[kR], "arc radius R is smaller than half the distance to the end point");
+      }
+      h2 = 0;
+    }
+    const double h = std::sqrt(h2);
+    // Going counter-clockwise round a centre, the centre is on the left of the chord; a
+    // clockwise arc has it on the right. Negative R (the long way round) swaps sides.
+    double side = cw ? -1.0 : 1.0;
+    if (r < 0)
+    {
+      side = -side;
+    }
+    const double mu = (su + eu) / 2.0, mv = (sv + ev) / 2.0;
+    cu = mu + side * h * (-dv / d);
+    cv = mv + side * h * (du / d);
+  }
+  else
+  {
+    cu = su + (scan.has(static_cast<Word>(p.offset_u)) ? scan.value[p.offset_u] * scale : 0.0);
+    cv = sv + (scan.has(static_cast<Word>(p.offset_v)) ? scan.value[p.offset_v] * scale : 0.0);
+    // The offset word along the normal axis makes no sense in this plane.
+    const int normal_offset = kI + p.w;
+    if (scan.has(static_cast<Word>(normal_offset)))
+    {
+      throw ParseError(line, scan.column[normal_offset],
+                       std::string("offset word not in the ") + toString(st.next.plane) + " plane of the arc");
+    }
+    if (!scan.has(static_cast<Word>(p.offset_u)) && !scan.has(static_cast<Word>(p.offset_v)))
+    {
+      throw ParseError(line, arc_column,
+                       std::string("arc without I/J/K or R in the ") + toString(st.next.plane) + " plane");
+    }
+  }
+  Arc arc;
+  arc.p = p;
+  arc.cu = cu;
+  arc.cv = cv;
+  arc.cw = cw;
+  arc.start = start;
+  arc.end = target;
+  arc.rs = std::hypot(su - cu, sv - cv);
+  arc.re = std::hypot(eu - cu, ev - cv);
+  if (arc.rs < 1e-9)
+  {
+    throw ParseError(line, arc_column, "arc radius is zero");
+  }
+  if (std::fabs(arc.rs - arc.re) > std::max(options_.arc_radius_tolerance_mm, 0.001 * arc.rs))
+  {
+    std::ostringstream what;
+    what << "arc end point is not on the circle (start radius " << arc.rs << " mm, end radius " << arc.re << " mm)";
+    throw ParseError(line, arc_column, what.str());
+  }
+  arc.a0 = std::atan2(sv - cv, su - cu);
+  const double a1 = std::atan2(ev - cv, eu - cu);
+  const bool closed = std::fabs(eu - su) < 1e-9 && std::fabs(ev - sv) < 1e-9;
+  arc.sweep = sweepBetween(arc.a0, a1, cw, closed);
+  return arc;
+}
+
+double sweepBetween(double a0, double a1, bool cw, bool closed)
+{
+  if (closed)
+  {
+    return cw ? -2 * kPi : 2 * kPi;
+  }
+  double sweep = a1 - a0;
+  if (cw)
+  {
+    while (sweep >= -1e-12)
+    {
+      sweep -= 2 * kPi;
+    }
+    if (sweep < -2 * kPi + 1e-12)
+    {
+      sweep += 2 * kPi;
+    }
+  }
+  else
+  {
+    while (sweep <= 1e-12)
+    {
+      sweep += 2 * kPi;
+    }
+    if (sweep > 2 * kPi - 1e-12)
+    {
+      sweep -= 2 * kPi;
+    }
+  }
+  return sweep;
+}
+
+void Parser::emitArc(Step& st, const Move& proto, const Arc& arc)
+{
+  const PlaneAxes& p = arc.p;
+  // Chord count from the sagitta: a chord spanning angle t deviates r (1 - cos(t/2)).
+  const double r_max = std::max(arc.rs, arc.re);
+  const double tol = options_.chord_tolerance_mm;
+  const double max_step = tol >= r_max ? kPi : 2.0 * std::acos(1.0 - tol / r_max);
+  double count = std::ceil(std::fabs(arc.sweep) / max_step - 1e-9);
+  count = std::max(1.0, std::min(count, static_cast<double>(options_.max_arc_segments)));
+  const uint32_t n = static_cast<uint32_t>(count);
+  const double sw0 = axis(arc.start, p.w), sw1 = axis(arc.end, p.w);
+  Vec3 prev = arc.start;
+  for (uint32_t s = 1; s <= n; ++s)
+  {
+    Vec3 point;
+    if (s == n)
+    {
+      point = arc.end;  // exactly the programmed end point, no accumulated rounding
+    }
+    else
+    {
+      const double f = static_cast<double>(s) / n;
+      const double angle = arc.a0 + arc.sweep * f;
+      const double radius = arc.rs + (arc.re - arc.rs) * f;  // a slight spiral if the radii differ
+      axis(point, p.u) = arc.cu + radius * std::cos(angle);
+      axis(point, p.v) = arc.cv + radius * std::sin(angle);
+      axis(point, p.w) = sw0 + (sw1 - sw0) * f;
+    }
+    Move m = proto;
+    m.motion = arc.cw ? Motion::kArcCw : Motion::kArcCcw;
+    m.start = prev;
+    m.end = point;
+    m.segment = s - 1;
+    m.segment_count = n;
+    st.block.moves.push_back(m);
+    prev = point;
+  }
+}
+
+void Parser::moveArc(const Scan& scan, Step& st, const Vec3& target)
+{
+  const Arc arc = arcGeometry(scan, st, st.position, target);
+  const Move m = proto(st, st.next.motion);
+  if (st.comp.on || st.comp_changed || st.next.cutter_comp != CutterComp::kOff)
+  {
+    compensatedArc(st, m, arc);
+    return;
+  }
+  emitArc(st, m, arc);
+  st.position = target;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -818,11 +1290,46 @@ const Block& Parser::parseLine(std::string_view text)
 namespace
 {
 constexpr size_t kChunkSize = 64 * 1024;
+// More O labels than this in one file is not a part program.
+constexpr size_t kMaxLabels = 100000;
+
+// The number of a line's leading O or N word ("O1000 (SUB)", " n100 G81 ..."), or -1.
+int64_t leadingLabel(std::string_view line, char letter)
+{
+  size_t i = 0;
+  while (i < line.size() && isSpace(line[i]))
+  {
+    ++i;
+  }
+  if (i < line.size() && line[i] == '/')
+  {
+    ++i;
+  }
+  if (i >= line.size() || (line[i] != letter && line[i] != letter - 'A' + 'a'))
+  {
+    return -1;
+  }
+  ++i;
+  while (i < line.size() && isSpace(line[i]))
+  {
+    ++i;
+  }
+  int64_t value = 0;
+  const auto result = std::from_chars(line.data() + i, line.data() + line.size(), value);
+  if (result.ec != std::errc() || value < 0)
+  {
+    return -1;
+  }
+  return value;
 }
+}  // namespace
 
 Reader::Reader(std::istream& in, const ParserOptions& options) : in_(in), parser_(options)
 {
   buffer_.resize(std::max(kChunkSize, options.max_line_length + 2) * 2);
+  const std::streampos start = in_.tellg();
+  stream_start_ = start == std::streampos(-1) ? -1 : static_cast<int64_t>(start);
+  in_.clear(in_.rdstate() & ~std::ios::failbit);
 }
 
 bool Reader::nextLine(std::string_view& line)
@@ -835,6 +1342,7 @@ bool Reader::nextLine(std::string_view& line)
     {
       const size_t length = static_cast<const char*>(nl) - begin;
       line = std::string_view(begin, length);
+      line_offset_ = base_ + begin_;
       begin_ += length + 1;
       return true;
     }
@@ -845,6 +1353,7 @@ bool Reader::nextLine(std::string_view& line)
         return false;
       }
       line = std::string_view(begin, end_ - begin_);
+      line_offset_ = base_ + begin_;
       begin_ = end_;
       return true;
     }
@@ -859,6 +1368,7 @@ bool Reader::nextLine(std::string_view& line)
     if (begin_ > 0)
     {
       std::memmove(buffer_.data(), begin, pending);
+      base_ += begin_;
       begin_ = 0;
       end_ = pending;
     }
@@ -876,17 +1386,174 @@ bool Reader::nextLine(std::string_view& line)
   }
 }
 
+void Reader::jump(const Label& label)
+{
+  in_.clear();
+  in_.seekg(static_cast<std::streamoff>(stream_start_ + static_cast<int64_t>(label.offset)));
+  if (!in_)
+  {
+    throw Error("G-code input stream: cannot go back to byte " + std::to_string(label.offset) +
+                " for a subprogram (the program must be a file)");
+  }
+  begin_ = end_ = 0;
+  base_ = label.offset;
+  eof_ = false;
+  parser_.setNextLine(label.line);
+}
+
+Reader::Label Reader::findLabel(char letter, int64_t number, const Block& caller)
+{
+  auto& cache = letter == 'O' ? o_labels_ : n_labels_;
+  for (const auto& entry : cache)
+  {
+    if (entry.first == number)
+    {
+      return entry.second;
+    }
+  }
+  // Not seen yet: read the file from the start (subprograms usually follow the main program's
+  // M30), noting every O label on the way.
+  const Label back{base_ + begin_, caller.line + 1};
+  jump(Label{0, 1});
+  uint32_t line_number = 0;
+  std::string_view line;
+  std::optional<Label> found;
+  while (nextLine(line))
+  {
+    ++line_number;
+    const int64_t o = leadingLabel(line, 'O');
+    if (o >= 0 && o_labels_.size() < kMaxLabels &&
+        std::none_of(o_labels_.begin(), o_labels_.end(), [o](const auto& e) { return e.first == o; }))
+    {
+      o_labels_.push_back({o, Label{line_offset_, line_number}});
+    }
+    if (!found && leadingLabel(line, letter) == number)
+    {
+      found = Label{line_offset_, line_number};
+      if (letter == 'N')
+      {
+        n_labels_.push_back({number, *found});
+        break;
+      }
+    }
+  }
+  if (!found)
+  {
+    jump(back);
+    const std::string what = letter == 'O' ? "O" : "N";
+    throw ParseError(caller.line, caller.call.column,
+                     std::string(letter == 'O' ? "M98" : "M97") + " calls " + what + std::to_string(number) +
+                         ", which is not in this program: add the subprogram (a line starting " + what +
+                         std::to_string(number) + ", ending with M99) to the file");
+  }
+  return *found;
+}
+
+void Reader::call(const Block& block)
+{
+  const SubprogramCall& c = block.call;
+  const char* code = c.kind == CallKind::kLocal ? "M97" : "M98";
+  if (stream_start_ < 0)
+  {
+    throw ParseError(block.line, c.column,
+                     std::string(code) + " needs a program that can be read again (a file), not a pipe");
+  }
+  if (calls_.size() >= parser_.options().max_call_depth)
+  {
+    throw ParseError(block.line, c.column,
+                     std::string(code) + " P" + std::to_string(c.label) + ": subprograms nested deeper than " +
+                         std::to_string(parser_.options().max_call_depth) + " (does a subprogram call itself?)");
+  }
+  if (c.repeats == 0)
+  {
+    return;
+  }
+  Frame frame;
+  frame.return_offset = base_ + begin_;
+  frame.return_line = block.line + 1;
+  frame.remaining = c.repeats - 1;
+  frame.target = findLabel(c.kind == CallKind::kLocal ? 'N' : 'O', c.label, block);
+  calls_.push_back(frame);
+  jump(frame.target);
+}
+
 const Block* Reader::nextBlock()
 {
-  std::string_view line;
-  if (!nextLine(line))
+  for (;;)
   {
-    block_ = nullptr;
-    return nullptr;
+    if (ended_)
+    {
+      if (!flushed_)
+      {
+        flushed_ = true;
+        tail_.line = parser_.lineCount();
+        if (parser_.finish(tail_))
+        {
+          block_ = &tail_;
+          move_index_ = 0;
+          return block_;
+        }
+      }
+      block_ = nullptr;
+      return nullptr;
+    }
+    std::string_view line;
+    if (!nextLine(line))
+    {
+      if (!calls_.empty())
+      {
+        throw ParseError(parser_.lineCount(), 1,
+                         "the file ends inside a subprogram (line " + std::to_string(calls_.back().target.line) +
+                             "): end it with M99");
+      }
+      ended_ = true;
+      continue;
+    }
+    const uint64_t offset = line_offset_;
+    const Block& block = parser_.parseLine(line);
+    block_ = &block;
+    move_index_ = 0;
+    if (block.program_number >= 0 && o_labels_.size() < kMaxLabels)
+    {
+      const int64_t o = block.program_number;
+      if (std::none_of(o_labels_.begin(), o_labels_.end(), [o](const auto& e) { return e.first == o; }))
+      {
+        o_labels_.push_back({o, Label{offset, block.line}});
+      }
+    }
+    // Where the next line comes from: the block's own moves are returned first.
+    if (block.program_end)
+    {
+      ended_ = true;
+    }
+    else if (block.call.kind != CallKind::kNone)
+    {
+      call(block);
+    }
+    else if (block.subprogram_end)
+    {
+      if (calls_.empty())
+      {
+        ended_ = true;  // M99 in a main program loops on a control: here it ends the program
+      }
+      else
+      {
+        Frame& frame = calls_.back();
+        if (frame.remaining > 0)
+        {
+          --frame.remaining;
+          jump(frame.target);
+        }
+        else
+        {
+          const Label back{frame.return_offset, frame.return_line};
+          calls_.pop_back();
+          jump(back);
+        }
+      }
+    }
+    return block_;
   }
-  block_ = &parser_.parseLine(line);
-  move_index_ = 0;
-  return block_;
 }
 
 bool Reader::nextMove(Move& move)

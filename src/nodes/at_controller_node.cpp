@@ -23,6 +23,7 @@
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/program_dir.h"
 #include "cnc_bridge/gcode/gcode.h"
+#include "cnc_bridge/ros/gcode_params.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/params.h"
 #include "cnc_bridge/ros/single_goal_action_server.h"
@@ -91,6 +92,9 @@ class AtControllerNode
     limits_.validate();
     // ~default_feed_rate: m/s along the path when neither the goal nor the program gives one.
     default_feed_ = params::positive(pnh, "default_feed_rate", 0.01);
+    // ~gcode_dialect (string, "haas"): haas, fanuc or linuxcnc, where the controls read G-code
+    // differently (docs/gcode.md); ~tool_table (string, ""): tool diameters for G41/G42.
+    params::gcodeOptions(pnh, gcode_options_);
     // ~spindle_max_rpm: rev/min that the spindle value 255 stands for.
     spindle_max_rpm_ = params::positive(pnh, "spindle_max_rpm", 24000.0);
     // ~coolant: whether operations use coolant (P1@) unless a goal says otherwise; ~coolant service.
@@ -570,28 +574,30 @@ class AtControllerNode
         throw ConfigError("cannot read " + file);
       }
       bool coolant_in_program = false;
-      gcode::forEachMove(in,
-                         [&](const gcode::Move& move)
-                         {
-                           // Program millimetres are machine millimetres: 1000 pulses each.
-                           plan.points.push_back({move.end.x * ap::kPulsesPerMm, move.end.y * ap::kPulsesPerMm,
-                                                  move.end.z * ap::kPulsesPerMm});
-                           double feed = fallback_feed;
-                           if (move.motion == gcode::Motion::kRapid)
-                           {
-                             feed = 1e9;  // as fast as the axes allow
-                           }
-                           else if (goal_feed <= 0.0 && move.feed_mm_per_min > 0.0)
-                           {
-                             feed = move.feed_mm_per_min / 60.0;
-                           }
-                           plan.feeds.push_back(feed);
-                           coolant_in_program = coolant_in_program || move.coolant;
-                           if (move.spindle == gcode::Spindle::kClockwise)
-                           {
-                             plan.spindle_rpm = move.spindle_rpm;
-                           }
-                         });
+      gcode::forEachMove(
+          in,
+          [&](const gcode::Move& move)
+          {
+            // Program millimetres are machine millimetres: 1000 pulses each.
+            plan.points.push_back(
+                {move.end.x * ap::kPulsesPerMm, move.end.y * ap::kPulsesPerMm, move.end.z * ap::kPulsesPerMm});
+            double feed = fallback_feed;
+            if (move.motion == gcode::Motion::kRapid)
+            {
+              feed = 1e9;  // as fast as the axes allow
+            }
+            else if (goal_feed <= 0.0 && move.feed_mm_per_min > 0.0)
+            {
+              feed = move.feed_mm_per_min / 60.0;
+            }
+            plan.feeds.push_back(feed);
+            coolant_in_program = coolant_in_program || move.coolant;
+            if (move.spindle == gcode::Spindle::kClockwise)
+            {
+              plan.spindle_rpm = move.spindle_rpm;
+            }
+          },
+          gcode_options_);
       if (goal.coolant == AtFollowPathGoal::COOLANT_DEFAULT && coolant_in_program)
       {
         plan.coolant = true;
@@ -858,6 +864,7 @@ class AtControllerNode
   std::unique_ptr<ProgramDirectory> program_dir_;
   ap::PlannerLimits limits_;
   double default_feed_ = 0.01;
+  gcode::ParserOptions gcode_options_;
   double spindle_max_rpm_ = 24000.0;
   std::atomic<bool> coolant_{false};
 

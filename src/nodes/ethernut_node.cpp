@@ -21,6 +21,7 @@
 #include "cnc_bridge/ethernut/client.h"
 #include "cnc_bridge/ethernut/settings.h"
 #include "cnc_bridge/gcode/gcode.h"
+#include "cnc_bridge/ros/gcode_params.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/params.h"
 #include "cnc_bridge/ros/single_goal_action_server.h"
@@ -297,6 +298,9 @@ class EthernutNode : public ethernut::ClientListener
     }
     // ~chord_tolerance (m, 0.00001): largest deviation of the streamed chords from a G02/G03 arc.
     parser_options_.chord_tolerance_mm = params::positive(pnh_, "chord_tolerance", 1e-5) / kMetresPerMm;
+    // ~gcode_dialect (string, "haas"): haas, fanuc or linuxcnc, where the controls read G-code
+    // differently (docs/gcode.md); ~tool_table (string, ""): tool diameters for G41/G42.
+    params::gcodeOptions(pnh_, parser_options_);
     // ~g53_moves (string, "refuse"): G53 moves (machine coordinates) in G-code jobs, which the
     // board cannot carry out (it knows one coordinate system): refuse (the job is refused before
     // anything is sent) or skip (left out of the stream and the preview).

@@ -293,7 +293,12 @@ TEST(GcodeErrors, MalformedLinesGiveLineAndColumn)
       {"G1 X\n", 1, 4, "no number"},
       {"G1 X1 X2\n", 1, 7, "twice"},
       {"G7 X1\n", 1, 1, "G7 is not supported"},
-      {"G81 X1\n", 1, 1, "G81 is not supported"},
+      {"G81 X1\n", 1, 1, "G81 needs R"},
+      {"G87 X1 R1 Z0\n", 1, 1, "G87"},
+      {"G41 D1 X1\n", 1, 1, "needs the tool's radius: give a tool table"},
+      {"M98 P100\n", 1, 1, "O100, which is not in this program"},
+      {"G1 X1 L2\n", 1, 7, "L (repeats) without"},
+      {"G4 X1 P1.\n", 1, 1, "G04 with axis words"},
       {"G1 A10\n", 1, 4, "axis A"},
       {"#1=5\n", 1, 1, "macro"},
       {"G1 X1 @\n", 1, 7, "unexpected character '@'"},
@@ -412,4 +417,301 @@ TEST(GcodeParser, SeparateMachineMovesLeaveTheProgramPositionAlone)
   ASSERT_FALSE(mixed.empty());
   EXPECT_EQ(std::count_if(mixed.begin(), mixed.end(), [](const Move& m) { return m.machine_coordinates; }), 1);
   expectNear(mixed.back().end, {40, 0, 0});
+}
+
+// ---- CAM program features: G92, G04 per dialect, G28/G30, canned cycles, subprograms, cutter
+// compensation, path-mode hints. LinuxCNC's rs274 checks the geometry of the same features in
+// test_gcode_rs274; these tests check what rs274 cannot see (flags, dialects, refusals).
+
+namespace
+{
+ParserOptions dialect(Dialect d)
+{
+  ParserOptions options;
+  options.dialect = d;
+  return options;
+}
+
+std::vector<Block> parseBlocks(const std::string& program, const ParserOptions& options = ParserOptions())
+{
+  std::istringstream in(program);
+  Reader reader(in, options);
+  std::vector<Block> blocks;
+  while (const Block* b = reader.nextBlock())
+  {
+    blocks.push_back(*b);
+  }
+  return blocks;
+}
+
+ParseError parseErrorWith(const std::string& program, const ParserOptions& options)
+{
+  try
+  {
+    parseAll(program, options);
+  }
+  catch (const ParseError& e)
+  {
+    return e;
+  }
+  ADD_FAILURE() << "no ParseError for: " << program;
+  return ParseError(0, 0, "none");
+}
+
+void expectSameMoves(const std::vector<Move>& a, const std::vector<Move>& b)
+{
+  ASSERT_EQ(a.size(), b.size());
+  for (size_t k = 0; k < a.size(); ++k)
+  {
+    SCOPED_TRACE(k);
+    expectNear(a[k].start, b[k].start, 1e-9);
+    expectNear(a[k].end, b[k].end, 1e-9);
+    EXPECT_EQ(a[k].motion, b[k].motion);
+  }
+}
+}  // namespace
+
+TEST(GcodeCam, G92ShiftGivesTheSameMovesAsTheProgramWithoutIt)
+{
+  const auto shifted = parseAll(
+      "G21 G90 G0 X10 Y10 Z5\nG92 X0 Y0\nG1 X5 Y5 F100\nG2 X10 Y0 I5 J0\nG91 G1 X1\nG90 G92.2\nG1 X20\nG92.3\nG1 X0\n"
+      "G92.1\nG1 X1 Y1\n");
+  const auto plain =
+      parseAll("G21 G90 G0 X10 Y10 Z5\nG1 X15 Y15 F100\nG2 X20 Y10 I5 J0\nG91 G1 X1\nG90\nG1 X20\nG1 X10\nG1 X1 Y1\n");
+  expectSameMoves(shifted, plain);
+}
+
+TEST(GcodeCam, DwellUnitsFollowTheDialect)
+{
+  EXPECT_DOUBLE_EQ(parseBlocks("G04 P1.5\n")[0].dwell_s, 1.5);   // Haas: a decimal point is seconds
+  EXPECT_DOUBLE_EQ(parseBlocks("G04 P1500\n")[0].dwell_s, 1.5);  // Haas: without one, ms
+  EXPECT_DOUBLE_EQ(parseBlocks("G4 P2\n", dialect(Dialect::kLinuxCnc))[0].dwell_s, 2.0);
+  EXPECT_DOUBLE_EQ(parseBlocks("G04 P1500\n", dialect(Dialect::kFanuc))[0].dwell_s, 1.5);
+  EXPECT_DOUBLE_EQ(parseBlocks("G04 X1.5\n", dialect(Dialect::kFanuc))[0].dwell_s, 1.5);
+  const ParseError e = parseErrorWith("G0 X1\nG04 P1.5\n", dialect(Dialect::kFanuc));
+  EXPECT_EQ(e.line(), 2u);
+  EXPECT_EQ(e.column(), 5u);
+  EXPECT_NE(e.reason().find("milliseconds"), std::string::npos) << e.reason();
+  // A canned cycle's P follows the same rule.
+  const auto moves = parseAll("G0 Z10\nM3 S100\nG82 X1 Y1 R2 Z-1 P250 F100\n");
+  ASSERT_EQ(moves.size(), 5u);  // Z up, XY, down to R, feed in (dwell), out
+  EXPECT_DOUBLE_EQ(moves[3].dwell_after_s, 0.25);
+}
+
+TEST(GcodeCam, ReferenceReturnGoesThroughTheIntermediatePointAndIsFlaggedAsMachineMove)
+{
+  const auto moves = parseAll("G21 G0 X10 Y20 Z30\nG91 G28 Z5\nG90 G0 X1 Y1 Z1\n");
+  ASSERT_EQ(moves.size(), 4u);
+  expectNear(moves[1].end, {10, 20, 35});  // intermediate point, incremental
+  EXPECT_FALSE(moves[1].machine_coordinates);
+  expectNear(moves[2].end, {10, 20, 0});  // then Z to the reference point, machine coordinates
+  EXPECT_TRUE(moves[2].machine_coordinates);
+  EXPECT_TRUE(moves[2].reference_return);
+  EXPECT_EQ(moves[2].motion, Motion::kRapid);
+
+  // ethernut's reading (G53 moves kept apart): the reference move is reported, position kept.
+  ParserOptions separate;
+  separate.separate_machine_moves = true;
+  const auto apart = parseAll("G0 X10 Y20 Z30\nG28 Z30\nG1 X11\n", separate);
+  ASSERT_EQ(apart.size(), 3u);
+  EXPECT_TRUE(apart[1].machine_coordinates);
+  expectNear(apart[2].start, {10, 20, 30});
+
+  // A bare G28: every axis on Haas and LinuxCNC, nothing on Fanuc (only named axes move).
+  EXPECT_EQ(parseAll("G0 X1 Y2 Z3\nG28\n").back().end.z, 0.0);
+  EXPECT_EQ(parseAll("G0 X1 Y2 Z3\nG28\n").back().end.x, 0.0);
+  EXPECT_EQ(parseAll("G0 X1 Y2 Z3\nG28\n", dialect(Dialect::kFanuc)).size(), 1u);
+  // G30 goes to its own point.
+  ParserOptions g30;
+  g30.g30_position = {100, 200, 50};
+  expectNear(parseAll("G0 X1 Y2 Z3\nG30 Z3\n", g30).back().end, {1, 2, 50});
+}
+
+TEST(GcodeCam, CannedCyclesFlagDwellsAndSpindleActions)
+{
+  // G84: reverse at the bottom, resume at R.
+  auto moves = parseAll("G0 X0 Y0 Z10\nM3 S500\nG99 G84 X5 Y5 R2 Z-8 F500\n");
+  ASSERT_EQ(moves.size(), 5u);  // Z up; XY rapid, down to R, feed in, feed out
+  EXPECT_EQ(moves[3].spindle_after, SpindleAction::kReverse);
+  EXPECT_DOUBLE_EQ(moves[3].end.z, -8);
+  EXPECT_EQ(moves[4].spindle_after, SpindleAction::kResume);
+  EXPECT_DOUBLE_EQ(moves[4].end.z, 2);
+  EXPECT_EQ(moves[4].motion, Motion::kLinear);
+  for (const Move& m : moves)
+  {
+    EXPECT_EQ(m.cycle, m.line == 3 ? 84 : 0);
+  }
+  // G86: spindle stop at the bottom, rapid out, resume.
+  moves = parseAll("G0 Z10\nM3 S500\nG98 G86 X1 R2 Z-3 P0.5\n");
+  ASSERT_EQ(moves.size(), 5u);
+  EXPECT_EQ(moves[3].spindle_after, SpindleAction::kStop);
+  EXPECT_DOUBLE_EQ(moves[3].dwell_after_s, 0.5);
+  EXPECT_EQ(moves[4].motion, Motion::kRapid);
+  EXPECT_DOUBLE_EQ(moves[4].end.z, 10);
+  EXPECT_EQ(moves[4].spindle_after, SpindleAction::kResume);
+  // G76 (Haas/Fanuc fine boring): oriented stop, shift by Q along +X, out, back.
+  moves = parseAll("G0 X0 Y0 Z10\nM3 S500\nG98 G76 X5 Y5 R2 Z-4 Q0.3 F50\n");
+  ASSERT_EQ(moves.size(), 7u);
+  EXPECT_EQ(moves[3].spindle_after, SpindleAction::kOrientStop);
+  expectNear(moves[4].end, {5.3, 5, -4});
+  expectNear(moves[5].end, {5.3, 5, 10});
+  expectNear(moves[6].end, {5, 5, 10});
+  EXPECT_EQ(moves[6].spindle_after, SpindleAction::kResume);
+  // LinuxCNC's G76 is a lathe threading cycle: refused, with what to do.
+  const ParseError e = parseErrorWith("G76 X1 R2 Z-4\n", dialect(Dialect::kLinuxCnc));
+  EXPECT_NE(e.reason().find("threading"), std::string::npos);
+  // Tapping with the spindle off is refused.
+  EXPECT_NE(parseError("G0 Z5\nG84 X1 R2 Z-4 F100\n").reason().find("spindle off"), std::string::npos);
+}
+
+TEST(GcodeCam, CycleRepeatsAreLOnHaasAndKOnFanuc)
+{
+  const auto haas = parseAll("G0 X0 Y0 Z5\nG91 G99 G81 X10 R-3 Z-4 L3 F100\n");
+  const auto fanuc = parseAll("G0 X0 Y0 Z5\nG91 G99 G81 X10 R-3 Z-4 K3 F100\n", dialect(Dialect::kFanuc));
+  expectSameMoves(haas, fanuc);
+  // Z up first; the first hole: XY, down to R (2, from the initial 5), feed, out to R; then XY,
+  // feed, out for each of the other two.
+  ASSERT_EQ(haas.size(), 11u);
+  expectNear(haas.back().end, {30, 0, 2});
+  EXPECT_DOUBLE_EQ(
+      std::min_element(haas.begin(), haas.end(), [](const Move& a, const Move& b) { return a.end.z < b.end.z; })->end.z,
+      -2);
+  const ParseError e = parseError("G0 Z5\nG81 X1 R2 Z-1 K3 F10\n");
+  EXPECT_EQ(e.line(), 2u);
+  EXPECT_NE(e.reason().find("repeats are L"), std::string::npos);
+  // L0 stores the cycle without drilling (Haas).
+  EXPECT_TRUE(parseAll("G0 Z5\nG81 X1 R2 Z-1 L0 F10\n").size() == 1u);
+}
+
+TEST(GcodeCam, CycleRefusalsKeepLineColumnAndState)
+{
+  Parser p;
+  p.parseLine("G0 X0 Y0 Z10");
+  try
+  {
+    p.parseLine("G83 X1 R2 Z-5 F100");
+    ADD_FAILURE() << "G83 without Q accepted";
+  }
+  catch (const ParseError& e)
+  {
+    EXPECT_EQ(e.column(), 1u);
+    EXPECT_NE(e.reason().find("Q, the peck depth"), std::string::npos);
+  }
+  EXPECT_EQ(p.state().canned_cycle, 0);
+  EXPECT_DOUBLE_EQ(p.position().x, 0.0);
+  EXPECT_THROW(p.parseLine("G81 X1 R-2 Z1"), ParseError);  // bottom above R
+  EXPECT_THROW(p.parseLine("G18 G81 X1 R2 Z-1"), ParseError);
+  const ParseError e = parseError("G0 Z1\nG81 X1 R2 Z-1 Q1000000 F1\nG83 X1 Q0.00001\n");
+  EXPECT_EQ(e.line(), 3u);
+  EXPECT_NE(e.reason().find("more than"), std::string::npos) << e.reason();
+}
+
+TEST(GcodeCam, SubprogramsM98AndM97WithRepeatsAndADepthLimit)
+{
+  const std::string main_part = "G21 G90 G0 X0 Y0 Z5\n";
+  const auto m98 = parseAll(main_part + "M98 P100 L2\nG0 X50\nM30\nO100\nG91 G1 X10 F100\nG90\nM99\n%\n");
+  const auto m97 = parseAll(main_part + "M97 P500 L2\nG0 X50\nM30\nN500 G91 G1 X10 F100\nG90\nM99\n%\n");
+  const auto inline_ = parseAll(main_part + "G91 G1 X10 F100\nX10\nG90 G0 X50\n");
+  expectSameMoves(m98, inline_);
+  expectSameMoves(m97, inline_);
+  // Lines are the file's own: the subprogram's move says line 6.
+  EXPECT_EQ(m98[1].line, 6u);
+  // Nested calls and a subprogram that calls itself.
+  const auto nested = parseAll("M98 P1\nM30\nO1\nM98 P2 L3\nM99\nO2\nG91 G1 X1 F10\nM99\n");
+  ASSERT_EQ(nested.size(), 3u);
+  EXPECT_DOUBLE_EQ(nested.back().end.x, 3.0);
+  const ParseError e = parseError("G0 X0\nM98 P7\nM30\nO7\nG91 G1 X1 F10\nM98 P7\nM99\n");
+  EXPECT_EQ(e.line(), 6u);
+  EXPECT_EQ(e.column(), 1u);
+  EXPECT_NE(e.reason().find("nested deeper than 8"), std::string::npos) << e.reason();
+  // Fanuc's P form: the digits before the last four count the runs.
+  const auto fanuc = parseAll("M98 P31000\nM30\nO1000\nG91 G1 X1 F10\nM99\n", dialect(Dialect::kFanuc));
+  ASSERT_EQ(fanuc.size(), 3u);
+  // M97 is Haas's: refused elsewhere; a file ending inside a subprogram is an error.
+  EXPECT_NE(parseErrorWith("M97 P1\n", dialect(Dialect::kFanuc)).reason().find("Haas"), std::string::npos);
+  EXPECT_NE(parseError("M98 P1\nM30\nO1\nG1 X1 F1\n").reason().find("end it with M99"), std::string::npos);
+}
+
+TEST(GcodeCam, ProgramEndsAtM30AndAtM99InTheMainProgram)
+{
+  auto blocks = parseBlocks("G1 X1 F10\nM30\nG1 X2\n");
+  EXPECT_EQ(blocks.size(), 2u);
+  EXPECT_TRUE(blocks.back().program_end);
+  blocks = parseBlocks("G1 X1 F10\nM99\nG1 X2\n");
+  EXPECT_EQ(blocks.size(), 2u);
+  EXPECT_TRUE(blocks.back().subprogram_end);
+}
+
+TEST(GcodeCam, PathModeHintsAreKeptInTheModalState)
+{
+  Parser p;
+  p.parseLine("G187 P2 E0.01");
+  EXPECT_EQ(p.state().path_mode, PathMode::kBlend);
+  EXPECT_EQ(p.state().smoothing_level, 2);
+  EXPECT_DOUBLE_EQ(p.state().path_tolerance_mm, 0.01);
+  p.parseLine("G103 P5");
+  EXPECT_EQ(p.state().lookahead_blocks, 5);
+  p.parseLine("G20 G64 P0.001");
+  EXPECT_DOUBLE_EQ(p.state().path_tolerance_mm, 0.0254);
+  p.parseLine("G61");
+  EXPECT_EQ(p.state().path_mode, PathMode::kExactStop);
+}
+
+TEST(GcodeCam, CutterCompensationOffsetsTheContourWithTheToolTable)
+{
+  ParserOptions options;
+  options.tool_table =
+      std::make_shared<ToolTable>(ToolTable::parseYaml("tools:\n  1: {diameter: 4.0}\n  2: {radius: 1}\n", "t.yaml"));
+  // A 20 x 20 square climbed on the outside (G41, counter-clockwise round the outside... the
+  // tool left of a clockwise path around the square's outside).
+  const auto moves = parseAll("G0 X-10 Y0 Z1\nG1 Z-1 F100\nG41 D1 X0 Y0\nY20\nX20\nY0\nX0\nG40 X-10 Y-10\n", options);
+  // Offset of 2 mm to the left of travel: going +Y along X=0, the tool is at X=-2.
+  bool saw_left = false;
+  for (const Move& m : moves)
+  {
+    if (m.line == 4 && m.motion == Motion::kLinear)
+    {
+      EXPECT_NEAR(m.end.x, -2.0, 1e-9);
+      EXPECT_NEAR(m.end.y, 20.0, 1e-9);
+      EXPECT_TRUE(m.compensated);
+      saw_left = true;
+    }
+  }
+  EXPECT_TRUE(saw_left);
+  // Outside corners are rounded with the tool radius about the programmed corner.
+  for (const Move& m : moves)
+  {
+    if (m.compensated && (m.motion == Motion::kArcCw || m.motion == Motion::kArcCcw))
+    {
+      const double r = std::min({std::hypot(m.end.x - 0, m.end.y - 20), std::hypot(m.end.x - 20, m.end.y - 20),
+                                 std::hypot(m.end.x - 20, m.end.y - 0), std::hypot(m.end.x, m.end.y)});
+      EXPECT_NEAR(r, 2.0, 1e-6);
+    }
+  }
+  // The exit move ends on the programmed point.
+  expectNear(moves.back().end, {-10, -10, -1});
+  EXPECT_FALSE(moves.back().compensated);
+  // A tool not in the table, an arc as the entry move, a tool too big for an inside arc.
+  EXPECT_NE(parseErrorWith("G41 D9 X1\n", options).reason().find("tool 9 is not in the tool table"), std::string::npos);
+  EXPECT_NE(parseErrorWith("G0 X-5 Y0\nG41 D1 G2 X5 Y0 I5 J0 F10\n", options).reason().find("straight line"),
+            std::string::npos);
+  EXPECT_NE(parseErrorWith("G0 X-5 Y0\nG41 D1 G1 X0 Y0 F10\nG3 X2 Y0 I1 J0\nG40 G1 X5 Y-5\n", options)
+                .reason()
+                .find("larger than this arc"),
+            std::string::npos);
+}
+
+TEST(GcodeCam, ToolTablesInLinuxCncAndYamlForm)
+{
+  std::istringstream tbl("T1 P1 D0.25 Z+1.0 ;quarter inch\n\n;comment\nT7 P2 D6 Z0\n");
+  const ToolTable inch = ToolTable::parseLinuxCnc(tbl, "tools.tbl", Units::kInches);
+  EXPECT_DOUBLE_EQ(inch.radius(1), 0.125 * 25.4);
+  EXPECT_DOUBLE_EQ(inch.radius(7), 3 * 25.4);
+  EXPECT_LT(inch.radius(2), 0);
+  std::istringstream bad("T1 P1 Dx\n");
+  EXPECT_THROW(ToolTable::parseLinuxCnc(bad, "bad.tbl"), cnc_bridge::ConfigError);
+  EXPECT_THROW(ToolTable::parseYaml("tools: [1, 2]\n", "bad.yaml"), cnc_bridge::ConfigError);
+  EXPECT_THROW(ToolTable::parseYaml("tools:\n  3: {length: 2}\n", "bad.yaml"), cnc_bridge::ConfigError);
+  EXPECT_THROW(parseDialect("okuma"), cnc_bridge::ConfigError);
+  EXPECT_EQ(parseDialect("LinuxCNC"), Dialect::kLinuxCnc);
 }

@@ -1,0 +1,60 @@
+%
+O01001 (BRACKET OP1)
+(cross-check: dialect=haas)
+(cross-check: peck_clearance=0.254)
+(cross-check: rs274_drop=G187,G103)
+(cross-check: rule=G187/G103 are Haas smoothing and look-ahead hints: blanked for rs274, no effect on the path here)
+(cross-check: rule=G83 clearance: LinuxCNC 0.010 in, Haas setting 22; ours set to LinuxCNC's for this comparison)
+(T1 D=10. CR=0. - ZMIN=-6. - FLAT END MILL)
+(T2 D=5. CR=0. TAPER=118DEG - ZMIN=-14. - DRILL)
+N10 G90 G94 G17 G40 G49 G80
+N15 G21
+N20 G28 G91 Z0.
+N25 G90
+(2D CONTOUR1)
+N30 T1 M06
+N35 S8000 M03
+N40 G187 P3
+N45 G103 P1
+N50 G54
+N55 M08
+N60 G00 X-8. Y-8.
+N65 G43 Z15. H01
+N70 G00 Z5.
+N75 G01 Z1. F400.
+N80 Z-6.
+N85 X60. F1200.
+N90 G03 X70. Y2. R10.
+N95 G01 Y38.
+N100 G02 X60. Y48. I-10. J0.
+N105 G01 X0.
+N110 G03 X-10. Y38. I0. J-10.
+N115 G01 Y0.
+N120 G02 X-8. Y-8. R10.
+N125 G00 Z15.
+N130 G187
+N135 M09
+N140 G28 G91 Z0.
+N145 G90
+(DRILL1)
+N150 T2 M06
+N155 S3000 M03
+N160 G54
+N165 M08
+N170 G00 X10. Y10.
+N175 G43 Z15. H02
+N180 G00 Z5.
+N185 G98 G83 X10. Y10. Z-14. R2. Q3. F250.
+N190 X50.
+N195 Y38.
+N200 X10.
+N205 G80
+N210 G00 Z15.
+N215 M09
+N220 M05
+N225 G28 G91 Z0.
+N230 G90
+N235 G28 G91 X0. Y0.
+N240 G90
+N245 M30
+%

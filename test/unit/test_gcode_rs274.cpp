@@ -1,0 +1,459 @@
+// Cross-check of the G-code parser against LinuxCNC's rs274 (Debian linuxcnc-uspace), the
+// descendant of the NIST RS274/NGC interpreter: every program in test/data/gcode/rs274/ is run
+// through `rs274 -g` and through gcode::Reader, and every move must end at the same point within
+// 0.001 mm (arcs: end point and centre). rs274 prints program coordinates (its G92 and G5x offsets
+// printed beside them are added back) with four decimals in the program's units, so inch programs
+// are compared within that print resolution (0.00005 in = 0.00127 mm) plus 0.001 mm.
+//
+// A program's first comment lines may say how it is read:
+//   (cross-check: dialect=haas)            our parser's dialect (default linuxcnc)
+//   (cross-check: tool_table=tools.tbl)    for G41/G42, given to both (rs274 reads it in inches)
+//   (cross-check: peck_clearance=0.254)    G73/G83 clearance for our side (LinuxCNC's 0.010 in)
+//   (cross-check: rs274_drop=G187,G103)    lines with these words are blanked for rs274 (Haas-only
+//                                          hints that do not change the path)
+//   (cross-check: rule=...)                where the dialects differ: which rule each side follows
+#include <dirent.h>
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <sstream>
+
+#include "cnc_bridge/gcode/gcode.h"
+#include "temp_dir.h"
+
+using namespace cnc_bridge::gcode;
+
+namespace
+{
+const std::string kCorpus = CNC_BRIDGE_FIXTURE_DIR "/rs274";
+const std::string kCamCorpus = CNC_BRIDGE_FIXTURE_DIR "/cam";
+
+enum class Kind
+{
+  kTraverse,
+  kFeed,
+  kArc
+};
+const char* name(Kind k)
+{
+  return k == Kind::kTraverse ? "traverse" : (k == Kind::kFeed ? "feed" : "arc");
+}
+
+struct Canon
+{
+  Kind kind;
+  Vec3 end;
+  bool has_centre = false;
+  Vec3 centre;  // in the arc's plane (the normal axis left 0)
+  uint32_t line = 0;
+  std::string text;
+};
+
+std::vector<double> numbers(const std::string& text, size_t open)
+{
+  std::vector<double> out;
+  std::istringstream in(text.substr(open + 1));
+  std::string item;
+  while (std::getline(in, item, ','))
+  {
+    out.push_back(std::strtod(item.c_str(), nullptr));
+  }
+  return out;
+}
+
+struct Rs274Result
+{
+  std::vector<Canon> moves;
+  std::string error;  // what rs274 said if it stopped on an error
+};
+
+Rs274Result runRs274(const std::string& program, const std::string& tool_table)
+{
+  Rs274Result result;
+  std::string command = "rs274 -g";
+  if (!tool_table.empty())
+  {
+    command += " -t '" + tool_table + "'";
+  }
+  command += " '" + program + "' </dev/null 2>&1";
+  std::unique_ptr<FILE, int (*)(FILE*)> pipe(popen(command.c_str(), "r"), pclose);
+  if (!pipe)
+  {
+    result.error = "cannot run rs274";
+    return result;
+  }
+  double scale = 1.0;
+  Vec3 g92, g5x;
+  Plane plane = Plane::kXY;
+  Vec3 last{0, 0, 0};
+  char buffer[4096];
+  while (fgets(buffer, sizeof buffer, pipe.get()))
+  {
+    std::string text(buffer);
+    while (!text.empty() && (text.back() == '\n' || text.back() == '\r'))
+    {
+      text.pop_back();
+    }
+    const size_t open = text.find('(');
+    // Canonical lines: "   12 N..... NAME(...)" or "   12 N100   NAME(...)" (the block's N).
+    size_t at = text.find_first_not_of(' ');
+    const bool canonical = at != std::string::npos && std::isdigit(static_cast<unsigned char>(text[at])) &&
+                           text.find(" N", at) != std::string::npos && open != std::string::npos;
+    if (!canonical)
+    {
+      if (text != "executing" && !text.empty())
+      {
+        result.error += text + "\n";
+      }
+      continue;
+    }
+    auto has = [&](const char* word) { return text.find(word) != std::string::npos; };
+    if (has("USE_LENGTH_UNITS("))
+    {
+      scale = has("CANON_UNITS_INCHES") ? 25.4 : 1.0;
+    }
+    else if (has("SET_G92_OFFSET("))
+    {
+      const auto v = numbers(text, open);
+      g92 = {v[0] * scale, v[1] * scale, v[2] * scale};
+    }
+    else if (has("SET_G5X_OFFSET("))
+    {
+      const auto v = numbers(text, open);
+      g5x = {v[1] * scale, v[2] * scale, v[3] * scale};
+    }
+    else if (has("SELECT_PLANE("))
+    {
+      plane = has("CANON_PLANE_XZ") ? Plane::kZX : (has("CANON_PLANE_YZ") ? Plane::kYZ : Plane::kXY);
+    }
+    else if (has("STRAIGHT_TRAVERSE(") || has("STRAIGHT_FEED(") || has("ARC_FEED("))
+    {
+      const auto v = numbers(text, open);
+      Canon c;
+      c.text = text;
+      auto base = [&](double x, double y, double z) {
+        return Vec3{x * scale + g92.x + g5x.x, y * scale + g92.y + g5x.y, z * scale + g92.z + g5x.z};
+      };
+      if (has("ARC_FEED("))
+      {
+        c.kind = Kind::kArc;
+        c.has_centre = true;
+        // ARC_FEED(first_end, second_end, first_centre, second_centre, rotation, axis_end, ...):
+        // XY (x, y, .., z), XZ (z, x, .., y), YZ (y, z, .., x).
+        if (plane == Plane::kXY)
+        {
+          c.end = base(v[0], v[1], v[5]);
+          c.centre = base(v[2], v[3], 0);
+          c.centre.z = 0;
+        }
+        else if (plane == Plane::kZX)
+        {
+          c.end = base(v[1], v[5], v[0]);
+          c.centre = base(v[3], 0, v[2]);
+          c.centre.y = 0;
+        }
+        else
+        {
+          c.end = base(v[5], v[0], v[1]);
+          c.centre = base(0, v[2], v[3]);
+          c.centre.x = 0;
+        }
+      }
+      else
+      {
+        c.kind = has("STRAIGHT_TRAVERSE(") ? Kind::kTraverse : Kind::kFeed;
+        c.end = base(v[0], v[1], v[2]);
+        // rs274 prints moves that go nowhere (a G28 intermediate point equal to the current one).
+        if (std::fabs(c.end.x - last.x) < 1e-9 && std::fabs(c.end.y - last.y) < 1e-9 &&
+            std::fabs(c.end.z - last.z) < 1e-9)
+        {
+          continue;
+        }
+      }
+      last = c.end;
+      result.moves.push_back(c);
+    }
+  }
+  return result;
+}
+
+// Circumcentre of three points in a plane (axes u, v of the chords' arc).
+bool centreOf(const Vec3& a, const Vec3& b, const Vec3& c, Plane plane, Vec3& out)
+{
+  auto get = [](const Vec3& p, int i) { return i == 0 ? p.x : (i == 1 ? p.y : p.z); };
+  const int u = plane == Plane::kXY ? 0 : (plane == Plane::kZX ? 2 : 1);
+  const int v = plane == Plane::kXY ? 1 : (plane == Plane::kZX ? 0 : 2);
+  const double ax = get(a, u), ay = get(a, v), bx = get(b, u), by = get(b, v), cx = get(c, u), cy = get(c, v);
+  const double d = 2 * (ax * (by - cy) + bx * (cy - ay) + cx * (ay - by));
+  if (std::fabs(d) < 1e-12)
+  {
+    return false;
+  }
+  const double a2 = ax * ax + ay * ay, b2 = bx * bx + by * by, c2 = cx * cx + cy * cy;
+  const double ux = (a2 * (by - cy) + b2 * (cy - ay) + c2 * (ay - by)) / d;
+  const double uy = (a2 * (cx - bx) + b2 * (ax - cx) + c2 * (bx - ax)) / d;
+  out = Vec3();
+  (u == 0 ? out.x : (u == 1 ? out.y : out.z)) = ux;
+  (v == 0 ? out.x : (v == 1 ? out.y : out.z)) = uy;
+  return true;
+}
+
+struct Directives
+{
+  ParserOptions options;
+  std::string tool_table;
+  std::vector<std::string> rs274_drop;
+  std::vector<std::string> rules;
+};
+
+Directives readDirectives(const std::string& path, const std::string& dir)
+{
+  Directives d;
+  d.options.dialect = Dialect::kLinuxCnc;
+  std::ifstream in(path);
+  std::string line;
+  const std::string tag = "(cross-check: ";
+  while (std::getline(in, line))
+  {
+    const size_t at = line.find(tag);
+    if (at == std::string::npos)
+    {
+      continue;
+    }
+    std::string body = line.substr(at + tag.size());
+    body = body.substr(0, body.rfind(')'));
+    const std::string key = body.substr(0, body.find('='));
+    const std::string value = body.substr(body.find('=') + 1);
+    if (key == "dialect")
+    {
+      d.options.dialect = parseDialect(value);
+    }
+    else if (key == "tool_table")
+    {
+      d.tool_table = dir + "/" + value;
+      // rs274 without an ini file reads a tool table in inches: so do we here.
+      d.options.tool_table = std::make_shared<ToolTable>(ToolTable::load(d.tool_table, Units::kInches));
+    }
+    else if (key == "peck_clearance")
+    {
+      d.options.peck_clearance_mm = std::stod(value);
+    }
+    else if (key == "rs274_drop")
+    {
+      std::istringstream words(value);
+      std::string w;
+      while (std::getline(words, w, ','))
+      {
+        d.rs274_drop.push_back(w);
+      }
+    }
+    else if (key == "rule")
+    {
+      d.rules.push_back(value);
+    }
+  }
+  return d;
+}
+
+std::vector<Canon> ours(const std::string& path, const ParserOptions& options)
+{
+  std::ifstream in(path, std::ios::binary);
+  Reader reader(in, options);
+  std::vector<Canon> out;
+  std::vector<Move> arc;
+  auto flushArc = [&]()
+  {
+    const Move& last = arc.back();
+    Canon c;
+    c.kind = Kind::kArc;
+    c.end = last.end;
+    c.line = last.line;
+    // The plane: the axis that the chords' end points keep nearest constant is not reliable for
+    // helices, so use the three points in each plane and keep the one whose centre is finite and
+    // equidistant; the XY plane is tried first (compensation arcs and most CAM arcs).
+    if (arc.size() >= 2)
+    {
+      const Vec3& a = arc.front().start;
+      const Vec3& b = arc[arc.size() / 2].start;
+      for (Plane plane : {Plane::kXY, Plane::kZX, Plane::kYZ})
+      {
+        Vec3 centre;
+        if (!centreOf(a, b, last.end, plane, centre))
+        {
+          continue;
+        }
+        // The plane's normal axis must not be what varies most (a helix moves along it linearly).
+        const double spread_x = std::fabs(a.x - last.end.x) + std::fabs(a.x - b.x);
+        const double spread_y = std::fabs(a.y - last.end.y) + std::fabs(a.y - b.y);
+        const double spread_z = std::fabs(a.z - last.end.z) + std::fabs(a.z - b.z);
+        const double normal = plane == Plane::kXY ? spread_z : (plane == Plane::kZX ? spread_y : spread_x);
+        const double in_plane = spread_x + spread_y + spread_z - normal;
+        if (normal > in_plane)
+        {
+          continue;
+        }
+        c.has_centre = true;
+        c.centre = centre;
+        break;
+      }
+    }
+    out.push_back(c);
+    arc.clear();
+  };
+  while (const Block* block = reader.nextBlock())
+  {
+    for (const Move& m : block->moves)
+    {
+      if (m.motion == Motion::kArcCw || m.motion == Motion::kArcCcw)
+      {
+        arc.push_back(m);
+        if (m.segment + 1 == m.segment_count)
+        {
+          flushArc();
+        }
+        continue;
+      }
+      Canon c;
+      c.kind = m.motion == Motion::kRapid ? Kind::kTraverse : Kind::kFeed;
+      c.end = m.end;
+      c.line = m.line;
+      out.push_back(c);
+    }
+  }
+  return out;
+}
+
+double distance(const Vec3& a, const Vec3& b)
+{
+  return std::sqrt((a.x - b.x) * (a.x - b.x) + (a.y - b.y) * (a.y - b.y) + (a.z - b.z) * (a.z - b.z));
+}
+
+std::vector<std::string> programsIn(const std::string& dir)
+{
+  std::vector<std::string> files;
+  if (DIR* d = opendir(dir.c_str()))
+  {
+    while (dirent* e = readdir(d))
+    {
+      const std::string n = e->d_name;
+      if (n.size() > 4 && (n.substr(n.size() - 4) == ".ngc" || n.substr(n.size() - 3) == ".nc"))
+      {
+        files.push_back(n);
+      }
+    }
+    closedir(d);
+  }
+  std::sort(files.begin(), files.end());
+  return files;
+}
+
+// Compares one program; returns the number of moves compared.
+size_t crossCheck(const std::string& dir, const std::string& file, cnc_bridge::test::TempDir& tmp)
+{
+  SCOPED_TRACE(file);
+  const std::string path = dir + "/" + file;
+  const Directives d = readDirectives(path, dir);
+  for (const std::string& rule : d.rules)
+  {
+    std::cout << "  " << file << ": " << rule << "\n";
+  }
+  std::string rs274_path = path;
+  if (!d.rs274_drop.empty())
+  {
+    std::ifstream in(path);
+    rs274_path = tmp.file(file);
+    std::ofstream out(rs274_path);
+    std::string line;
+    while (std::getline(in, line))
+    {
+      std::string upper = line;
+      for (char& ch : upper)
+      {
+        ch = static_cast<char>(std::toupper(static_cast<unsigned char>(ch)));
+      }
+      bool drop = false;
+      for (const std::string& w : d.rs274_drop)
+      {
+        drop = drop || upper.find(w) != std::string::npos;
+      }
+      out << (drop ? "" : line) << "\n";
+    }
+  }
+  // Without a table of its own, rs274 would take tool lengths from somewhere: give it tools 0-99 of
+  // length 0, so that G43 changes nothing there either (our parser leaves offsets to the control).
+  std::string table = d.tool_table;
+  if (table.empty())
+  {
+    table = tmp.file("zero_length.tbl");
+    std::ofstream out(table);
+    for (int t = 1; t < 100; ++t)
+    {
+      out << "T" << t << " P" << t << " Z0 D0\n";
+    }
+  }
+  const Rs274Result reference = runRs274(rs274_path, table);
+  EXPECT_EQ(reference.error, "") << "rs274 refused the program";
+  std::vector<Canon> mine;
+  try
+  {
+    mine = ours(path, d.options);
+  }
+  catch (const std::exception& e)
+  {
+    ADD_FAILURE() << "cnc_bridge refused the program: " << e.what();
+    return 0;
+  }
+  EXPECT_EQ(mine.size(), reference.moves.size());
+  const double tolerance = 0.001 + 0.00005 * 25.4;  // inch programs: rs274 prints 0.0001 in
+  const size_t n = std::min(mine.size(), reference.moves.size());
+  size_t bad = 0;
+  for (size_t k = 0; k < n && bad < 5; ++k)
+  {
+    const Canon& a = mine[k];
+    const Canon& b = reference.moves[k];
+    const double end_error = distance(a.end, b.end);
+    const bool kind_ok = a.kind == b.kind;
+    const bool centre_ok = !(a.has_centre && b.has_centre) || distance(a.centre, b.centre) <= tolerance;
+    if (!kind_ok || end_error > tolerance || !centre_ok)
+    {
+      ++bad;
+      ADD_FAILURE() << "move " << k << " (our line " << a.line << "): ours " << name(a.kind) << " to " << a.end.x << " "
+                    << a.end.y << " " << a.end.z << ", rs274 " << b.text << " (" << b.end.x << " " << b.end.y << " "
+                    << b.end.z << "), end error " << end_error << " mm";
+    }
+  }
+  return n;
+}
+}  // namespace
+
+TEST(GcodeRs274, FeatureProgramsGiveTheSameMovesAsLinuxCnc)
+{
+  cnc_bridge::test::TempDir tmp;
+  const auto files = programsIn(kCorpus);
+  ASSERT_GE(files.size(), 8u) << "corpus missing in " << kCorpus;
+  size_t moves = 0;
+  for (const std::string& file : files)
+  {
+    moves += crossCheck(kCorpus, file, tmp);
+  }
+  std::cout << files.size() << " programs, " << moves << " moves compared with rs274\n";
+}
+
+TEST(GcodeRs274, CamProgramsGiveTheSameMovesAsLinuxCnc)
+{
+  cnc_bridge::test::TempDir tmp;
+  const auto files = programsIn(kCamCorpus);
+  ASSERT_GE(files.size(), 1u) << "corpus missing in " << kCamCorpus;
+  size_t moves = 0;
+  for (const std::string& file : files)
+  {
+    moves += crossCheck(kCamCorpus, file, tmp);
+  }
+  std::cout << files.size() << " CAM programs, " << moves << " moves compared with rs274\n";
+}
