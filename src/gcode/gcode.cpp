@@ -371,6 +371,7 @@ void Parser::reset()
   line_ = 0;
   block_.moves.clear();
   comp_ = std::make_shared<Comp>();
+  comp_scratch_ = std::make_shared<Comp>();
 }
 
 double Parser::dwellSeconds(const Scan& scan, int word) const
@@ -429,8 +430,15 @@ const Block& Parser::parseLine(std::string_view text)
   {
     return block;
   }
-  // Applied on a copy, so that an error changes nothing.
-  Step step{block, state_, position_, *comp_};
+  // Applied on a copy, so that an error changes nothing. Without a tool table G41/G42 are refused
+  // and the compensation state stays as constructed, so it needs no copy (the parse rate).
+  Comp* comp = comp_.get();
+  if (options_.tool_table)
+  {
+    *comp_scratch_ = *comp_;
+    comp = comp_scratch_.get();
+  }
+  Step step{block, state_, position_, *comp};
   step.line = line;
   try
   {
@@ -443,7 +451,10 @@ const Block& Parser::parseLine(std::string_view text)
   }
   state_ = step.next;
   position_ = step.position;
-  *comp_ = step.comp;
+  if (comp != comp_.get())
+  {
+    std::swap(comp_, comp_scratch_);
+  }
   return block;
 }
 

@@ -442,7 +442,6 @@ bool Parser::finish(Block& out)
   compensationOff(st, true);
   state_ = st.next;
   position_ = st.position;
-  *comp_ = st.comp;
   return !out.moves.empty();
 }
 }  // namespace gcode

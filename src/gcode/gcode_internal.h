@@ -166,7 +166,7 @@ struct Parser::Step
   Block& block;
   ModalState next;
   Vec3 position;
-  Comp comp;
+  Comp& comp;  // a copy of the parser's, or (no tool table: compensation can never start) the parser's own
   uint32_t line = 0;
   bool machine_coordinates = false;
   bool motion_word = false;

@@ -391,6 +391,7 @@ class Parser
   Block block_;
   // Cutter compensation: the last offset move, not emitted until the next move decides its end.
   std::shared_ptr<Comp> comp_;
+  std::shared_ptr<Comp> comp_scratch_;  // the working copy of one line
 };
 
 /// \brief Reads a program from a stream in fixed-size chunks and parses it line by line.
