@@ -25,6 +25,7 @@
 #include "cnc_bridge/gcode/gcode.h"
 #include "cnc_bridge/ros/gcode_params.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
+#include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/ros/params.h"
 #include "cnc_bridge/ros/single_goal_action_server.h"
 #include "cnc_bridge/transport/backoff.h"
@@ -51,19 +52,14 @@ class AtControllerNode
     // ~host: address of the controller (both sockets in client mode).
     pnh.param<std::string>("host", host_, "127.0.0.1");
     // ~tcp_port: the controller's command server (the paper's server_recv).
-    command_port_ = port(pnh, "tcp_port", 5000);
+    command_port_ = params::tcpPort(pnh, "tcp_port", 5000);
     // ~report_mode: "client" connects to the controller's report server (the paper's server_send,
     // like the add-in's ReceiveClient); "server" listens on ~listen_port for the controller.
-    pnh.param<std::string>("report_mode", report_mode_, "client");
-    if (report_mode_ != "client" && report_mode_ != "server")
-    {
-      throw ConfigError(pnh.resolveName("report_mode") + " must be \"client\" or \"server\", not \"" + report_mode_ +
-                        "\"");
-    }
+    report_mode_ = params::choice(pnh, "report_mode", "client", {"client", "server"});
     // ~report_port: the controller's report server (client mode).
-    report_port_ = port(pnh, "report_port", 5001);
+    report_port_ = params::tcpPort(pnh, "report_port", 5001);
     // ~listen_port: our report server (server mode); 0 picks a free port (logged).
-    listen_port_ = port(pnh, "listen_port", 5001);
+    listen_port_ = params::tcpPort(pnh, "listen_port", 5001, params::PortZero::kMeansAny);
     // ~connect_timeout: s allowed for one TCP connect.
     connect_timeout_ = params::seconds(pnh, "connect_timeout", 2.0);
     // ~enable_motion: nothing that moves axes or turns the spindle is sent unless this is true.
@@ -158,17 +154,6 @@ class AtControllerNode
   }
 
  private:
-  static uint16_t port(const ros::NodeHandle& pnh, const std::string& name, int fallback)
-  {
-    int value = fallback;
-    pnh.param(name, value, fallback);
-    if (value < 0 || value > 65535)
-    {
-      throw ConfigError(pnh.resolveName(name) + " must be a TCP port (0..65535), not " + std::to_string(value));
-    }
-    return static_cast<uint16_t>(value);
-  }
-
   // ---- links ------------------------------------------------------------------------------------
 
   void startLinks()
@@ -901,17 +886,5 @@ class AtControllerNode
 
 int main(int argc, char** argv)
 {
-  ros::init(argc, argv, "at_controller_node");
-  cnc_bridge::routeCoreLogToRosconsole();
-  try
-  {
-    cnc_bridge::AtControllerNode node(ros::NodeHandle(), ros::NodeHandle("~"));
-    ros::spin();
-  }
-  catch (const cnc_bridge::Error& e)
-  {
-    ROS_FATAL_STREAM("at_controller_node: " << e.what());
-    return 1;
-  }
-  return 0;
+  return cnc_bridge::runNode<cnc_bridge::AtControllerNode>(argc, argv, "at_controller_node");
 }

@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "cnc_bridge/ros/machine_state_publisher.h"
+#include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/ros/params.h"
 
 namespace cnc_bridge
@@ -63,9 +64,5 @@ class DemoMotionNode
 
 int main(int argc, char** argv)
 {
-  ros::init(argc, argv, "demo_motion_node");
-  cnc_bridge::routeCoreLogToRosconsole();
-  cnc_bridge::DemoMotionNode node(ros::NodeHandle(), ros::NodeHandle("~"));
-  ros::spin();
-  return 0;
+  return cnc_bridge::runNode<cnc_bridge::DemoMotionNode>(argc, argv, "demo_motion_node");
 }

@@ -9,6 +9,7 @@
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/ros/dnc_drip_handlers.h"
+#include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/ros/params.h"
 
 namespace cnc_bridge
@@ -517,21 +518,8 @@ void DncNode::transferDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& s
 }
 }  // namespace cnc_bridge
 
+// Four threads: a service call may run a whole transfer; keep serving meanwhile.
 int main(int argc, char** argv)
 {
-  ros::init(argc, argv, "dnc_node");
-  cnc_bridge::routeCoreLogToRosconsole();
-  try
-  {
-    cnc_bridge::DncNode node(ros::NodeHandle(), ros::NodeHandle("~"));
-    ros::AsyncSpinner spinner(4);  // a service call may run a whole transfer: keep serving meanwhile
-    spinner.start();
-    ros::waitForShutdown();
-  }
-  catch (const cnc_bridge::Error& e)
-  {
-    ROS_FATAL("%s", e.what());
-    return 1;
-  }
-  return 0;
+  return cnc_bridge::runNode<cnc_bridge::DncNode>(argc, argv, "dnc_node", {4});
 }

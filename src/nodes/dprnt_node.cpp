@@ -23,6 +23,7 @@
 #include "cnc_bridge/dprnt/parser.h"
 #include "cnc_bridge/dprnt/rules.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
+#include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/ros/params.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/transport/tcp.h"
@@ -51,11 +52,7 @@ std::unique_ptr<dprnt::DprntInput> makeInput(const ros::NodeHandle& pnh)
     // ~host: address or name of the control.
     const std::string host = params::required<std::string>(pnh, "host");
     // ~tcp_port: the control's DPRNT port (Haas NGC setting 263).
-    const int port = params::required<int>(pnh, "tcp_port");
-    if (port <= 0 || port > 65535)
-    {
-      throw ConfigError("Parameter " + pnh.resolveName("tcp_port") + " must be 1..65535.");
-    }
+    const uint16_t port = params::tcpPort(pnh, "tcp_port", params::required<int>(pnh, "tcp_port"));
     // ~connect_timeout: s to wait for a TCP connection.
     const Milliseconds timeout = params::seconds(pnh, "connect_timeout", 3.0);
     return std::make_unique<dprnt::StreamInput>(
@@ -413,17 +410,5 @@ void DprntNode::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status)
 
 int main(int argc, char** argv)
 {
-  ros::init(argc, argv, "dprnt_node");
-  cnc_bridge::routeCoreLogToRosconsole();
-  try
-  {
-    cnc_bridge::DprntNode node(ros::NodeHandle(), ros::NodeHandle("~"));
-    ros::spin();
-  }
-  catch (const cnc_bridge::Error& e)
-  {
-    ROS_FATAL("%s", e.what());
-    return 1;
-  }
-  return 0;
+  return cnc_bridge::runNode<cnc_bridge::DprntNode>(argc, argv, "dprnt_node");
 }

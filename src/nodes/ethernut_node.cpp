@@ -23,6 +23,7 @@
 #include "cnc_bridge/gcode/gcode.h"
 #include "cnc_bridge/ros/gcode_params.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
+#include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/ros/params.h"
 #include "cnc_bridge/ros/single_goal_action_server.h"
 #include "cnc_bridge/transport/backoff.h"
@@ -238,13 +239,8 @@ class EthernutNode : public ethernut::ClientListener
       host_ = *settings.address;
     }
     // ~tcp_port (int, 0): the board's TCP port; 0: INET_PORT of the settings file, else 6666.
-    int port = 0;
-    pnh_.param("tcp_port", port, 0);
-    if (port < 0 || port > 65535)
-    {
-      throw ConfigError(pnh_.resolveName("tcp_port") + " must be 0-65535");
-    }
-    port_ = port != 0 ? static_cast<uint16_t>(port) : settings.port.value_or(6666);
+    const uint16_t port = params::tcpPort(pnh_, "tcp_port", 0, params::PortZero::kMeansAny);
+    port_ = port != 0 ? port : settings.port.value_or(6666);
     // ~dead_link_timeout (s, 0): silence after which the link is dead and is reconnected;
     // 0: INET_DEL (ms) of the settings file, else 2 s.
     double dead = 0.0;
@@ -304,20 +300,8 @@ class EthernutNode : public ethernut::ClientListener
     // ~g53_moves (string, "refuse"): G53 moves (machine coordinates) in G-code jobs, which the
     // board cannot carry out (it knows one coordinate system): refuse (the job is refused before
     // anything is sent) or skip (left out of the stream and the preview).
-    std::string g53;
-    pnh_.param<std::string>("g53_moves", g53, "refuse");
-    if (g53 == "refuse")
-    {
-      g53_moves_ = G53Moves::kRefuse;
-    }
-    else if (g53 == "skip")
-    {
-      g53_moves_ = G53Moves::kSkip;
-    }
-    else
-    {
-      throw ConfigError(pnh_.resolveName("g53_moves") + " must be refuse or skip, not '" + g53 + "'");
-    }
+    const bool skip_g53 = params::choice(pnh_, "g53_moves", "refuse", {"refuse", "skip"}) == "skip";
+    g53_moves_ = skip_g53 ? G53Moves::kSkip : G53Moves::kRefuse;
     // ~max_preview_points (int, 100000): job/path is thinned to at most this many poses.
     pnh_.param("max_preview_points", max_preview_points_, 100000);
     max_preview_points_ = std::max(max_preview_points_, 2);
@@ -975,21 +959,8 @@ class EthernutNode : public ethernut::ClientListener
 };
 }  // namespace cnc_bridge
 
+// Four threads, serving from the start: services and the action may wait for the board concurrently.
 int main(int argc, char** argv)
 {
-  ros::init(argc, argv, "ethernut_node");
-  cnc_bridge::routeCoreLogToRosconsole();
-  try
-  {
-    ros::AsyncSpinner spinner(4);  // services and the action may wait for the board concurrently
-    spinner.start();
-    cnc_bridge::EthernutNode node(ros::NodeHandle(), ros::NodeHandle("~"));
-    ros::waitForShutdown();
-  }
-  catch (const cnc_bridge::Error& e)
-  {
-    ROS_FATAL_STREAM(e.what());
-    return 1;
-  }
-  return 0;
+  return cnc_bridge::runNode<cnc_bridge::EthernutNode>(argc, argv, "ethernut_node", {4, true});
 }

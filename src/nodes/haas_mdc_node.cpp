@@ -19,6 +19,7 @@
 #include "cnc_bridge/common/port_lock.h"
 #include "cnc_bridge/mdc/mdc_monitor.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
+#include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/ros/params.h"
 #include "cnc_bridge/transport/backoff.h"
 #include "cnc_bridge/transport/serial_port.h"
@@ -110,13 +111,7 @@ class HaasMdcNode
       // ~host: address of an NGC control (or sim_haas_mdc).
       host_ = params::required<std::string>(pnh, "host");
       // ~tcp_port: the control's MDC port, Haas setting 143.
-      int tcp_port = 5051;
-      pnh.param("tcp_port", tcp_port, tcp_port);
-      if (tcp_port <= 0 || tcp_port > 65535)
-      {
-        throw ConfigError(pnh.resolveName("tcp_port") + " must be 1..65535, not " + std::to_string(tcp_port));
-      }
-      tcp_port_ = static_cast<uint16_t>(tcp_port);
+      tcp_port_ = params::tcpPort(pnh, "tcp_port", 5051);
       hardware_id_ = host_ + ":" + std::to_string(tcp_port_);
     }
     // ~connect_timeout: s allowed for a TCP connection.
@@ -489,21 +484,8 @@ class HaasMdcNode
 };
 }  // namespace cnc_bridge
 
+// Two threads: a service call waiting for its reply must not hold up the state timer.
 int main(int argc, char** argv)
 {
-  ros::init(argc, argv, "haas_mdc_node");
-  cnc_bridge::routeCoreLogToRosconsole();
-  try
-  {
-    cnc_bridge::HaasMdcNode node(ros::NodeHandle(), ros::NodeHandle("~"));
-    // Two threads: a service call waiting for its reply must not hold up the state timer.
-    ros::MultiThreadedSpinner spinner(2);
-    spinner.spin();
-  }
-  catch (const cnc_bridge::Error& e)
-  {
-    ROS_FATAL_STREAM("haas_mdc_node: " << e.what());
-    return 1;
-  }
-  return 0;
+  return cnc_bridge::runNode<cnc_bridge::HaasMdcNode>(argc, argv, "haas_mdc_node", {2});
 }

@@ -23,6 +23,7 @@
 #include "cnc_bridge/SlaveResponse.h"
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
+#include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/ros/params.h"
 #include "cnc_bridge/slave_bus/bus_session.h"
 #include "cnc_bridge/slave_bus/value_codec.h"
@@ -817,20 +818,5 @@ class SlaveBusNode
 
 int main(int argc, char** argv)
 {
-  ros::init(argc, argv, "slave_bus_node");
-  cnc_bridge::routeCoreLogToRosconsole();
-  ros::NodeHandle nh;  // held here so that a failing constructor does not shut ROS (and its log) down first
-  try
-  {
-    cnc_bridge::SlaveBusNode node(nh, ros::NodeHandle("~"));
-    ros::AsyncSpinner spinner(2);
-    spinner.start();
-    ros::waitForShutdown();
-  }
-  catch (const cnc_bridge::Error& e)
-  {
-    ROS_FATAL_STREAM("slave_bus_node: " << e.what());
-    return 1;
-  }
-  return 0;
+  return cnc_bridge::runNode<cnc_bridge::SlaveBusNode>(argc, argv, "slave_bus_node", {2});
 }

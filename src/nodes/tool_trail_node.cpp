@@ -10,6 +10,7 @@
 #include <deque>
 
 #include "cnc_bridge/MachineState.h"
+#include "cnc_bridge/ros/node_main.h"
 
 namespace cnc_bridge
 {
@@ -89,8 +90,5 @@ class ToolTrailNode
 
 int main(int argc, char** argv)
 {
-  ros::init(argc, argv, "tool_trail");
-  cnc_bridge::ToolTrailNode node{ros::NodeHandle(), ros::NodeHandle("~")};
-  ros::spin();
-  return 0;
+  return cnc_bridge::runNode<cnc_bridge::ToolTrailNode>(argc, argv, "tool_trail");
 }

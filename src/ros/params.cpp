@@ -49,6 +49,36 @@ SerialSettings serialSettings(const ros::NodeHandle& pnh, unsigned default_baud)
   return settings;
 }
 
+uint16_t tcpPort(const ros::NodeHandle& pnh, const std::string& name, int fallback, PortZero zero)
+{
+  int value = fallback;
+  pnh.param(name, value, fallback);
+  const int lowest = zero == PortZero::kMeansAny ? 0 : 1;
+  if (value < lowest || value > 65535)
+  {
+    throw ConfigError(pnh.resolveName(name) + " must be a TCP port (" + std::to_string(lowest) + "..65535), not " +
+                      std::to_string(value));
+  }
+  return static_cast<uint16_t>(value);
+}
+
+std::string choice(const ros::NodeHandle& pnh, const std::string& name, const std::string& fallback,
+                   std::initializer_list<const char*> choices)
+{
+  std::string value = fallback;
+  pnh.param(name, value, fallback);
+  std::string listed;
+  for (const char* each : choices)
+  {
+    if (value == each)
+    {
+      return value;
+    }
+    listed += std::string(listed.empty() ? "" : ", ") + each;
+  }
+  throw ConfigError(pnh.resolveName(name) + " must be one of " + listed + ", not '" + value + "'");
+}
+
 Milliseconds seconds(const ros::NodeHandle& pnh, const std::string& name, double fallback_seconds)
 {
   return Milliseconds(static_cast<Milliseconds::rep>(std::llround(positive(pnh, name, fallback_seconds) * 1000.0)));

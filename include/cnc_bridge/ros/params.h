@@ -4,6 +4,7 @@
 
 #include <ros/ros.h>
 
+#include <initializer_list>
 #include <string>
 
 #include "cnc_bridge/transport/serial_port.h"
@@ -30,6 +31,22 @@ double positive(const ros::NodeHandle& pnh, const std::string& name, double fall
 /// \brief ~port (required), ~baud, ~data_bits, ~parity, ~stop_bits, ~flow_control.
 /// \throws ConfigError on a missing port or an invalid value.
 SerialSettings serialSettings(const ros::NodeHandle& pnh, unsigned default_baud = 9600);
+
+/// What port 0 means for a TCP port parameter.
+enum class PortZero
+{
+  kRefused,   ///< 0 is not a port: 1..65535
+  kMeansAny,  ///< 0 asks for any free port (a server) or for a default found elsewhere
+};
+
+/// \brief A TCP port parameter (~tcp_port, ~listen_port, ...), \p fallback when not set.
+/// \throws ConfigError naming the parameter, the range and the value given.
+uint16_t tcpPort(const ros::NodeHandle& pnh, const std::string& name, int fallback, PortZero zero = PortZero::kRefused);
+
+/// \brief A string parameter that must be one of \p choices (\p fallback when not set).
+/// \throws ConfigError naming the parameter, the choices and the value given.
+std::string choice(const ros::NodeHandle& pnh, const std::string& name, const std::string& fallback,
+                   std::initializer_list<const char*> choices);
 
 /// \brief Milliseconds from a parameter given in seconds (float), e.g. ~timeout: 1.5.
 Milliseconds seconds(const ros::NodeHandle& pnh, const std::string& name, double fallback_seconds);
