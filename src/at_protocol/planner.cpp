@@ -40,6 +40,51 @@ void PlannerLimits::validate() const
   {
     throw ConfigError("planner: corner_share must be between 0 and 1");
   }
+  for (int i = 0; i < 3; ++i)
+  {
+    if (!(max_jerk[i] > 0.0))
+    {
+      throw ConfigError(std::string("planner: max jerk of axis ") + "XYZ"[i] + " must be positive");
+    }
+  }
+}
+
+size_t PlannerLimits::smoothingWindow() const
+{
+  if (profile != Profile::kSCurve)
+  {
+    return 1;
+  }
+  double n = 1.0;
+  for (int i = 0; i < 3; ++i)
+  {
+    n = std::max(n, std::ceil(2.0 * max_accel[i] / (max_jerk[i] * period) - 1e-9));
+  }
+  return static_cast<size_t>(std::min(n, 100000.0));
+}
+
+double timeOptimalJerkLimited(double length, double v, double a, double j)
+{
+  if (!(length > 0.0))
+  {
+    return 0.0;
+  }
+  // Ramp from rest to speed w: with a reached (w >= a^2/j) it takes w/a + a/j and covers
+  // w (w/a + a/j) / 2; without, 2 sqrt(w/j) and covers w sqrt(w/j).
+  auto rampTime = [&](double w) { return w * j >= a * a ? w / a + a / j : 2.0 * std::sqrt(w / j); };
+  auto rampDistance = [&](double w) { return w * rampTime(w) / 2.0; };
+  if (2.0 * rampDistance(v) <= length)
+  {
+    return 2.0 * rampTime(v) + (length - 2.0 * rampDistance(v)) / v;  // cruise at v
+  }
+  // The peak speed w below v with 2 rampDistance(w) = length (increasing in w): bisection.
+  double lo = 0.0, hi = v;
+  for (int k = 0; k < 200; ++k)
+  {
+    const double mid = (lo + hi) / 2.0;
+    (2.0 * rampDistance(mid) <= length ? lo : hi) = mid;
+  }
+  return 2.0 * rampTime(lo);
 }
 
 Trajectory::Trajectory(const std::vector<Vec3>& points, double feed, const PlannerLimits& limits, double entry_speed)
@@ -323,9 +368,16 @@ Trajectory Trajectory::stopFrom(const Sample& from) const
 TrajectoryStream::TrajectoryStream(Trajectory trajectory) : trajectory_(std::move(trajectory))
 {
   current_ = trajectory_.at(0.0);
+  raw_ = current_;
+  window_ = trajectory_.limits().smoothingWindow();
+  if (window_ > 1)
+  {
+    ring_.assign(window_, current_.position);  // before the start: at the start point
+    tail_ = trajectory_.steps() > 0 ? window_ - 1 : 0;
+  }
 }
 
-bool TrajectoryStream::next(Setpoint& setpoint)
+bool TrajectoryStream::nextRaw(Sample& sample)
 {
   const Trajectory& trajectory = active();
   if (index_ >= trajectory.steps())
@@ -333,8 +385,68 @@ bool TrajectoryStream::next(Setpoint& setpoint)
     return false;
   }
   ++index_;
-  current_ = trajectory.step(index_);
-  setpoint = trajectory.toSetpoint(current_);
+  sample = trajectory.step(index_);
+  return true;
+}
+
+bool TrajectoryStream::next(Setpoint& setpoint)
+{
+  if (window_ <= 1)
+  {
+    if (!nextRaw(raw_))
+    {
+      return false;
+    }
+    current_ = raw_;
+    setpoint = active().toSetpoint(current_);
+    ++sent_;
+    return true;
+  }
+  // S-curve: the mean of the last window_ trapezoid samples; after the trapezoid's end, the end
+  // point comes in until the window holds nothing else.
+  if (!raw_done_ && !nextRaw(raw_))
+  {
+    raw_done_ = true;
+  }
+  if (raw_done_)
+  {
+    if (tail_ == 0)
+    {
+      return false;
+    }
+    --tail_;
+    raw_ = active().at(active().duration());
+  }
+  ring_[ring_next_] = raw_.position;
+  ring_next_ = (ring_next_ + 1) % window_;
+  Sample smoothed;
+  const Vec3 before = current_.position;
+  bool all_equal = true;
+  for (int i = 0; i < 3; ++i)
+  {
+    double sum = 0.0;
+    for (const Vec3& p : ring_)
+    {
+      sum += p[i];
+      all_equal = all_equal && p[i] == ring_[0][i];
+    }
+    smoothed.position[i] = sum / static_cast<double>(window_);
+  }
+  if (all_equal)
+  {
+    smoothed.position = ring_[0];  // at rest on a point: exactly that point, no rounding of the mean
+  }
+  const double dt = active().limits().period;
+  double speed2 = 0.0;
+  for (int i = 0; i < 3; ++i)
+  {
+    smoothed.velocity[i] = (smoothed.position[i] - before[i]) / dt;
+    speed2 += smoothed.velocity[i] * smoothed.velocity[i];
+  }
+  smoothed.path_speed = std::sqrt(speed2);
+  smoothed.distance = raw_.distance;
+  current_ = smoothed;
+  setpoint = active().toSetpoint(current_);
   ++sent_;
   return true;
 }
@@ -346,7 +458,9 @@ void TrajectoryStream::stop()
     return;
   }
   stopping_ = true;
-  stop_.emplace(trajectory_.stopFrom(current_));
+  // The trapezoid behind the setpoints decelerates from where it is; the moving average follows
+  // it, so the S-curve stops within its limits too.
+  stop_.emplace(trajectory_.stopFrom(raw_));
   index_ = 0;
 }
 }  // namespace at_protocol

@@ -85,6 +85,19 @@ class AtControllerNode
     }
     // ~corner_share: share of the acceleration kept for changes of direction at corners (0..1).
     pnh.param("corner_share", limits_.corner_share, 0.2);
+    // ~profile: trapezoid (acceleration jumps) or scurve (jerk-limited, ~max_jerk_x/y/z in m/s^3).
+    std::string profile;
+    pnh.param<std::string>("profile", profile, "trapezoid");
+    if (profile != "trapezoid" && profile != "scurve")
+    {
+      throw ConfigError(pnh.resolveName("profile") + " must be trapezoid or scurve, not '" + profile + "'");
+    }
+    limits_.profile = profile == "scurve" ? ap::Profile::kSCurve : ap::Profile::kTrapezoid;
+    const double default_jerk[] = {10.0, 10.0, 5.0};
+    for (int i = 0; i < 3; ++i)
+    {
+      limits_.max_jerk[i] = params::positive(pnh, std::string("max_jerk_") + axes[i], default_jerk[i]) * 1000.0;
+    }
     limits_.validate();
     // ~default_feed_rate: m/s along the path when neither the goal nor the program gives one.
     default_feed_ = params::positive(pnh, "default_feed_rate", 0.01);

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <iostream>
 
 #include "cnc_bridge/at_protocol/planner.h"
 #include "cnc_bridge/common/error.h"
@@ -222,4 +223,182 @@ TEST(AtPlanner, FeedPerSegmentAsAProgramsFWordsChange)
   expectWithinLimits(samples(t), limits);
   EXPECT_THROW(Trajectory({mm(0, 0, 0), mm(1, 0, 0)}, std::vector<double>{10.0, 10.0}, limits), ConfigError);
   EXPECT_THROW(Trajectory({mm(0, 0, 0), mm(1, 0, 0)}, std::vector<double>{-1.0}, limits), ConfigError);
+}
+
+// ---- S-curve (jerk-limited) profile ----
+
+namespace
+{
+PlannerLimits scurveLimits()
+{
+  PlannerLimits limits;
+  limits.profile = Profile::kSCurve;
+  limits.max_jerk = {10000.0, 10000.0, 5000.0};
+  return limits;
+}
+
+struct Streamed
+{
+  std::vector<Vec3> positions;  // pulses, the setpoints' exact (unrounded) positions, start first
+  std::vector<Setpoint> setpoints;
+};
+
+// Streams \p stream to the end; calls stop() after \p stop_after setpoints (0: never).
+Streamed stream(TrajectoryStream& s, size_t stop_after = 0)
+{
+  Streamed out;
+  out.positions.push_back(s.current().position);
+  Setpoint sp;
+  while (s.next(sp))
+  {
+    out.positions.push_back(s.current().position);
+    out.setpoints.push_back(sp);
+    if (stop_after && out.setpoints.size() == stop_after)
+    {
+      s.stop();
+    }
+  }
+  return out;
+}
+
+struct Ratios
+{
+  double speed = 0, accel = 0, jerk = 0;
+};
+
+// Worst ratio to the limits of the speed, acceleration and jerk of every axis, from the
+// positions' differences (the start is at rest before the first setpoint).
+Ratios worstRatios(const std::vector<Vec3>& p, const PlannerLimits& limits)
+{
+  Ratios r;
+  const double dt = limits.period;
+  std::vector<Vec3> ext{p.front(), p.front()};
+  ext.insert(ext.end(), p.begin(), p.end());
+  ext.push_back(p.back());
+  ext.push_back(p.back());
+  for (size_t k = 3; k < ext.size(); ++k)
+  {
+    for (int i = 0; i < 3; ++i)
+    {
+      const double v0 = (ext[k][i] - ext[k - 1][i]) / dt, v1 = (ext[k - 1][i] - ext[k - 2][i]) / dt,
+                   v2 = (ext[k - 2][i] - ext[k - 3][i]) / dt;
+      const double a0 = (v0 - v1) / dt, a1 = (v1 - v2) / dt;
+      r.speed = std::max(r.speed, std::fabs(v0) / (limits.max_speed[i] * kPulsesPerMm));
+      r.accel = std::max(r.accel, std::fabs(a0) / (limits.max_accel[i] * kPulsesPerMm));
+      r.jerk = std::max(r.jerk, std::fabs(a0 - a1) / dt / (limits.max_jerk[i] * kPulsesPerMm));
+    }
+  }
+  return r;
+}
+}  // namespace
+
+TEST(AtPlannerSCurve, TimeOptimalReferenceMatchesTheClosedFormCases)
+{
+  // Long move: cruise at v; time L/v + v/a + a/j.
+  EXPECT_NEAR(timeOptimalJerkLimited(100.0, 50.0, 500.0, 10000.0), 100.0 / 50 + 50.0 / 500 + 500.0 / 10000, 1e-12);
+  // Short move where a is never reached (pure jerk): four phases of t with L = 2 j t^3.
+  const double t = std::cbrt(0.001 / (2 * 10000.0));
+  EXPECT_NEAR(timeOptimalJerkLimited(0.001, 50.0, 500.0, 10000.0), 4 * t, 1e-9);
+  EXPECT_EQ(timeOptimalJerkLimited(0.0, 50, 500, 10000), 0.0);
+}
+
+TEST(AtPlannerSCurve, SpeedAccelerationAndJerkHoldOnRandomPaths)
+{
+  const PlannerLimits limits = scurveLimits();
+  uint32_t seed = 12345;
+  auto rnd = [&seed](double lo, double hi)
+  {
+    seed = seed * 1664525u + 1013904223u;
+    return lo + (hi - lo) * (seed >> 8) / double(1u << 24);
+  };
+  Ratios worst;
+  for (int path = 0; path < 40; ++path)
+  {
+    std::vector<Vec3> points{{0, 0, 0}};
+    std::vector<double> feeds;
+    const int n = 2 + static_cast<int>(rnd(0, 12));
+    for (int k = 0; k < n; ++k)
+    {
+      points.push_back({std::round(rnd(-40000, 40000)), std::round(rnd(-40000, 40000)), std::round(rnd(-5000, 5000))});
+      feeds.push_back(rnd(1.0, 80.0));
+    }
+    TrajectoryStream s(Trajectory(points, feeds, limits));
+    const Streamed out = stream(s);
+    const Ratios r = worstRatios(out.positions, limits);
+    SCOPED_TRACE(path);
+    ASSERT_LE(r.speed, 1.0 + 1e-9);
+    ASSERT_LE(r.accel, 1.0 + 1e-6);
+    ASSERT_LE(r.jerk, 1.0 + 1e-6);
+    EXPECT_EQ(
+        out.setpoints.back().position,
+        (std::array<int32_t, 3>{int32_t(points.back()[0]), int32_t(points.back()[1]), int32_t(points.back()[2])}));
+    EXPECT_EQ(out.setpoints.back().feed, (std::array<int, 3>{0, 0, 0}));
+    worst.accel = std::max(worst.accel, r.accel);
+    worst.jerk = std::max(worst.jerk, r.jerk);
+  }
+  // The limits are used, not just respected.
+  std::cout << "worst ratios over 40 random paths: acceleration " << worst.accel << ", jerk " << worst.jerk << "\n";
+  EXPECT_GT(worst.accel, 0.5);
+  EXPECT_GT(worst.jerk, 0.3);
+}
+
+TEST(AtPlannerSCurve, SingleSegmentTimeIsWithinAFactorOfTheTimeOptimalProfile)
+{
+  const PlannerLimits limits = scurveLimits();
+  for (double length_mm : {0.5, 5.0, 20.0, 100.0, 500.0})
+  {
+    SCOPED_TRACE(length_mm);
+    const double feed = 40.0;
+    TrajectoryStream s(Trajectory({mm(0, 0, 0), mm(length_mm, 0, 0)}, feed, limits));
+    const double ours = static_cast<double>(s.total()) * limits.period;
+    const double best = timeOptimalJerkLimited(length_mm, feed, 500.0, 10000.0);
+    // docs/at_controller_node.md: within 1.6x of the time-optimal double S (the factor is largest
+    // on short moves, where the average's extra n - 1 periods weigh most).
+    EXPECT_LE(ours / best, 1.6) << ours << " s vs " << best << " s";
+    std::cout << length_mm << " mm at " << feed << " mm/s: S-curve " << ours << " s, time-optimal " << best
+              << " s, ratio " << ours / best << "\n";
+    EXPECT_GE(ours, best * (1 - 1e-9));
+    const Streamed out = stream(s);
+    EXPECT_EQ(out.setpoints.back().position[0], int32_t(length_mm * 1000));
+  }
+}
+
+TEST(AtPlannerSCurve, ArcStaysWithinTheChordTolerance)
+{
+  // A circle of 20 mm radius as chords with a sagitta of 0.01 mm, as the G-code parser cuts it.
+  const double r = 20000.0, tol = 10.0;  // pulses
+  const int n = static_cast<int>(std::ceil(2 * M_PI / (2 * std::acos(1 - tol / r))));
+  std::vector<Vec3> points;
+  for (int k = 0; k <= n; ++k)
+  {
+    points.push_back({std::round(r * std::cos(2 * M_PI * k / n)), std::round(r * std::sin(2 * M_PI * k / n)), 0});
+  }
+  const PlannerLimits limits = scurveLimits();
+  TrajectoryStream s(Trajectory(points, 30.0, limits));
+  const Streamed out = stream(s);
+  double worst = 0;
+  for (const Vec3& p : out.positions)
+  {
+    worst = std::max(worst, std::fabs(std::hypot(p[0], p[1]) - r));
+  }
+  EXPECT_LE(worst, 2 * tol) << "pulses off the circle";
+  std::cout << "S-curve on a chorded 20 mm circle: at most " << worst << " um off the circle\n";
+  const Ratios ratios = worstRatios(out.positions, limits);
+  EXPECT_LE(ratios.jerk, 1.0 + 1e-6);
+}
+
+TEST(AtPlannerSCurve, CancelDeceleratesWithinTheLimitsAndStopsShortOfTheEnd)
+{
+  const PlannerLimits limits = scurveLimits();
+  TrajectoryStream s(Trajectory({mm(0, 0, 0), mm(100, 0, 0), mm(100, 50, 0)}, 40.0, limits));
+  const Streamed out = stream(s, 1500);  // at full speed along X
+  const Ratios r = worstRatios(out.positions, limits);
+  EXPECT_LE(r.speed, 1.0 + 1e-9);
+  EXPECT_LE(r.accel, 1.0 + 1e-6);
+  EXPECT_LE(r.jerk, 1.0 + 1e-6);
+  EXPECT_LT(out.positions.back()[0], 100000.0);
+  EXPECT_EQ(out.positions.back()[1], 0.0);
+  EXPECT_EQ(out.setpoints.back().feed, (std::array<int, 3>{0, 0, 0}));
+  // The stop takes the deceleration ramp plus the average's window, no more.
+  EXPECT_LT(out.setpoints.size(), 1500u + 200u + limits.smoothingWindow());
 }

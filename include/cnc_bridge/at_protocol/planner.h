@@ -19,6 +19,13 @@ namespace at_protocol
 {
 using Vec3 = std::array<double, 3>;
 
+/// Velocity profile along the path.
+enum class Profile : uint8_t
+{
+  kTrapezoid,  ///< constant acceleration phases: the acceleration jumps (infinite jerk)
+  kSCurve      ///< jerk-limited: the trapezoid smoothed by a moving average (see TrajectoryStream)
+};
+
 /// \brief Machine limits and timing of the planner. Lengths in millimetres (the machinist's unit;
 /// the ROS layer converts from metres), times in seconds.
 struct PlannerLimits
@@ -31,10 +38,23 @@ struct PlannerLimits
   /// jump by at most share * max_accel * period. A sample straddling a corner then sees both, and
   /// the sum stays within max_accel: the limit holds at every sample, corners included.
   double corner_share = 0.2;
+  Profile profile = Profile::kTrapezoid;
+  Vec3 max_jerk{10000.0, 10000.0, 5000.0};  ///< mm/s^3 per axis (held by the S-curve profile)
 
   /// \throws ConfigError if a value is not positive or corner_share is not in (0, 1).
   void validate() const;
+  /// \brief Samples the S-curve averages over: n = max over the axes of ceil(2 a / (j period)), so
+  /// that a moving average of n samples of a trapezoid that keeps acceleration a keeps jerk j (a
+  /// sample's velocity change is at most a period; the average's acceleration is the difference of
+  /// two such changes n samples apart over n: at most 2 a / (n period) per period). 1 for the
+  /// trapezoid.
+  size_t smoothingWindow() const;
 };
+
+/// \brief The shortest time to travel \p length from rest to rest with speed, acceleration and jerk
+/// at most \p v, \p a, \p j (the time-optimal jerk-limited "double S" profile; closed form, see
+/// Biagiotti and Melchiorri, Trajectory Planning for Automatic Machines and Robots, section 3.4).
+double timeOptimalJerkLimited(double length, double v, double a, double j);
 
 /// \brief The state of the path at one instant, in pulses (1/1000 mm) and pulses per second.
 struct Sample
@@ -124,6 +144,14 @@ class Trajectory
 
 /// \brief Streams a trajectory one setpoint per call, and switches to a deceleration ramp on
 /// request. Used by the sender thread only: not thread-safe.
+///
+/// With Profile::kSCurve every setpoint is the mean of the last PlannerLimits::smoothingWindow()
+/// samples of the trapezoid (the samples before the start are the start point, after the end the
+/// end point): a moving average of n samples turns each constant-acceleration phase into a
+/// jerk-limited ramp and the velocity jumps at corners into ramps over n periods, while speed and
+/// acceleration stay within what the trapezoid keeps. The stream is n - 1 periods longer and ends
+/// exactly on the end point. Velocities of S-curve setpoints are the differences of consecutive
+/// positions over the period.
 class TrajectoryStream
 {
  public:
@@ -137,12 +165,13 @@ class TrajectoryStream
   /// Setpoints handed out so far.
   size_t sent() const { return sent_; }
   /// Setpoints in all (changes once when stop() shortens the stream).
-  size_t total() const { return sent_ - index_ + active().steps(); }
-  /// The sample of the last setpoint handed out (pulses).
+  size_t total() const { return sent_ - index_ + active().steps() + tail_; }
+  /// The sample of the last setpoint handed out (pulses; the smoothed one for an S-curve).
   const Sample& current() const { return current_; }
 
  private:
   const Trajectory& active() const { return stop_ ? *stop_ : trajectory_; }
+  bool nextRaw(Sample& sample);
 
   Trajectory trajectory_;
   std::optional<Trajectory> stop_;
@@ -150,6 +179,13 @@ class TrajectoryStream
   size_t sent_ = 0;
   bool stopping_ = false;
   Sample current_;
+  Sample raw_;  // the trapezoid's sample behind the last setpoint
+  // S-curve: the last `window` trapezoid samples (a ring) and how many flush steps remain.
+  size_t window_ = 1;
+  std::vector<Vec3> ring_;
+  size_t ring_next_ = 0;
+  size_t tail_ = 0;
+  bool raw_done_ = false;
 };
 }  // namespace at_protocol
 }  // namespace cnc_bridge
