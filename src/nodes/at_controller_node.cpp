@@ -27,6 +27,7 @@
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/ros/params.h"
+#include "cnc_bridge/ros/runtime_switch.h"
 #include "cnc_bridge/ros/single_goal_action_server.h"
 #include "cnc_bridge/transport/backoff.h"
 #include "cnc_bridge/transport/tcp.h"
@@ -62,8 +63,6 @@ class AtControllerNode
     listen_port_ = params::tcpPort(pnh, "listen_port", 5001, params::PortZero::kMeansAny);
     // ~connect_timeout: s allowed for one TCP connect.
     connect_timeout_ = params::seconds(pnh, "connect_timeout", 2.0);
-    // ~enable_motion: nothing that moves axes or turns the spindle is sent unless this is true.
-    pnh.param("enable_motion", enable_motion_, false);
     // ~program_dir: directory G-code goals are read from; empty refuses G-code goals.
     std::string program_dir;
     pnh.param<std::string>("program_dir", program_dir, "");
@@ -114,6 +113,11 @@ class AtControllerNode
 
     const std::string hardware_id = host_ + ":" + std::to_string(command_port_);
     state_ = std::make_unique<MachineStatePublisher>(nh, pnh, hardware_id);
+    // ~enable_motion (start-up value) and ~set_motion_enabled (at run time): nothing that moves
+    // axes or turns the spindle is sent unless motion is enabled.
+    motion_ = std::make_unique<RuntimeSwitch>(pnh, "motion", "enable_motion", "set_motion_enabled",
+                                              [this](bool enabled, const std::string& caller)
+                                              { onMotionSwitched(enabled, caller); });
     state_->diagnostics().add("streaming", this, &AtControllerNode::streamingDiagnostics);
     // job/path: the planned path of the last accepted follow_path goal (latched), for rviz and bags.
     path_pub_ = nh.advertise<nav_msgs::Path>("job/path", 1, true);
@@ -381,13 +385,43 @@ class AtControllerNode
 
   // ---- services ---------------------------------------------------------------------------------
 
+  /// ~set_motion_enabled: disabling stops what moves (a running path decelerates along the path to
+  /// a stop and holds; a jog gets feed 0) and says so in state.
+  void onMotionSwitched(bool enabled, const std::string& caller)
+  {
+    state_->update([&](MachineState& s)
+                   { s.message = std::string("motion ") + (enabled ? "enabled" : "disabled") + " by " + caller; });
+    if (enabled)
+    {
+      return;
+    }
+    {
+      std::lock_guard<std::mutex> lock(job_mutex_);
+      if (running_job_ && !running_job_->done())
+      {
+        disabled_by_ = caller;
+        running_job_->cancel();
+      }
+    }
+    if (jog_axis_ >= 0)
+    {
+      try
+      {
+        sender_->send(ap::JogFeed{0});  // jog feed 0: the axis stops
+      }
+      catch (const Error& e)
+      {
+        ROS_WARN_STREAM("at_controller_node: jog stop on disable: " << e.what());
+      }
+    }
+  }
+
   /// Refuses motion unless enabled and the e-stop is released. \returns the refusal or "".
   std::string motionRefusal(const std::string& what) const
   {
-    if (!enable_motion_)
+    if (!motion_->enabled())
     {
-      return what + " refused: motion is disabled; set the parameter " + pnh_.resolveName("enable_motion") +
-             " to true to allow it";
+      return motion_->refusal(what);
     }
     if (estop_ == MachineState::ESTOP_ON)
     {
@@ -722,6 +756,19 @@ class AtControllerNode
       publishPlannedPath(plan);  // before motion: the path is known once the goal is accepted
       const uint64_t underruns_before = sender_->stats().underruns;
       job = sender_->start(operation);
+      const uint64_t planned_setpoints = operation.trajectory->steps();
+      {
+        std::lock_guard<std::mutex> lock(job_mutex_);
+        running_job_ = job;
+        disabled_by_.clear();
+      }
+      if (!motion_->enabled())
+      {
+        // Disabled between the check above and the start: stop at once.
+        std::lock_guard<std::mutex> lock(job_mutex_);
+        disabled_by_ = "a call while the goal started";
+        job->cancel();
+      }
       state_->update(
           [&](MachineState& s)
           {
@@ -750,11 +797,25 @@ class AtControllerNode
         publishFeedback(*job, cancelled);
       }
       publishFeedback(*job, cancelled);
+      std::string disabled_by;
+      {
+        std::lock_guard<std::mutex> lock(job_mutex_);
+        running_job_.reset();
+        disabled_by.swap(disabled_by_);
+      }
       result.setpoints = job->sent();
       result.underruns = static_cast<uint32_t>(sender_->stats().underruns - underruns_before);
       bool ignored;
       result.final_position = toPoint(reported(ignored));
       result.message = job->message();
+      const bool stopped_by_disable = !disabled_by.empty() && job->state() == ap::Job::State::kCancelled;
+      if (stopped_by_disable)
+      {
+        result.message = "motion disabled by " + disabled_by + " (" + pnh_.resolveName("set_motion_enabled") +
+                         "): decelerated to a stop along the path after " + std::to_string(job->sent()) + " of " +
+                         std::to_string(planned_setpoints) + " planned setpoints and holds there; enable motion " +
+                         "and send the rest of the path as a new goal";
+      }
       state_->update(
           [&](MachineState& s)
           {
@@ -764,8 +825,16 @@ class AtControllerNode
             s.mode = jog_axis_ >= 0 ? MachineState::MODE_MANUAL : MachineState::MODE_AUTO;
             s.coolant = MachineState::COOLANT_OFF;  // #@ ends the operation's coolant
             s.spindle_speed = 0.0;                  // M0@ stops the spindle (step 18)
-            s.message = "follow_path " + std::string(ap::Job::toString(job->state())) + ": " + job->message();
+            s.message = stopped_by_disable
+                            ? result.message
+                            : "follow_path " + std::string(ap::Job::toString(job->state())) + ": " + job->message();
           });
+      if (stopped_by_disable)
+      {
+        ROS_WARN_STREAM("at_controller_node: follow_path: " << result.message);
+        follow_path_.setAborted(result, result.message);
+        return;
+      }
       switch (job->state())
       {
         case ap::Job::State::kSucceeded:
@@ -846,7 +915,7 @@ class AtControllerNode
     status.add("command link reconnects", command_link_ ? command_link_->reconnects() : 0u);
     status.add("report link reconnects", report_link_ ? report_link_->reconnects() : 0u);
     status.add("report errors", report_errors_.load());
-    status.add("motion enabled", enable_motion_);
+    motion_->addTo(status);
     status.add("mode", jog_axis_ >= 0 ? std::string("jog ") + "XYZ"[jog_axis_] : std::string("auto or unknown"));
     status.add("at home", at_home_.load());
     status.add("spindle value (0..255)", sequencer.spindle());
@@ -858,7 +927,10 @@ class AtControllerNode
   uint16_t command_port_ = 0, report_port_ = 0, listen_port_ = 0;
   std::string report_mode_;
   Milliseconds connect_timeout_{2000};
-  bool enable_motion_ = false;
+  std::unique_ptr<RuntimeSwitch> motion_;
+  std::mutex job_mutex_;  // guards running_job_, disabled_by_
+  std::shared_ptr<ap::Job> running_job_;
+  std::string disabled_by_;  // who disabled motion while running_job_ ran
   std::unique_ptr<ProgramDirectory> program_dir_;
   ap::PlannerLimits limits_;
   double default_feed_ = 0.01;

@@ -25,6 +25,7 @@
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/ros/params.h"
+#include "cnc_bridge/ros/runtime_switch.h"
 #include "cnc_bridge/ros/single_goal_action_server.h"
 #include "cnc_bridge/transport/backoff.h"
 #include "cnc_bridge/transport/tcp.h"
@@ -271,11 +272,17 @@ class EthernutNode : public ethernut::ClientListener
     int max_resends = 5;
     pnh_.param("max_resends", max_resends, 5);
     options_.max_resends = static_cast<unsigned>(std::max(0, max_resends));
-    // ~enable_kill (bool, false): allow ~kill (opcode 99/99). PROG_CNCkill|1 in the settings file
-    // enables it too (qCNC enabled it by default; we do not).
-    pnh_.param("enable_kill", enable_kill_, false);
-    enable_kill_ = enable_kill_ || settings.kill_enabled.value_or(false);
-    options_.kill_enabled = enable_kill_;
+    // ~enable_kill (bool, false) at start-up, ~set_kill_enabled at run time: allow ~kill (opcode
+    // 99/99). PROG_CNCkill|1 in the settings file enables it too (qCNC enabled it by default; we
+    // do not).
+    kill_ = std::make_unique<RuntimeSwitch>(pnh_, "kill", "enable_kill", "set_kill_enabled");
+    if (!kill_->enabled() && settings.kill_enabled.value_or(false))
+    {
+      kill_->set(true, "PROG_CNCkill|1 in " + settings_file);
+    }
+    // The client's own gate stays open: the node's switch decides, and it changes at run time
+    // while one client serves a whole connection.
+    options_.kill_enabled = true;
     // ~ack_position_reports (bool, true): answer the board's position reports with an ack (Table 1).
     pnh_.param("ack_position_reports", options_.ack_position_reports, true);
     // ~mode (string, "file"): board mode selected on every connection: file, gui-control, standalone.
@@ -824,11 +831,10 @@ class EthernutNode : public ethernut::ClientListener
   }
   bool onKill(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res)
   {
-    if (!enable_kill_)
+    if (!kill_->enabled())
     {
       res.success = false;
-      res.message = "kill is disabled: set " + pnh_.resolveName("enable_kill") +
-                    " to true (or PROG_CNCkill|1 in ~settings_file) to allow it";
+      res.message = kill_->refusal("kill") + " (or PROG_CNCkill|1 in ~settings_file)";
       return true;
     }
     return command(res, "killed: the board stopped and dropped the link", [](ethernut::Client& c) { c.kill(); });
@@ -923,7 +929,7 @@ class EthernutNode : public ethernut::ClientListener
     status.add("unexpected messages", total.unexpected_messages);
     status.add("last board error code", st.last_board_error);
     status.add("reconnects", reconnector_ ? reconnector_->reconnects() : 0u);
-    status.add("kill enabled", enable_kill_);
+    kill_->addTo(status);
   }
 
   ros::NodeHandle nh_;
@@ -932,7 +938,7 @@ class EthernutNode : public ethernut::ClientListener
   uint16_t port_ = 6666;
   Milliseconds connect_timeout_{3000};
   ethernut::ClientOptions options_;
-  bool enable_kill_ = false;
+  std::unique_ptr<RuntimeSwitch> kill_;
   std::unique_ptr<ProgramDirectory> program_dir_;
   gcode::ParserOptions parser_options_;
   G53Moves g53_moves_ = G53Moves::kRefuse;

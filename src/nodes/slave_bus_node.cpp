@@ -25,6 +25,7 @@
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/ros/params.h"
+#include "cnc_bridge/ros/runtime_switch.h"
 #include "cnc_bridge/slave_bus/bus_session.h"
 #include "cnc_bridge/slave_bus/value_codec.h"
 #include "cnc_bridge/transport/backoff.h"
@@ -127,8 +128,9 @@ class SlaveBusNode
                         std::to_string(slave_bus::kMaxPayload));
     }
     wire_ = slave_bus::WireFormat::of(slave_bus::parseWireCrc(crc), static_cast<size_t>(max_payload));
-    // ~enable_motion: axis and tool payloads (bus/frame or commands) are refused unless true.
-    pnh.param("enable_motion", enable_motion_, false);
+    // ~enable_motion (start-up value) and ~set_motion_enabled (at run time): axis and tool payloads
+    // (bus/frame or commands) are refused unless motion is enabled.
+    motion_ = std::make_unique<RuntimeSwitch>(pnh, "motion", "enable_motion", "set_motion_enabled");
     // ~reply_timeout (s): how long a slave that got a payload has to answer before it counts a timeout.
     reply_timeout_ = params::seconds(pnh, "reply_timeout", 0.5);
     // ~command_delay (s): a step of queued commands leaves this long after its first command, so
@@ -187,7 +189,7 @@ class SlaveBusNode
                                        << slave_bus::toString(framing_) << " framing, WirePacker CRC "
                                        << slave_bus::toString(wire_.crc) << ", payloads up to " << wire_.max_data
                                        << " bytes, " << settings_.describe()
-                                       << (enable_motion_ ? ", motion enabled" : ", motion disabled"));
+                                       << (motion_->enabled() ? ", motion enabled" : ", motion disabled"));
   }
 
   ~SlaveBusNode()
@@ -313,8 +315,7 @@ class SlaveBusNode
       }
       else if (!payload.data.empty() && !motionAllowed(payload.address))
       {
-        why = "address " + std::to_string(payload.address) +
-              " is an axis, tool or unconfigured slave and ~enable_motion is false (set it true to send motion)";
+        why = motion_->refusal("address " + std::to_string(payload.address) + " (an axis, tool or unconfigured slave)");
       }
       if (!why.empty())
       {
@@ -347,9 +348,9 @@ class SlaveBusNode
 
   std::vector<uint8_t> commandPayload(const Slave& slave, const SlaveCommand& msg) const
   {
-    if (startsMotion(slave.role) && !enable_motion_)
+    if (startsMotion(slave.role) && !motion_->enabled())
     {
-      throw DisabledError("slave " + slave.name + " moves or cuts and ~enable_motion is false (set it true)");
+      throw DisabledError(motion_->refusal("slave " + slave.name + " (it moves or cuts)"));
     }
     if (msg.values.empty() == msg.data.empty())
     {
@@ -410,7 +411,7 @@ class SlaveBusNode
 
   bool motionAllowed(uint8_t address) const
   {
-    if (enable_motion_)
+    if (motion_->enabled())
     {
       return true;
     }
@@ -746,7 +747,7 @@ class SlaveBusNode
     status.add("WirePacker CRC", slave_bus::toString(wire_.crc));
     status.add("max payload", wire_.max_data);
     status.add("bus size", bus_size_);
-    status.add("motion enabled", enable_motion_);
+    motion_->addTo(status);
     status.add("frames sent", s.steps_sent);
     status.add("bytes sent", s.bytes_sent);
     status.add("bytes received", s.bytes_received);
@@ -782,7 +783,7 @@ class SlaveBusNode
   MachineStatePublisher state_;
   slave_bus::Framing framing_ = slave_bus::Framing::kRaw;
   slave_bus::WireFormat wire_;
-  bool enable_motion_ = false;
+  std::unique_ptr<RuntimeSwitch> motion_;
   Milliseconds reply_timeout_{500};
   Milliseconds command_delay_{5};
   Milliseconds resync_gap_{50};

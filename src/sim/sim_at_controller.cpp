@@ -47,7 +47,8 @@ struct Options
   std::array<int32_t, 3> home{0, 0, 0};
   std::string fault_script;
   std::string pid_file;
-  std::string command_log;  // every command message received, one per line, for tests to inspect
+  std::string command_log;        // every command message received, one per line, for tests to inspect
+  bool estop_unreported = false;  // no E report on connection: a controller that reports only changes
 };
 
 /// One fault-script line: after the n-th setpoint received, switch the emergency stop.
@@ -481,7 +482,10 @@ class SimController
 
       if (greet_.exchange(false))
       {
-        report(EStopReport{estop_});
+        if (!options_.estop_unreported)
+        {
+          report(EStopReport{estop_});
+        }
         reportMode();
         report(positionReport());
         last_report_tick = tick;
@@ -614,7 +618,9 @@ int main(int argc, char** argv)
       "home-speed", po::value(&options.home_speed)->default_value(options.home_speed), "homing speed (mm/s)")(
       "fault-script", po::value(&options.fault_script), "file of \"setpoint <n> estop-on|estop-off\" lines")(
       "pid-file", po::value(&options.pid_file), "write the process id here (for SIGUSR1/SIGUSR2 e-stop)")(
-      "command-log", po::value(&options.command_log), "append every command message received to this file");
+      "command-log", po::value(&options.command_log), "append every command message received to this file")(
+      "estop-unreported", po::bool_switch(&options.estop_unreported),
+      "send no E0/E1 on connection (the e-stop state is reported only when it changes)");
   try
   {
     po::variables_map vm;

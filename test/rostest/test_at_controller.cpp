@@ -5,6 +5,7 @@
 
 #include <atomic>
 #include <fstream>
+#include <sstream>
 
 #include "at_test_support.h"
 
@@ -12,7 +13,7 @@ using namespace at_test;
 
 namespace
 {
-std::string node, ns, prefix, pid_file;
+std::string node, ns, prefix, pid_file, command_log;
 
 pid_t simulatorPid()
 {
@@ -132,6 +133,62 @@ TEST_F(AtController, ASecondGoalIsRejectedAndTheFirstRunsToItsEnd)
       << state.last().position;
 }
 
+// ~set_motion_enabled false mid-path: the path decelerates to a stop and holds, the goal ends with
+// who disabled it, the controller receives no setpoint after the operation's end (M0@), and motion
+// is refused, naming the service and the parameter, until it is enabled again.
+TEST_F(AtController, DisablingMotionMidPathStopsItAndTheControllerGetsNoMoreSetpoints)
+{
+  CommandLog received{command_log};
+  const auto start = state.last().position;
+  client.sendGoal(lineGoal(start.x + 0.1, start.y, start.z, 0.02, prefix + "machine"));  // 5 s of setpoints
+  ASSERT_TRUE(state.waitFor([&](const auto& s) { return s.position.x > start.x + 0.01; }));
+  const size_t at_disable = received.lines().size();
+  std_srvs::SetBool::Request disable;
+  disable.data = false;
+  const auto switched = call<std_srvs::SetBool>(node + "/set_motion_enabled", disable);
+  EXPECT_TRUE(switched.success);
+  EXPECT_EQ(switched.message, "motion disabled by " + ros::this_node::getName());
+  ASSERT_TRUE(client.waitForResult(ros::Duration(10.0)));
+  EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::ABORTED) << client.getState().getText();
+  const std::string text = client.getResult()->message;
+  EXPECT_NE(text.find("motion disabled by " + ros::this_node::getName() + " (" + node + "/set_motion_enabled)"),
+            std::string::npos)
+      << text;
+  EXPECT_LT(client.getResult()->setpoints, 4000u);
+  // The controller's side: the deceleration (a ramp of some 50 ms from 20 mm/s) and the
+  // operation's end, then nothing.
+  const auto until_end = received.linesUntil(at_disable, "M0");
+  ASSERT_FALSE(until_end.empty()) << "the operation did not end";
+  EXPECT_LT(until_end.size(), 1000u);
+  EXPECT_EQ(until_end[until_end.size() - 2], "#");
+  const size_t after_end = at_disable + until_end.size();
+  // The axes settle on the last setpoint ("feed x feed y feed z", pulses of 1 um) and hold there.
+  std::istringstream last_setpoint(until_end[until_end.size() - 3]);
+  double feed, x = NAN;
+  last_setpoint >> feed >> x;
+  ASSERT_FALSE(std::isnan(x)) << until_end[until_end.size() - 3];
+  const double held_x = x * 1e-6;
+  EXPECT_TRUE(state.waitFor([&](const auto& s) { return std::fabs(s.position.x - held_x) <= 1.5e-6; }))
+      << state.last().position.x << " vs " << held_x;
+  // A measurement window (that nothing arrives needs a span of time): no setpoint, no motion.
+  ros::WallDuration(0.5).sleep();
+  EXPECT_EQ(received.lines().size(), after_end);
+  EXPECT_NEAR(state.last().position.x, held_x, 1.5e-6);
+  EXPECT_LT(held_x, start.x + 0.09);
+  // Refused while disabled, naming both the run-time switch and the start-up parameter.
+  const auto jog = call<cnc_bridge::AtJog>(node + "/jog", jogRequest("x", 0.01));
+  EXPECT_FALSE(jog.success);
+  EXPECT_NE(jog.message.find(node + "/set_motion_enabled"), std::string::npos) << jog.message;
+  EXPECT_NE(jog.message.find(node + "/enable_motion"), std::string::npos) << jog.message;
+  EXPECT_EQ(received.lines().size(), after_end);
+  disable.data = true;
+  EXPECT_EQ(call<std_srvs::SetBool>(node + "/set_motion_enabled", disable).message,
+            "motion enabled by " + ros::this_node::getName());
+  client.sendGoal(lineGoal(start.x, start.y, start.z, 0.02, prefix + "machine"));
+  ASSERT_TRUE(client.waitForResult(ros::Duration(20.0)));
+  EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client.getState().getText();
+}
+
 TEST_F(AtController, EmergencyStopMidPathStopsMotionAndAbortsWithTheReason)
 {
   const auto start = state.last().position;
@@ -181,6 +238,7 @@ int main(int argc, char** argv)
   pnh.getParam("namespace", ns);
   pnh.getParam("tf_prefix", prefix);
   pnh.getParam("pid_file", pid_file);
+  pnh.getParam("command_log", command_log);
   ros::AsyncSpinner spinner(2);
   spinner.start();
   return RUN_ALL_TESTS();

@@ -1,5 +1,6 @@
 // at_controller_node with ~enable_motion false (the default): every request that moves an axis or
-// starts the spindle is refused and the refusal names the parameter; harmless ones go through.
+// starts the spindle is refused and the refusal names the parameter and the run-time switch;
+// harmless ones go through; motion switched on at run time is refused while the e-stop is unknown.
 // The report link runs in server mode here (the simulator connects to the node).
 #include "at_test_support.h"
 
@@ -12,7 +13,8 @@ std::string node, ns, command_log;
 void expectRefusedNamingTheParameter(bool success, const std::string& message)
 {
   EXPECT_FALSE(success);
-  EXPECT_NE(message.find("enable_motion"), std::string::npos) << message;
+  EXPECT_NE(message.find(node + "/enable_motion"), std::string::npos) << message;
+  EXPECT_NE(message.find(node + "/set_motion_enabled"), std::string::npos) << message;
 }
 
 struct AtControllerDisabled : ::testing::Test
@@ -83,6 +85,35 @@ TEST_F(AtControllerDisabled, HarmlessRequestsGoThrough)
   std_srvs::SetBool::Request coolant;
   coolant.data = true;
   EXPECT_TRUE(call<std_srvs::SetBool>(node + "/coolant", coolant).success);
+}
+
+// Motion enabled at run time, but the controller has not reported its emergency stop (the
+// simulator sends no E0 on connection): unknown is not clear, so motion is still refused, the
+// refusal says why, and the controller receives nothing.
+TEST_F(AtControllerDisabled, AnUnknownEmergencyStopBlocksMotion)
+{
+  EXPECT_EQ(state.last().estop, cnc_bridge::MachineState::ESTOP_UNKNOWN);
+  std_srvs::SetBool::Request enable;
+  enable.data = true;
+  const auto switched = call<std_srvs::SetBool>(node + "/set_motion_enabled", enable);
+  EXPECT_TRUE(switched.success);
+  EXPECT_EQ(switched.message, "motion enabled by " + ros::this_node::getName());
+  EXPECT_TRUE(
+      state.waitFor([](const auto& s) { return s.message == "motion enabled by " + ros::this_node::getName(); }));
+  const size_t mark = received.lines().size();
+  const auto jog = call<cnc_bridge::AtJog>(node + "/jog", jogRequest("x", 0.01));
+  EXPECT_FALSE(jog.success);
+  EXPECT_NE(jog.message.find("emergency stop state is unknown"), std::string::npos) << jog.message;
+  FollowPathClient client(node + "/follow_path", true);
+  ASSERT_TRUE(client.waitForServer(ros::Duration(10.0)));
+  client.sendGoal(lineGoal(0.01, 0, 0, 0.01, ""));
+  ASSERT_TRUE(client.waitForResult(ros::Duration(10.0)));
+  EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::ABORTED);
+  EXPECT_NE(client.getResult()->message.find("emergency stop state is unknown"), std::string::npos)
+      << client.getResult()->message;
+  EXPECT_EQ(receivedSinceThroughSpindleStop(mark), kOnlyTheSpindleStop) << "the controller received motion";
+  enable.data = false;
+  EXPECT_TRUE(call<std_srvs::SetBool>(node + "/set_motion_enabled", enable).success);
 }
 
 int main(int argc, char** argv)

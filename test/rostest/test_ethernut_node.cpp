@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 #include <nav_msgs/Path.h>
 #include <ros/ros.h>
+#include <std_srvs/SetBool.h>
 #include <std_srvs/Trigger.h>
 #include <visualization_msgs/MarkerArray.h>
 
@@ -274,6 +275,31 @@ TEST(EthernutJob, KillIsRefusedByDefault)
   ASSERT_TRUE(waitForSimMessage("alive-request", simMessages().size()));
   const auto received = simMessages();
   EXPECT_EQ(std::count(received.begin() + static_cast<long>(before), received.end(), "kill"), 0)
+      << "the board received a kill the node refused";
+  EXPECT_NE(res.message.find(ns + "/ethernut_node/set_kill_enabled"), std::string::npos) << res.message;
+
+  // The run-time switch answers with its caller and shows in diagnostics; switched off again,
+  // kill stays refused and the board receives none.
+  std_srvs::SetBool set;
+  set.request.data = true;
+  ASSERT_TRUE(ros::service::call(ns + "/ethernut_node/set_kill_enabled", set));
+  EXPECT_EQ(set.response.message, "kill enabled by " + ros::this_node::getName());
+  set.request.data = false;
+  ASSERT_TRUE(ros::service::call(ns + "/ethernut_node/set_kill_enabled", set));
+  EXPECT_EQ(set.response.message, "kill disabled by " + ros::this_node::getName());
+  const size_t again = simMessages().size();
+  ASSERT_TRUE(call("kill", res));
+  EXPECT_FALSE(res.success) << res.message;
+  ASSERT_TRUE(watch->waitFor(
+      []
+      {
+        const auto it = watch->protocol.find("kill last change");
+        return it != watch->protocol.end() && it->second.rfind("disabled by " + ros::this_node::getName(), 0) == 0;
+      },
+      10.0));
+  ASSERT_TRUE(waitForSimMessage("alive-request", simMessages().size()));
+  const auto later = simMessages();
+  EXPECT_EQ(std::count(later.begin() + static_cast<long>(again), later.end(), "kill"), 0)
       << "the board received a kill the node refused";
 }
 
