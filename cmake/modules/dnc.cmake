@@ -23,7 +23,7 @@ if(CNC_BRIDGE_FUZZ)
 endif()
 
 # cnc_dnc: the ROS-free transfer tool (subcommands in a table in src/cli/cnc_dnc.cpp).
-cnc_tool(cnc_dnc src/cli/cnc_dnc.cpp)
+cnc_tool(cnc_dnc src/cli/cnc_dnc.cpp src/cli/cnc_dnc_doctor.cpp)
 target_link_libraries(cnc_dnc cnc_bridge_xmodem cnc_bridge_programs)
 
 # The tools as a user runs them: cnc_dnc and sim_haas_serial xmodem as processes over a pty.
@@ -55,4 +55,15 @@ endif()
 # The serial control profiles of config/controls/ through dnc_node.launch onto a pty.
 if(NOT CNC_BRIDGE_CORE_ONLY AND CATKIN_ENABLE_TESTING)
   add_rostest(test/rostest/control_profiles.test DEPENDENCIES dnc_node ${PROJECT_NAME}_generate_messages_py)
+endif()
+
+# The port doctor (src/transport/port_doctor.cpp) and `cnc_dnc doctor` on ptys and the simulated punch.
+if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
+  cnc_core_gtest(test_port_doctor test/unit/test_port_doctor.cpp)
+  if(TARGET test_port_doctor)
+    target_link_libraries(test_port_doctor cnc_bridge_common yaml-cpp util)
+    target_compile_definitions(test_port_doctor PRIVATE CNC_DNC="$<TARGET_FILE:cnc_dnc>"
+      SIM_HAAS_SERIAL="$<TARGET_FILE:sim_haas_serial>" CONTROLS_DIR="${PROJECT_SOURCE_DIR}/config/controls")
+    add_dependencies(test_port_doctor cnc_dnc sim_haas_serial)
+  endif()
 endif()

@@ -11,6 +11,7 @@
 //   cnc_dnc send    --share URL [--credentials FILE] [--allow-protected] FILE (cnc_dnc_share.cpp)
 //   cnc_dnc receive --share URL [--credentials FILE] NAME OUT
 //   cnc_dnc list    --share URL [--credentials FILE]
+//   cnc_dnc doctor  --port DEV [serial options] [--listen S]            (cnc_dnc_doctor.cpp)
 #include <unistd.h>
 
 #include <boost/program_options.hpp>
@@ -42,6 +43,9 @@ int runShareSend(const std::vector<std::string>& args);     // cnc_dnc_share.cpp
 int runShareReceive(const std::vector<std::string>& args);  // cnc_dnc_share.cpp
 int runList(const std::vector<std::string>& args);          // cnc_dnc_share.cpp
 bool namesShare(const std::vector<std::string>& args);      // cnc_dnc_share.cpp
+int runDrip(const std::vector<std::string>& args);    // cnc_dnc_drip.cpp
+int runBackup(const std::vector<std::string>& args);  // cnc_dnc_drip.cpp
+int runDoctor(const std::vector<std::string>& args);  // cnc_dnc_doctor.cpp
 }  // namespace cli
 }  // namespace cnc_bridge
 
@@ -265,6 +269,7 @@ const Command kCommands[] = {
     {"drip", "drip-feed a program while the control runs it (DNC, XON/XOFF)", &cli::runDrip},
     {"backup", "store a program the control punches (from '%' to '%')", &cli::runBackup},
     {"list", "list the programs of a share (--share URL): name, O number, size, time, first comment", &cli::runList},
+    {"doctor", "check a port: opens? why not, in words; with --listen S, what the control sends", &cli::runDoctor},
 };
 
 void usage(std::ostream& out)

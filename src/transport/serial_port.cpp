@@ -2,6 +2,7 @@
 // and input flush use termios directly.
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/transport/paced_transport.h"
+#include "cnc_bridge/transport/port_doctor.h"
 
 #include <sys/ioctl.h>
 #include <sys/stat.h>
@@ -192,7 +193,8 @@ SerialPort::SerialPort(SerialSettings settings, InputOnOpen on_open) : settings_
   stream_.open(settings_.device, error);
   if (error)
   {
-    throw LinkError(settings_.describe() + ": cannot open: " + error.message());
+    throw LinkError(settings_.describe() + ": cannot open: " + error.message() + ": " +
+                    explainOpenFailure(settings_.device, error.value()));
   }
   try
   {

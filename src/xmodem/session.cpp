@@ -27,6 +27,7 @@
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/log.h"
+#include "cnc_bridge/transport/port_doctor.h"
 
 namespace cnc_bridge
 {
@@ -159,7 +160,8 @@ uint8_t Sender::waitForStart()
     if (c < 0)
     {
       ++stats_.timeouts;
-      abort("the receiver did not start (no NAK or 'C' within " + seconds(config_.start_wait) + ")", true, true);
+      abort("the receiver did not start (no NAK or 'C' within " + seconds(config_.start_wait) + "): " + kNoAnswerHint,
+            true, true);
     }
     if (c == kNak || c == kCrcStart)
     {
@@ -450,7 +452,7 @@ std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
         if (!started)
         {
           if (Clock::now() >= start_deadline)
-            abort("the sender did not start within " + seconds(start_timeout), true, true);
+            abort("the sender did not start within " + seconds(start_timeout) + ": " + kNoAnswerHint, true, true);
           if (crc && requests >= config_.crc_attempts)
           {
             crc = false;  // the sender does not know 'C': fall back to checksum mode

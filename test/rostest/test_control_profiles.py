@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The serial control profiles reach the driver: dnc_node, started through launch/dnc_node.launch
+"""The serial control profiles reach the driver, and a port that cannot be opened is explained: dnc_node, started through launch/dnc_node.launch
 with params_file:=config/controls/<profile>.yaml and a pty as its port (keep_open, so the port is
 opened at start-up), must leave the pty's termios as the profile says: baud rate in and out, stop
 bits and the flow control the kernel does. A pty keeps 8 data bits and no parity whatever it is
@@ -75,6 +75,25 @@ class ControlProfilesOnAPty(unittest.TestCase):
                     log.close()
                     os.close(master)
                     os.close(slave)
+
+    def test_start_up_error_explains_a_missing_port(self):
+        """The node's start-up error says why, in words: the same explanation as cnc_dnc doctor."""
+        missing = os.path.join(self.scratch, "ttyUSB9")
+        path = os.path.join(self.package, "config", "controls", "haas_classic_rs232.yaml")
+        process, log = self.start_node("missing", path, missing)
+        try:
+            deadline = rospy.Time.now() + rospy.Duration(30)
+            message = ""
+            while not rospy.is_shutdown() and rospy.Time.now() < deadline and "does not exist" not in message:
+                state = rospy.wait_for_message("/profiles/missing/state", MachineState, timeout=30)
+                message = state.message
+            self.assertEqual(state.link, MachineState.LINK_DOWN)
+            self.assertIn(missing + " does not exist", message)
+            self.assertIn("/dev/serial/by-id", message)
+        finally:
+            os.killpg(process.pid, signal.SIGINT)
+            process.wait(timeout=20)
+            log.close()
 
 
 if __name__ == "__main__":
