@@ -137,6 +137,8 @@ ROSDEP_EXCEPTIONS = {
     "python3-xmodem": "test peer; no rosdep key: apt-get install python3-xmodem",
     "libsmbclient-dev": "Samba's client library (the SMB program store); no rosdep key: apt-get install libsmbclient-dev",
     "samba": "test peer (smbd, smbpasswd); no rosdep key: apt-get install samba",
+    "linuxcnc-uspace": "test peer (LinuxCNC's rs274 for the G-code comparison); no rosdep key: apt-get install "
+                       "linuxcnc-uspace (Debian 12)",
 }
 
 # Installed for building and running the scripts and benchmarks, not a dependency of the package.

@@ -43,9 +43,9 @@ int runShareSend(const std::vector<std::string>& args);     // cnc_dnc_share.cpp
 int runShareReceive(const std::vector<std::string>& args);  // cnc_dnc_share.cpp
 int runList(const std::vector<std::string>& args);          // cnc_dnc_share.cpp
 bool namesShare(const std::vector<std::string>& args);      // cnc_dnc_share.cpp
-int runDrip(const std::vector<std::string>& args);    // cnc_dnc_drip.cpp
-int runBackup(const std::vector<std::string>& args);  // cnc_dnc_drip.cpp
-int runDoctor(const std::vector<std::string>& args);  // cnc_dnc_doctor.cpp
+int runDrip(const std::vector<std::string>& args);          // cnc_dnc_drip.cpp
+int runBackup(const std::vector<std::string>& args);        // cnc_dnc_drip.cpp
+int runDoctor(const std::vector<std::string>& args);        // cnc_dnc_doctor.cpp
 }  // namespace cli
 }  // namespace cnc_bridge
 
