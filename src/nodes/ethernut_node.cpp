@@ -9,11 +9,13 @@
 #include <std_srvs/Trigger.h>
 #include <visualization_msgs/MarkerArray.h>
 
+#include <atomic>
 #include <cmath>
 #include <condition_variable>
 #include <fstream>
 #include <memory>
 #include <mutex>
+#include <optional>
 
 #include "cnc_bridge/EthernutSetMode.h"
 #include "cnc_bridge/RunJobAction.h"
@@ -21,6 +23,7 @@
 #include "cnc_bridge/ethernut/client.h"
 #include "cnc_bridge/ethernut/settings.h"
 #include "cnc_bridge/gcode/gcode.h"
+#include "cnc_bridge/gcode/program_steps.h"
 #include "cnc_bridge/ros/gcode_params.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/node_main.h"
@@ -75,7 +78,7 @@ class GcodeJob
  public:
   GcodeJob(const std::string& path, const gcode::ParserOptions& options, G53Moves g53, std::string g53_param)
       : in_(path, std::ios::binary),
-        reader_(in_, withSeparateMachineMoves(options)),
+        steps_(in_, withSeparateMachineMoves(options)),
         g53_(g53),
         g53_param_(std::move(g53_param))
   {
@@ -85,12 +88,22 @@ class GcodeJob
     }
   }
 
-  // The next move to stream; false at the end. Throws ParseError, or ConfigError for a G53 move
-  // under kRefuse.
+  // The next move to stream; false at the end of the program, or at one of the program's own
+  // steps (stop, end, dwell, spindle, coolant, tool change), which step() then holds: the stream
+  // pauses there and the next call goes on after it. Throws ParseError, or ConfigError for a G53
+  // move under kRefuse.
   bool next(gcode::Move& move)
   {
-    while (reader_.nextMove(move))
+    step_.reset();
+    gcode::ProgramStep step;
+    while (steps_.next(step))
     {
+      if (step.kind != gcode::ProgramStep::Kind::kMove)
+      {
+        step_ = step;
+        return false;
+      }
+      move = step.move;
       if (!move.machine_coordinates)
       {
         return true;
@@ -110,6 +123,9 @@ class GcodeJob
     }
     return false;
   }
+
+  // The program step next() stopped at, if it did not stop at the end of the program.
+  const std::optional<gcode::ProgramStep>& step() const { return step_; }
 
   // "" when no G53 move was left out, else e.g. "3 G53 moves left out (lines 8, 58, 63)".
   std::string skippedSummary() const
@@ -135,7 +151,8 @@ class GcodeJob
   }
 
   std::ifstream in_;
-  gcode::Reader reader_;
+  gcode::ProgramSteps steps_;
+  std::optional<gcode::ProgramStep> step_;
   G53Moves g53_;
   std::string g53_param_;
   uint64_t skipped_ = 0;
@@ -472,6 +489,10 @@ class EthernutNode : public ethernut::ClientListener
       job_.message = message;
     }
     job_cv_.notify_all();
+    if (outcome == ethernut::JobOutcome::kCompleted && segment_continues_)
+    {
+      return;  // the program goes on after one of its own steps: the job runs on
+    }
     // A job cancelled by ~run_job's cancel leaves the board paused (the held move): say so.
     const Session s = session();
     const bool paused = s.client && s.client->state() == ethernut::SessionState::kPaused;
@@ -613,6 +634,8 @@ class EthernutNode : public ethernut::ClientListener
     // the preview is out before the first set is sent and a bad program is refused before it runs.
     Preview preview(static_cast<size_t>(max_preview_points_), state_->frame("machine"));
     std::function<bool(ethernut::Coordinate&)> source;
+    // The program step the stream stopped at when a segment of moves ended (none for points).
+    std::function<std::optional<gcode::ProgramStep>()> step_at_end = [] { return std::nullopt; };
     uint64_t count = 0;
     std::string program;
     std::string skipped_note;  // G53 moves left out
@@ -631,8 +654,17 @@ class EthernutNode : public ethernut::ClientListener
         gcode::Move move;
         bool first_move = true;
         Preview fresh(static_cast<size_t>(max_preview_points_), state_->frame("machine"));
-        while (job.next(move))
+        // Every move up to the program's end (M02/M30): what comes after it is never sent.
+        for (;;)
         {
+          if (!job.next(move))
+          {
+            if (job.step())
+            {
+              continue;
+            }
+            break;
+          }
           if (first_move)
           {
             fresh.add(move.start.x, move.start.y, move.start.z, true);
@@ -656,11 +688,14 @@ class EthernutNode : public ethernut::ClientListener
       }
       program = goal->file;
       auto job = std::make_shared<GcodeJob>(path, parser_options_, g53_moves_, pnh_.resolveName("g53_moves"));
-      source = [job](ethernut::Coordinate& out)
+      step_at_end = [job] { return job->step(); };
+      source = [this, job](ethernut::Coordinate& out)
       {
         gcode::Move move;
         if (!job->next(move))
         {
+          // The stream pauses at a program step (not the end): the segment's end is not the job's.
+          segment_continues_ = job->step() && job->step()->kind != gcode::ProgramStep::Kind::kEnd;
           return false;
         }
         out.x = static_cast<float>(move.end.x);
@@ -714,65 +749,117 @@ class EthernutNode : public ethernut::ClientListener
           m.block = 0;
         });
 
+    ROS_INFO_STREAM("run_job: streaming " << count << " coordinates of " << program);
+    // The job runs as segments: the moves up to the program's next own step (stop, dwell, spindle,
+    // coolant, tool change), which the node carries out between two segments, or its end.
+    RunJobFeedback feedback;
+    feedback.coordinate_count = static_cast<uint32_t>(count);
+    Totals totals;
+    bool cancelled = false;
+    for (;;)
     {
-      std::lock_guard<std::mutex> lock(job_mutex_);
-      job_ = JobProgress();
-    }
-    try
-    {
-      c->startJob(source);
-    }
-    catch (const Error& e)
-    {
-      abort(e.what());
+      {
+        std::lock_guard<std::mutex> lock(job_mutex_);
+        job_ = JobProgress();
+      }
+      segment_continues_ = false;
+      try
+      {
+        c->startJob(source);
+      }
+      catch (const Error& e)
+      {
+        abort(e.what());
+        return;
+      }
+      const JobProgress p = followSegment(*c, feedback, count, totals, cancelled);
+      totals.done += p.done;
+      totals.resends += p.resends;
+      const auto step = p.outcome == ethernut::JobOutcome::kCompleted ? step_at_end() : std::nullopt;
+      if (step && step->kind != gcode::ProgramStep::Kind::kEnd)
+      {
+        if (!carryOut(*step, feedback, cancelled))
+        {
+          result.coordinates_done = static_cast<uint32_t>(totals.done);
+          result.coordinate_count = static_cast<uint32_t>(count);
+          result.resends = totals.resends;
+          result.message = "cancelled at the " + step->describe();
+          state_->update(
+              [&](MachineState& m)
+              {
+                m.execution = MachineState::EXECUTION_STOPPED;
+                m.message = result.message;
+              });
+          action_.setPreempted(result, result.message);
+          return;
+        }
+        continue;
+      }
+      result.coordinates_done = static_cast<uint32_t>(totals.done);
+      result.coordinate_count = static_cast<uint32_t>(count);
+      result.resends = totals.resends;
+      result.message = step ? step->describe() + ": the job ends here; nothing after it was sent" : p.message;
+      if (!skipped_note.empty())
+      {
+        result.message += "; " + skipped_note;
+      }
+      result.success = p.outcome == ethernut::JobOutcome::kCompleted;
+      if (step)
+      {
+        state_->update([&](MachineState& m) { m.message = result.message; });
+      }
+      if (cancelled)
+      {
+        action_.setPreempted(result, result.message);
+      }
+      else if (result.success)
+      {
+        action_.setSucceeded(result, result.message);
+      }
+      else
+      {
+        abort(result.message);
+      }
       return;
     }
-    ROS_INFO_STREAM("run_job: streaming " << count << " coordinates of " << program);
+  }
 
-    // Feedback at most every 50 ms (a fast board acknowledges thousands of sets per second).
-    RunJobFeedback feedback;
+  struct Totals
+  {
+    uint64_t done = 0;  // sets acknowledged in the segments before this one
+    uint32_t resends = 0;
+  };
+
+  // Streams one segment to its end, with feedback at most every 50 ms (a fast board acknowledges
+  // thousands of sets per second); a cancel holds the board, then stops streaming.
+  JobProgress followSegment(ethernut::Client& c, RunJobFeedback& feedback, uint64_t count, const Totals& totals,
+                            bool& cancelled)
+  {
     uint64_t reported = UINT64_MAX;
-    bool cancelled = false;
     for (;;)
     {
       std::unique_lock<std::mutex> lock(job_mutex_);
       job_cv_.wait_for(lock, std::chrono::milliseconds(50), [&] { return job_.finished; });
       const JobProgress p = job_;
       lock.unlock();
-      if (p.done != reported)
+      if (p.done != reported && (p.done > 0 || totals.done == 0))
       {
         reported = p.done;
+        const uint64_t done = totals.done + p.done;
         feedback.line = p.line;
-        feedback.coordinate_index = p.done > 0 ? static_cast<uint32_t>(p.done - 1) : 0;
-        feedback.coordinate_count = static_cast<uint32_t>(count);
-        feedback.percent = count > 0 ? static_cast<float>(100.0 * p.done / count) : 100.0f;
-        feedback.resends = p.resends;
+        feedback.coordinate_index = done > 0 ? static_cast<uint32_t>(done - 1) : 0;
+        feedback.percent = count > 0 ? static_cast<float>(100.0 * done / count) : 100.0f;
+        feedback.resends = totals.resends + p.resends;
         feedback.commanded.x = p.last.x * kMetresPerMm;
         feedback.commanded.y = p.last.y * kMetresPerMm;
         feedback.commanded.z = p.last.z * kMetresPerMm;
+        feedback.paused = false;
         action_.publishFeedback(feedback);
         state_->update([&](MachineState& m) { m.block = p.line; });
       }
       if (p.finished)
       {
-        result.coordinates_done = static_cast<uint32_t>(p.done);
-        result.coordinate_count = static_cast<uint32_t>(count);
-        result.resends = p.resends;
-        result.message = skipped_note.empty() ? p.message : p.message + "; " + skipped_note;
-        result.success = p.outcome == ethernut::JobOutcome::kCompleted;
-        if (cancelled)
-        {
-          action_.setPreempted(result, result.message);
-        }
-        else if (result.success)
-        {
-          action_.setSucceeded(result, result.message);
-        }
-        else
-        {
-          abort(result.message);
-        }
-        return;
+        return p;
       }
       if (!cancelled && (action_.isPreemptRequested() || !ros::ok()))
       {
@@ -780,14 +867,116 @@ class EthernutNode : public ethernut::ClientListener
         // Cancel: hold the board first (it stops the move in progress), then stop streaming.
         try
         {
-          c->pause();
+          c.pause();
         }
         catch (const Error& e)
         {
           ROS_WARN_STREAM("run_job: pause on cancel failed: " << e.what());
         }
-        c->cancelJob();
+        c.cancelJob();
       }
+    }
+  }
+
+  // Carries out one of the program's own steps between two segments (every set before it is
+  // acknowledged: the board has moved there). \returns false if the goal was cancelled meanwhile.
+  bool carryOut(const gcode::ProgramStep& step, RunJobFeedback& feedback, bool& cancelled)
+  {
+    using Kind = gcode::ProgramStep::Kind;
+    feedback.event = step.describe();
+    feedback.line = step.line;
+    switch (step.kind)
+    {
+      case Kind::kToolChange:
+        state_->update([&](MachineState& m) { m.tool = step.tool; });
+        break;
+      case Kind::kSpindle:
+        state_->update([&](MachineState& m)
+                       { m.spindle_speed = step.spindle == gcode::Spindle::kOff ? 0.0 : step.spindle_rpm; });
+        break;
+      case Kind::kCoolant:
+        state_->update([&](MachineState& m)
+                       { m.coolant = step.coolant ? MachineState::COOLANT_ON : MachineState::COOLANT_OFF; });
+        break;
+      case Kind::kDwell:
+        state_->update([&](MachineState& m) { m.message = step.describe(); });
+        action_.publishFeedback(feedback);
+        return waitWhileRunning(std::chrono::duration<double>(step.dwell_s), false, cancelled);
+      case Kind::kOptionalStop:
+        // Read at each M01, as an operator flips the control's OPT STOP switch during a job.
+        if (!pnh_.param("optional_stop", true))
+        {
+          feedback.event += " passed (" + pnh_.resolveName("optional_stop") + " false)";
+          action_.publishFeedback(feedback);
+          return true;
+        }
+        [[fallthrough]];
+      case Kind::kStop:
+      {
+        feedback.event += ": waiting for " + pnh_.resolveName("resume");
+        feedback.paused = true;
+        {
+          std::lock_guard<std::mutex> lock(job_mutex_);
+          program_stop_ = step.describe();
+          resume_requested_ = false;
+        }
+        state_->update(
+            [&](MachineState& m)
+            {
+              m.execution = MachineState::EXECUTION_PAUSED;
+              m.block = step.line;
+              m.message = feedback.event;
+            });
+        ROS_INFO_STREAM("run_job: " << feedback.event);
+        action_.publishFeedback(feedback);
+        const bool resumed = waitWhileRunning(std::chrono::hours(24 * 365), true, cancelled);
+        {
+          std::lock_guard<std::mutex> lock(job_mutex_);
+          program_stop_.clear();
+        }
+        feedback.paused = false;
+        if (resumed)
+        {
+          state_->update(
+              [&](MachineState& m)
+              {
+                m.execution = MachineState::EXECUTION_ACTIVE;
+                m.message = "resumed after the " + step.describe();
+              });
+        }
+        return resumed;
+      }
+      default:
+        break;
+    }
+    action_.publishFeedback(feedback);
+    return true;
+  }
+
+  // Waits for \p time, or (\p until_resume) for ~resume; false if the goal is cancelled first.
+  bool waitWhileRunning(std::chrono::duration<double> time, bool until_resume, bool& cancelled)
+  {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration_cast<Milliseconds>(time);
+    std::unique_lock<std::mutex> lock(job_mutex_);
+    for (;;)
+    {
+      if (until_resume && resume_requested_)
+      {
+        return true;
+      }
+      if (std::chrono::steady_clock::now() >= deadline)
+      {
+        return !until_resume;
+      }
+      lock.unlock();
+      if (action_.isPreemptRequested() || !ros::ok())
+      {
+        cancelled = true;
+        return false;
+      }
+      lock.lock();
+      // Cancel comes without a notification here: look again at least every 20 ms.
+      job_cv_.wait_until(lock, std::min(deadline, std::chrono::steady_clock::now() + Milliseconds(20)));
     }
   }
 
@@ -823,6 +1012,18 @@ class EthernutNode : public ethernut::ClientListener
   }
   bool onResume(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res)
   {
+    {
+      // A job held at the program's M00/M01 goes on; the board itself was never paused.
+      std::lock_guard<std::mutex> lock(job_mutex_);
+      if (!program_stop_.empty())
+      {
+        resume_requested_ = true;
+        res.success = true;
+        res.message = "resumed after the " + program_stop_;
+        job_cv_.notify_all();
+        return true;
+      }
+    }
     return command(res, "resumed", [](ethernut::Client& c) { c.resume(); });
   }
   bool onReset(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res)
@@ -960,6 +1161,9 @@ class EthernutNode : public ethernut::ClientListener
   std::mutex job_mutex_;
   std::condition_variable job_cv_;
   JobProgress job_;
+  std::string program_stop_;                    // the M00/M01 the job waits at ("" when none), under job_mutex_
+  bool resume_requested_ = false;               // ~resume called while waiting there, under job_mutex_
+  std::atomic<bool> segment_continues_{false};  // the segment streaming ended at a program step
 
   std::unique_ptr<Reconnector> reconnector_;
 };

@@ -51,6 +51,7 @@ struct Watch
   visualization_msgs::MarkerArray markers;
   uint64_t events = 0;
   std::vector<cnc_bridge::RunJobFeedback> feedback;
+  std::vector<ros::WallTime> feedback_times;  // arrival of each feedback
   uint64_t first_feedback_seq = 0;
   ros::WallTime last_feedback_time;
   std::map<std::string, std::string> protocol;  // the last "ethernut protocol" diagnostics, key -> value
@@ -100,6 +101,7 @@ void onFeedback(const RunJobFeedbackConstPtr& f)
     watch->first_feedback_seq = ++watch->events;
   }
   watch->feedback.push_back(*f);
+  watch->feedback_times.push_back(ros::WallTime::now());
   watch->last_feedback_time = ros::WallTime::now();
   watch->cv.notify_all();
 }
@@ -133,6 +135,7 @@ void clearJob()
 {
   std::lock_guard<std::mutex> lock(watch->mutex);
   watch->feedback.clear();
+  watch->feedback_times.clear();
   watch->first_feedback_seq = 0;
   watch->path_seq = 0;
 }
@@ -519,6 +522,142 @@ TEST(EthernutJob, SecondGoalIsRejectedAndTheRunningJobCompletes)
   }
   expectSameCoordinates(simLog(), before, expected);  // exactly the first job's sets
   EXPECT_TRUE(boardReady(10.0));
+}
+
+// True once the last feedback says the job is held at a program stop.
+bool heldAtProgramStop(double seconds = 20.0)
+{
+  return watch->waitFor([] { return !watch->feedback.empty() && watch->feedback.back().paused; }, seconds);
+}
+
+// The program's own stops (test/data/gcode/program_stops.nc): M00 and M01 hold the stream at the
+// end of their block until ~resume and nothing more reaches the board meanwhile; the spindle and
+// coolant words show in state; G04 holds the stream for its time; M30 ends the job and the move
+// after it never reaches the board.
+TEST(EthernutJob, ProgramStopsHoldTheStreamUntilResumeAndM30EndsTheJob)
+{
+  ASSERT_TRUE(boardReady());
+  auto client = actionClient();
+  clearJob();
+  const size_t before = simLog().size();
+  RunJobGoal goal;
+  goal.file = "program_stops.nc";
+  client->sendGoal(goal, Client::SimpleDoneCallback(), Client::SimpleActiveCallback(), &onFeedback);
+  const std::string resume = ns + "/ethernut_node/resume";
+
+  // M00 on line 8, after G01 X10.
+  ASSERT_TRUE(heldAtProgramStop());
+  {
+    std::lock_guard<std::mutex> lock(watch->mutex);
+    EXPECT_EQ(watch->feedback.back().event, "M00 program stop at line 8: waiting for " + resume);
+    EXPECT_EQ(watch->feedback.back().line, 8u);
+  }
+  ASSERT_TRUE(watch->waitFor([] { return watch->state.execution == MachineState::EXECUTION_PAUSED; }, 5.0));
+  {
+    std::lock_guard<std::mutex> lock(watch->mutex);
+    EXPECT_EQ(watch->state.spindle_speed, 8000.0);              // S8000 M03
+    EXPECT_EQ(watch->state.coolant, MachineState::COOLANT_ON);  // M08
+    EXPECT_EQ(watch->state.block, 8u);
+    EXPECT_NE(watch->state.message.find("M00 program stop at line 8"), std::string::npos) << watch->state.message;
+  }
+  expectSameCoordinates(simLog(), before, {{0, 0, 5}, {10, 0, 5}});
+  // Held: nothing more reaches the board (a measurement window of several moves' time).
+  EXPECT_FALSE(watch->waitFor([&] { return simLog().size() > before + 2; }, 0.4));
+  EXPECT_FALSE(client->getState().isDone());
+  std_srvs::Trigger::Response res;
+  clearJob();
+  ASSERT_TRUE(call("resume", res));
+  EXPECT_TRUE(res.success) << res.message;
+  EXPECT_EQ(res.message, "resumed after the M00 program stop at line 8");
+
+  // M01 on line 10 (~optional_stop defaults to true), after G01 X20.
+  ASSERT_TRUE(heldAtProgramStop());
+  {
+    std::lock_guard<std::mutex> lock(watch->mutex);
+    EXPECT_EQ(watch->feedback.back().event, "M01 optional stop at line 10: waiting for " + resume);
+  }
+  expectSameCoordinates(simLog(), before, {{0, 0, 5}, {10, 0, 5}, {20, 0, 5}});
+  clearJob();
+  ASSERT_TRUE(call("resume", res));
+  EXPECT_TRUE(res.success) << res.message;
+
+  ASSERT_TRUE(client->waitForResult(ros::Duration(30.0)));
+  ASSERT_EQ(client->getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client->getState().getText();
+  const auto result = client->getResult();
+  EXPECT_NE(result->message.find("M30 program end at line 15: the job ends here; nothing after it was sent"),
+            std::string::npos)
+      << result->message;
+  EXPECT_EQ(result->coordinate_count, 5u);
+  EXPECT_EQ(result->coordinates_done, 5u);
+  // The board's side: every move up to M30, and not G01 X99 after it.
+  expectSameCoordinates(simLog(), before, {{0, 0, 5}, {10, 0, 5}, {20, 0, 5}, {30, 0, 5}, {40, 0, 5}});
+
+  // G04 P0.3 on line 12 was announced and held the stream: X40 was acknowledged no sooner.
+  {
+    std::lock_guard<std::mutex> lock(watch->mutex);
+    size_t dwell = watch->feedback.size();
+    for (size_t i = 0; i < watch->feedback.size(); ++i)
+    {
+      if (watch->feedback[i].event == "G04 dwell of 0.300 s at line 12")
+      {
+        dwell = i;
+        break;
+      }
+    }
+    ASSERT_LT(dwell, watch->feedback.size()) << "no dwell feedback";
+    size_t x40 = watch->feedback.size();
+    for (size_t i = dwell; i < watch->feedback.size(); ++i)
+    {
+      if (watch->feedback[i].coordinate_index == 4)
+      {
+        x40 = i;
+        break;
+      }
+    }
+    ASSERT_LT(x40, watch->feedback.size());
+    EXPECT_GE((watch->feedback_times[x40] - watch->feedback_times[dwell]).toSec(), 0.25);
+  }
+  // M05 M09 before M30: spindle and coolant off in state.
+  EXPECT_TRUE(watch->waitFor(
+      [] { return watch->state.spindle_speed == 0.0 && watch->state.coolant == MachineState::COOLANT_OFF; }, 5.0));
+  EXPECT_TRUE(boardReady(10.0));
+}
+
+// With ~optional_stop false (the OPT STOP switch off), M01 is passed and said so; M00 still holds.
+TEST(EthernutJob, OptionalStopIsPassedWhenTheSwitchIsOff)
+{
+  ASSERT_TRUE(boardReady());
+  ros::param::set(ns + "/ethernut_node/optional_stop", false);
+  auto client = actionClient();
+  clearJob();
+  const size_t before = simLog().size();
+  RunJobGoal goal;
+  goal.file = "program_stops.nc";
+  client->sendGoal(goal, Client::SimpleDoneCallback(), Client::SimpleActiveCallback(), &onFeedback);
+  ASSERT_TRUE(heldAtProgramStop());
+  std_srvs::Trigger::Response res;
+  ASSERT_TRUE(call("resume", res));
+  EXPECT_TRUE(res.success) << res.message;
+  ASSERT_TRUE(client->waitForResult(ros::Duration(30.0)));
+  ros::param::del(ns + "/ethernut_node/optional_stop");
+  ASSERT_EQ(client->getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client->getState().getText();
+  std::lock_guard<std::mutex> lock(watch->mutex);
+  bool passed = false;
+  for (const auto& f : watch->feedback)
+  {
+    passed = passed || f.event == "M01 optional stop at line 10 passed (" + ns + "/ethernut_node/optional_stop false)";
+  }
+  EXPECT_TRUE(passed);
+  size_t pauses = 0;
+  for (size_t i = 0; i < watch->feedback.size(); ++i)
+  {
+    if (watch->feedback[i].paused && (i == 0 || !watch->feedback[i - 1].paused))
+    {
+      ++pauses;
+    }
+  }
+  EXPECT_EQ(pauses, 1u);  // M00 only
+  EXPECT_EQ(simLog().size() - before, 5u);
 }
 
 // The protocol diagnostics after the jobs above: RESENDs counted (the simulator asks again for
