@@ -6,7 +6,9 @@ cnc_core_module(cnc_bridge_at_protocol
   src/at_protocol/codec.cpp
   src/at_protocol/sequencer.cpp
   src/at_protocol/planner.cpp
+  src/at_protocol/program_path.cpp
   src/at_protocol/sender.cpp)
+target_link_libraries(cnc_bridge_at_protocol PUBLIC cnc_bridge_gcode)
 
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   cnc_core_gtest(test_at_protocol
@@ -19,6 +21,18 @@ endif()
 
 cnc_tool(sim_at_controller src/sim/sim_at_controller.cpp)
 cnc_tool(at_stream_bench bench/at_controller/at_stream_bench.cpp)
+# cnc_plan: the '@' path as 1 ms setpoints (CSV, PNG through scripts/plot_plan.py), ROS-free.
+cnc_tool(cnc_plan src/cli/cnc_plan.cpp)
+target_link_libraries(cnc_plan cnc_bridge_at_protocol)
+target_compile_definitions(cnc_plan PRIVATE CNC_PLAN_PLOT_SCRIPT="${PROJECT_SOURCE_DIR}/scripts/plot_plan.py")
+if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
+  # cnc_plan's setpoints against the node's planning path (appendProgram, Trajectory, TrajectoryStream).
+  cnc_core_gtest(test_cnc_plan test/unit/test_cnc_plan.cpp)
+  target_link_libraries(test_cnc_plan cnc_bridge_at_protocol)
+  add_dependencies(test_cnc_plan cnc_plan)
+  target_compile_definitions(test_cnc_plan PRIVATE CNC_PLAN="$<TARGET_FILE:cnc_plan>"
+                             CNC_BRIDGE_FIXTURE_DIR="${PROJECT_SOURCE_DIR}/test/data/gcode")
+endif()
 
 if(NOT CNC_BRIDGE_CORE_ONLY)
   cnc_node(at_controller_node src/nodes/at_controller_node.cpp)

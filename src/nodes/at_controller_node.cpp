@@ -19,6 +19,7 @@
 #include "cnc_bridge/AtToolChange.h"
 #include "cnc_bridge/at_protocol/codec.h"
 #include "cnc_bridge/at_protocol/planner.h"
+#include "cnc_bridge/at_protocol/program_path.h"
 #include "cnc_bridge/at_protocol/sender.h"
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/program_dir.h"
@@ -571,13 +572,7 @@ class AtControllerNode
 
   // ---- follow_path --------------------------------------------------------------------------------
 
-  struct Plan
-  {
-    std::vector<ap::Vec3> points;  // pulses
-    std::vector<double> feeds;     // mm/s per segment
-    bool coolant = false;
-    double spindle_rpm = 0.0;
-  };
+  using Plan = ap::PathPlan;  // pulses, mm/s per segment; the same path cnc_plan dry-runs
 
   /// The goal as points in pulses starting at the reported position. \throws Error with the reason.
   Plan planFromGoal(const AtFollowPathGoal& goal, const std::array<int32_t, 3>& start)
@@ -605,31 +600,16 @@ class AtControllerNode
       {
         throw ConfigError("cannot read " + file);
       }
-      bool coolant_in_program = false;
-      gcode::forEachMove(
-          in,
-          [&](const gcode::Move& move)
-          {
-            // Program millimetres are machine millimetres: 1000 pulses each.
-            plan.points.push_back(
-                {move.end.x * ap::kPulsesPerMm, move.end.y * ap::kPulsesPerMm, move.end.z * ap::kPulsesPerMm});
-            double feed = fallback_feed;
-            if (move.motion == gcode::Motion::kRapid)
-            {
-              feed = 1e9;  // as fast as the axes allow
-            }
-            else if (goal_feed <= 0.0 && move.feed_mm_per_min > 0.0)
-            {
-              feed = move.feed_mm_per_min / 60.0;
-            }
-            plan.feeds.push_back(feed);
-            coolant_in_program = coolant_in_program || move.coolant;
-            if (move.spindle == gcode::Spindle::kClockwise)
-            {
-              plan.spindle_rpm = move.spindle_rpm;
-            }
-          },
-          gcode_options_);
+      ap::PathPlan program;
+      program.points = plan.points;
+      ap::appendProgram(in, gcode_options_, goal_feed, fallback_feed, program);
+      plan.points = std::move(program.points);
+      plan.feeds = std::move(program.feeds);
+      const bool coolant_in_program = program.coolant;
+      if (program.spindle_rpm > 0.0)
+      {
+        plan.spindle_rpm = program.spindle_rpm;
+      }
       if (goal.coolant == AtFollowPathGoal::COOLANT_DEFAULT && coolant_in_program)
       {
         plan.coolant = true;
@@ -655,17 +635,7 @@ class AtControllerNode
         plan.feeds.push_back(fallback_feed);
       }
     }
-    for (auto& point : plan.points)
-    {
-      for (double& c : point)
-      {
-        if (!(std::fabs(c) < 2.0e9))
-        {
-          throw ConfigError("a path point is outside the protocol's range (+-2147 m)");
-        }
-        c = std::round(c);  // whole pulses: the end point is exact
-      }
-    }
+    ap::roundToPulses(plan);
     if (goal.spindle_speed > 0.0)
     {
       plan.spindle_rpm = goal.spindle_speed;

@@ -305,11 +305,11 @@ TEST(AtPlannerSCurve, TimeOptimalReferenceMatchesTheClosedFormCases)
 TEST(AtPlannerSCurve, SpeedAccelerationAndJerkHoldOnRandomPaths)
 {
   const PlannerLimits limits = scurveLimits();
-  uint32_t seed = 12345;
-  auto rnd = [&seed](double lo, double hi)
+  uint32_t state = 12345;
+  auto rnd = [&state](double lo, double hi)
   {
-    seed = seed * 1664525u + 1013904223u;
-    return lo + (hi - lo) * (seed >> 8) / double(1u << 24);
+    state = state * 1664525u + 1013904223u;
+    return lo + (hi - lo) * (state >> 8) / double(1u << 24);
   };
   Ratios worst;
   for (int path = 0; path < 40; ++path)
