@@ -5,7 +5,9 @@
 //
 //   cnc_dnc send    --port DEV [serial options] [--mode checksum|crc|1k] [--turnaround MS]
 //                   [--ack-turnaround MS] FILE
-//   cnc_dnc receive --port DEV [serial options] [--mode checksum|crc] [--timeout S] FILE
+//   cnc_dnc receive --port DEV [serial options] [--mode checksum|crc] [--timeout S]
+//                   [--block-timeout S] FILE
+//   (both: [--retries N] [--wait-chars N] [--wait-floor MS])
 //   cnc_dnc drip    --port DEV [serial options] [--start-line N] FILE   (cnc_dnc_drip.cpp)
 //   cnc_dnc backup  --port DEV [serial options] FILE                    (cnc_dnc_drip.cpp)
 //   cnc_dnc send    --share URL [--credentials FILE] [--allow-protected] FILE (cnc_dnc_share.cpp)
@@ -14,6 +16,7 @@
 //   cnc_dnc doctor  --port DEV [serial options] [--listen S]            (cnc_dnc_doctor.cpp)
 #include <unistd.h>
 
+#include <algorithm>
 #include <boost/program_options.hpp>
 #include <chrono>
 #include <cstdio>
@@ -157,7 +160,10 @@ void addTransferOptions(po::options_description& options, const std::string& def
       "the control's end-of-block pattern, Haas setting 25: lf|cr|crlf|crcr|lflf")(
       "binary", po::bool_switch(), "move bytes exactly: no EOB conversion, received padding kept")(
       "timeout,t", po::value<double>()->default_value(60.0), "seconds to wait for the other side to start")(
-      "retries", po::value<unsigned>()->default_value(10), "errors in a row on one block before giving up");
+      "retries", po::value<unsigned>()->default_value(10), "errors in a row on one block before giving up")(
+      "wait-chars", po::value<unsigned>()->default_value(30),
+      "gap inside a packet, and silence before a NAK, in character times of the line")(
+      "wait-floor", po::value<unsigned>()->default_value(30), "milliseconds: the least of those two waits");
 }
 
 xmodem::Config transferConfig(const po::variables_map& vm)
@@ -168,6 +174,8 @@ xmodem::Config transferConfig(const po::variables_map& vm)
     throw UsageError("--timeout must be positive");
   config.start_timeout = config.start_wait = Milliseconds(static_cast<int64_t>(timeout * 1000));
   config.max_retries = config.eot_retries = vm["retries"].as<unsigned>();
+  config.wait_characters = vm["wait-chars"].as<unsigned>();
+  config.wait_floor = Milliseconds(vm["wait-floor"].as<unsigned>());
   xmodem::fitToLine(config, serialSettings(vm).charactersPerSecond());
   return config;
 }
@@ -211,6 +219,11 @@ int runSend(const std::vector<std::string>& args)
   xmodem::Config config = transferConfig(vm);
   config.turnaround = Milliseconds(vm["turnaround"].as<unsigned>());
   config.ack_turnaround = Milliseconds(vm["ack-turnaround"].as<unsigned>());
+  // EOT: lrzsz rx answers after 1 s of silence, this tool's receiver after 30 ms. An answer lost
+  // as the receiver exits (rx flushes its tty then) is not sent again, so waiting longer or asking
+  // more often only keeps the user waiting: 2 s, three times at most.
+  config.eot_timeout = Milliseconds(2000);
+  config.eot_retries = std::min(config.eot_retries, 3u);
   const std::string file = vm["file"].as<std::string>();
   cli::checkProtected(vm, file);  // before the port is opened: the control receives nothing
   return withPort(vm,
@@ -231,7 +244,10 @@ int runReceive(const std::vector<std::string>& args)
   po::options_description options = serialOptions();
   addTransferOptions(options, "crc");
   options.add_options()("file-eob", po::value<std::string>()->default_value("lf"),
-                        "line ends of the stored file: lf|cr|crlf|crcr|lflf");
+                        "line ends of the stored file: lf|cr|crlf|crcr|lflf")(
+      "block-timeout", po::value<double>()->default_value(1.0),
+      "seconds without the next packet before a NAK (a lost ACK or NAK costs this long; the "
+      "protocol's 10 s suits 300 baud)");
   const po::variables_map vm = parse("receive", args, options);
   const xmodem::Mode mode = parsed(vm, "mode", &xmodem::parseMode);
   if (mode == xmodem::Mode::k1K)
@@ -241,9 +257,16 @@ int runReceive(const std::vector<std::string>& args)
   text.control_eob = parsed(vm, "eob", &xmodem::parseEob);
   text.file_eob = parsed(vm, "file-eob", &xmodem::parseEob);
   xmodem::Config config = transferConfig(vm);
-  // Waiting for the other side: the start request is repeated every 10 s (or more often when the
-  // whole wait is short), 'C' three times before falling back to checksum.
-  config.nak_interval = std::min(config.nak_interval, config.start_timeout / 6);
+  // Waiting for the other side: the start request is repeated every 3 s (more often when the whole
+  // wait is short), so that one damaged on the line costs 3 s, not the protocol's 10; 'C' for 30 s
+  // (at least three times) before falling back to checksum, as with 10 s and three tries.
+  config.nak_interval = std::min(Milliseconds(3000), config.start_timeout / 6);
+  config.crc_attempts =
+      std::max<unsigned>(3, static_cast<unsigned>(30000 / std::max<int64_t>(1, config.nak_interval.count())));
+  const double block_timeout = vm["block-timeout"].as<double>();
+  if (block_timeout <= 0)
+    throw UsageError("--block-timeout must be positive");
+  config.block_timeout = Milliseconds(static_cast<int64_t>(block_timeout * 1000));
   const std::string file = vm["file"].as<std::string>();
   return withPort(vm,
                   [&](Transport& port, std::atomic<bool>& cancel)

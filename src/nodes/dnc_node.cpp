@@ -58,17 +58,23 @@ DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   xmodem_config_.nak_interval = params::seconds(pnh, "nak_interval", 10.0);
   // ~start_wait: sending, how long to wait for the control's NAK (the operator starts the receive).
   xmodem_config_.start_wait = params::seconds(pnh, "start_wait", 120.0);
-  // ~char_timeout: longest gap between two bytes of a packet.
-  xmodem_config_.char_timeout = params::seconds(pnh, "char_timeout", 1.0);
-  // ~purge_quiet: silence that ends the purge of a garbled packet before a NAK.
-  xmodem_config_.purge_quiet = params::seconds(pnh, "purge_quiet", 1.0);
   // ~block_timeout: receiving, wait for the next packet before a NAK.
   xmodem_config_.block_timeout = params::seconds(pnh, "block_timeout", 10.0);
   // ~ack_timeout: sending, wait for ACK/NAK after a packet before sending it again.
   xmodem_config_.ack_timeout = params::seconds(pnh, "ack_timeout", 10.0);
   // ~eot_quiet: receiving, silence after EOT before it is believed (a garbled SOH looks like EOT).
   xmodem_config_.eot_quiet = params::seconds(pnh, "eot_quiet", 0.03);
-  xmodem::fitToLine(xmodem_config_, serial_.charactersPerSecond());  // 12 characters at least
+  // ~wait_characters (int, default 30), ~wait_floor (s, default 0.03): the longest gap between two
+  // bytes of a packet and the silence that ends the purge of a garbled packet before a NAK, in
+  // character times of the line, at least wait_floor (1 s at 300 baud, 30 ms at 9600 and above).
+  xmodem_config_.wait_characters = static_cast<unsigned>(std::max(1, pnh.param("wait_characters", 30)));
+  xmodem_config_.wait_floor = params::seconds(pnh, "wait_floor", 0.03);
+  xmodem::fitToLine(xmodem_config_, serial_.charactersPerSecond());  // eot_quiet: 12 characters at least
+  // ~char_timeout, ~purge_quiet (s, default 0: from the line rate as above): fixed values instead.
+  if (pnh.param("char_timeout", 0.0) > 0)
+    xmodem_config_.char_timeout = params::seconds(pnh, "char_timeout", 1.0);
+  if (pnh.param("purge_quiet", 0.0) > 0)
+    xmodem_config_.purge_quiet = params::seconds(pnh, "purge_quiet", 1.0);
   // ~max_retries (int, default 10): errors in a row on one block before the transfer aborts.
   int max_retries = pnh.param("max_retries", 10);
   if (max_retries < 1)
@@ -78,7 +84,11 @@ DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   }
   xmodem_config_.max_retries = static_cast<unsigned>(max_retries);
   xmodem_config_.eot_retries = static_cast<unsigned>(max_retries);
-  xmodem_config_.stale_nak_settle = std::min(xmodem_config_.char_timeout, Milliseconds(1000));
+  // A Haas may take its time to ACK block 1 while a NAK it sent before is in flight: a second, as
+  // before the waits followed the line rate, unless a shorter char_timeout was set.
+  xmodem_config_.stale_nak_settle = pnh.param("char_timeout", 0.0) > 0
+                                        ? std::min(xmodem_config_.char_timeout, Milliseconds(1000))
+                                        : Milliseconds(1000);
   // ~feedback_rate (Hz, default 20): action feedback at most this often (and after the last block).
   feedback_period_ = ros::Duration(1.0 / params::positive(pnh, "feedback_rate", 20.0));
 

@@ -80,9 +80,11 @@ void fitToLine(Config& config, double characters_per_second)
 {
   if (characters_per_second <= 0)
     return;
-  constexpr double kCharacters = 12;
-  const auto needed = Milliseconds(static_cast<int64_t>(std::ceil(kCharacters * 1000.0 / characters_per_second)));
-  config.eot_quiet = std::max(config.eot_quiet, needed);
+  const auto characterTimes = [characters_per_second](double characters)
+  { return Milliseconds(static_cast<int64_t>(std::ceil(characters * 1000.0 / characters_per_second))); };
+  constexpr double kEotCharacters = 12;
+  config.eot_quiet = std::max(config.eot_quiet, characterTimes(kEotCharacters));
+  config.char_timeout = config.purge_quiet = std::max(config.wait_floor, characterTimes(config.wait_characters));
 }
 
 std::string Stats::summary() const
@@ -122,6 +124,11 @@ void sendCancel(Transport& link) noexcept
 // ------------------------------------------------------------------------------------------------
 // Replies are single bytes; a few queued start requests (a Haas repeats NAK) fit in one read.
 constexpr size_t kReplyReadSize = 64;
+// After an ACK on a line that has damaged bytes before: long enough for a doubled ACK to arrive
+// (a character time is 87 us at 115200, 1 ms at 9600), short beside a block's time on the line.
+constexpr Milliseconds kDoubleReplyQuiet{1};
+// Receiver, the same for the byte that follows a packet shifted by a doubled byte.
+constexpr Milliseconds kDoubledByteQuiet{1};
 
 Sender::Sender(Transport& link, Mode mode, Config config, const std::atomic<bool>* cancel)
     : link_(link), input_(link, kReplyReadSize), mode_(mode), config_(config), cancel_(cancel)
@@ -192,9 +199,19 @@ Sender::Reply Sender::waitForReply(bool first_block, Milliseconds timeout)
     }
     if (c == kAck)
     {
+      // While part of our packet is still in the port's output queue the receiver cannot have
+      // taken it all: this ACK answers an earlier packet (doubled on the line).
+      if (link_.pendingOutput() > 0)
+        continue;
       return Reply::kAck;
     }
-    if (c == kNak)
+    // A byte that is none of the replies is a reply damaged on the line (lrzsz sx resends on one
+    // as well): an ACK, and the receiver takes the block again as a duplicate, or a NAK.
+    const bool damaged = c != kAck && c != kNak && c != kCan && c != kCrcStart;
+    // After block 1, a CRC receiver asks again with 'C' when block 1 arrived damaged (it has no
+    // block yet to NAK); it may also be a start request still in flight: as a NAK of block 1.
+    const bool repeated_start = first_block && c == kCrcStart;
+    if (c == kNak || damaged || repeated_start)
     {
       if (!first_block)
       {
@@ -226,7 +243,7 @@ Sender::Reply Sender::waitForReply(bool first_block, Milliseconds timeout)
         return Reply::kNak;
       continue;
     }
-    // 'C' after block 1 is a start request still in flight; anything else is noise.
+    // 'C' after later blocks is a start request long in flight: dropped.
   }
 }
 
@@ -284,8 +301,15 @@ Stats Sender::send(const std::vector<uint8_t>& payload, const ProgressCallback& 
         if (reply == Reply::kAck)
         {
           stats_.block_time = std::chrono::duration_cast<std::chrono::microseconds>(Clock::now() - blocks_start);
+          // Nothing the receiver sends before the next block is an answer to it: a doubled ACK
+          // taken as the next block's would put the two sides a block apart. Once the line has
+          // shown damage, wait a little for such a double (it follows within a character time).
           if (config_.ack_turnaround.count() > 0)
             input_.purge(config_.ack_turnaround, config_.ack_turnaround * 4);
+          else if (stats_.retries > 0)
+            input_.purge(kDoubleReplyQuiet, kDoubleReplyQuiet * 4);
+          else
+            input_.discard();
           break;
         }
         if (reply == Reply::kCancel)
@@ -387,10 +411,12 @@ void Receiver::abort(const std::string& why, bool send_can, bool timeout)
   throw ProtocolError(message);
 }
 
-void Receiver::nak(uint8_t request, Milliseconds purge_limit)
+void Receiver::nak(uint8_t request, Milliseconds purge_limit, Milliseconds already_quiet)
 {
-  // Whatever is left of a garbled packet must not be read as the start of the next one.
-  input_.purge(config_.purge_quiet, purge_limit);
+  // Whatever is left of a garbled packet must not be read as the start of the next one. A line
+  // that has just been quiet for a while (a short packet's character timeout) needs only the rest.
+  const Milliseconds quiet = std::max(Milliseconds(1), config_.purge_quiet - already_quiet);
+  input_.purge(quiet, purge_limit);
   link_.writeByte(request);
 }
 
@@ -418,7 +444,7 @@ std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
     int pending = -1;                     // a byte read ahead (after a lone CAN) that starts the next round
     Clock::time_point first_block_start;  // when the first byte of block 1 arrived
 
-    auto error = [&](const std::string& what)
+    auto error = [&](const std::string& what, Milliseconds already_quiet = Milliseconds(0))
     {
       ++stats_.retries;
       ++state.retries;
@@ -432,7 +458,7 @@ std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
       // Before the first packet the purge ends after one nak_interval at most: a control that is
       // itself waiting to receive NAKs more often than purge_quiet, and would keep the line from
       // ever going quiet (the rest of a block it sent before a cancel, then its NAKs).
-      nak(started ? kNak : request, started ? Milliseconds(10000) : config_.nak_interval);
+      nak(started ? kNak : request, started ? Milliseconds(10000) : config_.nak_interval, already_quiet);
     };
 
     for (;;)
@@ -487,7 +513,8 @@ std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
         {
           ++stats_.garbled;
           ++stats_.timeouts;
-          error("short packet (" + std::to_string(got + 1) + " of " + std::to_string(need) + " bytes)");
+          error("short packet (" + std::to_string(got + 1) + " of " + std::to_string(need) + " bytes)",
+                config_.char_timeout);
           continue;
         }
         const Packet packet = decodePacket(buffer.data(), need, check);
@@ -495,6 +522,15 @@ std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
         {
           ++stats_.garbled;
           error(toString(packet.status));
+          continue;
+        }
+        // A byte doubled on the line shifts the packet by one: its check is then read from the
+        // data, which an 8-bit sum passes one time in 256, and the real check byte follows. Once
+        // the line has shown damage, a packet followed at once by more bytes is taken as garbled.
+        if (stats_.retries > 0 && input_.readByte(kDoubledByteQuiet) >= 0)
+        {
+          ++stats_.garbled;
+          error("packet followed by more bytes (a doubled byte on the line)");
           continue;
         }
         if (packet.block == expected)

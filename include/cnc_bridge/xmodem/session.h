@@ -40,11 +40,18 @@ struct Config
   unsigned crc_attempts = 3;
   /// Receiver: wait for the next packet's first byte (then NAK it).
   Milliseconds block_timeout{10000};
-  /// Both: the longest gap between two bytes inside a packet.
+  /// Both: the longest gap between two bytes inside a packet (fitToLine sets it from the line rate).
   Milliseconds char_timeout{1000};
   /// Receiver: before a NAK the line is read until this long passes in silence (the rest of a
-  /// garbled packet must not be taken for the next one).
+  /// garbled packet must not be taken for the next one; fitToLine sets it from the line rate).
   Milliseconds purge_quiet{1000};
+  /// fitToLine: char_timeout and purge_quiet in character times of the line. The protocol's one
+  /// second is 30 character times at 300 baud, where it comes from; at 115200 it is 3500, and a
+  /// retry would cost two seconds of silence.
+  unsigned wait_characters = 30;
+  /// fitToLine: the least char_timeout and purge_quiet, whatever the line rate: twice a USB serial
+  /// adapter's 16 ms latency timer, which can hold the rest of a packet that long.
+  Milliseconds wait_floor{30};
   /// Receiver: an EOT counts only if this long passes without another byte (a garbled SOH can look
   /// like EOT, and the rest of its packet follows within a character time; lrzsz waits 1 s). The
   /// default is twice a USB serial adapter's 16 ms latency timer and 12 character times at 4800
@@ -83,8 +90,9 @@ struct Config
   bool eot_can_completes = true;
 };
 
-/// \brief Raises the silences that mean "no more bytes follow" (eot_quiet) to at least 12 character
-/// times of a line moving \p characters_per_second, so that slow lines keep their margin.
+/// \brief Fits the waits to a line moving \p characters_per_second: char_timeout and purge_quiet
+/// become wait_characters character times (at least wait_floor), and eot_quiet is raised to at
+/// least 12 character times, so that slow lines keep their margin and fast ones do not idle.
 void fitToLine(Config& config, double characters_per_second);
 
 /// \brief Where a transfer is; given to the progress callback after every block.
@@ -171,7 +179,7 @@ class Receiver
   const Stats& stats() const { return stats_; }
 
  private:
-  void nak(uint8_t request, Milliseconds purge_limit);
+  void nak(uint8_t request, Milliseconds purge_limit, Milliseconds already_quiet);
   void checkCancel();
   [[noreturn]] void abort(const std::string& why, bool send_can, bool timeout);
 
