@@ -70,6 +70,7 @@ class NodeLaunchFiles(unittest.TestCase):
                 node = os.path.basename(path)[:-len(".launch")]
                 defaults, _ = load(path)
                 self.assertEqual(load(path, "params_file:=")[0], defaults, "an empty params_file changes nothing")
+                self.assertEqual(load(path, "params_file:=none")[0], defaults, "params_file none changes nothing")
                 # The first two parameters the launch file sets: one from the file, one from both.
                 first, second = sorted(name for name in defaults if not isinstance(defaults[name], (dict, list)))[:2]
                 ours = {"%s" % first.split("/")[-1]: self.other_than(defaults[first]),
