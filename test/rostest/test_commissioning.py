@@ -133,6 +133,8 @@ class Commissioning(unittest.TestCase):
                               "--report-port", str(report)])
             return {"192.168.1.50": "127.0.0.1", "tcp_port:=5000": "tcp_port:=%d" % command,
                     "report_port:=5001": "report_port:=%d" % report}, []
+        if name == "board_status":
+            return {"/dev/ttyACM0": self.pty_link("board", ["sim_slave_bus", "--framing", "framed"])}, []
         return None
 
     # -- the page ----------------------------------------------------------------------------
@@ -173,7 +175,7 @@ class Commissioning(unittest.TestCase):
         blocks = page_blocks()
         names = [name for name, _ in blocks]
         self.assertEqual(names, ["check_port", "listen", "haas_send", "haas_dnc_node", "haas_dprnt", "ngc_status",
-                                 "ngc_dprnt", "fanuc_backup", "ethernut_status", "at_status"])
+                                 "ngc_dprnt", "fanuc_backup", "ethernut_status", "at_status", "board_status"])
         # One block after the other, each block's nodes stopped before the next (they share /state).
         for name, text in blocks:
             self.run_block(name, text)
