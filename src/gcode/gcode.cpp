@@ -1521,6 +1521,12 @@ const Block* Reader::nextBlock()
       continue;
     }
     const uint64_t offset = line_offset_;
+    if (!calls_.empty() && ++subprogram_blocks_ > parser_.options().max_subprogram_blocks)
+    {
+      throw ParseError(parser_.lineCount() + 1, 1,
+                       "subprogram repeats run more than " + std::to_string(parser_.options().max_subprogram_blocks) +
+                           " blocks: check the L counts of the M98/M97 calls");
+    }
     const Block& block = parser_.parseLine(line);
     block_ = &block;
     move_index_ = 0;

@@ -627,6 +627,11 @@ TEST(GcodeCam, SubprogramsM98AndM97WithRepeatsAndADepthLimit)
   // Fanuc's P form: the digits before the last four count the runs.
   const auto fanuc = parseAll("M98 P31000\nM30\nO1000\nG91 G1 X1 F10\nM99\n", dialect(Dialect::kFanuc));
   ASSERT_EQ(fanuc.size(), 3u);
+  // Repeats of repeats cannot make the reader run for ever.
+  ParserOptions few;
+  few.max_subprogram_blocks = 1000;
+  const ParseError forever = parseErrorWith("M98 P1 L9999\nM30\nO1\nM98 P2 L9999\nM99\nO2\nG91 G1 X1 F10\nM99\n", few);
+  EXPECT_NE(forever.reason().find("more than 1000 blocks"), std::string::npos) << forever.reason();
   // M97 is Haas's: refused elsewhere; a file ending inside a subprogram is an error.
   EXPECT_NE(parseErrorWith("M97 P1\n", dialect(Dialect::kFanuc)).reason().find("Haas"), std::string::npos);
   EXPECT_NE(parseError("M98 P1\nM30\nO1\nG1 X1 F1\n").reason().find("end it with M99"), std::string::npos);

@@ -282,6 +282,9 @@ struct ParserOptions
   Dialect dialect = Dialect::kHaas;
   /// Subprograms (M98/M97) nested deeper than this are an error (a subprogram calling itself).
   uint32_t max_call_depth = 8;
+  /// More blocks than this read inside subprograms (repeats of repeats) is an error, so that a
+  /// program cannot make a reader run for ever.
+  uint64_t max_subprogram_blocks = 10000000;
   /// Machine coordinates (mm) of the G28 and G30 reference points (the Haas/Fanuc machine zero,
   /// LinuxCNC's parameters 5161-5163 and 5181-5183 are 0 on a fresh control).
   Vec3 g28_position;
@@ -451,6 +454,7 @@ class Reader
   std::vector<Frame> calls_;
   std::vector<std::pair<int64_t, Label>> o_labels_;  // O numbers seen (M98 targets)
   std::vector<std::pair<int64_t, Label>> n_labels_;  // N numbers asked for by M97
+  uint64_t subprogram_blocks_ = 0;                   // blocks read inside subprograms
   bool ended_ = false;                               // M02/M30, or M99 in the main program
   bool flushed_ = false;
   Block tail_;  // moves flushed by Parser::finish() at the end
