@@ -3,7 +3,8 @@
 # cnc_bridge_share (the SMB store on Samba's libsmbclient); their tests and fuzz target.
 cnc_core_module(cnc_bridge_programs
   src/programs/program_name.cpp
-  src/programs/program_store.cpp)
+  src/programs/program_store.cpp
+  src/programs/archive.cpp)
 
 find_path(SMBCLIENT_INCLUDE_DIR libsmbclient.h PATH_SUFFIXES samba-4.0)
 find_library(SMBCLIENT_LIBRARY smbclient)
@@ -15,7 +16,7 @@ target_include_directories(cnc_bridge_share PRIVATE ${SMBCLIENT_INCLUDE_DIR})
 target_link_libraries(cnc_bridge_share PUBLIC cnc_bridge_programs ${SMBCLIENT_LIBRARY})
 
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
-  cnc_core_gtest(test_program_name test/unit/test_program_name.cpp)
+  cnc_core_gtest(test_program_name test/unit/test_program_name.cpp test/unit/test_program_archive.cpp)
   target_link_libraries(test_program_name cnc_bridge_programs)
   # Against a real Samba server (smbd started by the test on a free loopback port).
   cnc_core_gtest(test_smb_store test/unit/test_smb_store.cpp)
@@ -35,6 +36,20 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   if(TARGET test_share_cli)
     target_compile_definitions(test_share_cli PRIVATE CNC_DNC="$<TARGET_FILE:cnc_dnc>"
                                LSAN_SUPPRESSIONS="${PROJECT_SOURCE_DIR}/test/unit/lsan_libsmbclient.supp")
+    target_link_libraries(test_share_cli cnc_bridge_programs)
     add_dependencies(test_share_cli cnc_dnc)
+  endif()
+endif()
+
+if(NOT CNC_BRIDGE_CORE_ONLY)
+  cnc_node(share_node src/nodes/share_node.cpp)
+  target_link_libraries(share_node cnc_bridge_share)
+  if(CATKIN_ENABLE_TESTING)
+    # The real share_node against a real smbd, both started by the test (the server's port is free
+    # only at run time).
+    add_rostest_gtest(test_share_node test/rostest/share_node.test test/rostest/test_share_node.cpp)
+    target_link_libraries(test_share_node ${catkin_LIBRARIES} ${GTEST_LIBRARIES})
+    target_include_directories(test_share_node PRIVATE ${PROJECT_SOURCE_DIR}/test/unit)
+    add_dependencies(test_share_node share_node ${PROJECT_NAME}_generate_messages_cpp)
   endif()
 endif()

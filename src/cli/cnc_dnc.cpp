@@ -14,6 +14,8 @@
 //   cnc_dnc receive --share URL [--credentials FILE] NAME OUT
 //   cnc_dnc list    --share URL [--credentials FILE]
 //   cnc_dnc doctor  --port DEV [serial options] [--listen S]            (cnc_dnc_doctor.cpp)
+//   cnc_dnc history (--archive DIR | --program-dir DIR) NAME
+//   cnc_dnc diff    (--archive DIR | --program-dir DIR) NAME [V1 [V2]]
 #include <unistd.h>
 
 #include <algorithm>
@@ -45,6 +47,8 @@ int runBackup(const std::vector<std::string>& args);        // cnc_dnc_drip.cpp
 int runShareSend(const std::vector<std::string>& args);     // cnc_dnc_share.cpp
 int runShareReceive(const std::vector<std::string>& args);  // cnc_dnc_share.cpp
 int runList(const std::vector<std::string>& args);          // cnc_dnc_share.cpp
+int runHistory(const std::vector<std::string>& args);       // cnc_dnc_share.cpp
+int runDiff(const std::vector<std::string>& args);          // cnc_dnc_share.cpp
 bool namesShare(const std::vector<std::string>& args);      // cnc_dnc_share.cpp
 int runDrip(const std::vector<std::string>& args);          // cnc_dnc_drip.cpp
 int runBackup(const std::vector<std::string>& args);        // cnc_dnc_drip.cpp
@@ -291,6 +295,8 @@ const Command kCommands[] = {
     {"receive", "receive a program by XModem (the control sends)", &runReceive},
     {"drip", "drip-feed a program while the control runs it (DNC, XON/XOFF)", &cli::runDrip},
     {"backup", "store a program the control punches (from '%' to '%')", &cli::runBackup},
+    {"history", "the kept versions of a program in the program archive", &cli::runHistory},
+    {"diff", "unified diff of two kept versions of a program, or of one and the current file", &cli::runDiff},
     {"list", "list the programs of a share (--share URL): name, O number, size, time, first comment", &cli::runList},
     {"doctor", "check a port: opens? why not, in words; with --listen S, what the control sends", &cli::runDoctor},
 };

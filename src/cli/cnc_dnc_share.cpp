@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "cnc_bridge/common/error.h"
+#include "cnc_bridge/programs/archive.h"
 #include "cnc_bridge/share/smb_store.h"
 #include "cnc_bridge/sim/sim_support.h"
 #include "progress_line.h"
@@ -184,6 +185,112 @@ int runList(const std::vector<std::string>& args)
     std::cout << item.entry.name << "\t" << (number ? programs::programLabel(*number) : "-") << "\t" << item.entry.size
               << "\t" << when << "\t" << item.header.comment << "\n";
   }
+  return 0;
+}
+
+namespace
+{
+po::options_description archiveOptions()
+{
+  po::options_description options("program archive");
+  options.add_options()("help,h", "this help")(
+      "archive,a", po::value<std::string>(),
+      "the archive folder (a node's ~archive_dir; default <program_dir>.archive)")(
+      "program-dir,d", po::value<std::string>(), "the program directory; its archive is <program-dir>.archive");
+  return options;
+}
+
+/// The archive folder and the program directory from --archive / --program-dir.
+std::pair<std::string, std::string> archiveFolders(const po::variables_map& vm)
+{
+  std::string archive = vm.count("archive") ? vm["archive"].as<std::string>() : "";
+  std::string dir = vm.count("program-dir") ? vm["program-dir"].as<std::string>() : "";
+  while (dir.size() > 1 && dir.back() == '/')
+    dir.pop_back();
+  if (archive.empty() && dir.empty())
+    throw ConfigError("give --archive DIR or --program-dir DIR");
+  if (archive.empty())
+    archive = dir + ".archive";
+  const std::string suffix = ".archive";
+  if (dir.empty() && archive.size() > suffix.size() &&
+      archive.compare(archive.size() - suffix.size(), suffix.size(), suffix) == 0)
+    dir = archive.substr(0, archive.size() - suffix.size());
+  return {archive, dir};
+}
+}  // namespace
+
+int runHistory(const std::vector<std::string>& args)
+{
+  po::options_description options = archiveOptions();
+  po::variables_map vm;
+  po::options_description all(options);
+  all.add_options()("name", po::value<std::string>(), "");
+  po::positional_options_description positional;
+  positional.add("name", 1);
+  const std::string usage = "usage: cnc_dnc history (--archive DIR | --program-dir DIR) NAME\n";
+  try
+  {
+    po::store(po::command_line_parser(args).options(all).positional(positional).run(), vm);
+    po::notify(vm);
+  }
+  catch (const po::error& e)
+  {
+    std::cerr << "cnc_dnc history: " << e.what() << "\n" << usage << options;
+    return 2;
+  }
+  if (vm.count("help") || !vm.count("name"))
+  {
+    (vm.count("help") ? std::cout : std::cerr) << usage << options;
+    return vm.count("help") ? 0 : 2;
+  }
+  const programs::ProgramArchive archive(archiveFolders(vm).first);
+  // One version a line, tab-separated: number, time (UTC), node, machine, direction, bytes, crc32.
+  for (const programs::ArchiveVersion& v : archive.history(vm["name"].as<std::string>()))
+  {
+    char when[32];
+    const std::time_t time = static_cast<std::time_t>(v.time);
+    std::tm tm{};
+    ::gmtime_r(&time, &tm);
+    std::strftime(when, sizeof(when), "%Y-%m-%dT%H:%M:%SZ", &tm);
+    std::cout << v.number << "\t" << when << "\t" << v.source.node << "\t" << v.source.machine << "\t"
+              << v.source.direction << "\t" << v.size << "\t" << v.crc32 << "\n";
+  }
+  return 0;
+}
+
+int runDiff(const std::vector<std::string>& args)
+{
+  po::options_description options = archiveOptions();
+  po::variables_map vm;
+  po::options_description all(options);
+  all.add_options()("name", po::value<std::string>(), "")("from", po::value<unsigned>(), "")("to",
+                                                                                             po::value<unsigned>(), "");
+  po::positional_options_description positional;
+  positional.add("name", 1).add("from", 1).add("to", 1);
+  const std::string usage =
+      "usage: cnc_dnc diff (--archive DIR | --program-dir DIR) NAME [V1 [V2]]\n"
+      "  no version: the newest kept version against the current file; V1: that version against the\n"
+      "  current file; V1 V2: two kept versions\n";
+  try
+  {
+    po::store(po::command_line_parser(args).options(all).positional(positional).run(), vm);
+    po::notify(vm);
+  }
+  catch (const po::error& e)
+  {
+    std::cerr << "cnc_dnc diff: " << e.what() << "\n" << usage << options;
+    return 2;
+  }
+  if (vm.count("help") || !vm.count("name"))
+  {
+    (vm.count("help") ? std::cout : std::cerr) << usage << options;
+    return vm.count("help") ? 0 : 2;
+  }
+  const auto [archive_dir, program_dir] = archiveFolders(vm);
+  const std::string name = vm["name"].as<std::string>();
+  const programs::ProgramArchive archive(archive_dir);
+  std::cout << programs::compareVersions(archive, name, vm.count("from") ? vm["from"].as<unsigned>() : 0,
+                                         vm.count("to") ? vm["to"].as<unsigned>() : 0, program_dir + "/" + name);
   return 0;
 }
 

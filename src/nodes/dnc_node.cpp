@@ -6,6 +6,8 @@
 
 #include <chrono>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/ros/dnc_drip_handlers.h"
@@ -36,6 +38,12 @@ DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh)
                                                           pnh.param("allow_protected_programs", false),
                                                           "~allow_protected_programs");
   name_pattern_ = std::make_unique<programs::NamePattern>(pnh.param<std::string>("name_pattern", "O%05d.nc"));
+  // ~archive_dir (string, default <program_dir>.archive), ~archive_keep (int, default 20): every
+  // program sent or received is kept there, one folder per program, distinct versions only
+  // (docs/share_node.md, "Program archive").
+  archive_ =
+      std::make_unique<programs::ProgramArchive>(pnh.param<std::string>("archive_dir", programs_->root() + ".archive"),
+                                                 static_cast<unsigned>(std::max(1, pnh.param("archive_keep", 20))));
   // ~xmodem_mode (string, default "xmodem"): protocol when a request leaves it empty. A Haas
   // speaks XModem checksum only (xmodem); xmodem-crc and xmodem-1k suit PC-based controls.
   pnh.param<std::string>("xmodem_mode", default_protocol_, "xmodem");
@@ -340,10 +348,33 @@ TransferResult DncNode::runReserved(TransferGoal goal, const Feedback& feedback,
         s.message = result.message;
       });
   if (result.success)
+  {
     ROS_INFO("%s", result.message.c_str());
+    archiveProgram(job);
+  }
   else
+  {
     ROS_ERROR("%s", result.message.c_str());
+  }
   return result;
+}
+
+void DncNode::archiveProgram(const TransferJob& job)
+{
+  const std::string name = job.path.substr(job.path.find_last_of('/') + 1);
+  try
+  {
+    std::ifstream in(job.path, std::ios::binary);
+    const std::string content((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (const auto kept =
+            archive_->add(name, content, {"dnc_node", state_->machineName(), job.send ? "sent" : "received"}))
+      ROS_INFO("kept %s as version %u in %s", name.c_str(), kept->number, archive_->root().c_str());
+  }
+  catch (const Error& e)
+  {
+    // The transfer itself succeeded: an archive that cannot be written is reported, not a failure.
+    ROS_ERROR("%s was moved but not archived: %s", name.c_str(), e.what());
+  }
 }
 
 TransferResult DncNode::runXmodem(Transport& link, const TransferJob& job,

@@ -129,6 +129,9 @@ TEST_F(DncNodeTest, SendsAProgramByServiceAndTheControlStoresIt)
   EXPECT_NE(srv.response.message.find("CAN"), std::string::npos) << srv.response.message;
   ASSERT_TRUE(waitForFile(control_dir_ + "/O05555.nc", 10));
   EXPECT_EQ(readFile(control_dir_ + "/O05555.nc"), contents);
+  // Kept in the archive beside ~program_dir, with where it went.
+  EXPECT_EQ(readFile(program_dir_ + ".archive/O05555.nc/v0001.nc"), contents);
+  EXPECT_NE(readFile(program_dir_ + ".archive/O05555.nc/v0001.meta").find("direction = sent"), std::string::npos);
 }
 
 TEST_F(DncNodeTest, ReceivesAProgramByServiceInChecksumAndCrcFallbackModes)

@@ -9,6 +9,7 @@
 #include <netinet/in.h>
 #include <pwd.h>
 #include <signal.h>
+#include <sys/prctl.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
@@ -82,6 +83,7 @@ class SambaServer
     if (pid_ == 0)
     {
       ::setpgid(0, 0);
+      ::prctl(PR_SET_PDEATHSIG, SIGKILL);  // a killed test leaves no server behind
       const std::string out = dir_ + "/smbd.out";
       std::freopen(out.c_str(), "a", stdout);
       std::freopen(out.c_str(), "a", stderr);

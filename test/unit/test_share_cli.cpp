@@ -10,6 +10,7 @@
 #include <random>
 #include <sstream>
 
+#include "cnc_bridge/programs/archive.h"
 #include "samba_server.h"
 #include "temp_dir.h"
 
@@ -151,4 +152,32 @@ TEST_F(ShareCliTest, FailuresExitOneWithOneClearLine)
 
   EXPECT_EQ(cncDnc({"send", "--share"}).status, 2);
   EXPECT_EQ(cncDnc({"receive", "--share", server_->url("guest"), "O1.nc"}).status, 2);
+}
+
+// cnc_dnc history and diff read the archive the nodes keep beside their program directory.
+TEST_F(ShareCliTest, HistoryAndDiffOfTheArchive)
+{
+  const std::string programs = local_.file("programs");
+  std::filesystem::create_directories(programs);
+  cnc_bridge::programs::ProgramArchive archive(programs + ".archive");
+  archive.add("O01500.nc", "%\nO01500\nS1000 M03\n%\n", {"share_node", "lathe", "sent"});
+  archive.add("O01500.nc", "%\nO01500\nS1200 M03\n%\n", {"dnc_node", "lathe", "received"});
+  writeFile(programs + "/O01500.nc", "%\nO01500\nS1500 M03\n%\n");
+
+  const ToolRun history = cncDnc({"history", "--program-dir", programs, "O01500.nc"});
+  ASSERT_EQ(history.status, 0) << history.err;
+  const auto rows = lines(history.out);
+  ASSERT_EQ(rows.size(), 2u) << history.out;
+  EXPECT_EQ(rows[0].rfind("1\t", 0), 0u) << rows[0];
+  EXPECT_NE(rows[1].find("\tdnc_node\tlathe\treceived\t21\t"), std::string::npos) << rows[1];
+
+  const ToolRun two = cncDnc({"diff", "--archive", programs + ".archive", "O01500.nc", "1", "2"});
+  ASSERT_EQ(two.status, 0) << two.err;
+  EXPECT_NE(two.out.find("-S1000 M03\n+S1200 M03\n"), std::string::npos) << two.out;
+  const ToolRun current = cncDnc({"diff", "--program-dir", programs, "O01500.nc"});
+  ASSERT_EQ(current.status, 0) << current.err;
+  EXPECT_NE(current.out.find("--- O01500.nc v2"), std::string::npos) << current.out;
+  EXPECT_NE(current.out.find("-S1200 M03\n+S1500 M03\n"), std::string::npos) << current.out;
+  expectOneErrorLine(cncDnc({"diff", "--program-dir", programs, "O01500.nc", "9"}), "diff", "no version 9");
+  EXPECT_EQ(cncDnc({"history", "O01500.nc"}).status, 1);
 }

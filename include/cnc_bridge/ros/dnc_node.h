@@ -23,6 +23,7 @@
 #include "cnc_bridge/TransferAction.h"
 #include "cnc_bridge/common/port_lock.h"
 #include "cnc_bridge/common/program_dir.h"
+#include "cnc_bridge/programs/archive.h"
 #include "cnc_bridge/programs/program_name.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/transport/serial_port.h"
@@ -81,6 +82,8 @@ class DncNode
   void cancelRunning();
   bool onSend(SendProgram::Request& request, SendProgram::Response& response);
   bool onReceive(ReceiveProgram::Request& request, ReceiveProgram::Response& response);
+  /// Keeps the program of a completed transfer in ~archive_dir (a failure there is logged only).
+  void archiveProgram(const TransferJob& job);
   void transferDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& status);
   TransferResult runXmodem(Transport& link, const TransferJob& job,
                            const std::function<void(const TransferFeedback&)>& feedback,
@@ -92,6 +95,7 @@ class DncNode
   std::unique_ptr<ProgramDirectory> programs_;
   std::unique_ptr<programs::ProtectedRange> protected_;  ///< refused on send unless allowed
   std::unique_ptr<programs::NamePattern> name_pattern_;
+  std::unique_ptr<programs::ProgramArchive> archive_;  ///< every program sent or received, versioned
   std::string default_protocol_;
   bool keep_open_ = false;
   xmodem::Config xmodem_config_;

@@ -1,0 +1,478 @@
+// share_node: NC programs between ~program_dir and a machine's SMB share (a Haas NGC's Net Share,
+// a file server the control mounts), with the same ~send_program, ~receive_program and ~transfer
+// interface as dnc_node, so orchestration code does not care which wire a machine uses
+// (docs/share_node.md). The share is the core's SmbProgramStore; this file maps parameters,
+// services, the action, state and diagnostics onto it. One transfer at a time; a periodic check
+// of the share keeps the link state (UP while the share answers, DOWN with the reason).
+#include <ros/ros.h>
+
+#include <atomic>
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <memory>
+#include <mutex>
+
+#include "cnc_bridge/ComparePrograms.h"
+#include "cnc_bridge/ListPrograms.h"
+#include "cnc_bridge/ProgramHistory.h"
+#include "cnc_bridge/ReceiveProgram.h"
+#include "cnc_bridge/RemoveProgram.h"
+#include "cnc_bridge/SendProgram.h"
+#include "cnc_bridge/TransferAction.h"
+#include "cnc_bridge/common/error.h"
+#include "cnc_bridge/common/program_dir.h"
+#include "cnc_bridge/programs/archive.h"
+#include "cnc_bridge/ros/machine_state_publisher.h"
+#include "cnc_bridge/ros/node_main.h"
+#include "cnc_bridge/ros/params.h"
+#include "cnc_bridge/ros/single_goal_action_server.h"
+#include "cnc_bridge/share/smb_store.h"
+
+namespace cnc_bridge
+{
+class ShareNode
+{
+ public:
+  ShareNode(ros::NodeHandle nh, ros::NodeHandle pnh);
+
+ private:
+  TransferResult run(const TransferGoal& goal, const programs::StoreProgress& progress);
+  TransferResult transfer(const TransferGoal& goal, const programs::StoreProgress& progress);
+  void execute(const TransferGoalConstPtr& goal);
+  bool onSend(SendProgram::Request& request, SendProgram::Response& response);
+  bool onReceive(ReceiveProgram::Request& request, ReceiveProgram::Response& response);
+  bool onList(ListPrograms::Request& request, ListPrograms::Response& response);
+  bool onRemove(RemoveProgram::Request& request, RemoveProgram::Response& response);
+  bool onHistory(ProgramHistory::Request& request, ProgramHistory::Response& response);
+  bool onCompare(ComparePrograms::Request& request, ComparePrograms::Response& response);
+  void archive(const std::string& name, const std::string& path, const std::string& direction);
+  void checkShare(const ros::WallTimerEvent& event);
+  void linkResult(const std::string& error);
+  void diagnostics(diagnostic_updater::DiagnosticStatusWrapper& status);
+
+  std::unique_ptr<programs::ProgramStore> store_;
+  std::string url_;
+  std::unique_ptr<ProgramDirectory> programs_;
+  std::unique_ptr<programs::NamePattern> pattern_;
+  std::unique_ptr<programs::ProtectedRange> protected_;
+  std::unique_ptr<programs::ProgramArchive> archive_;
+  std::string machine_;
+  bool enable_remove_ = false;
+  ros::Duration feedback_period_;
+  std::unique_ptr<MachineStatePublisher> state_;
+
+  std::mutex busy_mutex_;
+  bool busy_ = false;
+  std::atomic<bool> cancel_{false};
+
+  std::mutex stats_mutex_;
+  struct Counters
+  {
+    uint64_t transfers = 0, completed = 0, failed = 0, refused = 0, bytes = 0, checks = 0, check_failures = 0;
+    double round_trip = 0;  // s, the last check's
+    std::string last_error, last_result;
+  } counters_;
+
+  std::unique_ptr<SingleGoalActionServer<TransferAction>> action_;
+  ros::ServiceServer send_srv_, receive_srv_, list_srv_, remove_srv_, history_srv_, compare_srv_;
+  ros::WallTimer check_timer_;
+};
+
+ShareNode::ShareNode(ros::NodeHandle nh, ros::NodeHandle pnh)
+{
+  // ~url (string, required): smb://[user@]host[:port]/share[/folder] (or a local directory).
+  url_ = params::required<std::string>(pnh, "url");
+  // ~credentials_file (string, default "": guest): smbclient authentication file, mode 0600.
+  // ~timeout (s, default 10): limit of every SMB request.
+  store_ =
+      share::openStore(url_, pnh.param<std::string>("credentials_file", ""), params::seconds(pnh, "timeout", 10.0));
+  // ~program_dir (string, required): the local folder programs are sent from and received into;
+  // created if missing.
+  const std::string program_dir = params::required<std::string>(pnh, "program_dir");
+  std::error_code ignored;
+  std::filesystem::create_directories(program_dir, ignored);
+  programs_ = std::make_unique<ProgramDirectory>(program_dir);
+  // ~name_pattern (string, default "O%05d.nc"): how the control names program files.
+  pattern_ = std::make_unique<programs::NamePattern>(pnh.param<std::string>("name_pattern", "O%05d.nc"));
+  // ~protected_programs (default "O08000-O09999", "none"), ~allow_protected_programs (default
+  // false): as dnc_node's.
+  protected_ = std::make_unique<programs::ProtectedRange>(pnh.param<std::string>("protected_programs", "O08000-O09999"),
+                                                          pnh.param("allow_protected_programs", false),
+                                                          "~allow_protected_programs");
+  // ~archive_dir (string, default <program_dir>.archive): every program sent or received is kept
+  // there, one folder per program; ~archive_keep (int, default 20) versions each.
+  std::string root = programs_->root();
+  archive_ =
+      std::make_unique<programs::ProgramArchive>(pnh.param<std::string>("archive_dir", root + ".archive"),
+                                                 static_cast<unsigned>(std::max(1, pnh.param("archive_keep", 20))));
+  machine_ = pnh.param<std::string>("machine", ros::this_node::getName());
+  // ~enable_remove (bool, default false): ~remove_program deletes from the share only when set.
+  pnh.param("enable_remove", enable_remove_, false);
+  // ~feedback_rate (Hz, default 20): action feedback at most this often.
+  feedback_period_ = ros::Duration(1.0 / params::positive(pnh, "feedback_rate", 20.0));
+
+  state_ = std::make_unique<MachineStatePublisher>(nh, pnh, store_->describe());
+  state_->update(
+      [](MachineState& s)
+      {
+        s.mode = MachineState::MODE_DNC;
+        s.execution = MachineState::EXECUTION_READY;
+      });
+  state_->setLink(LinkState::kConnecting, "first check of " + store_->describe());
+  state_->diagnostics().add("Share", this, &ShareNode::diagnostics);
+
+  action_ = std::make_unique<SingleGoalActionServer<TransferAction>>(
+      pnh, "transfer", [this](const TransferGoalConstPtr& goal) { execute(goal); },
+      [](const TransferGoal& goal) { return goal.direction + " " + goal.file; });
+  action_->setCancelCallback([this] { cancel_ = true; });
+  action_->start();
+  send_srv_ = pnh.advertiseService("send_program", &ShareNode::onSend, this);
+  receive_srv_ = pnh.advertiseService("receive_program", &ShareNode::onReceive, this);
+  list_srv_ = pnh.advertiseService("list_programs", &ShareNode::onList, this);
+  remove_srv_ = pnh.advertiseService("remove_program", &ShareNode::onRemove, this);
+  history_srv_ = pnh.advertiseService("program_history", &ShareNode::onHistory, this);
+  compare_srv_ = pnh.advertiseService("compare_programs", &ShareNode::onCompare, this);
+  // ~check_period (s, default 5): how often the share is listed to keep the link state.
+  check_timer_ =
+      nh.createWallTimer(ros::WallDuration(params::positive(pnh, "check_period", 5.0)), &ShareNode::checkShare, this);
+  checkShare(ros::WallTimerEvent());
+  ROS_INFO("share_node on %s, programs in %s", store_->describe().c_str(), programs_->root().c_str());
+}
+
+void ShareNode::linkResult(const std::string& error)
+{
+  // Only a change is set: the state's message otherwise keeps the last transfer's result.
+  const MachineState now = state_->snapshot();
+  if (error.empty() && now.link != MachineState::LINK_UP)
+    state_->setLink(LinkState::kUp, "share answers");
+  else if (!error.empty() && (now.link != MachineState::LINK_DOWN || now.message != error))
+    state_->setLink(LinkState::kDown, error);
+}
+
+void ShareNode::checkShare(const ros::WallTimerEvent&)
+{
+  {
+    std::lock_guard<std::mutex> lock(busy_mutex_);
+    if (busy_)
+      return;  // a running transfer says whether the share answers
+  }
+  const auto start = std::chrono::steady_clock::now();
+  std::string error;
+  try
+  {
+    store_->list();
+  }
+  catch (const Error& e)
+  {
+    error = e.what();
+  }
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    ++counters_.checks;
+    counters_.round_trip = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    if (!error.empty())
+    {
+      ++counters_.check_failures;
+      if (error != counters_.last_error)
+        ROS_ERROR("%s", error.c_str());
+      counters_.last_error = error;
+    }
+  }
+  linkResult(error);  // not under stats_mutex_: a link change runs the diagnostics at once
+}
+
+TransferResult ShareNode::run(const TransferGoal& goal, const programs::StoreProgress& progress)
+{
+  TransferResult result;
+  {
+    std::lock_guard<std::mutex> lock(busy_mutex_);
+    if (busy_)
+    {
+      result.message = "refused: another transfer is running on " + store_->describe() + " (one at a time)";
+      std::lock_guard<std::mutex> stats(stats_mutex_);
+      ++counters_.refused;
+      return result;
+    }
+    busy_ = true;
+    cancel_ = false;
+  }
+  result = transfer(goal, progress);
+  std::lock_guard<std::mutex> lock(busy_mutex_);
+  busy_ = false;
+  return result;
+}
+
+TransferResult ShareNode::transfer(const TransferGoal& goal, const programs::StoreProgress& progress)
+{
+  TransferResult result;
+  const bool send = goal.direction == TransferGoal::DIRECTION_SEND;
+  if (!send && goal.direction != TransferGoal::DIRECTION_RECEIVE)
+  {
+    result.message = "refused: direction must be 'send' or 'receive', not '" + goal.direction + "'";
+    return result;
+  }
+  if (!goal.protocol.empty() && goal.protocol != "smb")
+  {
+    result.message =
+        "refused: share_node moves whole files over SMB (protocol '' or 'smb'), not '" + goal.protocol + "'";
+    return result;
+  }
+  const std::string name = goal.file.substr(goal.file.find_last_of('/') + 1);  // the name on the share
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    ++counters_.transfers;
+  }
+  state_->update(
+      [&](MachineState& s)
+      {
+        s.execution = MachineState::EXECUTION_ACTIVE;
+        s.program = goal.file;
+        s.message = (send ? "sending " : "receiving ") + goal.file;
+      });
+  bool refused = false;
+  try
+  {
+    if (send)
+    {
+      const std::string path = programs_->resolveExisting(goal.file);
+      result.bytes = programs::putProgram(*store_, path, name, *protected_, *pattern_, progress, &cancel_);
+      result.message = "sent " + goal.file + " to " + store_->describe() + "/" + name;
+      archive(name, path, "sent");
+    }
+    else
+    {
+      const std::string path = programs_->resolveForWrite(goal.file);
+      result.bytes = programs::getProgram(*store_, name, path, progress, &cancel_);
+      result.message = "received " + store_->describe() + "/" + name + " as " + path;
+      archive(name, path, "received");
+    }
+    result.success = true;
+    result.message += " (" + std::to_string(result.bytes) + " bytes)";
+    linkResult("");
+  }
+  catch (const ConfigError& e)
+  {
+    refused = true;
+    result.message = std::string("refused: ") + e.what();
+  }
+  catch (const DisabledError& e)
+  {
+    refused = true;
+    result.message = e.what();
+  }
+  catch (const LinkError& e)
+  {
+    result.message = e.what();
+    linkResult(e.what());
+  }
+  catch (const Error& e)
+  {
+    result.message = e.what();
+  }
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    (result.success ? counters_.completed : refused ? counters_.refused : counters_.failed)++;
+    counters_.bytes += result.bytes;
+    counters_.last_result = result.message;
+    if (!result.success && !refused)
+      counters_.last_error = result.message;
+  }
+  state_->update(
+      [&](MachineState& s)
+      {
+        s.execution = result.success ? MachineState::EXECUTION_READY : MachineState::EXECUTION_STOPPED;
+        s.message = result.message;
+      });
+  if (result.success)
+    ROS_INFO("%s", result.message.c_str());
+  else
+    ROS_ERROR("%s", result.message.c_str());
+  return result;
+}
+
+void ShareNode::execute(const TransferGoalConstPtr& goal)
+{
+  ros::Time last;
+  const TransferResult result = run(*goal,
+                                    [&](uint64_t done, uint64_t total)
+                                    {
+                                      const ros::Time now = ros::Time::now();
+                                      if (done < total && now - last < feedback_period_)
+                                        return;
+                                      last = now;
+                                      TransferFeedback feedback;
+                                      feedback.bytes = done;
+                                      feedback.total = total;
+                                      feedback.percent = total > 0 ? static_cast<float>(100.0 * done / total) : 0.0f;
+                                      action_->publishFeedback(feedback);
+                                    });
+  if (result.success)
+    action_->setSucceeded(result, result.message);
+  else if (cancel_)
+    action_->setPreempted(result, result.message);
+  else
+    action_->setAborted(result, result.message);
+}
+
+bool ShareNode::onSend(SendProgram::Request& request, SendProgram::Response& response)
+{
+  TransferGoal goal;
+  goal.direction = TransferGoal::DIRECTION_SEND;
+  goal.file = request.file;
+  goal.protocol = request.protocol;
+  const TransferResult result = run(goal, nullptr);
+  response.success = result.success;
+  response.message = result.message;
+  response.bytes = result.bytes;
+  return true;
+}
+
+bool ShareNode::onReceive(ReceiveProgram::Request& request, ReceiveProgram::Response& response)
+{
+  TransferGoal goal;
+  goal.direction = TransferGoal::DIRECTION_RECEIVE;
+  goal.file = request.file;
+  goal.protocol = request.protocol;
+  const TransferResult result = run(goal, nullptr);
+  response.success = result.success;
+  response.message = result.message;
+  response.bytes = result.bytes;
+  return true;
+}
+
+bool ShareNode::onList(ListPrograms::Request&, ListPrograms::Response& response)
+{
+  try
+  {
+    for (const programs::ProgramListing& item : programs::listPrograms(*store_, *pattern_))
+    {
+      ProgramInfo info;
+      info.name = item.entry.name;
+      const auto number = item.header.number ? item.header.number : item.name_number;
+      info.number = number ? static_cast<int32_t>(*number) : -1;
+      info.size = item.entry.size;
+      info.mtime = ros::Time(static_cast<uint32_t>(std::max<int64_t>(0, item.entry.mtime)), 0);
+      info.comment = item.header.comment;
+      response.programs.push_back(info);
+    }
+    response.success = true;
+    response.message = std::to_string(response.programs.size()) + " programs on " + store_->describe();
+  }
+  catch (const Error& e)
+  {
+    response.message = e.what();
+    if (dynamic_cast<const LinkError*>(&e) != nullptr)
+      linkResult(e.what());
+  }
+  return true;
+}
+
+bool ShareNode::onRemove(RemoveProgram::Request& request, RemoveProgram::Response& response)
+{
+  if (!enable_remove_)
+  {
+    response.message = "refused: removing programs from " + store_->describe() + " is off (set ~enable_remove)";
+    return true;
+  }
+  try
+  {
+    store_->remove(request.file);
+    response.success = true;
+    response.message = "removed " + request.file + " from " + store_->describe();
+    ROS_INFO("%s", response.message.c_str());
+  }
+  catch (const Error& e)
+  {
+    response.message = e.what();
+  }
+  return true;
+}
+
+void ShareNode::archive(const std::string& name, const std::string& path, const std::string& direction)
+{
+  try
+  {
+    std::ifstream in(path, std::ios::binary);
+    const std::string content((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (const auto kept = archive_->add(name, content, {"share_node", machine_, direction}))
+      ROS_INFO("kept %s as version %u in %s", name.c_str(), kept->number, archive_->root().c_str());
+  }
+  catch (const Error& e)
+  {
+    // The transfer itself succeeded: a full archive disk is reported, not turned into a failure.
+    ROS_ERROR("%s was %s but not archived: %s", name.c_str(), direction.c_str(), e.what());
+  }
+}
+
+bool ShareNode::onHistory(ProgramHistory::Request& request, ProgramHistory::Response& response)
+{
+  try
+  {
+    for (const programs::ArchiveVersion& v : archive_->history(request.file))
+    {
+      ProgramVersion version;
+      version.number = v.number;
+      version.stamp = ros::Time(static_cast<uint32_t>(std::max<int64_t>(0, v.time)), 0);
+      version.node = v.source.node;
+      version.machine = v.source.machine;
+      version.direction = v.source.direction;
+      version.size = v.size;
+      version.crc32 = v.crc32;
+      response.versions.push_back(version);
+    }
+    response.success = true;
+    response.message =
+        std::to_string(response.versions.size()) + " versions of " + request.file + " in " + archive_->root();
+  }
+  catch (const Error& e)
+  {
+    response.message = e.what();
+  }
+  return true;
+}
+
+bool ShareNode::onCompare(ComparePrograms::Request& request, ComparePrograms::Response& response)
+{
+  try
+  {
+    const std::string current = programs_->root() + "/" + request.file.substr(request.file.find_last_of('/') + 1);
+    response.diff = programs::compareVersions(*archive_, request.file, request.from, request.to, current);
+    response.success = true;
+    response.message = response.diff.empty() ? "identical" : "different";
+  }
+  catch (const Error& e)
+  {
+    response.message = e.what();
+  }
+  return true;
+}
+
+void ShareNode::diagnostics(diagnostic_updater::DiagnosticStatusWrapper& status)
+{
+  std::lock_guard<std::mutex> lock(stats_mutex_);
+  if (counters_.failed > 0 && counters_.last_result == counters_.last_error)
+    status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "last transfer failed: " + counters_.last_error);
+  else
+    status.summary(diagnostic_msgs::DiagnosticStatus::OK,
+                   counters_.last_result.empty() ? "no transfer yet" : counters_.last_result);
+  status.add("share", store_->describe());
+  status.add("program_dir", programs_->root());
+  status.add("transfers", counters_.transfers);
+  status.add("completed", counters_.completed);
+  status.add("failed", counters_.failed);
+  status.add("refused", counters_.refused);
+  status.add("bytes", counters_.bytes);
+  status.add("checks", counters_.checks);
+  status.add("check failures", counters_.check_failures);
+  status.add("round trip (s)", counters_.round_trip);
+  status.add("last error", counters_.last_error);
+}
+}  // namespace cnc_bridge
+
+int main(int argc, char** argv)
+{
+  // Several threads: a service call may run a whole transfer, and the share is checked meanwhile.
+  return cnc_bridge::runNode<cnc_bridge::ShareNode>(argc, argv, "share_node", cnc_bridge::Spinning{4});
+}
