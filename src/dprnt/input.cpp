@@ -37,38 +37,16 @@ StreamInput::~StreamInput()
 void StreamInput::start(BytesHandler on_bytes, StateHandler on_state, RestartHandler /*on_restart*/)
 {
   on_bytes_ = std::move(on_bytes);
-  Reconnector::Callbacks callbacks;
-  callbacks.connect = [this]
-  {
-    auto link = open_();
-    std::lock_guard<std::mutex> lock(mutex_);
-    link_ = std::move(link);
-  };
-  callbacks.session = [this] { session(); };
-  callbacks.on_state = std::move(on_state);
-  // Called from stop() (another thread) and after a failure: interrupt only, the reading thread
-  // owns the link and replaces it on the next connect.
-  callbacks.disconnect = [this]
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    if (link_)
-      link_->interrupt();
-  };
-  reconnector_ = std::make_unique<Reconnector>(description_, std::move(callbacks), backoff_);
-  reconnector_->start();
+  link_ = std::make_unique<ReconnectingLink>(description_, open_, backoff_);
+  link_->start([this](Transport& link) { session(link); }, std::move(on_state));
 }
 
-void StreamInput::session()
+void StreamInput::session(Transport& link)
 {
-  Transport* link = nullptr;
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    link = link_.get();
-  }
   uint8_t buffer[kChunk];
   while (!stopping_)
   {
-    const size_t n = link->read(buffer, sizeof buffer, kReadSlice);
+    const size_t n = link.read(buffer, sizeof buffer, kReadSlice);
     if (n > 0)
       on_bytes_(buffer, n);
   }
@@ -77,18 +55,13 @@ void StreamInput::session()
 void StreamInput::stop()
 {
   stopping_ = true;
-  if (reconnector_)
-  {
-    reconnector_->stop();
-    reconnector_.reset();
-  }
-  std::lock_guard<std::mutex> lock(mutex_);
-  link_.reset();
+  if (link_)
+    link_->stop();
 }
 
 unsigned StreamInput::reconnects() const
 {
-  return reconnector_ ? reconnector_->reconnects() : 0;
+  return link_ ? link_->reconnects() : 0;
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -22,6 +22,7 @@
 #include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/ros/params.h"
 #include "cnc_bridge/transport/backoff.h"
+#include "cnc_bridge/transport/reconnecting_link.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/transport/tcp.h"
 
@@ -192,26 +193,8 @@ class HaasMdcNode
     write_srv_ = pnh.advertiseService("write_variable", &HaasMdcNode::writeVariable, this);
     query_srv_ = pnh.advertiseService("query", &HaasMdcNode::query, this);
 
-    Reconnector::Callbacks callbacks;
-    callbacks.connect = [this] { connect(); };
-    callbacks.session = [this]
-    {
-      std::shared_ptr<Transport> link;
-      {
-        std::lock_guard<std::mutex> lock(link_mutex_);
-        link = link_;
-      }
-      poller_->run(*link, stop_);
-    };
-    callbacks.disconnect = [this]
-    {
-      std::lock_guard<std::mutex> lock(link_mutex_);
-      if (link_)
-      {
-        link_->interrupt();
-      }
-    };
-    callbacks.on_state = [this](LinkState link, const std::string& why)
+    link_ = std::make_unique<ReconnectingLink>("haas_mdc " + hardware_id_, [this] { return open(); });
+    auto on_state = [this](LinkState link, const std::string& why)
     {
       if (link != LinkState::kUp)
       {
@@ -227,8 +210,7 @@ class HaasMdcNode
       }
       state_->setLink(link, why);
     };
-    reconnector_ = std::make_unique<Reconnector>("haas_mdc " + hardware_id_, callbacks);
-    reconnector_->start();
+    link_->start([this](Transport& link) { poller_->run(link, stop_); }, on_state);
     ROS_INFO_STREAM("haas_mdc_node polling " << hardware_id_ << " (Q500 every " << plan.status_period.count()
                                              << " ms; writes "
                                              << (policy_->allowed().empty() ? "disabled" : "allow-listed") << ")");
@@ -237,28 +219,17 @@ class HaasMdcNode
   ~HaasMdcNode()
   {
     stop_.stop();
-    reconnector_->stop();
+    link_->stop();
   }
 
  private:
-  void connect()
+  std::unique_ptr<Transport> open() const
   {
-    std::shared_ptr<Transport> link;
-    {
-      // Release the previous link first: a serial port must be closed before it is reopened.
-      std::lock_guard<std::mutex> lock(link_mutex_);
-      link_.reset();
-    }
     if (serial_)
     {
-      link = std::make_shared<SerialPort>(*serial_);
+      return std::make_unique<SerialPort>(*serial_);
     }
-    else
-    {
-      link = std::shared_ptr<Transport>(TcpConnection::connect(host_, tcp_port_, connect_timeout_));
-    }
-    std::lock_guard<std::mutex> lock(link_mutex_);
-    link_ = link;
+    return TcpConnection::connect(host_, tcp_port_, connect_timeout_);
   }
 
   // The emergency stop as far as Q500 tells it: a status naming it is ON; a status that is no alarm
@@ -451,7 +422,7 @@ class HaasMdcNode
     status.add("latency max (ms)", stats.max_latency_ms);
     status.add("polls skipped for a DNC transfer", poller_->skippedForPortLock());
     status.add("port regained after a DNC transfer", poller_->portRegained());
-    status.add("reconnects", reconnector_ ? reconnector_->reconnects() : 0u);
+    status.add("reconnects", link_ ? link_->reconnects() : 0u);
     if (s.last_cycle_s)
       status.add("last cycle (s)", *s.last_cycle_s);
     if (s.m30_counter1)
@@ -477,10 +448,8 @@ class HaasMdcNode
   ros::ServiceServer read_srv_, write_srv_, query_srv_;
   uint64_t last_unanswered_ = 0;
 
-  std::mutex link_mutex_;
-  std::shared_ptr<Transport> link_;
   StopSignal stop_;
-  std::unique_ptr<Reconnector> reconnector_;
+  std::unique_ptr<ReconnectingLink> link_;
 };
 }  // namespace cnc_bridge
 

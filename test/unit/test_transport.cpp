@@ -12,6 +12,7 @@
 #include <termios.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <ctime>
 #include <filesystem>
 
@@ -28,6 +29,7 @@
 #include "cnc_bridge/transport/forwarding_transport.h"
 #include "cnc_bridge/transport/paced_transport.h"
 #include "cnc_bridge/transport/pty.h"
+#include "cnc_bridge/transport/reconnecting_link.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/transport/tcp.h"
 
@@ -686,6 +688,156 @@ TEST(Reconnector, RetriesUntilTheLinkComesUpAndReportsStates)
   stopping = true;
   reconnector.stop();
   EXPECT_EQ(reconnector.failures(), 2u);
+}
+
+namespace
+{
+/// Links handed out by an opener, so a test can play the peer of each one.
+struct Links
+{
+  std::mutex mutex;
+  std::condition_variable opened;
+  std::vector<FakeTransport*> all;
+  int refusals = 0;  // the first opens that fail, as a machine switched off
+
+  ReconnectingLink::Opener opener()
+  {
+    return [this]() -> std::unique_ptr<Transport>
+    {
+      std::lock_guard<std::mutex> lock(mutex);
+      if (refusals > 0)
+      {
+        --refusals;
+        throw LinkError("connection refused");
+      }
+      auto link = std::make_unique<FakeTransport>("link " + std::to_string(all.size()));
+      all.push_back(link.get());
+      opened.notify_all();
+      return link;
+    };
+  }
+  FakeTransport* waitForLink(size_t index)
+  {
+    std::unique_lock<std::mutex> lock(mutex);
+    return opened.wait_for(lock, std::chrono::seconds(5), [&] { return all.size() > index; }) ? all[index] : nullptr;
+  }
+};
+
+/// The states a link reported, and a wait for one.
+struct StateLog
+{
+  std::mutex mutex;
+  std::condition_variable changed;
+  std::vector<LinkState> states;
+
+  ReconnectingLink::StateHandler handler()
+  {
+    return [this](LinkState state, const std::string&)
+    {
+      {
+        std::lock_guard<std::mutex> lock(mutex);
+        states.push_back(state);
+      }
+      changed.notify_all();
+    };
+  }
+  /// Waits until \p state was reported \p times times in all.
+  bool waitFor(LinkState state, long times = 1)
+  {
+    std::unique_lock<std::mutex> lock(mutex);
+    return changed.wait_for(lock, std::chrono::seconds(5),
+                            [&] { return std::count(states.begin(), states.end(), state) >= times; });
+  }
+};
+
+/// A session that echoes what it reads until its link fails or is interrupted.
+void echo(Transport& link)
+{
+  uint8_t buffer[64];
+  for (;;)
+  {
+    const size_t n = link.read(buffer, sizeof buffer, Milliseconds(30000));
+    link.write(buffer, n);
+  }
+}
+}  // namespace
+
+TEST(ReconnectingLink, OpensRunsTheSessionAndReopensAfterAFailure)
+{
+  Links links;
+  links.refusals = 2;
+  StateLog log;
+  ReconnectingLink link("machine", links.opener(), Backoff(Milliseconds(1), Milliseconds(2)));
+  link.start(echo, log.handler());
+  FakeTransport* first = links.waitForLink(0);
+  ASSERT_NE(first, nullptr);
+  first->feed("ping");
+  ASSERT_TRUE(first->waitForWritten(4, Milliseconds(5000)));
+  ASSERT_TRUE(log.waitFor(LinkState::kUp));
+  EXPECT_TRUE(link.isUp());
+  EXPECT_EQ(link.failures(), 2u);  // the two refused opens
+  first->disconnect();             // the peer goes away: the session fails, the link is reopened
+  FakeTransport* second = links.waitForLink(1);
+  ASSERT_NE(second, nullptr);
+  second->feed("again");
+  ASSERT_TRUE(second->waitForWritten(5, Milliseconds(5000)));
+  ASSERT_TRUE(log.waitFor(LinkState::kUp, 2));
+  EXPECT_EQ(link.failures(), 3u);
+  EXPECT_EQ(link.reconnects(), 2u);  // up after the refusals, and again after the drop
+  {
+    std::lock_guard<std::mutex> lock(log.mutex);
+    EXPECT_EQ(log.states.front(), LinkState::kConnecting);
+    EXPECT_EQ(std::count(log.states.begin(), log.states.end(), LinkState::kDown), 3);  // 2 refusals, 1 drop
+  }
+  link.stop();
+}
+
+TEST(ReconnectingLink, OtherThreadsWriteOnlyThroughAnOpenLink)
+{
+  Links links;
+  links.refusals = 1000000;  // never comes up
+  StateLog down_log;
+  ReconnectingLink down("machine", links.opener(), Backoff(Milliseconds(1), Milliseconds(2)));
+  down.start(echo, down_log.handler());
+  ASSERT_TRUE(down_log.waitFor(LinkState::kDown));
+  EXPECT_FALSE(down.withLink([](Transport&) { ADD_FAILURE() << "used a link that is not open"; }));
+  down.stop();
+
+  Links up_links;
+  StateLog up_log;
+  ReconnectingLink up("machine", up_links.opener());
+  up.start(echo, up_log.handler());
+  ASSERT_TRUE(up_log.waitFor(LinkState::kUp));
+  FakeTransport* fake = up_links.waitForLink(0);
+  ASSERT_NE(fake, nullptr);
+  const std::string command = "M1@";
+  EXPECT_TRUE(up.withLink([&](Transport& l) { l.write(reinterpret_cast<const uint8_t*>(command.data()), 3); }));
+  ASSERT_TRUE(fake->waitForWritten(3, Milliseconds(5000)));
+  EXPECT_EQ(fake->written(), std::vector<uint8_t>(command.begin(), command.end()));
+  up.stop();
+}
+
+TEST(ReconnectingLink, StopEndsABlockedSessionAndNoHandlerRunsAfterIt)
+{
+  Links links;
+  std::atomic<int> calls_after_stop{0};
+  std::atomic<bool> stopped{false};
+  StateLog log;
+  auto record = log.handler();
+  ReconnectingLink link("machine", links.opener());
+  link.start(echo,
+             [&](LinkState state, const std::string& why)
+             {
+               if (stopped)
+                 ++calls_after_stop;
+               record(state, why);
+             });
+  ASSERT_TRUE(log.waitFor(LinkState::kUp));  // the session now waits in a 30 s read
+  link.stop();                               // must not wait it out
+  stopped = true;
+  EXPECT_EQ(calls_after_stop, 0);
+  EXPECT_FALSE(link.isUp());
+  link.stop();  // idempotent
 }
 
 namespace

@@ -16,6 +16,7 @@
 #include <string>
 
 #include "cnc_bridge/transport/backoff.h"
+#include "cnc_bridge/transport/reconnecting_link.h"
 #include "cnc_bridge/transport/transport.h"
 
 namespace cnc_bridge
@@ -49,7 +50,7 @@ class DprntInput
 
 /// \brief Any Transport that can be reopened: a serial port or a TCP client. Thread-safe.
 ///
-/// A Reconnector opens the link with \p open, reads until it fails, and reopens it after a
+/// A ReconnectingLink opens the link with \p open, reads until it fails, and reopens it after a
 /// capped exponential backoff, so a machine switched off overnight is picked up in the morning.
 class StreamInput : public DprntInput
 {
@@ -66,16 +67,14 @@ class StreamInput : public DprntInput
   unsigned reconnects() const override;
 
  private:
-  void session();
+  void session(Transport& link);
 
   std::function<std::unique_ptr<Transport>()> open_;
   std::string description_;
   Backoff backoff_;
   BytesHandler on_bytes_;
-  std::mutex mutex_;  // guards link_ against interrupt() from stop()
-  std::unique_ptr<Transport> link_;
   std::atomic<bool> stopping_{false};
-  std::unique_ptr<Reconnector> reconnector_;
+  std::unique_ptr<ReconnectingLink> link_;
 };
 
 /// \brief Follows a file the control appends DPRNT output to (Haas NGC setting 262). Thread-safe.
