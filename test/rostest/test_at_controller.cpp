@@ -3,7 +3,13 @@
 // stop, an emergency stop mid-path aborts the goal with the reason, and home returns to the home position.
 #include <signal.h>
 
+#include <unistd.h>
+
+#include <array>
 #include <atomic>
+#include <cctype>
+#include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <sstream>
 
@@ -46,8 +52,56 @@ struct AtController : ::testing::Test
 };
 }  // namespace
 
+// The setpoints of one operation in the simulator's command log: "feed pos feed pos feed pos".
+std::vector<std::array<long, 6>> setpointLines(const std::vector<std::string>& lines)
+{
+  std::vector<std::array<long, 6>> out;
+  for (const std::string& line : lines)
+  {
+    std::istringstream in(line);
+    std::array<long, 6> v{};
+    if (std::isdigit(static_cast<unsigned char>(line[0])) || line[0] == '-')
+    {
+      if (in >> v[0] >> v[1] >> v[2] >> v[3] >> v[4] >> v[5])
+      {
+        out.push_back(v);
+      }
+    }
+  }
+  return out;
+}
+
+// cnc_plan's CSV rows as the same six numbers (feed and position per axis).
+std::vector<std::array<long, 6>> cncPlanSetpoints(const std::string& program, const geometry_msgs::Point& start)
+{
+  const std::string csv = "/tmp/test_at_controller_" + std::to_string(::getpid()) + ".csv";
+  std::ostringstream command;
+  command << CNC_PLAN << " --gcode " << program << " --csv " << csv << " --start " << start.x * 1000 << ','
+          << start.y * 1000 << ',' << start.z * 1000 << " >/dev/null";
+  EXPECT_EQ(std::system(command.str().c_str()), 0) << command.str();
+  std::vector<std::array<long, 6>> out;
+  std::ifstream in(csv);
+  std::string line;
+  std::getline(in, line);
+  while (std::getline(in, line))
+  {
+    std::vector<double> cells;
+    std::istringstream row(line);
+    for (std::string cell; std::getline(row, cell, ',');)
+    {
+      cells.push_back(std::stod(cell));
+    }
+    out.push_back({long(cells[4]), long(cells[1]), long(cells[5]), long(cells[2]), long(cells[6]), long(cells[3])});
+  }
+  std::remove(csv.c_str());
+  return out;
+}
+
 TEST_F(AtController, FollowsAGcodeProgramToItsEndPoint)
 {
+  CommandLog received{command_log};
+  const size_t mark = received.lines().size();
+  const auto start_position = state.last().position;
   cnc_bridge::AtFollowPathGoal goal;
   goal.gcode_file = "square.nc";
   goal.coolant = cnc_bridge::AtFollowPathGoal::COOLANT_DEFAULT;
@@ -82,6 +136,16 @@ TEST_F(AtController, FollowsAGcodeProgramToItsEndPoint)
       << state.last().position;
   EXPECT_EQ(state.last().coolant, cnc_bridge::MachineState::COOLANT_OFF);  // #@
   EXPECT_EQ(state.last().spindle_speed, 0.0);                              // M0@ stops the spindle
+  // Every setpoint the controller received is the one cnc_plan's dry run of the same program from
+  // the same start gives (same feed values, same pulses, same count).
+  const auto sent = setpointLines(received.linesUntil(mark, "#"));
+  const auto planned = cncPlanSetpoints(CNC_BRIDGE_AT_PROGRAMS "/square.nc", start_position);
+  ASSERT_EQ(sent.size(), result->setpoints);
+  ASSERT_EQ(sent.size(), planned.size());
+  for (size_t k = 0; k < sent.size(); ++k)
+  {
+    ASSERT_EQ(sent[k], planned[k]) << "setpoint " << k;
+  }
 }
 
 TEST_F(AtController, JogIsRefusedWhileMachiningAndCancelDecelerates)
