@@ -441,7 +441,11 @@ std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
     Progress state;
     unsigned errors = 0;
     std::vector<uint8_t> buffer(packetSize(kBlockSize1K, CheckType::kCrc16));
-    int pending = -1;                     // a byte read ahead (after a lone CAN) that starts the next round
+    int pending = -1;  // a byte read ahead (after a lone CAN) that starts the next round
+    // A whole packet after the last good block was NAKed (bad check, or followed by a doubled
+    // byte): a sender must now send that block again. One that sends EOT instead took a stray byte
+    // (a doubled or delayed ACK) for our ACK, and the block it believes delivered is missing.
+    bool block_to_resend = false;
     Clock::time_point first_block_start;  // when the first byte of block 1 arrived
 
     auto error = [&](const std::string& what, Milliseconds already_quiet = Milliseconds(0))
@@ -521,6 +525,7 @@ std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
         if (packet.status != PacketStatus::kOk)
         {
           ++stats_.garbled;
+          block_to_resend = started;
           error(toString(packet.status));
           continue;
         }
@@ -530,9 +535,11 @@ std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
         if (stats_.retries > 0 && input_.readByte(kDoubledByteQuiet) >= 0)
         {
           ++stats_.garbled;
+          block_to_resend = started;
           error("packet followed by more bytes (a doubled byte on the line)");
           continue;
         }
+        block_to_resend = false;
         if (packet.block == expected)
         {
           if (!started)
@@ -580,6 +587,12 @@ std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
           ++stats_.garbled;
           error("EOT followed by more data (line noise)");
           continue;
+        }
+        if (block_to_resend)
+        {
+          abort("the sender ended the transfer instead of sending block " + std::to_string(expected) +
+                    " again after its NAK (it took a stray byte for an ACK): the end of the file is missing",
+                true, false);
         }
         if (config_.answer_eot_with_can)
         {

@@ -524,6 +524,51 @@ TEST(XmodemReceiver, ABlockLeftFromAnEarlierTransferIsNotTheStart)
   EXPECT_EQ(tx.written(), (Bytes{kNak, kNak, kAck, kAck}));
 }
 
+// A sender that takes a stray byte (a doubled or late ACK) for the ACK of the last block, after
+// the receiver NAKed it, sends EOT while the receiver waits for that block again. Taking the EOT
+// would deliver the file without its end (an NC program without its last lines): the receive
+// fails instead, and CANs tell the sender.
+TEST(XmodemReceiver, AnEotInsteadOfTheBlockItNakedIsAFailureNotATruncatedFile)
+{
+  FakeTransport tx;
+  const Bytes one = encodePacket(1, Bytes(128, '1').data(), 128, kBlockSize, CheckType::kChecksum);
+  Bytes two = encodePacket(2, Bytes(20, '2').data(), 20, kBlockSize, CheckType::kChecksum);
+  two[40] ^= 0x01;  // damaged on the line: NAKed
+  std::vector<Bytes> script = {one, two, {kEot}};
+  answerEachWriteWith(tx, script);
+  Receiver receiver(tx, Mode::kChecksum, fastConfig());
+  try
+  {
+    receiver.receive();
+    FAIL() << "a file without its last block was taken as complete";
+  }
+  catch (const ProtocolError& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("end of the file is missing"), std::string::npos) << e.what();
+  }
+  const Bytes written = tx.written();
+  ASSERT_GE(written.size(), 6u);
+  EXPECT_EQ(Bytes(written.begin(), written.begin() + 3), (Bytes{kNak, kAck, kNak}));
+  EXPECT_EQ(Bytes(written.end() - 3, written.end()), (Bytes{kCan, kCan, kCan}));
+}
+
+// A damaged packet that the sender then sends again, followed by EOT, is an ordinary retry.
+TEST(XmodemReceiver, AnEotAfterTheResentBlockEndsTheFile)
+{
+  FakeTransport tx;
+  const Bytes one = encodePacket(1, Bytes(128, '1').data(), 128, kBlockSize, CheckType::kChecksum);
+  const Bytes two = encodePacket(2, Bytes(20, '2').data(), 20, kBlockSize, CheckType::kChecksum);
+  Bytes damaged = two;
+  damaged[40] ^= 0x01;
+  std::vector<Bytes> script = {one, damaged, two, {kEot}};
+  answerEachWriteWith(tx, script);
+  Receiver receiver(tx, Mode::kChecksum, fastConfig());
+  Bytes data = receiver.receive();
+  stripSubPadding(data);
+  EXPECT_EQ(data.size(), 148u);
+  EXPECT_EQ(tx.written(), (Bytes{kNak, kAck, kNak, kAck, kAck}));
+}
+
 TEST(XmodemReceiver, NaksGarbledPacketsAndIgnoresALoneCan)
 {
   FakeTransport tx;
