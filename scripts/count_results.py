@@ -20,7 +20,7 @@ from collections import OrderedDict
 
 # Kinds in the order the breakdown lists them.
 KINDS = ["unit tests", "script tests", "rostests (C++)", "rostests (Python)", "rostest runs", "launch file checks",
-         "sanitizer re-runs", "fuzz targets", "lint tools", "two hosts", "steps that could not run", "other"]
+         "sanitizer re-runs", "fuzz targets", "lint tools", "two hosts", "install space", "steps that could not run", "other"]
 
 
 def summary(problem, limit=400):
@@ -52,6 +52,8 @@ def kind_of(name, root):
         return "script tests"
     if name.startswith("two_hosts"):
         return "two hosts"
+    if name.startswith("install_space"):
+        return "install space"
     if any((case.get("classname") or "").startswith("lint.") for case in root.iter("testcase")):
         return "lint tools"
     return "other"
