@@ -595,7 +595,9 @@ void MdcPoller::run(Transport& transport, StopSignal& stop)
       {
         stats_ = sum(base_stats_, client.stats());
         throw LinkError("MDC " + transport.describe() + ": no reply to " + std::to_string(unanswered_in_a_row) +
-                        " queries in a row");
+                        " queries in a row: check that the control's Setting 143 (MDC port, NGC over TCP) is on "
+                        "and is this port, or (Classic over RS-232) that Settings 11, 12, 37 and 13 match this "
+                        "side's; `cnc_dnc doctor --port DEV` checks a serial port");
       }
       deliverHeldEvents(client);
     }

@@ -178,17 +178,22 @@ def check_simulators_of_cell(space):
         raise Failure("simulators not installed: %s" % missing)
 
 
-def owning_package(path):
-    """The Debian package that installed a library file (ldd may name it by /lib or /usr/lib)."""
-    real = os.path.realpath(path)
-    candidates = list(dict.fromkeys([path, real, path.replace("/usr/lib/", "/lib/", 1),
-                                     real.replace("/usr/lib/", "/lib/", 1), "/usr" + path]))
-    result = subprocess.run(["dpkg-query", "-S"] + candidates, capture_output=True, text=True)
+def owning_packages(paths):
+    """{library path: the Debian package that installed it} in one dpkg query (ldd may name a file
+    by /lib or /usr/lib)."""
+    candidates = {}
+    for path in paths:
+        real = os.path.realpath(path)
+        for candidate in (path, real, path.replace("/usr/lib/", "/lib/", 1), real.replace("/usr/lib/", "/lib/", 1),
+                          "/usr" + path):
+            candidates.setdefault(candidate, path)
+    result = subprocess.run(["dpkg-query", "-S"] + sorted(candidates), capture_output=True, text=True)
+    owners = {}
     for line in result.stdout.splitlines():
         packages, _, owned = line.partition(": ")
         if owned in candidates:
-            return packages.split(",")[0].split(":")[0].strip()
-    return None
+            owners.setdefault(candidates[owned], packages.split(",")[0].split(":")[0].strip())
+    return {path: owners.get(path) for path in paths}
 
 
 def installed_dependency_closure(packages):
@@ -246,7 +251,7 @@ def check_runtime_packages_cover_programs(space):
                 library = parts[1].split()[0]
                 if not library.startswith(space.prefix):
                     libraries.add(library)
-    owners = {library: owning_package(library) for library in libraries}
+    owners = owning_packages(sorted(libraries))
     uncovered = sorted("%s (%s)" % (library, owner) for library, owner in owners.items() if owner not in available)
     if uncovered:
         raise Failure("libraries loaded by installed programs whose packages scripts/debian-runtime-packages.txt "

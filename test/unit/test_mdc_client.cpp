@@ -423,6 +423,9 @@ TEST(MdcPoller, AControlThatStopsAnsweringEndsThePollWithALinkError)
   catch (const LinkError& e)
   {
     EXPECT_NE(std::string(e.what()).find("3 queries in a row"), std::string::npos) << e.what();
+    // What to compare: the control's MDC setting, or its serial settings.
+    EXPECT_NE(std::string(e.what()).find("Setting 143"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("Settings 11, 12, 37 and 13"), std::string::npos) << e.what();
   }
   EXPECT_EQ(poller.stats().unanswered, 3u);
 }
