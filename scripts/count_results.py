@@ -31,29 +31,20 @@ def summary(problem, limit=400):
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
+# Result files by the start of their name: what each step of scripts/test.sh writes.
+KIND_OF_PREFIX = [("gtest-", "unit tests"), ("rostest-", "rostest runs"), ("roslaunch-check", "launch file checks"),
+                  ("asan_", "sanitizer re-runs"), ("fuzz_", "fuzz targets"), ("step_", "steps that could not run"),
+                  ("scripts", "script tests"), ("two_hosts", "two hosts"), ("install_space", "install space")]
+
+
 def kind_of(name, root):
     """The kind of the result file `name` (its root element `root`)."""
-    if name.startswith("gtest-"):
-        return "unit tests"
     if name.startswith("rosunit-"):
         # GoogleTest writes <testsuites>; Python's unittest (through rosunit) a <testsuite>.
         return "rostests (C++)" if root.tag == "testsuites" else "rostests (Python)"
-    if name.startswith("rostest-"):
-        return "rostest runs"
-    if name.startswith("roslaunch-check"):
-        return "launch file checks"
-    if name.startswith("asan_"):
-        return "sanitizer re-runs"
-    if name.startswith("fuzz_"):
-        return "fuzz targets"
-    if name.startswith("step_"):
-        return "steps that could not run"
-    if name.startswith("scripts"):
-        return "script tests"
-    if name.startswith("two_hosts"):
-        return "two hosts"
-    if name.startswith("install_space"):
-        return "install space"
+    for prefix, kind in KIND_OF_PREFIX:
+        if name.startswith(prefix):
+            return kind
     if any((case.get("classname") or "").startswith("lint.") for case in root.iter("testcase")):
         return "lint tools"
     return "other"
