@@ -16,3 +16,22 @@ trap 'rm -rf "$work"' EXIT
 cc -O2 -o "$work/tap" "$here/tap.c" -lutil
 echo "command: BUILD_DIR=$build ROUNDS=${ROUNDS:-5} SEEDS=${SEEDS:-8} bench/xmodem/run.sh ${1:-256}; $(date -u '+%Y-%m-%d %H:%M UTC')"
 python3 "$here/bench_xmodem.py" "$bin" "$work/tap" "${1:-256}" "${ROUNDS:-5}" "${SEEDS:-8}"
+
+# Paced: the simulated Haas (sim_haas_serial xmodem), its output paced at 115200 8N1, sends 100 KB
+# (checksum-128) to cnc_dnc receive; the line-rate bound is 128 payload bytes per 133 on the wire.
+# Timed from cnc_dnc's start to its exit, so the start request and the EOT exchange are included.
+sim="$bin/sim_haas_serial"
+head -c 102400 /dev/urandom | tr '\032\r' 'xy' >"$work/paced.bin"
+mkdir -p "$work/mem"
+"$sim" xmodem --link "$work/haas" --dir "$work/mem" --program "$work/paced.bin" --pace-baud 115200 \
+  --nak-interval 10 >"$work/sim.out" 2>&1 &
+sim_pid=$!
+for _ in $(seq 100); do [[ -e "$work/haas" ]] && break; sleep 0.02; done
+t0=$(date +%s.%N)
+"$bin/cnc_dnc" receive --port "$work/haas" --mode checksum --binary "$work/paced_out.bin" >/dev/null 2>&1 || true
+t1=$(date +%s.%N)
+kill "$sim_pid"; wait "$sim_pid" 2>/dev/null || true
+cmp -s -n 102400 "$work/paced.bin" "$work/paced_out.bin" || echo "paced transfer FAILED"
+awk -v n=102400 -v a="$t0" -v b="$t1" -v load="$(cut -d' ' -f1-3 /proc/loadavg)" 'BEGIN { r = n / (b - a); bound = 11520 * 128 / 133;
+  printf "paced 115200 8N1, 100 KB checksum-128 (sim -> cnc_dnc), end to end: %.0f B/s payload, line-rate bound %.0f B/s: %.1f%% (load %s)\n",
+    r, bound, 100 * r / bound, load }'
