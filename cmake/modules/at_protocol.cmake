@@ -46,8 +46,9 @@ if(NOT CNC_BRIDGE_CORE_ONLY AND CATKIN_ENABLE_TESTING)
     target_link_libraries(test_${test} ${catkin_LIBRARIES})
     add_dependencies(test_${test} at_controller_node sim_at_controller ${PROJECT_NAME}_generate_messages_cpp)
   endforeach()
-  # The node's setpoints against cnc_plan's dry run of the same program.
+  # The node's setpoints against cnc_plan's dry run of the same program, trapezoid and S-curve.
   add_dependencies(test_at_controller cnc_plan)
+  add_rostest(test/rostest/at_controller_scurve.test DEPENDENCIES test_at_controller)
   target_compile_definitions(test_at_controller PRIVATE CNC_PLAN="$<TARGET_FILE:cnc_plan>"
                              CNC_BRIDGE_AT_PROGRAMS="${PROJECT_SOURCE_DIR}/test/data/at_controller")
 endif()

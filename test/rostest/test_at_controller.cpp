@@ -19,7 +19,7 @@ using namespace at_test;
 
 namespace
 {
-std::string node, ns, prefix, pid_file, command_log;
+std::string node, ns, prefix, pid_file, command_log, profile = "trapezoid";
 
 pid_t simulatorPid()
 {
@@ -76,8 +76,8 @@ std::vector<std::array<long, 6>> cncPlanSetpoints(const std::string& program, co
 {
   const std::string csv = "/tmp/test_at_controller_" + std::to_string(::getpid()) + ".csv";
   std::ostringstream command;
-  command << CNC_PLAN << " --gcode " << program << " --csv " << csv << " --start " << start.x * 1000 << ','
-          << start.y * 1000 << ',' << start.z * 1000 << " >/dev/null";
+  command << CNC_PLAN << " --gcode " << program << " --profile " << profile << " --csv " << csv << " --start "
+          << start.x * 1000 << ',' << start.y * 1000 << ',' << start.z * 1000 << " >/dev/null";
   EXPECT_EQ(std::system(command.str().c_str()), 0) << command.str();
   std::vector<std::array<long, 6>> out;
   std::ifstream in(csv);
@@ -303,6 +303,7 @@ int main(int argc, char** argv)
   pnh.getParam("tf_prefix", prefix);
   pnh.getParam("pid_file", pid_file);
   pnh.getParam("command_log", command_log);
+  pnh.getParam("profile", profile);  // the node's ~profile, for cnc_plan
   ros::AsyncSpinner spinner(2);
   spinner.start();
   return RUN_ALL_TESTS();
