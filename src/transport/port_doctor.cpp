@@ -232,6 +232,29 @@ std::string explainOpenFailure(const std::string& device, int error_number, cons
   }
 }
 
+std::string explainConnectFailure(const std::string& where, int error_number)
+{
+  const std::string servers =
+      "the control's server is on and on this port (Haas NGC: Setting 143 for MDC, 263 for DPRNT; qCNC: "
+      "INET_PORT of the board's settings file; '@' controller: its command and report ports)";
+  switch (error_number)
+  {
+    case ECONNREFUSED:
+      return "nothing listens on " + where + ": check that " + servers;
+    case EHOSTUNREACH:
+    case ENETUNREACH:
+      return "no route to " + where +
+             ": check the address, the cable or switch, and this computer's address "
+             "on the control's network";
+    case 0:
+    case ETIMEDOUT:
+      return "no answer from " + where + ": check the address (`ping` it), the network, a firewall, and that " +
+             servers;
+    default:
+      return where + ": " + std::strerror(error_number);
+  }
+}
+
 const std::vector<ProfileLine>& serialProfiles()
 {
   static const std::vector<ProfileLine> kProfiles = {

@@ -1,5 +1,6 @@
 // TcpConnection and TcpServer on Boost.Asio, with connect and accept bounded in time.
 #include "cnc_bridge/transport/tcp.h"
+#include "cnc_bridge/transport/port_doctor.h"
 
 #include <boost/asio/connect.hpp>
 
@@ -43,11 +44,13 @@ std::unique_ptr<TcpConnection> TcpConnection::connect(const std::string& host, u
       [&] { connection->close(); }, done);
   if (!completed)
   {
-    throw LinkError(where + ": no connection within " + std::to_string(timeout.count()) + " ms");
+    throw LinkError(where + ": no connection within " + std::to_string(timeout.count()) +
+                    " ms: " + explainConnectFailure(where, 0));
   }
   if (error)
   {
-    throw LinkError(where + ": cannot connect: " + error.message());
+    throw LinkError(where + ": cannot connect: " + error.message() + ": " +
+                    explainConnectFailure(where, error.value()));
   }
   connection->setUp(where);
   return connection;

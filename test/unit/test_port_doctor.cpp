@@ -1,10 +1,13 @@
 // The port doctor: open failures explained in words (missing device, permission, busy) as every
 // SerialPort user reports them, a silent control, and `cnc_dnc doctor --listen` judging 7E1 from
 // 8N1 by the punch output of the simulated control at 9600 baud.
+#include <arpa/inet.h>
 #include <fcntl.h>
 #include <grp.h>
+#include <netinet/in.h>
 #include <pty.h>
 #include <signal.h>
+#include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -23,6 +26,7 @@
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/transport/port_doctor.h"
 #include "cnc_bridge/transport/serial_port.h"
+#include "cnc_bridge/transport/tcp.h"
 
 using namespace cnc_bridge;
 
@@ -267,6 +271,36 @@ TEST(PortDoctor, SilentControlGetsTheSettingsToCompare)
   const ssize_t sent = ::read(pty.master, buffer, sizeof(buffer));
   for (ssize_t i = 0; i < sent; ++i)
     EXPECT_EQ(buffer[i], 0x18) << "byte " << i << " of what the sender wrote to a control that never asked";
+}
+
+TEST(PortDoctor, RefusedConnectionNamesTheServerSettings)
+{
+  // A port nobody listens on: bound once to learn a free number, then closed.
+  uint16_t port = 0;
+  {
+    const int probe = ::socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in address{};
+    address.sin_family = AF_INET;
+    address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    ASSERT_EQ(::bind(probe, reinterpret_cast<sockaddr*>(&address), sizeof(address)), 0);
+    socklen_t length = sizeof(address);
+    ::getsockname(probe, reinterpret_cast<sockaddr*>(&address), &length);
+    port = ntohs(address.sin_port);
+    ::close(probe);
+  }
+  try
+  {
+    TcpConnection::connect("127.0.0.1", port, Milliseconds(2000));
+    FAIL() << "connected to a port nobody listens on";
+  }
+  catch (const LinkError& e)
+  {
+    const std::string where = "127.0.0.1:" + std::to_string(port);
+    EXPECT_NE(std::string(e.what()).find("nothing listens on " + where), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("Setting 143 for MDC, 263 for DPRNT"), std::string::npos) << e.what();
+  }
+  EXPECT_NE(explainConnectFailure("10.0.0.9:5051", 0).find("no answer from 10.0.0.9:5051: check the address"),
+            std::string::npos);
 }
 
 TEST(PortDoctor, ReadsParityFromBitSeven)

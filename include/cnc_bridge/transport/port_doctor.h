@@ -22,6 +22,11 @@ extern const char* const kNoAnswerHint;
 std::string explainOpenFailure(const std::string& device, int error_number,
                                const std::string& by_id_dir = "/dev/serial/by-id");
 
+/// \brief Why a TCP connection to \p host (":port" in \p where) failed, with what to check: nothing
+/// listening (the control's server off or another port), no route, no answer in time
+/// (\p error_number 0 for a timeout).
+std::string explainConnectFailure(const std::string& where, int error_number);
+
 /// \brief The processes that hold \p device open (its path or any link to it), as
 /// "PID (command)", from /proc/<pid>/fd; \p except is left out (-1: none).
 std::vector<std::string> processesHolding(const std::string& device, pid_t except = -1);
