@@ -4,7 +4,8 @@
 cnc_core_module(cnc_bridge_programs
   src/programs/program_name.cpp
   src/programs/program_store.cpp
-  src/programs/archive.cpp)
+  src/programs/archive.cpp
+  src/programs/program_request.cpp)
 
 find_path(SMBCLIENT_INCLUDE_DIR libsmbclient.h PATH_SUFFIXES samba-4.0)
 find_library(SMBCLIENT_LIBRARY smbclient)
@@ -16,7 +17,8 @@ target_include_directories(cnc_bridge_share PRIVATE ${SMBCLIENT_INCLUDE_DIR})
 target_link_libraries(cnc_bridge_share PUBLIC cnc_bridge_programs ${SMBCLIENT_LIBRARY})
 
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
-  cnc_core_gtest(test_program_name test/unit/test_program_name.cpp test/unit/test_program_archive.cpp)
+  cnc_core_gtest(test_program_name test/unit/test_program_name.cpp test/unit/test_program_archive.cpp
+  test/unit/test_program_request.cpp)
   target_link_libraries(test_program_name cnc_bridge_programs)
   # Against a real Samba server (smbd started by the test on a free loopback port).
   cnc_core_gtest(test_smb_store test/unit/test_smb_store.cpp)
@@ -52,4 +54,9 @@ if(NOT CNC_BRIDGE_CORE_ONLY)
     target_include_directories(test_share_node PRIVATE ${PROJECT_SOURCE_DIR}/test/unit)
     add_dependencies(test_share_node share_node ${PROJECT_NAME}_generate_messages_cpp)
   endif()
+endif()
+
+cnc_fuzz_target(fuzz_program_request test/fuzz/fuzz_program_request.cpp)
+if(CNC_BRIDGE_FUZZ)
+  target_link_libraries(fuzz_program_request cnc_bridge_programs)
 endif()

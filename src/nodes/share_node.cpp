@@ -15,8 +15,10 @@
 #include <mutex>
 
 #include "cnc_bridge/ComparePrograms.h"
+#include "cnc_bridge/DprntLine.h"
 #include "cnc_bridge/ListPrograms.h"
 #include "cnc_bridge/ProgramHistory.h"
+#include "cnc_bridge/ProgramRequestEvent.h"
 #include "cnc_bridge/ReceiveProgram.h"
 #include "cnc_bridge/RemoveProgram.h"
 #include "cnc_bridge/SendProgram.h"
@@ -24,6 +26,7 @@
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/program_dir.h"
 #include "cnc_bridge/programs/archive.h"
+#include "cnc_bridge/programs/program_request.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/ros/params.h"
@@ -48,11 +51,20 @@ class ShareNode
   bool onHistory(ProgramHistory::Request& request, ProgramHistory::Response& response);
   bool onCompare(ComparePrograms::Request& request, ComparePrograms::Response& response);
   void archive(const std::string& name, const std::string& path, const std::string& direction);
+  /// Serves the request files in the share's requests folder (each removed once read).
+  void serveRequestFiles();
+  void onDprntLine(const DprntLine::ConstPtr& line);
+  /// Serves one request: LOAD/SEND publishes the program into the share, SAVE fetches it.
+  void serveRequest(const std::optional<programs::ProgramRequest>& request, const std::string& source);
   void checkShare(const ros::WallTimerEvent& event);
   void linkResult(const std::string& error);
   void diagnostics(diagnostic_updater::DiagnosticStatusWrapper& status);
 
   std::unique_ptr<programs::ProgramStore> store_;
+  std::unique_ptr<programs::ProgramStore> requests_;  ///< the share's requests folder, if any
+  std::string requests_folder_;
+  std::string credentials_file_;
+  Milliseconds timeout_{10000};
   std::string url_;
   std::unique_ptr<ProgramDirectory> programs_;
   std::unique_ptr<programs::NamePattern> pattern_;
@@ -78,6 +90,8 @@ class ShareNode
   std::unique_ptr<SingleGoalActionServer<TransferAction>> action_;
   ros::ServiceServer send_srv_, receive_srv_, list_srv_, remove_srv_, history_srv_, compare_srv_;
   ros::WallTimer check_timer_;
+  ros::Publisher requests_pub_;
+  ros::Subscriber dprnt_sub_;
 };
 
 ShareNode::ShareNode(ros::NodeHandle nh, ros::NodeHandle pnh)
@@ -108,6 +122,18 @@ ShareNode::ShareNode(ros::NodeHandle nh, ros::NodeHandle pnh)
       std::make_unique<programs::ProgramArchive>(pnh.param<std::string>("archive_dir", root + ".archive"),
                                                  static_cast<unsigned>(std::max(1, pnh.param("archive_keep", 20))));
   machine_ = pnh.param<std::string>("machine", ros::this_node::getName());
+  // ~requests_folder (string, default "requests"; "" for none): a folder of the share where the
+  // control drops request files ((LOAD O1234), (SEND O1234), (SAVE O1234)), served at each check.
+  requests_folder_ = pnh.param<std::string>("requests_folder", "requests");
+  if (!requests_folder_.empty())
+    programs::checkName(requests_folder_);
+  credentials_file_ = pnh.param<std::string>("credentials_file", "");
+  timeout_ = params::seconds(pnh, "timeout", 10.0);
+  requests_pub_ = nh.advertise<ProgramRequestEvent>("program_requests", 20);
+  // ~dprnt_requests (bool, default true): a DPRNT line `LOAD O1234` on dprnt/raw (dprnt_node in
+  // the same machine namespace) is a request too.
+  if (pnh.param("dprnt_requests", true))
+    dprnt_sub_ = nh.subscribe("dprnt/raw", 20, &ShareNode::onDprntLine, this);
   // ~enable_remove (bool, default false): ~remove_program deletes from the share only when set.
   pnh.param("enable_remove", enable_remove_, false);
   // ~feedback_rate (Hz, default 20): action feedback at most this often.
@@ -181,6 +207,84 @@ void ShareNode::checkShare(const ros::WallTimerEvent&)
     }
   }
   linkResult(error);  // not under stats_mutex_: a link change runs the diagnostics at once
+  if (error.empty())
+    serveRequestFiles();
+}
+
+void ShareNode::serveRequestFiles()
+{
+  if (requests_folder_.empty())
+    return;
+  std::vector<programs::ProgramEntry> files;
+  try
+  {
+    if (!requests_)  // opened once it exists (a local folder must exist to be opened)
+      requests_ = share::openStore(url_ + "/" + requests_folder_, credentials_file_, timeout_);
+    files = requests_->list();
+  }
+  catch (const Error& e)
+  {
+    ROS_WARN_THROTTLE(60, "requests folder: %s", e.what());  // a share without one is no error
+    return;
+  }
+  for (const programs::ProgramEntry& file : files)
+  {
+    std::string text;
+    try
+    {
+      text = requests_->read(file.name);
+      requests_->remove(file.name);  // served once, whatever it held
+    }
+    catch (const Error& e)
+    {
+      ROS_WARN("request file %s: %s", file.name.c_str(), e.what());
+      continue;
+    }
+    serveRequest(programs::recogniseRequest(text), "share " + requests_folder_ + "/" + file.name);
+  }
+}
+
+void ShareNode::onDprntLine(const DprntLine::ConstPtr& line)
+{
+  if (const auto request = programs::recogniseRequest(line->text, true))
+    serveRequest(request, "dprnt");
+}
+
+void ShareNode::serveRequest(const std::optional<programs::ProgramRequest>& request, const std::string& source)
+{
+  ProgramRequestEvent event;
+  event.machine = machine_;
+  event.source = source;
+  if (!request)
+  {
+    event.outcome = "no (LOAD O1234), (SEND O1234) or (SAVE O1234) in it";
+  }
+  else
+  {
+    event.request = request->word;
+    event.number = request->number;
+    event.program = pattern_->format(request->number);
+    TransferGoal goal;
+    goal.file = event.program;
+    const bool load = request->kind == programs::ProgramRequest::Kind::kLoad;
+    goal.direction = load ? TransferGoal::DIRECTION_SEND : TransferGoal::DIRECTION_RECEIVE;
+    if (load && !std::filesystem::exists(programs_->root() + "/" + event.program))
+    {
+      event.outcome = "no " + event.program + " in " + programs_->root();
+    }
+    else
+    {
+      const TransferResult result = run(goal, nullptr);
+      event.success = result.success;
+      event.outcome = result.message;
+    }
+  }
+  event.header.stamp = ros::Time::now();
+  if (event.success)
+    ROS_INFO_STREAM("request from " << source << ": " << event.outcome);
+  else
+    ROS_WARN_STREAM("request from " << source << " not served: " << event.outcome);
+  requests_pub_.publish(event);
 }
 
 TransferResult ShareNode::run(const TransferGoal& goal, const programs::StoreProgress& progress)

@@ -11,12 +11,16 @@
 #include <unistd.h>
 
 #include <condition_variable>
+#include <filesystem>
 #include <mutex>
+#include <optional>
 
 #include "cnc_bridge/ComparePrograms.h"
+#include "cnc_bridge/DprntLine.h"
 #include "cnc_bridge/ListPrograms.h"
 #include "cnc_bridge/MachineState.h"
 #include "cnc_bridge/ProgramHistory.h"
+#include "cnc_bridge/ProgramRequestEvent.h"
 #include "cnc_bridge/ReceiveProgram.h"
 #include "cnc_bridge/RemoveProgram.h"
 #include "cnc_bridge/SendProgram.h"
@@ -49,6 +53,13 @@ class ShareNodeTest : public ::testing::Test
                                                have_state_ = true;
                                                changed_.notify_all();
                                              });
+    requests_sub_ = nh_.subscribe<ProgramRequestEvent>("/cell/lathe/program_requests", 100,
+                                                       [this](const ProgramRequestEvent::ConstPtr& e)
+                                                       {
+                                                         std::lock_guard<std::mutex> lock(mutex_);
+                                                         requests_.push_back(*e);
+                                                         changed_.notify_all();
+                                                       });
     node_ = ::fork();
     if (node_ == 0)
     {
@@ -80,7 +91,18 @@ class ShareNodeTest : public ::testing::Test
     return seen ? last_.message : "<none>";
   }
 
+  /// The next program request event (after the \p seen first ones); nothing if none came in time.
+  std::optional<ProgramRequestEvent> waitForRequest(size_t seen, double seconds)
+  {
+    std::unique_lock<std::mutex> lock(mutex_);
+    if (!changed_.wait_for(lock, std::chrono::duration<double>(seconds), [&] { return requests_.size() > seen; }))
+      return std::nullopt;
+    return requests_[seen];
+  }
+
   TempDir dir_{"cnc_share_node"};
+  ros::Subscriber requests_sub_;
+  std::vector<ProgramRequestEvent> requests_;
   std::unique_ptr<test::SambaServer> server_;
   std::string programs_;
   pid_t node_ = -1;
@@ -212,6 +234,54 @@ TEST_F(ShareNodeTest, ArchiveKeepsEachDistinctVersionOnce)
   ASSERT_TRUE(ros::service::call(kNs + "program_history", history));
   ASSERT_EQ(history.response.versions.size(), 1u);
   EXPECT_EQ(history.response.versions[0].direction, "received");
+}
+
+// The operator asks at the control: a request file dropped in the share's requests/ folder, or a
+// DPRNT line LOAD O1234, makes share_node publish the program into the share; an unknown number is
+// answered with the reason; every request is published on program_requests.
+TEST_F(ShareNodeTest, RequestsFromTheControlArePublishedIntoTheShare)
+{
+  const std::string program = "%\nO01234 (REQUESTED)\nM30\n%\n";
+  writeFile(programs_ + "/O01234.nc", program);
+  writeFile(programs_ + "/O01235.nc", "%\nO01235 (BY DPRNT)\nM30\n%\n");
+  // Events are not queued for a subscriber that is not connected yet: wait for the connection.
+  for (int i = 0; i < 200 && requests_sub_.getNumPublishers() == 0; ++i)
+    ros::WallDuration(0.05).sleep();  // polling the connection count, not a wait for the event
+  ASSERT_GT(requests_sub_.getNumPublishers(), 0u);
+  const std::string requests = server_->folder("secure") + "/requests";
+  std::filesystem::create_directories(requests);
+  writeFile(requests + "/from_operator.nc", "%\nO00001 (LOAD O1234)\nM30\n%\n");
+  auto event = waitForRequest(0, 15);
+  ASSERT_TRUE(event);
+  EXPECT_TRUE(event->success) << event->outcome;
+  EXPECT_EQ(event->request, "LOAD");
+  EXPECT_EQ(event->number, 1234u);
+  EXPECT_EQ(event->program, "O01234.nc");
+  EXPECT_EQ(event->source, "share requests/from_operator.nc");
+  EXPECT_EQ(readFile(server_->folder("secure") + "/O01234.nc"), program);
+  EXPECT_FALSE(test::exists(requests + "/from_operator.nc"));  // served once
+
+  writeFile(requests + "/unknown.nc", "%\nO00001 (SEND O4444)\n%\n");
+  event = waitForRequest(1, 15);
+  ASSERT_TRUE(event);
+  EXPECT_FALSE(event->success);
+  EXPECT_NE(event->outcome.find("no O04444.nc"), std::string::npos) << event->outcome;
+  EXPECT_FALSE(test::exists(server_->folder("secure") + "/O04444.nc"));
+
+  ros::Publisher dprnt = nh_.advertise<DprntLine>("/cell/lathe/dprnt/raw", 10);
+  DprntLine line;
+  line.text = "LOAD O1235";
+  // Published until the node has subscribed (a latched topic would replay old lines).
+  std::optional<ProgramRequestEvent> by_dprnt;
+  for (int i = 0; i < 50 && !by_dprnt; ++i)
+  {
+    dprnt.publish(line);
+    by_dprnt = waitForRequest(2, 0.2);
+  }
+  ASSERT_TRUE(by_dprnt);
+  EXPECT_TRUE(by_dprnt->success) << by_dprnt->outcome;
+  EXPECT_EQ(by_dprnt->source, "dprnt");
+  EXPECT_TRUE(test::exists(server_->folder("secure") + "/O01235.nc"));
 }
 
 TEST_F(ShareNodeTest, LinkDownWhenTheServerStopsAndUpWhenItReturns)

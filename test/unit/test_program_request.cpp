@@ -1,0 +1,41 @@
+// Program requests as an operator types them at a control, and the answer program.
+#include <gtest/gtest.h>
+
+#include "cnc_bridge/programs/program_name.h"
+#include "cnc_bridge/programs/program_request.h"
+
+using namespace cnc_bridge::programs;
+
+TEST(ProgramRequest, RecognisedInAPunchedProgramOrADprntLine)
+{
+  auto r = recogniseRequest("%\nO00001 (LOAD O1234)\nM30\n%\n");
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->kind, ProgramRequest::Kind::kLoad);
+  EXPECT_EQ(r->number, 1234u);
+  r = recogniseRequest("%\n:0002\n( send o01234 )\n%");
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->word, "SEND");
+  EXPECT_EQ(r->number, 1234u);
+  r = recogniseRequest("%\nO0003 (SAVE 5555)\n%\n");
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->kind, ProgramRequest::Kind::kSave);
+  EXPECT_EQ(r->number, 5555u);
+  // The first comment that is a request counts; other comments are passed over.
+  r = recogniseRequest("%\nO0004 (OPERATOR SHIFT 2)\n(LOAD O77)\n%\n");
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->number, 77u);
+  EXPECT_FALSE(recogniseRequest("LOAD O1234"));  // a bare line only on a DPRNT stream
+  r = recogniseRequest("LOAD O1234\r\n", true);
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->number, 1234u);
+  for (const char* not_one :
+       {"(LOADO1234)", "(LOAD)", "(LOAD O12X)", "(RELOAD O1)", "(LOAD O1234", "(UNLOAD 5)", "(LOAD O123456789)", ""})
+    EXPECT_FALSE(recogniseRequest(not_one, true)) << not_one;
+}
+
+TEST(ProgramRequest, TheAnswerSaysWhyInCharactersTheControlShows)
+{
+  const std::string answer = answerProgram(1234, "LOAD", "no O01234.nc in /srv/programs (ask the office)");
+  EXPECT_EQ(answer, "%\nO01234 (CANNOT LOAD O01234: NO O01234.NC IN /SRV/PROGRAMS  ASK THE OFFICE )\nM30\n%\n");
+  EXPECT_EQ(readHeader(answer).number, 1234u);
+}
