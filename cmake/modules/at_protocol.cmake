@@ -25,6 +25,10 @@ cnc_tool(at_stream_bench bench/at_controller/at_stream_bench.cpp)
 cnc_tool(cnc_plan src/cli/cnc_plan.cpp)
 target_link_libraries(cnc_plan cnc_bridge_at_protocol)
 target_compile_definitions(cnc_plan PRIVATE CNC_PLAN_PLOT_SCRIPT="${PROJECT_SOURCE_DIR}/scripts/plot_plan.py")
+if(NOT CNC_BRIDGE_CORE_ONLY)
+  # Installed beside cnc_plan, which looks for it there first (then in the source tree).
+  install(PROGRAMS scripts/plot_plan.py DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
+endif()
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   # cnc_plan's setpoints against the node's planning path (appendProgram, Trajectory, TrajectoryStream).
   cnc_core_gtest(test_cnc_plan test/unit/test_cnc_plan.cpp)

@@ -10,7 +10,9 @@
 //            [--csv FILE] [--png FILE]
 // Units: mm, mm/s, mm/s^2, mm/s^3, s (the node's parameters are the same numbers in metres).
 // A point list has one point a line, "x y z [feed]" in mm (feed in mm/s for the segment to it).
+#include <unistd.h>
 #include <array>
+
 #include <boost/program_options.hpp>
 #include <chrono>
 #include <cmath>
@@ -69,6 +71,23 @@ void readPoints(const std::string& path, double fallback_feed, ap::PathPlan& pla
     plan.points.push_back({x * ap::kPulsesPerMm, y * ap::kPulsesPerMm, z * ap::kPulsesPerMm});
     plan.feeds.push_back(feed);
   }
+}
+
+// scripts/plot_plan.py: installed beside this program, or in the source tree of a build.
+std::string plotScript()
+{
+  char self[4096];
+  const ssize_t n = ::readlink("/proc/self/exe", self, sizeof(self) - 1);
+  if (n > 0)
+  {
+    std::string dir(self, static_cast<size_t>(n));
+    dir.resize(dir.rfind('/') + 1);
+    if (std::ifstream(dir + "plot_plan.py").good())
+    {
+      return dir + "plot_plan.py";
+    }
+  }
+  return CNC_PLAN_PLOT_SCRIPT;
 }
 
 struct Limits
@@ -241,7 +260,7 @@ int run(int argc, char** argv)
       throw ConfigError("--png needs --csv (the plot is drawn from it)");
     }
     std::ostringstream command;
-    command << "/usr/bin/python3 '" << CNC_PLAN_PLOT_SCRIPT << "' '" << vm["csv"].as<std::string>() << "' '"
+    command << "/usr/bin/python3 '" << plotScript() << "' '" << vm["csv"].as<std::string>() << "' '"
             << vm["png"].as<std::string>() << "' " << limits.max_speed[0] << ',' << limits.max_speed[1] << ','
             << limits.max_speed[2] << ' ' << limits.max_accel[0] << ',' << limits.max_accel[1] << ','
             << limits.max_accel[2] << ' ' << limits.max_jerk[0] << ',' << limits.max_jerk[1] << ','
