@@ -10,8 +10,10 @@
 #include <std_srvs/Trigger.h>
 
 #include <cmath>
+#include <condition_variable>
 #include <fstream>
 #include <memory>
+#include <optional>
 
 #include "cnc_bridge/AtFollowPathAction.h"
 #include "cnc_bridge/AtJog.h"
@@ -24,6 +26,7 @@
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/program_dir.h"
 #include "cnc_bridge/gcode/gcode.h"
+#include "cnc_bridge/gcode/program_steps.h"
 #include "cnc_bridge/ros/gcode_params.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/node_main.h"
@@ -152,6 +155,7 @@ class AtControllerNode
     coolant_srv_ = pnh.advertiseService("coolant", &AtControllerNode::coolant, this);
     tool_srv_ = pnh.advertiseService("tool_change", &AtControllerNode::toolChange, this);
     home_srv_ = pnh.advertiseService("home", &AtControllerNode::home, this);
+    resume_srv_ = pnh.advertiseService("resume", &AtControllerNode::resume, this);
     follow_path_.start();
   }
 
@@ -572,12 +576,27 @@ class AtControllerNode
 
   // ---- follow_path --------------------------------------------------------------------------------
 
-  using Plan = ap::PathPlan;  // pulses, mm/s per segment; the same path cnc_plan dry-runs
-
-  /// The goal as points in pulses starting at the reported position. \throws Error with the reason.
-  Plan planFromGoal(const AtFollowPathGoal& goal, const std::array<int32_t, 3>& start)
+  /// One operation (M1@ ... M0@) of a goal, and the program's own step that follows it.
+  struct Plan
   {
-    Plan plan;
+    std::vector<ap::Vec3> points;  // pulses, from where the previous operation ends
+    std::vector<double> feeds;     // mm/s per segment
+    bool coolant = false;
+    double spindle_rpm = 0.0;
+    int32_t tool = -1;                        // tool change before the moves (T@), -1: none
+    bool cuts = false;                        // has a feed move (not only positioning rapids)
+    std::optional<gcode::ProgramStep> after;  // stop, optional stop, dwell or end after the moves
+  };
+
+  /// The goal as operations of points in pulses, the first starting at the reported position: one
+  /// for a path; for a program, one per stretch of moves between the program's own steps (M00,
+  /// M01, G04, M02/M30, and, with ~program_commands, spindle, coolant and tool changes, which
+  /// the next operation's P@, T@ and S@ carry in the order of the protocol's steps).
+  /// \throws Error with the reason.
+  std::vector<Plan> planFromGoal(const AtFollowPathGoal& goal, const std::array<int32_t, 3>& start)
+  {
+    std::vector<Plan> plans(1);
+    Plan& plan = plans.front();
     plan.points.push_back({double(start[0]), double(start[1]), double(start[2])});
     plan.coolant =
         goal.coolant == AtFollowPathGoal::COOLANT_ON || (goal.coolant == AtFollowPathGoal::COOLANT_DEFAULT && coolant_);
@@ -600,20 +619,7 @@ class AtControllerNode
       {
         throw ConfigError("cannot read " + file);
       }
-      ap::PathPlan program;
-      program.points = plan.points;
-      ap::appendProgram(in, gcode_options_, goal_feed, fallback_feed, program);
-      plan.points = std::move(program.points);
-      plan.feeds = std::move(program.feeds);
-      const bool coolant_in_program = program.coolant;
-      if (program.spindle_rpm > 0.0)
-      {
-        plan.spindle_rpm = program.spindle_rpm;
-      }
-      if (goal.coolant == AtFollowPathGoal::COOLANT_DEFAULT && coolant_in_program)
-      {
-        plan.coolant = true;
-      }
+      planProgram(in, goal, fallback_feed, goal_feed, plans);
     }
     else
     {
@@ -635,29 +641,151 @@ class AtControllerNode
         plan.feeds.push_back(fallback_feed);
       }
     }
-    ap::roundToPulses(plan);
-    if (goal.spindle_speed > 0.0)
+    for (Plan& each : plans)
     {
-      plan.spindle_rpm = goal.spindle_speed;
+      for (auto& point : each.points)
+      {
+        for (double& c : point)
+        {
+          if (!(std::fabs(c) < 2.0e9))
+          {
+            throw ConfigError("a path point is outside the protocol's range (+-2147 m)");
+          }
+          c = std::round(c);  // whole pulses: the end point is exact
+        }
+      }
+      if (goal.spindle_speed > 0.0)
+      {
+        each.spindle_rpm = goal.spindle_speed;
+      }
+      if (goal.coolant != AtFollowPathGoal::COOLANT_DEFAULT)
+      {
+        each.coolant = goal.coolant == AtFollowPathGoal::COOLANT_ON;
+      }
     }
-    return plan;
+    if (goal.tool >= 0)
+    {
+      plans.front().tool = goal.tool;
+    }
+    return plans;
   }
 
-  /// Publishes the planned corners (pulses) as job/path in <tf_prefix>machine, metres.
-  void publishPlannedPath(const Plan& plan)
+  /// Splits a program into operations at its own steps (see planFromGoal). The first plan holds
+  /// the start point already.
+  void planProgram(std::istream& in, const AtFollowPathGoal& goal, double fallback_feed, double goal_feed,
+                   std::vector<Plan>& plans)
+  {
+    using Kind = gcode::ProgramStep::Kind;
+    const bool program_commands = pnh_.param("program_commands", false);
+    gcode::ProgramSteps steps(in, gcode_options_);
+    gcode::ProgramStep step;
+    bool coolant = plans.back().coolant;
+    double spindle_rpm = 0.0;
+    int32_t tool = -1;
+    // Starts a new operation where the last one ends, with the modal values now in force.
+    const auto next_operation = [&](std::optional<gcode::ProgramStep> after)
+    {
+      Plan& last = plans.back();
+      last.after = std::move(after);
+      Plan fresh;
+      fresh.points.push_back(last.points.back());
+      fresh.coolant = coolant;
+      fresh.spindle_rpm = spindle_rpm;
+      plans.push_back(std::move(fresh));
+    };
+    while (steps.next(step))
+    {
+      if (step.isMachineCommand() && !program_commands)
+      {
+        throw ConfigError("program refused: line " + std::to_string(step.line) + ": " + step.describe() +
+                          " commands the machine; set " + pnh_.resolveName("program_commands") +
+                          " true to send the program's spindle, coolant and tool commands to the controller "
+                          "(S@, P1@/P0@, T@), or take them out of the program");
+      }
+      switch (step.kind)
+      {
+        case Kind::kMove:
+        {
+          const gcode::Move& move = step.move;
+          // Program millimetres are machine millimetres: 1000 pulses each.
+          plans.back().points.push_back(
+              {move.end.x * ap::kPulsesPerMm, move.end.y * ap::kPulsesPerMm, move.end.z * ap::kPulsesPerMm});
+          double feed = fallback_feed;
+          if (move.motion == gcode::Motion::kRapid)
+          {
+            feed = 1e9;  // as fast as the axes allow
+          }
+          else if (goal_feed <= 0.0 && move.feed_mm_per_min > 0.0)
+          {
+            feed = move.feed_mm_per_min / 60.0;
+          }
+          plans.back().feeds.push_back(feed);
+          plans.back().cuts = plans.back().cuts || move.motion != gcode::Motion::kRapid;
+          break;
+        }
+        case Kind::kSpindle:
+          if (step.spindle == gcode::Spindle::kCounterClockwise)
+          {
+            throw ConfigError("program refused: line " + std::to_string(step.line) + ": " + step.describe() +
+                              ": the controller turns the spindle clockwise only");
+          }
+          spindle_rpm = step.spindle == gcode::Spindle::kClockwise ? step.spindle_rpm : 0.0;
+          break;
+        case Kind::kCoolant:
+          coolant = step.coolant;
+          break;
+        case Kind::kToolChange:
+          tool = step.tool;
+          break;
+        default:  // stop, optional stop, dwell, end: the operation ends here
+          next_operation(step);
+          if (step.kind == Kind::kEnd)
+          {
+            plans.pop_back();
+            return;
+          }
+          continue;
+      }
+      if (step.kind != Kind::kMove)
+      {
+        // A new spindle, coolant or tool value: the next moves are a new operation with it (the
+        // protocol sets them only at an operation's start, P@ T@ S@ before the setpoints). Before
+        // the operation's first cut (after positioning rapids only) it applies to that operation.
+        Plan& last = plans.back();
+        if (last.cuts)
+        {
+          next_operation(std::nullopt);
+        }
+        plans.back().coolant = coolant;
+        plans.back().spindle_rpm = spindle_rpm;
+        if (step.kind == Kind::kToolChange)
+        {
+          plans.back().tool = tool;
+        }
+      }
+    }
+    (void)goal;
+  }
+
+  /// Publishes the planned corners (pulses) of every operation as job/path in <tf_prefix>machine, metres.
+  void publishPlannedPath(const std::vector<Plan>& plans)
   {
     nav_msgs::Path path;
     path.header.stamp = ros::Time::now();
     path.header.frame_id = state_->frame("machine");
-    path.poses.resize(plan.points.size());
-    for (size_t i = 0; i < plan.points.size(); ++i)
+    for (size_t p = 0; p < plans.size(); ++p)
     {
-      auto& pose = path.poses[i];
-      pose.header = path.header;
-      pose.pose.position.x = plan.points[i][0] / ap::kPulsesPerMetre;
-      pose.pose.position.y = plan.points[i][1] / ap::kPulsesPerMetre;
-      pose.pose.position.z = plan.points[i][2] / ap::kPulsesPerMetre;
-      pose.pose.orientation.w = 1.0;
+      // Each operation starts where the one before ended: that corner once.
+      for (size_t i = p == 0 ? 0 : 1; i < plans[p].points.size(); ++i)
+      {
+        geometry_msgs::PoseStamped pose;
+        pose.header = path.header;
+        pose.pose.position.x = plans[p].points[i][0] / ap::kPulsesPerMetre;
+        pose.pose.position.y = plans[p].points[i][1] / ap::kPulsesPerMetre;
+        pose.pose.position.z = plans[p].points[i][2] / ap::kPulsesPerMetre;
+        pose.pose.orientation.w = 1.0;
+        path.poses.push_back(pose);
+      }
     }
     path_pub_.publish(path);
   }
@@ -699,126 +827,54 @@ class AtControllerNode
     {
       return abort("the controller has not reported its position yet (is the report link up?)");
     }
-    std::shared_ptr<ap::Job> job;
     try
     {
-      Plan plan = planFromGoal(*goal, start);
-      ap::Operation operation;
-      operation.coolant = plan.coolant;
-      if (goal->tool >= 0)
+      const std::vector<Plan> plans = planFromGoal(*goal, start);
+      publishPlannedPath(plans);  // before motion: the path is known once the goal is accepted
+      AtFollowPathFeedback feedback;
+      std::string end_note;
+      for (const Plan& plan : plans)
       {
-        operation.tool = ap::ToolChange{goal->tool, static_cast<int>(std::lround(goal->tool_length * 1000.0))};
-      }
-      if (plan.spindle_rpm > 0.0)
-      {
-        const long value = std::lround(plan.spindle_rpm / spindle_max_rpm_ * ap::kMaxFeed);
-        if (value > ap::kMaxFeed)
+        if (plan.points.size() > 1)
         {
-          throw ConfigError("spindle speed " + std::to_string(plan.spindle_rpm) + " rev/min is above ~spindle_max_rpm");
-        }
-        operation.spindle = static_cast<int>(value);
-      }
-      operation.trajectory = std::make_shared<ap::Trajectory>(plan.points, plan.feeds, limits_);
-      ROS_INFO_STREAM("at_controller_node: follow_path: " << plan.points.size() - 1 << " segments, "
-                                                          << operation.trajectory->length() / ap::kPulsesPerMm
-                                                          << " mm in " << operation.trajectory->duration() << " s ("
-                                                          << operation.trajectory->steps() << " setpoints)");
-      publishPlannedPath(plan);  // before motion: the path is known once the goal is accepted
-      const uint64_t underruns_before = sender_->stats().underruns;
-      job = sender_->start(operation);
-      const uint64_t planned_setpoints = operation.trajectory->steps();
-      {
-        std::lock_guard<std::mutex> lock(job_mutex_);
-        running_job_ = job;
-        disabled_by_.clear();
-      }
-      if (!motion_->enabled())
-      {
-        // Disabled between the check above and the start: stop at once.
-        std::lock_guard<std::mutex> lock(job_mutex_);
-        disabled_by_ = "a call while the goal started";
-        job->cancel();
-      }
-      state_->update(
-          [&](MachineState& s)
+          refusal = motionRefusal("follow_path");
+          if (!refusal.empty())
           {
-            s.execution = MachineState::EXECUTION_ACTIVE;
-            s.mode = MachineState::MODE_DNC;
-            s.coolant = operation.coolant ? MachineState::COOLANT_ON : MachineState::COOLANT_OFF;
-            s.program = has(goal->gcode_file) ? goal->gcode_file : "nav_msgs/Path";
-            if (operation.tool)
-            {
-              s.tool = operation.tool->tool;
-            }
-            if (operation.spindle)
-            {
-              s.spindle_speed = *operation.spindle * spindle_max_rpm_ / ap::kMaxFeed;
-            }
-          });
-      bool cancelled = false;
-      ros::WallRate feedback_rate(10.0);
-      while (!job->waitFor(Milliseconds(100)))
-      {
-        if (!cancelled && (follow_path_.isPreemptRequested() || !ros::ok() || stopping_))
+            return abort(refusal + " (before the operation after " + feedback.event + ")");
+          }
+          if (!runOperation(*goal, plan, result, feedback))
+          {
+            return;  // cancelled, disabled or failed: the goal has ended
+          }
+        }
+        if (plan.after)
         {
-          job->cancel();
-          cancelled = true;
-        }
-        publishFeedback(*job, cancelled);
-      }
-      publishFeedback(*job, cancelled);
-      std::string disabled_by;
-      {
-        std::lock_guard<std::mutex> lock(job_mutex_);
-        running_job_.reset();
-        disabled_by.swap(disabled_by_);
-      }
-      result.setpoints = job->sent();
-      result.underruns = static_cast<uint32_t>(sender_->stats().underruns - underruns_before);
-      bool ignored;
-      result.final_position = toPoint(reported(ignored));
-      result.message = job->message();
-      const bool stopped_by_disable = !disabled_by.empty() && job->state() == ap::Job::State::kCancelled;
-      if (stopped_by_disable)
-      {
-        result.message = "motion disabled by " + disabled_by + " (" + pnh_.resolveName("set_motion_enabled") +
-                         "): decelerated to a stop along the path after " + std::to_string(job->sent()) + " of " +
-                         std::to_string(planned_setpoints) + " planned setpoints and holds there; enable motion " +
-                         "and send the rest of the path as a new goal";
-      }
-      state_->update(
-          [&](MachineState& s)
+          if (plan.after->kind == gcode::ProgramStep::Kind::kEnd)
           {
-            s.execution = estop_ == MachineState::ESTOP_ON             ? MachineState::EXECUTION_ALARM
-                          : job->state() == ap::Job::State::kSucceeded ? MachineState::EXECUTION_READY
-                                                                       : MachineState::EXECUTION_STOPPED;
-            s.mode = jog_axis_ >= 0 ? MachineState::MODE_MANUAL : MachineState::MODE_AUTO;
-            s.coolant = MachineState::COOLANT_OFF;  // #@ ends the operation's coolant
-            s.spindle_speed = 0.0;                  // M0@ stops the spindle (step 18)
-            s.message = stopped_by_disable
-                            ? result.message
-                            : "follow_path " + std::string(ap::Job::toString(job->state())) + ": " + job->message();
-          });
-      if (stopped_by_disable)
-      {
-        ROS_WARN_STREAM("at_controller_node: follow_path: " << result.message);
-        follow_path_.setAborted(result, result.message);
-        return;
+            end_note = plan.after->describe() + ": the program ends here; nothing after it was sent";
+            break;
+          }
+          if (!carryOut(*plan.after, feedback))
+          {
+            result.message = "cancelled at the " + plan.after->describe();
+            state_->update(
+                [&](MachineState& s)
+                {
+                  s.execution = MachineState::EXECUTION_STOPPED;
+                  s.message = result.message;
+                });
+            follow_path_.setPreempted(result, result.message);
+            return;
+          }
+        }
       }
-      switch (job->state())
+      result.success = true;
+      if (!end_note.empty())
       {
-        case ap::Job::State::kSucceeded:
-          result.success = true;
-          follow_path_.setSucceeded(result, result.message);
-          break;
-        case ap::Job::State::kCancelled:
-          follow_path_.setPreempted(result, result.message);
-          break;
-        default:
-          ROS_WARN_STREAM("at_controller_node: follow_path: " << result.message);
-          follow_path_.setAborted(result, result.message);
-          break;
+        result.message = end_note;
+        state_->update([&](MachineState& s) { s.message = "follow_path: " + end_note; });
       }
+      follow_path_.setSucceeded(result, result.message);
     }
     catch (const std::exception& e)
     {
@@ -826,11 +882,221 @@ class AtControllerNode
     }
   }
 
+  /// Runs one operation to its end. \returns true if it succeeded (the goal goes on); otherwise
+  /// the goal has been ended (cancelled, disabled, e-stop, link failure).
+  bool runOperation(const AtFollowPathGoal& goal_msg, const Plan& plan, AtFollowPathResult& result,
+                    AtFollowPathFeedback& feedback)
+  {
+    const AtFollowPathGoal* goal = &goal_msg;
+    ap::Operation operation;
+    operation.coolant = plan.coolant;
+    if (plan.tool >= 0)
+    {
+      // The goal's tool length goes with its own tool; a program's tool change carries none.
+      const double length = plan.tool == goal->tool ? goal->tool_length : 0.0;
+      operation.tool = ap::ToolChange{plan.tool, static_cast<int>(std::lround(length * 1000.0))};
+    }
+    if (plan.spindle_rpm > 0.0)
+    {
+      const long value = std::lround(plan.spindle_rpm / spindle_max_rpm_ * ap::kMaxFeed);
+      if (value > ap::kMaxFeed)
+      {
+        throw ConfigError("spindle speed " + std::to_string(plan.spindle_rpm) + " rev/min is above ~spindle_max_rpm");
+      }
+      operation.spindle = static_cast<int>(value);
+    }
+    operation.trajectory = std::make_shared<ap::Trajectory>(plan.points, plan.feeds, limits_);
+    ROS_INFO_STREAM("at_controller_node: follow_path: " << plan.points.size() - 1 << " segments, "
+                                                        << operation.trajectory->length() / ap::kPulsesPerMm
+                                                        << " mm in " << operation.trajectory->duration() << " s ("
+                                                        << operation.trajectory->steps() << " setpoints)");
+    const uint64_t underruns_before = sender_->stats().underruns;
+    const std::shared_ptr<ap::Job> job = sender_->start(operation);
+    const uint64_t planned_setpoints = operation.trajectory->steps();
+    {
+      std::lock_guard<std::mutex> lock(job_mutex_);
+      running_job_ = job;
+      disabled_by_.clear();
+    }
+    if (!motion_->enabled())
+    {
+      // Disabled between the check above and the start: stop at once.
+      std::lock_guard<std::mutex> lock(job_mutex_);
+      disabled_by_ = "a call while the goal started";
+      job->cancel();
+    }
+    state_->update(
+        [&](MachineState& s)
+        {
+          s.execution = MachineState::EXECUTION_ACTIVE;
+          s.mode = MachineState::MODE_DNC;
+          s.coolant = operation.coolant ? MachineState::COOLANT_ON : MachineState::COOLANT_OFF;
+          s.program = has(goal->gcode_file) ? goal->gcode_file : "nav_msgs/Path";
+          if (operation.tool)
+          {
+            s.tool = operation.tool->tool;
+          }
+          if (operation.spindle)
+          {
+            s.spindle_speed = *operation.spindle * spindle_max_rpm_ / ap::kMaxFeed;
+          }
+        });
+    bool cancelled = false;
+    ros::WallRate feedback_rate(10.0);
+    while (!job->waitFor(Milliseconds(100)))
+    {
+      if (!cancelled && (follow_path_.isPreemptRequested() || !ros::ok() || stopping_))
+      {
+        job->cancel();
+        cancelled = true;
+      }
+      publishFeedback(*job, cancelled, feedback);
+    }
+    publishFeedback(*job, cancelled, feedback);
+    std::string disabled_by;
+    {
+      std::lock_guard<std::mutex> lock(job_mutex_);
+      running_job_.reset();
+      disabled_by.swap(disabled_by_);
+    }
+    result.setpoints += job->sent();
+    result.underruns += static_cast<uint32_t>(sender_->stats().underruns - underruns_before);
+    bool ignored;
+    result.final_position = toPoint(reported(ignored));
+    result.message = job->message();
+    const bool stopped_by_disable = !disabled_by.empty() && job->state() == ap::Job::State::kCancelled;
+    if (stopped_by_disable)
+    {
+      result.message = "motion disabled by " + disabled_by + " (" + pnh_.resolveName("set_motion_enabled") +
+                       "): decelerated to a stop along the path after " + std::to_string(job->sent()) + " of " +
+                       std::to_string(planned_setpoints) + " planned setpoints and holds there; enable motion " +
+                       "and send the rest of the path as a new goal";
+    }
+    state_->update(
+        [&](MachineState& s)
+        {
+          s.execution = estop_ == MachineState::ESTOP_ON             ? MachineState::EXECUTION_ALARM
+                        : job->state() == ap::Job::State::kSucceeded ? MachineState::EXECUTION_READY
+                                                                     : MachineState::EXECUTION_STOPPED;
+          s.mode = jog_axis_ >= 0 ? MachineState::MODE_MANUAL : MachineState::MODE_AUTO;
+          s.coolant = MachineState::COOLANT_OFF;  // #@ ends the operation's coolant
+          s.spindle_speed = 0.0;                  // M0@ stops the spindle (step 18)
+          s.message = stopped_by_disable
+                          ? result.message
+                          : "follow_path " + std::string(ap::Job::toString(job->state())) + ": " + job->message();
+        });
+    if (stopped_by_disable)
+    {
+      ROS_WARN_STREAM("at_controller_node: follow_path: " << result.message);
+      follow_path_.setAborted(result, result.message);
+      return false;
+    }
+    switch (job->state())
+    {
+      case ap::Job::State::kSucceeded:
+        return true;
+      case ap::Job::State::kCancelled:
+        follow_path_.setPreempted(result, result.message);
+        return false;
+      default:
+        ROS_WARN_STREAM("at_controller_node: follow_path: " << result.message);
+        follow_path_.setAborted(result, result.message);
+        return false;
+    }
+  }
+
+  /// Carries out the program's stop, optional stop or dwell between two operations.
+  /// \returns false if the goal was cancelled meanwhile.
+  bool carryOut(const gcode::ProgramStep& step, AtFollowPathFeedback& feedback)
+  {
+    using Kind = gcode::ProgramStep::Kind;
+    feedback.event = step.describe();
+    feedback.paused = false;
+    if (step.kind == Kind::kDwell)
+    {
+      state_->update([&](MachineState& s) { s.message = step.describe(); });
+      follow_path_.publishFeedback(feedback);
+      return waitWhileRunning(std::chrono::duration<double>(step.dwell_s), false);
+    }
+    // Read at each M01, as an operator flips the control's OPT STOP switch during a job.
+    if (step.kind == Kind::kOptionalStop && !pnh_.param("optional_stop", true))
+    {
+      feedback.event += " passed (" + pnh_.resolveName("optional_stop") + " false)";
+      follow_path_.publishFeedback(feedback);
+      return true;
+    }
+    feedback.event += ": waiting for " + pnh_.resolveName("resume");
+    feedback.paused = true;
+    {
+      std::lock_guard<std::mutex> lock(job_mutex_);
+      program_stop_ = step.describe();
+      resume_requested_ = false;
+    }
+    state_->update(
+        [&](MachineState& s)
+        {
+          s.execution = MachineState::EXECUTION_PAUSED;
+          s.block = step.line;
+          s.message = feedback.event;
+        });
+    ROS_INFO_STREAM("at_controller_node: follow_path: " << feedback.event);
+    follow_path_.publishFeedback(feedback);
+    const bool resumed = waitWhileRunning(std::chrono::hours(24 * 365), true);
+    {
+      std::lock_guard<std::mutex> lock(job_mutex_);
+      program_stop_.clear();
+    }
+    feedback.paused = false;
+    return resumed;
+  }
+
+  /// Waits for \p time, or (\p until_resume) for ~resume; false if the goal is cancelled first.
+  bool waitWhileRunning(std::chrono::duration<double> time, bool until_resume)
+  {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration_cast<Milliseconds>(time);
+    std::unique_lock<std::mutex> lock(job_mutex_);
+    for (;;)
+    {
+      if (until_resume && resume_requested_)
+      {
+        return true;
+      }
+      if (std::chrono::steady_clock::now() >= deadline)
+      {
+        return !until_resume;
+      }
+      lock.unlock();
+      if (follow_path_.isPreemptRequested() || !ros::ok() || stopping_)
+      {
+        return false;
+      }
+      lock.lock();
+      // A cancel comes without a notification here: look again at least every 20 ms.
+      job_cv_.wait_until(lock, std::min(deadline, std::chrono::steady_clock::now() + Milliseconds(20)));
+    }
+  }
+
+  /// ~resume: a goal held at the program's M00/M01 goes on.
+  bool resume(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res)
+  {
+    std::lock_guard<std::mutex> lock(job_mutex_);
+    if (program_stop_.empty())
+    {
+      res.success = false;
+      res.message = "nothing to resume: no follow_path goal is held at a program stop (M00/M01)";
+      return true;
+    }
+    resume_requested_ = true;
+    res.success = true;
+    res.message = "resumed after the " + program_stop_;
+    job_cv_.notify_all();
+    return true;
+  }
+
   static bool has(const std::string& text) { return !text.empty(); }
 
-  void publishFeedback(const ap::Job& job, bool stopping)
+  void publishFeedback(const ap::Job& job, bool stopping, AtFollowPathFeedback& feedback)
   {
-    AtFollowPathFeedback feedback;
     feedback.setpoint = job.sent();
     feedback.setpoints_total = job.total();
     feedback.progress =
@@ -898,7 +1164,10 @@ class AtControllerNode
   std::string report_mode_;
   Milliseconds connect_timeout_{2000};
   std::unique_ptr<RuntimeSwitch> motion_;
-  std::mutex job_mutex_;  // guards running_job_, disabled_by_
+  std::mutex job_mutex_;            // guards running_job_, disabled_by_, program_stop_, resume_requested_
+  std::condition_variable job_cv_;  // ~resume
+  std::string program_stop_;        // the M00/M01 a goal is held at ("" when none)
+  bool resume_requested_ = false;
   std::shared_ptr<ap::Job> running_job_;
   std::string disabled_by_;  // who disabled motion while running_job_ ran
   std::unique_ptr<ProgramDirectory> program_dir_;
@@ -934,7 +1203,7 @@ class AtControllerNode
   uint64_t underruns_seen_ = 0;
 
   SingleGoalActionServer<AtFollowPathAction> follow_path_;
-  ros::ServiceServer set_auto_srv_, jog_srv_, spindle_srv_, coolant_srv_, tool_srv_, home_srv_;
+  ros::ServiceServer set_auto_srv_, jog_srv_, spindle_srv_, coolant_srv_, tool_srv_, home_srv_, resume_srv_;
   ros::Publisher path_pub_;
 };
 }  // namespace cnc_bridge

@@ -5,9 +5,11 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <cctype>
+#include <condition_variable>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -116,7 +118,14 @@ TEST_F(AtController, FollowsAGcodeProgramToItsEndPoint)
                     const double e = std::hypot(f->following_error.x, f->following_error.y, f->following_error.z);
                     worst_error = std::max(worst_error.load(), e);
                   });
-  ASSERT_TRUE(state.waitFor([](const auto& s) { return s.execution == cnc_bridge::MachineState::EXECUTION_ACTIVE; }));
+  // The rapid to the start (before M08 and S12000 M03) is an operation of its own; the cut follows.
+  ASSERT_TRUE(state.waitFor(
+      [](const auto& s)
+      {
+        return s.execution == cnc_bridge::MachineState::EXECUTION_ACTIVE &&
+               s.coolant == cnc_bridge::MachineState::COOLANT_ON;
+      },
+      20.0));
   const auto running = state.last();
   EXPECT_EQ(running.coolant, cnc_bridge::MachineState::COOLANT_ON);  // M08 in the program: P1@
   EXPECT_NEAR(running.spindle_speed, 12000, 50);                     // S12000 M03 -> S128@ of 24000 rev/min
@@ -251,6 +260,117 @@ TEST_F(AtController, DisablingMotionMidPathStopsItAndTheControllerGetsNoMoreSetp
   client.sendGoal(lineGoal(start.x, start.y, start.z, 0.02, prefix + "machine"));
   ASSERT_TRUE(client.waitForResult(ros::Duration(20.0)));
   EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client.getState().getText();
+}
+
+// The program's own steps in a G-code goal (test/data/at_controller/program_stops.nc, with
+// ~program_commands): M00 and M01 hold the goal until ~resume with nothing sent meanwhile; every
+// operation carries the program's coolant and spindle in the protocol's order (M1@ P1@ S@ ...
+// #@ M0@); G04 waits; M30 ends the goal and the move after it is never sent.
+TEST_F(AtController, ProgramStopsHoldTheGoalUntilResumeAndM30EndsIt)
+{
+  CommandLog received{command_log};
+  const size_t mark = received.lines().size();
+  std::mutex m;
+  std::condition_variable cv;
+  std::vector<cnc_bridge::AtFollowPathFeedback> feedback;
+  // Waits for a feedback whose event is \p event (feedback and state are separate topics).
+  const auto event_arrived = [&](const std::string& event)
+  {
+    std::unique_lock<std::mutex> lock(m);
+    return cv.wait_for(lock, std::chrono::seconds(20),
+                       [&] { return !feedback.empty() && feedback.back().event == event; });
+  };
+  cnc_bridge::AtFollowPathGoal goal;
+  goal.gcode_file = "program_stops.nc";
+  goal.coolant = cnc_bridge::AtFollowPathGoal::COOLANT_DEFAULT;
+  goal.tool = -1;
+  client.sendGoal(goal, FollowPathClient::SimpleDoneCallback(), FollowPathClient::SimpleActiveCallback(),
+                  [&](const cnc_bridge::AtFollowPathFeedbackConstPtr& f)
+                  {
+                    {
+                      std::lock_guard<std::mutex> lock(m);
+                      feedback.push_back(*f);
+                    }
+                    cv.notify_all();
+                  });
+  const std::string resume = node + "/resume";
+  // M00 on line 7: the first operation ended (M0@) at X10 and nothing follows it.
+  const auto first = received.linesUntil(mark, "M0", 20.0);
+  ASSERT_FALSE(first.empty());
+  ASSERT_TRUE(state.waitFor([](const auto& s) { return s.execution == cnc_bridge::MachineState::EXECUTION_PAUSED; }));
+  ASSERT_TRUE(event_arrived("M00 program stop at line 7: waiting for " + resume));
+  {
+    std::lock_guard<std::mutex> lock(m);
+    EXPECT_TRUE(feedback.back().paused);
+  }
+  EXPECT_EQ(state.last().block, 7u);
+  // Protocol order: M1@, then P1@ (M08), then S64@ (S6000 of 24000 rev/min), then the setpoints.
+  ASSERT_GE(first.size(), 5u);
+  EXPECT_EQ(first[0], "M1");
+  EXPECT_EQ(first[1], "P1");
+  EXPECT_EQ(first[2], "S64");
+  EXPECT_EQ(first[first.size() - 2], "#");
+  EXPECT_TRUE(state.waitFor([](const auto& s) { return near(s.position, 0.010, 0.005, 0.002, 1.5e-6); }))
+      << state.last().position;
+  // Held: a measurement window in which the controller receives nothing.
+  ros::WallDuration(0.3).sleep();
+  EXPECT_EQ(received.lines().size(), mark + first.size());
+  EXPECT_FALSE(client.getState().isDone());
+  auto answer = call<std_srvs::Trigger>(resume);
+  EXPECT_TRUE(answer.success);
+  EXPECT_EQ(answer.message, "resumed after the M00 program stop at line 7");
+
+  // M01 on line 9 (~optional_stop true by default): held again after X15.
+  ASSERT_TRUE(state.waitFor(
+      [](const auto& s) { return s.execution == cnc_bridge::MachineState::EXECUTION_PAUSED && s.block == 9; }, 20.0));
+  ASSERT_TRUE(event_arrived("M01 optional stop at line 9: waiting for " + resume));
+  EXPECT_TRUE(state.waitFor([](const auto& s) { return near(s.position, 0.015, 0.005, 0.002, 1.5e-6); }));
+  EXPECT_TRUE(call<std_srvs::Trigger>(resume).success);
+
+  ASSERT_TRUE(client.waitForResult(ros::Duration(30.0)));
+  EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client.getState().getText();
+  EXPECT_EQ(client.getResult()->message,
+            "M30 program end at line 14: the program ends here; nothing after it was sent");
+  EXPECT_TRUE(state.waitFor([](const auto& s) { return near(s.position, 0.025, 0.005, 0.002, 1.5e-6); }))
+      << state.last().position;
+  // The controller's side: four operations (to X10, X15, X20, X25), each with its P1@ and S64@;
+  // nothing for G01 X99 after M30.
+  const auto all = received.lines();
+  const std::vector<std::string> since(all.begin() + static_cast<long>(mark), all.end());
+  EXPECT_EQ(std::count(since.begin(), since.end(), "M1"), 4);
+  EXPECT_EQ(std::count(since.begin(), since.end(), "P1"), 4);
+  EXPECT_EQ(std::count(since.begin(), since.end(), "S64"), 4);
+  EXPECT_EQ(std::count(since.begin(), since.end(), "M0"), 4);
+  EXPECT_EQ(since.back(), "M0");
+  // The dwell was announced.
+  std::lock_guard<std::mutex> lock(m);
+  EXPECT_TRUE(std::any_of(feedback.begin(), feedback.end(),
+                          [](const auto& f) { return f.event == "G04 dwell of 0.300 s at line 11"; }));
+}
+
+// Without ~program_commands a program that commands the spindle, coolant or tool is refused
+// before anything is sent, naming the line and the parameter.
+TEST_F(AtController, AProgramWithMachineCommandsIsRefusedWithoutProgramCommands)
+{
+  CommandLog received{command_log};
+  ros::param::set(node + "/program_commands", false);
+  const size_t mark = received.lines().size();
+  cnc_bridge::AtFollowPathGoal goal;
+  goal.gcode_file = "square.nc";
+  goal.coolant = cnc_bridge::AtFollowPathGoal::COOLANT_DEFAULT;
+  goal.tool = -1;
+  client.sendGoal(goal);
+  ASSERT_TRUE(client.waitForResult(ros::Duration(10.0)));
+  ros::param::set(node + "/program_commands", true);
+  EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::ABORTED);
+  const std::string text = client.getResult()->message;
+  EXPECT_NE(text.find("program refused: line 7: coolant on (M07/M08) at line 7 commands the machine; set " + node +
+                      "/program_commands true"),
+            std::string::npos)
+      << text;
+  // A later command is the barrier: nothing of the refused program reached the controller before it.
+  EXPECT_TRUE(call<std_srvs::Trigger>(node + "/set_auto").success);
+  EXPECT_EQ(received.linesUntil(mark, "A"), std::vector<std::string>{"A"});
 }
 
 TEST_F(AtController, EmergencyStopMidPathStopsMotionAndAbortsWithTheReason)
