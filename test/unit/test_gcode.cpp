@@ -637,6 +637,33 @@ TEST(GcodeCam, SubprogramsM98AndM97WithRepeatsAndADepthLimit)
   EXPECT_NE(parseError("M98 P1\nM30\nO1\nG1 X1 F1\n").reason().find("end it with M99"), std::string::npos);
 }
 
+TEST(GcodeCam, SubprogramsNeedAStreamThatCanBeReadAgain)
+{
+  // A pipe cannot seek: M98 is refused with its line and column, the moves before it were read.
+  struct Pipe : std::stringbuf
+  {
+    using std::stringbuf::stringbuf;
+    pos_type seekoff(off_type, std::ios_base::seekdir, std::ios_base::openmode) override { return pos_type(-1); }
+    pos_type seekpos(pos_type, std::ios_base::openmode) override { return pos_type(-1); }
+  } pipe("G1 X1 F10\nM98 P1\nM30\nO1\nG1 X2\nM99\n");
+  std::istream in(&pipe);
+  Reader reader(in);
+  Move move;
+  ASSERT_TRUE(reader.nextMove(move));
+  EXPECT_DOUBLE_EQ(move.end.x, 1.0);
+  try
+  {
+    reader.nextMove(move);
+    ADD_FAILURE() << "M98 on a pipe accepted";
+  }
+  catch (const ParseError& e)
+  {
+    EXPECT_EQ(e.line(), 2u);
+    EXPECT_EQ(e.column(), 1u);
+    EXPECT_NE(e.reason().find("read again (a file), not a pipe"), std::string::npos) << e.reason();
+  }
+}
+
 TEST(GcodeCam, ProgramEndsAtM30AndAtM99InTheMainProgram)
 {
   auto blocks = parseBlocks("G1 X1 F10\nM30\nG1 X2\n");
