@@ -215,10 +215,13 @@ uint64_t putProgram(ProgramStore& store, const std::string& local_path, std::str
     name = slash == std::string::npos ? local_path : local_path.substr(slash + 1);
   }
   checkName(name);
-  std::ifstream in(local_path, std::ios::binary);
+  std::ifstream in(local_path, std::ios::binary | std::ios::ate);
   if (!in)
     throw ConfigError("cannot read " + local_path + ": " + std::strerror(errno));
-  const std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::string data(static_cast<size_t>(in.tellg()), '\0');  // one read, not a character at a time
+  in.seekg(0);
+  if (!in.read(data.data(), static_cast<std::streamsize>(data.size())))
+    throw Error("reading " + local_path + " failed");
   range.check(local_path + " (as " + name + ")", pattern.number(name), readHeader(data).number);
   store.write(name, data, progress, cancel);
   return data.size();

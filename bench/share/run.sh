@@ -1,0 +1,111 @@
+#!/usr/bin/env bash
+# Programs to and from an SMB share: cnc_dnc send/receive --share against Samba's own smbclient
+# put/get, to the same smbd in the same run, as a user times them (from starting the program to its
+# exit). smbd runs on 127.0.0.1 on a free port with everything in a scratch folder (as the tests'
+# samba_server.h does); both clients log in with the same user and credentials file.
+#   bench/share/run.sh [ROUNDS]      (as root: smbd must be able to become the user it serves)
+# Prints one line per size and direction: medians of ROUNDS, MB/s, and the throughput ratio
+# cnc_dnc / smbclient (>= 0.9 is the goal); and the fixed per-transfer cost (a 1-byte program:
+# process start, connect, authenticate, and for cnc_dnc the temporary name and renames).
+set -euo pipefail
+root=$(cd "$(dirname "$0")/../.." && pwd)
+source "$root/scripts/env.sh"
+build=${BUILD_DIR:-$root/.build}
+cnc_dnc=$build/devel/lib/cnc_bridge/cnc_dnc
+rounds=${1:-5}
+[[ $(id -u) == 0 ]] || { echo "bench/share: run as root (smbd becomes the user it serves)"; exit 1; }
+[[ -x $cnc_dnc ]] || { echo "bench/share: build cnc_dnc first ($cnc_dnc)"; exit 1; }
+
+dir=$(mktemp -d /tmp/cnc_bench_share.XXXXXX)
+smbd_pid=
+cleanup() {
+  [[ -n $smbd_pid ]] && kill -TERM -- -"$smbd_pid" 2>/dev/null && wait "$smbd_pid" 2>/dev/null
+  rm -rf "$dir"
+}
+trap cleanup EXIT
+port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
+user=$(id -un)
+mkdir -p "$dir"/{private,lock,state,cache,pid,ncalrpc,share}
+cat >"$dir/smb.conf" <<CONF
+[global]
+  server role = standalone server
+  smb ports = $port
+  interfaces = 127.0.0.1
+  bind interfaces only = yes
+  disable netbios = yes
+  passdb backend = tdbsam:$dir/private/passdb.tdb
+  private dir = $dir/private
+  lock directory = $dir/lock
+  state directory = $dir/state
+  cache directory = $dir/cache
+  pid directory = $dir/pid
+  ncalrpc dir = $dir/ncalrpc
+  log file = $dir/smbd.log
+  load printers = no
+  printing = bsd
+  printcap name = /dev/null
+  disable spoolss = yes
+[bench]
+  path = $dir/share
+  valid users = $user
+  read only = no
+CONF
+printf 'bench-Pass-1\nbench-Pass-1\n' | smbpasswd -c "$dir/smb.conf" -s -a "$user" >/dev/null
+printf 'username = %s\npassword = bench-Pass-1\n' "$user" >"$dir/auth"
+chmod 600 "$dir/auth"
+setsid smbd --foreground --no-process-group -s "$dir/smb.conf" >"$dir/smbd.out" 2>&1 &
+smbd_pid=$!
+for _ in $(seq 300); do
+  (exec 3<>/dev/tcp/127.0.0.1/"$port") 2>/dev/null && break
+  sleep 0.05  # polling the port until smbd answers
+done
+url=smb://127.0.0.1:$port/bench
+
+# seconds a command takes, from its start to its exit
+timed() {
+  local start end
+  start=$(date +%s.%N)
+  "$@" >/dev/null 2>&1 || { echo "bench/share: failed: $*" >&2; exit 1; }
+  end=$(date +%s.%N)
+  echo "$end - $start" | python3 -c 'import sys; print("%.4f" % eval(sys.stdin.read()))'
+}
+median() { python3 -c 'import sys, statistics; print("%.4f" % statistics.median(float(x) for x in sys.argv[1:]))' "$@"; }
+
+echo "bench/share: $(date -u '+%Y-%m-%d %H:%M UTC'), load $(cut -d' ' -f1-3 /proc/loadavg), smbd $(smbd --version | cut -d' ' -f2), $rounds rounds, medians"
+for size in 1 1048576 20971520; do
+  head -c "$size" /dev/urandom >"$dir/local.nc"
+  declare -A t=()
+  for direction in up down; do
+    for tool in cnc_dnc smbclient; do
+      runs=()
+      for _ in $(seq "$rounds"); do
+        if [[ $direction == up && $tool == cnc_dnc ]]; then
+          runs+=("$(timed "$cnc_dnc" send --share "$url" --credentials "$dir/auth" --name "by_cnc_dnc.nc" "$dir/local.nc")")
+          cmp -s "$dir/local.nc" "$dir/share/by_cnc_dnc.nc" || { echo "bench/share: cnc_dnc upload differs"; exit 1; }
+        elif [[ $direction == up ]]; then
+          runs+=("$(timed smbclient //127.0.0.1/bench -p "$port" -A "$dir/auth" -c "put $dir/local.nc by_smbclient.nc")")
+          cmp -s "$dir/local.nc" "$dir/share/by_smbclient.nc" || { echo "bench/share: smbclient upload differs"; exit 1; }
+        elif [[ $tool == cnc_dnc ]]; then
+          rm -f "$dir/back.nc"
+          runs+=("$(timed "$cnc_dnc" receive --share "$url" --credentials "$dir/auth" by_smbclient.nc "$dir/back.nc")")
+          cmp -s "$dir/local.nc" "$dir/back.nc" || { echo "bench/share: cnc_dnc download differs"; exit 1; }
+        else
+          rm -f "$dir/back.nc"
+          runs+=("$(timed smbclient //127.0.0.1/bench -p "$port" -A "$dir/auth" -c "get by_cnc_dnc.nc $dir/back.nc")")
+          cmp -s "$dir/local.nc" "$dir/back.nc" || { echo "bench/share: smbclient download differs"; exit 1; }
+        fi
+      done
+      t[$direction.$tool]=$(median "${runs[@]}")
+    done
+    python3 - "$size" "$direction" "${t[$direction.cnc_dnc]}" "${t[$direction.smbclient]}" <<'PY'
+import sys
+size, direction, ours, theirs = int(sys.argv[1]), sys.argv[2], float(sys.argv[3]), float(sys.argv[4])
+label = "1 byte (fixed cost)" if size == 1 else "%d MB" % (size // 1048576)
+if size == 1:
+    print("%-20s %-4s cnc_dnc %.3f s, smbclient %.3f s (difference %+.3f s)" % (label, direction, ours, theirs, ours - theirs))
+else:
+    print("%-20s %-4s cnc_dnc %.3f s %6.1f MB/s, smbclient %.3f s %6.1f MB/s, throughput ratio %.2f"
+          % (label, direction, ours, size / ours / 1e6, theirs, size / theirs / 1e6, theirs / ours))
+PY
+  done
+done
