@@ -45,15 +45,30 @@ class Commissioning(unittest.TestCase):
                 break
 
     def tearDown(self):
+        """Stops every process group started: a block's shell has ended, but the roslaunch it put
+        in the background lives on in its group until stopped, and would answer the next block."""
         for process, log in reversed(self.background):
-            if process.poll() is None:
-                os.killpg(process.pid, signal.SIGINT)
+            for sig, grace in ((signal.SIGINT, 20), (signal.SIGKILL, 5)):
                 try:
-                    process.wait(timeout=15)
-                except subprocess.TimeoutExpired:
-                    os.killpg(process.pid, signal.SIGKILL)
-                    process.wait()
+                    os.killpg(process.pid, sig)
+                except ProcessLookupError:
+                    break
+                deadline = time.monotonic() + grace
+                while time.monotonic() < deadline and self.group_alive(process):
+                    time.sleep(0.1)  # polling for the group's last process to end
+                if not self.group_alive(process):
+                    break
+            process.wait()
             log.close()
+
+    @staticmethod
+    def group_alive(process):
+        process.poll()
+        try:
+            os.killpg(process.pid, 0)
+            return True
+        except ProcessLookupError:
+            return False
 
     # -- the simulated machines ------------------------------------------------------------
     def start(self, name, argv):
@@ -178,7 +193,9 @@ class Commissioning(unittest.TestCase):
                                  "ngc_dprnt", "fanuc_backup", "ethernut_status", "at_status", "board_status"])
         # One block after the other, each block's nodes stopped before the next (they share /state).
         for name, text in blocks:
+            started = time.monotonic()
             self.run_block(name, text)
+            sys.stderr.write("commissioning: block %s %.1f s\n" % (name, time.monotonic() - started))
 
 
 if __name__ == "__main__":
