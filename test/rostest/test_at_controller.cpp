@@ -373,6 +373,33 @@ TEST_F(AtController, AProgramWithMachineCommandsIsRefusedWithoutProgramCommands)
   EXPECT_EQ(received.linesUntil(mark, "A"), std::vector<std::string>{"A"});
 }
 
+// A path goal in another frame (world, where the test launch places machine zero at (0.1, 0.2, 0))
+// is transformed into the machine frame with tf2: the machine ends where the world point is. A
+// frame with no transform is refused with tf2's reason and nothing reaches the controller.
+TEST_F(AtController, APathGoalInWorldArrivesTransformed)
+{
+  CommandLog received{command_log};
+  const auto start = state.last().position;
+  const double x = start.x + 0.004, y = start.y - 0.003;  // machine frame
+  client.sendGoal(lineGoal(x + 0.1, y + 0.2, start.z, 0.02, "world"));
+  ASSERT_TRUE(client.waitForResult(ros::Duration(20.0)));
+  EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client.getState().getText();
+  EXPECT_TRUE(state.waitFor([&](const auto& s) { return near(s.position, x, y, start.z, 1.5e-6); }))
+      << state.last().position;
+
+  const size_t mark = received.lines().size();
+  client.sendGoal(lineGoal(0.0, 0.0, 0.0, 0.02, "nowhere"));
+  ASSERT_TRUE(client.waitForResult(ros::Duration(20.0)));
+  EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::ABORTED);
+  const std::string text = client.getResult()->message;
+  EXPECT_NE(text.find("path in frame \"nowhere\" refused: no transform into \"" + prefix + "machine\": "),
+            std::string::npos)
+      << text;
+  // A later command is the barrier: nothing of the refused goal reached the controller before it.
+  EXPECT_TRUE(call<std_srvs::Trigger>(node + "/set_auto").success);
+  EXPECT_EQ(received.linesUntil(mark, "A"), std::vector<std::string>{"A"});
+}
+
 TEST_F(AtController, EmergencyStopMidPathStopsMotionAndAbortsWithTheReason)
 {
   const auto start = state.last().position;
