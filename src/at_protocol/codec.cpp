@@ -199,10 +199,10 @@ Axis axisFromChar(char c)
 
 void appendSetpoint(const Setpoint& setpoint, std::string& out)
 {
-  const auto appendNumber = [&out](int64_t value)
+  const auto append_number = [&out](int64_t value)
   {
     char digits[24];  // an int64 needs at most 20
-    const auto end = std::to_chars(digits, digits + sizeof(digits), value).ptr;
+    auto* const end = std::to_chars(digits, digits + sizeof(digits), value).ptr;
     out.append(digits, static_cast<size_t>(end - digits));
   };
   for (int axis = 0; axis < 3; ++axis)
@@ -211,9 +211,9 @@ void appendSetpoint(const Setpoint& setpoint, std::string& out)
   }
   for (int axis = 0; axis < 3; ++axis)
   {
-    appendNumber(setpoint.feed[axis]);
+    append_number(setpoint.feed[axis]);
     out.push_back(' ');
-    appendNumber(setpoint.position[axis]);
+    append_number(setpoint.position[axis]);
     out.push_back(axis < 2 ? ' ' : '@');
   }
 }
@@ -260,7 +260,7 @@ Command decodeCommand(std::string_view raw)
   }
   const char head = message.front();
   const std::string_view rest = message.substr(1);
-  const auto noArgument = [&](Command command) -> Command
+  const auto no_argument = [&](Command command) -> Command
   {
     if (!trim(rest).empty())
     {
@@ -280,11 +280,11 @@ Command decodeCommand(std::string_view raw)
   switch (head)
   {
     case 'A':
-      return noArgument(AutoMode{});
+      return no_argument(AutoMode{});
     case 'H':
-      return noArgument(Home{});
+      return no_argument(Home{});
     case '#':
-      return noArgument(EndOperation{});
+      return no_argument(EndOperation{});
     case 'J':
     {
       const std::string_view axis = trim(rest);
@@ -324,7 +324,7 @@ Command decodeCommand(std::string_view raw)
                           " fields, not 6 (feed and position per axis)");
     }
     Setpoint setpoint;
-    for (int axis = 0; axis < 3; ++axis)
+    for (size_t axis = 0; axis < 3; ++axis)
     {
       setpoint.feed[axis] = static_cast<int>(parseInt(parts[2 * axis], -kMaxFeed, kMaxFeed, "setpoint feed", message));
       setpoint.position[axis] =

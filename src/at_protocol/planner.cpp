@@ -249,7 +249,7 @@ size_t Trajectory::steps() const
   return static_cast<size_t>(std::ceil(duration_ / limits_.period - 1e-9));
 }
 
-Sample Trajectory::sampleSegment(const Segment& s, double tau) const
+Sample Trajectory::sampleSegment(const Segment& s, double tau)
 {
   double distance = 0.0;
   double speed = 0.0;

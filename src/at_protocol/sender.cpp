@@ -5,13 +5,13 @@
 #include <pthread.h>
 #include <sched.h>
 #include <sys/mman.h>
-#include <time.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
+#include <ctime>
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/log.h"
@@ -296,7 +296,7 @@ std::future<void> SetpointSender::send(const Command& command)
       throw LinkError("the command link to the controller is down");
     }
     sequencer_.apply(command);
-    queue_.push_back(Queued{command, std::move(done)});
+    queue_.emplace_back(Queued{command, std::move(done)});
   }
   cv_.notify_all();
   return future;
@@ -333,7 +333,7 @@ std::shared_ptr<Job> SetpointSender::start(Operation operation)
     check.apply(StartOperation{job->operation().coolant});
     sequencer_ = check;
     running_ = job;
-    queue_.push_back(job);
+    queue_.emplace_back(job);
   }
   cv_.notify_all();
   return job;
@@ -517,8 +517,8 @@ void SetpointSender::runJob(const std::shared_ptr<Job>& job)
 {
   const Operation& operation = job->operation();
   TrajectoryStream stream(*operation.trajectory);
-  const auto period_ns = static_cast<int64_t>(options_.period * 1e9 + 0.5);
-  auto endJob = [&](Job::State state, const std::string& message)
+  const auto period_ns = static_cast<int64_t>(std::llround(options_.period * 1e9));
+  auto end_job = [&](Job::State state, const std::string& message)
   {
     {
       std::lock_guard<std::mutex> lock(mutex_);
@@ -624,7 +624,7 @@ void SetpointSender::runJob(const std::shared_ptr<Job>& job)
     // Epilogue: #@ ends the operation (coolant off, step 16), M0@ the machining (spindle 0).
     write(encode(EndOperation{}) + encode(Machining{false}));
     commands_ += 2;
-    endJob(outcome, message);
+    end_job(outcome, message);
   }
   catch (const Error& e)
   {
@@ -634,7 +634,7 @@ void SetpointSender::runJob(const std::shared_ptr<Job>& job)
       std::lock_guard<std::mutex> lock(job->mutex_);
       why = job->abort_reason_ + " (" + why + ")";
     }
-    endJob(Job::State::kFailed, why);
+    end_job(Job::State::kFailed, why);
     linkFailed(why);
   }
 }

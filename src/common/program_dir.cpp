@@ -76,7 +76,7 @@ std::string ProgramDirectory::resolveForWrite(const std::string& name) const
   {
     throw ConfigError("the directory of '" + name + "' does not exist in the program directory " + root_);
   }
-  const std::string resolved = directory + "/" + file;
+  std::string resolved = directory + "/" + file;
   if (directory != root_ && !inside(directory))
   {
     throw ConfigError("'" + name + "' is outside the program directory " + root_ + ": refused");

@@ -21,13 +21,12 @@ namespace dnc
 
 namespace
 {
-constexpr size_t kReadBufferSize = 64 * 1024;
+constexpr size_t kReadBufferSize = size_t{64} * 1024;
 }
 
 LineReader::LineReader(const std::string& path, size_t max_line_length)
-    : path_(path), max_line_length_(max_line_length), buffer_(kReadBufferSize)
+    : path_(path), max_line_length_(max_line_length), file_(std::fopen(path.c_str(), "rb")), buffer_(kReadBufferSize)
 {
-  file_ = std::fopen(path.c_str(), "rb");
   if (file_ == nullptr)
   {
     throw ConfigError("cannot open program " + path + ": " + std::strerror(errno));

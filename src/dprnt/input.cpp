@@ -133,7 +133,7 @@ void FileInput::openFile()
     // The skipped history's last bytes are what a rewrite check compares against.
     const off_t from = std::max<off_t>(0, end - static_cast<off_t>(kVerifyWindow));
     std::string history(static_cast<size_t>(end - from), '\0');
-    const ssize_t n = ::pread(fd_, &history[0], history.size(), from);
+    const ssize_t n = ::pread(fd_, history.data(), history.size(), from);
     if (n == static_cast<ssize_t>(history.size()))
       tail_ = std::move(history);
   }
@@ -169,7 +169,7 @@ const char* FileInput::changedUnderneath()
     return nullptr;
   // Written since the last look: are the bytes before the read position still the ones read?
   std::string now(tail_.size(), '\0');
-  const ssize_t n = ::pread(fd_, &now[0], now.size(), position - static_cast<off_t>(tail_.size()));
+  const ssize_t n = ::pread(fd_, now.data(), now.size(), position - static_cast<off_t>(tail_.size()));
   if (n < 0)
   {
     throw LinkError("file " + path_ + ": " + std::strerror(errno));

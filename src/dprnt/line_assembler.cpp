@@ -30,8 +30,8 @@ enum class ByteClass : uint8_t
 // One table lookup per byte keeps the assembler well above a million lines per second.
 struct ClassTable
 {
-  ByteClass table[256];
-  constexpr ClassTable() : table()
+  ByteClass table[256]{};
+  constexpr ClassTable()
   {
     for (int b = 0; b < 256; ++b)
     {

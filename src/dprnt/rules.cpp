@@ -3,6 +3,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <fstream>
@@ -60,12 +61,8 @@ bool validName(const std::string& name)
 {
   if (name.empty())
     return false;
-  for (char c : name)
-  {
-    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '_')
-      return false;
-  }
-  return true;
+  return std::all_of(name.begin(), name.end(),
+                     [](char c) { return std::isalnum(static_cast<unsigned char>(c)) != 0 || c == '_'; });
 }
 
 // Resolves a source on one line. Capture groups are parsed with the tolerant line parser, so
@@ -188,7 +185,7 @@ RuleSet RuleSet::fromYaml(const std::string& text, const std::string& default_un
           rule.labels.push_back(label.as<std::string>());
       }
       if (!rule.has_regex && rule.labels.empty())
-        throw ConfigError(where + ": give \"regex\", \"labels\" or both");
+        throw ConfigError(where + R"(: give "regex", "labels" or both)");
       rule.x = parseSource(node["x"], where);
       rule.y = parseSource(node["y"], where);
       rule.z = parseSource(node["z"], where);
@@ -199,7 +196,7 @@ RuleSet RuleSet::fromYaml(const std::string& text, const std::string& default_un
       {
         const ValueSource program = parseSource(node["program"], where);
         if (program.group < 0)
-          throw ConfigError(where + ": \"program\" must be a capture group (\"$1\")");
+          throw ConfigError(where + R"(: "program" must be a capture group ("$1"))");
         rule.program_group = program.group;
       }
       switch (rule.type)

@@ -288,7 +288,7 @@ void Client::sendRequest(std::unique_lock<std::mutex>& lock, Request request)
   lock.lock();
 }
 
-void Client::completePending(std::unique_lock<std::mutex>& lock, const std::string& error)
+void Client::completePending([[maybe_unused]] std::unique_lock<std::mutex>& lock, const std::string& error)
 {
   has_pending_ = false;
   if (pending_.done)
@@ -303,7 +303,7 @@ void Client::completePending(std::unique_lock<std::mutex>& lock, const std::stri
   }
 }
 
-void Client::failAll(std::unique_lock<std::mutex>& lock, const std::string& error)
+void Client::failAll([[maybe_unused]] std::unique_lock<std::mutex>& lock, const std::string& error)
 {
   auto fail = [&](const std::shared_ptr<Completion>& done)
   {

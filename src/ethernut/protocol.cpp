@@ -37,7 +37,7 @@ const std::array<OpcodeRow, 18> kTable = {{
 
 void putFloat(uint8_t* out, float value)
 {
-  uint32_t bits;
+  uint32_t bits = 0;
   std::memcpy(&bits, &value, sizeof bits);
   out[0] = static_cast<uint8_t>(bits);
   out[1] = static_cast<uint8_t>(bits >> 8);
@@ -49,7 +49,7 @@ float getFloat(const uint8_t* in)
 {
   const uint32_t bits = static_cast<uint32_t>(in[0]) | (static_cast<uint32_t>(in[1]) << 8) |
                         (static_cast<uint32_t>(in[2]) << 16) | (static_cast<uint32_t>(in[3]) << 24);
-  float value;
+  float value = 0.0f;
   std::memcpy(&value, &bits, sizeof value);
   return value;
 }
@@ -154,7 +154,7 @@ void encode(const Message& message, uint8_t* out)
 {
   const float fields[5] = {message.x, message.y, message.z, message.status, message.error};
   checkFinite(fields, "ethernut: cannot send a message");
-  for (int i = 0; i < 5; ++i)
+  for (size_t i = 0; i < 5; ++i)
   {
     putFloat(out + 4 * i, fields[i]);
   }

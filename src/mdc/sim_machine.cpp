@@ -45,7 +45,7 @@ SimMachine SimMachine::fromScript(std::istream& in, const std::string& name)
   size_t line_number = 0;
   auto fail = [&](const std::string& why)
   { throw ConfigError(name + ":" + std::to_string(line_number) + ": " + why + ": \"" + text + "\""); };
-  auto toDouble = [&](const std::string& value) -> double
+  auto to_double = [&](const std::string& value) -> double
   {
     try
     {
@@ -84,16 +84,16 @@ SimMachine SimMachine::fromScript(std::istream& in, const std::string& name)
       std::string x, y, z;
       if (!(words >> x >> y >> z))
         fail("work needs X Y Z");
-      machine.work_[0] = toDouble(x);
-      machine.work_[1] = toDouble(y);
-      machine.work_[2] = toDouble(z);
+      machine.work_[0] = to_double(x);
+      machine.work_[1] = to_double(y);
+      machine.work_[2] = to_double(z);
     }
     else if (keyword == "var")
     {
       std::string n, value;
       if (!(words >> n >> value))
         fail("var needs N VALUE");
-      machine.variables_[static_cast<int>(toDouble(n))] = toDouble(value);
+      machine.variables_[static_cast<int>(to_double(n))] = to_double(value);
     }
     else if (keyword == "phase")
     {
@@ -102,7 +102,7 @@ SimMachine SimMachine::fromScript(std::istream& in, const std::string& name)
       std::string seconds;
       if (!(words >> seconds))
         fail("phase needs SECONDS");
-      phase.seconds = toDouble(seconds);
+      phase.seconds = to_double(seconds);
       if (!(phase.seconds > 0) || phase.seconds > 1e6)
         fail("phase length must be positive");
       std::string item;
@@ -121,18 +121,18 @@ SimMachine SimMachine::fromScript(std::istream& in, const std::string& name)
           if (c == '_')
             c = ' ';
         if (key == "parts+")
-          phase.parts_increment = static_cast<long long>(toDouble(value));
+          phase.parts_increment = static_cast<long long>(to_double(value));
         else if (key == "x")
-          phase.x = toDouble(value);
+          phase.x = to_double(value);
         else if (key == "y")
-          phase.y = toDouble(value);
+          phase.y = to_double(value);
         else if (key == "z")
-          phase.z = toDouble(value);
+          phase.z = to_double(value);
         else if (key == "mode" || key == "status" || key == "program")
           phase.set[key] = upper(value);
         else if (key == "tool" || key == "spindle" || key == "parts")
         {
-          toDouble(value);
+          to_double(value);
           phase.set[key] = value;
         }
         else
@@ -186,7 +186,7 @@ SimMachine::State SimMachine::stateAt(Clock::time_point now) const
   // Settings carry over from the previous loop's end, so apply the whole timeline first when
   // this is not the first loop, then the phases up to the current one.
   double axis_end[3] = {0, 0, 0};
-  auto applyPhase = [&](const Phase& phase)
+  auto apply_phase = [&](const Phase& phase)
   {
     for (const auto& [key, value] : phase.set)
     {
@@ -211,16 +211,16 @@ SimMachine::State SimMachine::stateAt(Clock::time_point now) const
   if (state.loop > 0)
   {
     for (const auto& phase : phases_)
-      applyPhase(phase);
+      apply_phase(phase);
   }
   long long parts = 0;
   for (size_t i = 0; i < index; ++i)
   {
-    applyPhase(phases_[i]);
+    apply_phase(phases_[i]);
     parts += phases_[i].parts_increment;
   }
   const double from[3] = {axis_end[0], axis_end[1], axis_end[2]};
-  applyPhase(phases_[index]);
+  apply_phase(phases_[index]);
   parts += phases_[index].parts_increment;
   state.parts = base_parts + state.loop * increments_per_loop + parts;
   state.x = from[0] + (axis_end[0] - from[0]) * fraction;

@@ -97,7 +97,7 @@ size_t FakeTransport::read(uint8_t* buffer, size_t size, Milliseconds timeout)
   return n;
 }
 
-void FakeTransport::write(const uint8_t* data, size_t size, Milliseconds)
+void FakeTransport::write(const uint8_t* data, size_t size, Milliseconds /*timeout*/)
 {
   WriteHook hook;
   {

@@ -28,7 +28,7 @@ std::string linkAtomically(const std::string& target, const std::string& link)
   }
   if (::rename(temporary.c_str(), link.c_str()) != 0)
   {
-    const std::string reason = std::strerror(errno);
+    std::string reason = std::strerror(errno);
     ::unlink(temporary.c_str());
     return reason;
   }

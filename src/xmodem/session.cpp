@@ -46,7 +46,7 @@ Milliseconds remainingUntil(Clock::time_point deadline)
 std::string seconds(Milliseconds ms)
 {
   std::ostringstream out;
-  out << ms.count() / 1000.0 << " s";
+  out << static_cast<double>(ms.count()) / 1000.0 << " s";
   return out.str();
 }
 }  // namespace
@@ -254,7 +254,7 @@ size_t Sender::countCans()
   const Milliseconds quiet = std::min(config_.char_timeout, Milliseconds(100));
   const auto limit = Clock::now() + Milliseconds(500);
   size_t cans = 0;
-  for (int c; Clock::now() < limit && (c = input_.readByte(quiet)) >= 0;)
+  for (int c = 0; Clock::now() < limit && (c = input_.readByte(quiet)) >= 0;)
   {
     if (c == kCan)
       ++cans;

@@ -131,7 +131,7 @@ class Trajectory
 
  private:
   void plan(const std::vector<Vec3>& points, const std::vector<double>& feeds, double entry_speed);
-  Sample sampleSegment(const Segment& segment, double tau) const;
+  static Sample sampleSegment(const Segment& segment, double tau);
 
   PlannerLimits limits_;
   std::vector<Segment> segments_;

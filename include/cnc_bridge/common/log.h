@@ -29,7 +29,9 @@ void log(LogLevel level, const std::string& message);
 const char* toString(LogLevel level);
 }  // namespace cnc_bridge
 
-// Stream-style helpers: CNC_LOG_WARN("port " << name << " lost").
+// Stream-style helpers: CNC_LOG_WARN("port " << name << " lost"). `expr` is a chain of << operands, so
+// it cannot be parenthesised.
+// NOLINTBEGIN(bugprone-macro-parentheses)
 #define CNC_LOG_STREAM(level, expr)                  \
   do                                                 \
   {                                                  \
@@ -37,6 +39,7 @@ const char* toString(LogLevel level);
     cnc_log_stream_ << expr;                         \
     ::cnc_bridge::log(level, cnc_log_stream_.str()); \
   } while (false)
+// NOLINTEND(bugprone-macro-parentheses)
 #define CNC_LOG_DEBUG(expr) CNC_LOG_STREAM(::cnc_bridge::LogLevel::kDebug, expr)
 #define CNC_LOG_INFO(expr) CNC_LOG_STREAM(::cnc_bridge::LogLevel::kInfo, expr)
 #define CNC_LOG_WARN(expr) CNC_LOG_STREAM(::cnc_bridge::LogLevel::kWarn, expr)
