@@ -142,7 +142,7 @@ ROSDEP_EXCEPTIONS = {
 }
 
 # Installed for building and running the scripts and benchmarks, not a dependency of the package.
-TOOLS = {"build-essential", "cmake", "ccache", "bc", "nodejs", "npm"}
+TOOLS = {"build-essential", "cmake", "ccache", "bc", "nodejs", "npm", "clang-tidy"}
 
 # Python module (top-level name) -> the Debian 12 package that provides it.
 PYTHON_MODULE_PACKAGE = {
@@ -184,6 +184,7 @@ PROGRAM_PACKAGES = {
     "smbclient": ["smbclient"],  # the SMB tests' control and bench/share's reference
     "clang": ["clang", "libclang-rt-14-dev"],  # sanitizers and libFuzzer
     "clang-format": ["clang-format"],
+    "clang-tidy": ["clang-tidy"],  # the lint step, on the core
     "cmake": ["cmake"], "cc": ["build-essential"], "ccache": ["ccache"],
     "roscore": ["python3-roslaunch"], "roslaunch": ["python3-roslaunch"], "rostest": ["python3-rostest"],
     "rosrun": ["rosbash"], "rosparam": ["python3-rosparam"], "rosbag": ["python3-rosbag"],

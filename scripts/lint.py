@@ -2,7 +2,8 @@
 """Style checks, written as JUnit XML: every C++ file clang-formatted (.clang-format), every
 launch file with a doc on each <arg>, no citation of a document a reader of the repository cannot
 open, the module table of docs/DEVELOPING.md matching the tree
-(scripts/check_module_table.py). (The core's freedom from ROS: scripts/check_ros_free.py.)
+(scripts/check_module_table.py), clang-tidy clean on the core (scripts/check_clang_tidy.py, with the
+compile commands of the build given by --build). (The core's freedom from ROS: scripts/check_ros_free.py.)
 
 The files come from git, or from a walk of the tree outside a git checkout (scripts/repo_files.py);
 finding no C++ or no launch file at all is a failure, not a pass over nothing."""
@@ -14,6 +15,7 @@ import sys
 import tempfile
 import xml.etree.ElementTree as ET
 
+import check_clang_tidy
 import check_module_table
 from repo_files import git_files, repo_files, walked_files
 from tool_cases import ToolCases
@@ -101,6 +103,7 @@ def check_cell_launch_generated(path, rviz_path="rviz/cell.rviz"):
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--junit", required=True)
+    parser.add_argument("--build", default=os.path.join(ROOT, ".build"), help="build directory: compile commands")
     args = parser.parse_args()
     tools = ToolCases("lint")
     discovery = found_cases()
@@ -114,6 +117,8 @@ def main():
     tools.add("references resolvable", check_references(text), checked=len(text))
     table = check_module_table.problems()
     tools.add("module table", [(check_module_table.GUIDE, problem) for problem in table], checked=1)
+    tidy, tidied = check_clang_tidy.findings(os.path.abspath(args.build))
+    tools.add("clang-tidy", tidy, checked=tidied)
     if os.path.exists(os.path.join(ROOT, "config/cell.yaml")):
         tools.add("cell.launch generated", [("launch/cell.launch", check_cell_launch_generated("launch/cell.launch"))],
                   checked=1)

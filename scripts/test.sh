@@ -3,7 +3,8 @@
 #   1. catkin build, then `make run_tests` (GoogleTest unit tests, rostests, launch-file checks);
 #   2. two hosts (network namespaces): a machine's state and tf cross to the cell's master;
 #      the package installed into a temporary prefix and run from there (test/install);
-#   3. lint: clang-format on every C++ file, launch-file docs; the core free of ROS in its includes
+#   3. lint: clang-format on every C++ file, launch-file docs, the module table, clang-tidy on the
+#      core (with the build's compile commands); the core free of ROS in its includes
 #      and in the libraries its executables load; package.xml and the Debian package list agree;
 #      the unit tests of these scripts themselves (test/scripts);
 #   4. the core and its unit tests again under AddressSanitizer + UndefinedBehaviorSanitizer,
@@ -70,7 +71,7 @@ run_step install_space "$results/install_space.xml" \
   "$root/test/install/test_install_space.py" --build "$build" --junit "$results/install_space.xml"
 
 step "lint"
-run_step lint "$results/lint.xml" python3 "$root/scripts/lint.py" --junit "$results/lint.xml"
+run_step lint "$results/lint.xml" python3 "$root/scripts/lint.py" --build "$build" --junit "$results/lint.xml"
 run_step ros_free_core "$results/ros_free_core.xml" \
   python3 "$root/scripts/check_ros_free.py" --build "$build" --junit "$results/ros_free_core.xml"
 run_step packages "$results/packages.xml" python3 "$root/scripts/check_packages.py" --junit "$results/packages.xml"
