@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <utility>
 
 #include "cnc_bridge/common/atomic_file.h"
 
@@ -19,7 +20,7 @@ namespace fs = std::filesystem;
 
 namespace
 {
-constexpr size_t kChunk = 64 * 1024;
+constexpr size_t kChunk = size_t{64} * 1024;
 
 void throwIfCancelled(const std::atomic<bool>* cancel, const std::string& what)
 {
@@ -66,7 +67,7 @@ std::string temporaryName(const std::string& name, const std::string& tag)
   return folder + "." + base + "." + tag + ".partial";
 }
 
-LocalProgramStore::LocalProgramStore(const std::string& root) : root_(root)
+LocalProgramStore::LocalProgramStore(std::string root) : root_(std::move(root))
 {
   std::error_code error;
   if (!fs::is_directory(root_, error))

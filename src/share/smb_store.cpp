@@ -21,7 +21,7 @@ using programs::ProgramEntry;
 namespace
 {
 // Large requests let libsmbclient keep several SMB2 reads/writes in flight, as smbclient does.
-constexpr size_t kChunk = 1024 * 1024;
+constexpr size_t kChunk = size_t{1024} * 1024;
 
 std::string trimmed(const std::string& text)
 {
@@ -243,7 +243,8 @@ SMBCCTX* SmbProgramStore::context()
         reason = "connection refused: no SMB server answers on " + url_.host + ":" + std::to_string(url_.port);
         break;
       case ETIMEDOUT:
-        reason = "no answer within " + std::to_string(timeout_.count() / 1000.0).substr(0, 4) + " s";
+        reason =
+            "no answer within " + std::to_string(static_cast<double>(timeout_.count()) / 1000.0).substr(0, 4) + " s";
         break;
       default:
         reason = std::strerror(error);

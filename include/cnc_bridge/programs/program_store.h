@@ -82,7 +82,7 @@ class LocalProgramStore : public ProgramStore
 {
  public:
   /// \throws ConfigError if \p root is not a directory.
-  explicit LocalProgramStore(const std::string& root);
+  explicit LocalProgramStore(std::string root);
   std::string describe() const override { return root_; }
   std::vector<ProgramEntry> list() override;
   ProgramEntry stat(const std::string& name) override;

@@ -27,6 +27,8 @@
 
 #include "cnc_bridge/programs/program_store.h"
 
+// libsmbclient's own declaration of its context type, repeated so that this header need not include it.
+// NOLINTNEXTLINE(bugprone-reserved-identifier,cert-dcl37-c,cert-dcl51-cpp,modernize-use-using)
 typedef struct _SMBCCTX SMBCCTX;
 
 namespace cnc_bridge::share
