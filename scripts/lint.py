@@ -31,6 +31,8 @@ UNOPENABLE = re.compile(
     r"|universal_cnc_serial_i2c_protocol)\.md"
     r"|\b[Tt]he seed(?:'s|s'|s\b| document| section)|(?<![-~\w])[Ss]eed (?:section|figure|document|\d)|\(seed\b[ :]"
     r"|\bDESIGN(?: section| §| \d|\.md)|\b[Ii]ssue \d+")
+# A citation of a section of a page under docs/, as docs/protocols/xmodem.md#packet.
+SECTION = re.compile(r"((?:docs/)?(?:protocols/)?[A-Za-z_]+\.md)#([a-z0-9-]+)")
 REFERENCED = ("src/*", "include/*", "test/*", "scripts/*", "bench/*", "docs/*", "cmake/*", "launch/*", "config/*",
               "CMakeLists.txt", "README.md", "package.xml", "Makefile")
 LAUNCH = ("launch/*.launch",)
@@ -63,8 +65,17 @@ def check_launch_args(path):
     return f"<arg> without doc: {', '.join(missing)}" if missing else None
 
 
+def heading_anchors(path):
+    """The anchors a Markdown viewer gives the headings of a page ("## Haas end of transfer" -> haas-end-of-transfer)."""
+    with open(os.path.join(ROOT, path), encoding="utf-8") as f:
+        headings = [line.lstrip("#").strip().lower() for line in f if line.startswith("#")]
+    return {re.sub(r"[^\w\- ]", "", heading).replace(" ", "-") for heading in headings}
+
+
 def check_references(paths):
-    """(file:line, problem) for every citation of something a reader of the repository cannot open."""
+    """(file:line, problem) for every citation of something a reader of the repository cannot open, and for
+    every citation of a page section (docs/protocols/xmodem.md#haas-end-of-transfer) that does not exist."""
+    pages = {path: heading_anchors(path) for path in paths if path.startswith("docs/") and path.endswith(".md")}
     found = []
     for path in paths:
         try:
@@ -76,6 +87,12 @@ def check_references(paths):
             match = UNOPENABLE.search(line)
             if match:
                 found.append((f"{path}:{number}", f"cites {match.group(0)!r}: cite docs/ or a named public source"))
+            for page, anchor in SECTION.findall(line):
+                candidates = [page, "docs/" + page, "docs/protocols/" + page,
+                              os.path.normpath(os.path.join(os.path.dirname(path), page))]
+                target = next((candidate for candidate in candidates if candidate in pages), None)
+                if target is None or anchor not in pages[target]:
+                    found.append((f"{path}:{number}", f"cites {page}#{anchor}, a page section that does not exist"))
     return found
 
 

@@ -349,7 +349,7 @@ void Bounds::add(const Vec3& p)
   max.z = std::max(max.z, p.z);
 }
 
-Parser::Parser(const ParserOptions& options) : options_(options)
+Parser::Parser(ParserOptions options) : options_(std::move(options))
 {
   if (!(options_.chord_tolerance_mm > 0.0) || !std::isfinite(options_.chord_tolerance_mm))
   {
@@ -475,7 +475,7 @@ void Parser::applyWords(const Scan& scan, Step& st)
     }
     seen_group[g] = true;
   };
-  auto nonModal = [&](int code, uint32_t column)
+  auto non_modal = [&](int code, uint32_t column)
   {
     if (st.non_modal)
     {
@@ -547,20 +547,20 @@ void Parser::applyWords(const Scan& scan, Step& st)
                                " (back boring / manual boring cycle) is not supported; expand it into "
                                "G00/G01 moves");
       case 40:
-        nonModal(40, column);
+        non_modal(40, column);
         break;
       case 280:
-        nonModal(280, column);
+        non_modal(280, column);
         break;
       case 300:
-        nonModal(300, column);
+        non_modal(300, column);
         break;
       case 920:
       case 921:
       case 922:
       case 923:
         group(7, column);
-        nonModal(code, column);
+        non_modal(code, column);
         break;
       case 170:
         group(1, column);
@@ -999,7 +999,7 @@ void Parser::emitRaw(Step& st, const Move& move)
   st.block.moves.push_back(move);
 }
 
-Move Parser::proto(const Step& st, Motion motion) const
+Move Parser::proto(const Step& st, Motion motion)
 {
   Move m;
   m.motion = motion;
@@ -1015,7 +1015,7 @@ Move Parser::proto(const Step& st, Motion motion) const
   return m;
 }
 
-void Parser::moveStraight(const Scan&, Step& st, const Vec3& target)
+void Parser::moveStraight(const Scan& /*scan*/, Step& st, const Vec3& target)
 {
   Move m = proto(st, st.next.motion);
   m.end = target;
@@ -1244,7 +1244,7 @@ double sweepBetween(double a0, double a1, bool cw, bool closed)
   return sweep;
 }
 
-void Parser::emitArc(Step& st, const Move& proto, const Arc& arc)
+void Parser::emitArc(Step& st, const Move& proto, const Arc& arc) const
 {
   const PlaneAxes& p = arc.p;
   // Chord count from the sagitta: a chord spanning angle t deviates r (1 - cos(t/2)).
@@ -1300,7 +1300,7 @@ void Parser::moveArc(const Scan& scan, Step& st, const Vec3& target)
 
 namespace
 {
-constexpr size_t kChunkSize = 64 * 1024;
+constexpr size_t kChunkSize = size_t{64} * 1024;
 // More O labels than this in one file is not a part program.
 constexpr size_t kMaxLabels = 100000;
 
@@ -1436,14 +1436,14 @@ Reader::Label Reader::findLabel(char letter, int64_t number, const Block& caller
     if (o >= 0 && o_labels_.size() < kMaxLabels &&
         std::none_of(o_labels_.begin(), o_labels_.end(), [o](const auto& e) { return e.first == o; }))
     {
-      o_labels_.push_back({o, Label{line_offset_, line_number}});
+      o_labels_.emplace_back(o, Label{line_offset_, line_number});
     }
     if (!found && leadingLabel(line, letter) == number)
     {
       found = Label{line_offset_, line_number};
       if (letter == 'N')
       {
-        n_labels_.push_back({number, *found});
+        n_labels_.emplace_back(number, *found);
         break;
       }
     }
@@ -1535,7 +1535,7 @@ const Block* Reader::nextBlock()
       const int64_t o = block.program_number;
       if (std::none_of(o_labels_.begin(), o_labels_.end(), [o](const auto& e) { return e.first == o; }))
       {
-        o_labels_.push_back({o, Label{offset, block.line}});
+        o_labels_.emplace_back(o, Label{offset, block.line});
       }
     }
     // Where the next line comes from: the block's own moves are returned first.

@@ -407,13 +407,13 @@ void Parser::compensatedArc(Step& st, const Move& move, const Arc& arc)
   }
   const Point t0 = arcTangent(arc.cu, arc.cv, arc.start, arc.cw);
   const Point t1 = arcTangent(arc.cu, arc.cv, arc.end, arc.cw);
-  auto offsetPoint = [&](const Vec3& p)
+  auto offset_point = [&](const Vec3& p)
   {
     const double rx = p.x - arc.cu, ry = p.y - arc.cv;
     const double r = std::hypot(rx, ry);
     return Vec3{arc.cu + rx / r * rad, arc.cv + ry / r * rad, p.z};
   };
-  Vec3 start = offsetPoint(arc.start);
+  Vec3 start = offset_point(arc.start);
   if (comp.has_held)
   {
     joinHeld(st, comp, true, arc.cu, arc.cv, rad, arc.cw, start, t0.x, t0.y, st.position);
@@ -427,7 +427,7 @@ void Parser::compensatedArc(Step& st, const Move& move, const Arc& arc)
   comp.cv = arc.cv;
   comp.rad = rad;
   comp.start = start;
-  comp.end = offsetPoint(arc.end);
+  comp.end = offset_point(arc.end);
   comp.programmed_end = arc.end;
   comp.tx = t1.x;
   comp.ty = t1.y;

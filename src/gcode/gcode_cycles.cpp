@@ -183,10 +183,10 @@ void Parser::runCycle(const Scan& scan, Step& st)
     check_count();
     return &st.block.moves.back();
   };
-  auto rapidZ = [&](double z) { return go(Motion::kRapid, st.position.x, st.position.y, z); };
-  auto feedZ = [&](double z) { return go(Motion::kLinear, st.position.x, st.position.y, z); };
+  auto rapid_z = [&](double z) { return go(Motion::kRapid, st.position.x, st.position.y, z); };
+  auto feed_z = [&](double z) { return go(Motion::kLinear, st.position.x, st.position.y, z); };
   // Flags an action at the tool's current point: on the move that got it there.
-  auto atBottom = [&](Move* m, double dwell, SpindleAction action)
+  auto at_bottom = [&](Move* m, double dwell, SpindleAction action)
   {
     if (!m)
     {
@@ -206,7 +206,7 @@ void Parser::runCycle(const Scan& scan, Step& st)
   // Preliminary motion: below R, first up to R.
   if (st.position.z < c.r)
   {
-    rapidZ(c.r);
+    rapid_z(c.r);
   }
   for (uint32_t hole = 0; hole < repeats; ++hole)
   {
@@ -225,72 +225,73 @@ void Parser::runCycle(const Scan& scan, Step& st)
     // tool was lower, after a G99 hole); Haas and Fanuc move in XY at the current height.
     const bool rise = options_.dialect == Dialect::kLinuxCnc && next.retract == RetractMode::kInitialLevel;
     go(Motion::kRapid, x, y, rise ? std::max(st.position.z, clear) : st.position.z);
-    rapidZ(c.r);
+    rapid_z(c.r);
     switch (g)
     {
       case 81:
-        feedZ(c.bottom);
-        rapidZ(clear);
+        feed_z(c.bottom);
+        rapid_z(clear);
         break;
       case 82:
-        atBottom(feedZ(c.bottom), c.dwell_s, SpindleAction::kNone);
-        rapidZ(clear);
+        at_bottom(feed_z(c.bottom), c.dwell_s, SpindleAction::kNone);
+        rapid_z(clear);
         break;
       case 73:
       case 83:
       {
         // Pecks of Q; G73 backs off by the clearance to break the chip, G83 goes out to R and
         // comes back to the clearance above the last depth.
-        for (double depth = c.r - c.peck; depth > c.bottom; depth -= c.peck)
+        // The pecks step down by Q from R as the control counts them; the bound is checked at each.
+        for (double depth = c.r - c.peck; depth > c.bottom; depth -= c.peck)  // NOLINT(cert-flp30-c)
         {
-          feedZ(depth);
+          feed_z(depth);
           if (g == 73)
           {
-            rapidZ(depth + clearance);
+            rapid_z(depth + clearance);
           }
           else
           {
-            rapidZ(c.r);
-            rapidZ(depth + clearance);
+            rapid_z(c.r);
+            rapid_z(depth + clearance);
           }
         }
-        feedZ(c.bottom);
-        rapidZ(clear);
+        feed_z(c.bottom);
+        rapid_z(clear);
         break;
       }
       case 74:
       case 84:
         // Feed in, reverse at the bottom, feed out to R, spindle back as it was.
-        atBottom(feedZ(c.bottom), c.dwell_s, SpindleAction::kReverse);
-        if (Move* out = feedZ(feed_out))
+        at_bottom(feed_z(c.bottom), c.dwell_s, SpindleAction::kReverse);
+        if (Move* out = feed_z(feed_out))
         {
           out->spindle_after = SpindleAction::kResume;
         }
-        rapidZ(clear);
+        rapid_z(clear);
         break;
       case 85:
-        feedZ(c.bottom);
-        feedZ(feed_out);
-        rapidZ(clear);
+        feed_z(c.bottom);
+        feed_z(feed_out);
+        rapid_z(clear);
         break;
       case 86:
-        atBottom(feedZ(c.bottom), c.dwell_s, SpindleAction::kStop);
-        if (Move* out = rapidZ(clear))
+        at_bottom(feed_z(c.bottom), c.dwell_s, SpindleAction::kStop);
+        if (Move* out = rapid_z(clear))
         {
           out->spindle_after = SpindleAction::kResume;
         }
         break;
       case 89:
-        atBottom(feedZ(c.bottom), c.dwell_s, SpindleAction::kNone);
-        feedZ(feed_out);
-        rapidZ(clear);
+        at_bottom(feed_z(c.bottom), c.dwell_s, SpindleAction::kNone);
+        feed_z(feed_out);
+        rapid_z(clear);
         break;
       case 76:
       {
         // Fine boring: oriented stop at the bottom, shift off the wall, out, shift back.
-        atBottom(feedZ(c.bottom), c.dwell_s, SpindleAction::kOrientStop);
+        at_bottom(feed_z(c.bottom), c.dwell_s, SpindleAction::kOrientStop);
         go(Motion::kRapid, x + shift_x, y + shift_y, st.position.z);
-        rapidZ(clear);
+        rapid_z(clear);
         if (Move* back = go(Motion::kRapid, x, y, st.position.z))
         {
           back->spindle_after = SpindleAction::kResume;

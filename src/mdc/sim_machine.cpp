@@ -320,7 +320,7 @@ std::string SimMachine::answer(const std::string& raw, Clock::time_point now)
     }
     return "?, " + command;
   }
-  const std::string unknown = classic_ ? "UNKNOWN" : "?, " + command;
+  std::string unknown = classic_ ? "UNKNOWN" : "?, " + command;
   const auto query = parseReadOnlyQuery(command);
   if (!query)
     return unknown;

@@ -337,7 +337,7 @@ struct Arc;  // an arc's geometry (internal)
 class Parser
 {
  public:
-  explicit Parser(const ParserOptions& options = ParserOptions());
+  explicit Parser(ParserOptions options = ParserOptions());
 
   /// \brief Parses the next line of the program (without its newline; a trailing CR is ignored).
   /// \returns the block, valid until the next call. Its line is the count of calls so far.
@@ -369,19 +369,19 @@ class Parser
  private:
   void applyWords(const Scan& scan, Step& step);
   void finishBlock(const Scan& scan, Step& step, bool l_used);
-  Move proto(const Step& step, Motion motion) const;
-  void emitRaw(Step& step, const Move& move);
+  static Move proto(const Step& step, Motion motion);
+  static void emitRaw(Step& step, const Move& move);
   void moveStraight(const Scan& scan, Step& step, const Vec3& target);
   void moveArc(const Scan& scan, Step& step, const Vec3& target);
   Arc arcGeometry(const Scan& scan, const Step& step, const Vec3& start, const Vec3& target) const;
-  void emitArc(Step& step, const Move& proto, const Arc& arc);
+  void emitArc(Step& step, const Move& proto, const Arc& arc) const;
   void runCycle(const Scan& scan, Step& step);
   void referenceReturn(const Scan& scan, Step& step, bool g30);
   double dwellSeconds(const Scan& scan, int word) const;
   // Cutter compensation (gcode_comp.cpp).
   void compensatedStraight(Step& step, const Move& move);
   void compensatedArc(Step& step, const Move& move, const Arc& arc);
-  void compensationOn(Step& step);
+  static void compensationOn(Step& step);
   void compensationOff(Step& step, bool program_end);
   void emitHeld(Step& step, Comp& comp);
   void joinHeld(Step& step, Comp& comp, bool next_arc, double ncu, double ncv, double nrad, bool ncw, Vec3& next_start,
