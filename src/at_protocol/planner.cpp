@@ -71,20 +71,20 @@ double timeOptimalJerkLimited(double length, double v, double a, double j)
   }
   // Ramp from rest to speed w: with a reached (w >= a^2/j) it takes w/a + a/j and covers
   // w (w/a + a/j) / 2; without, 2 sqrt(w/j) and covers w sqrt(w/j).
-  auto rampTime = [&](double w) { return w * j >= a * a ? w / a + a / j : 2.0 * std::sqrt(w / j); };
-  auto rampDistance = [&](double w) { return w * rampTime(w) / 2.0; };
-  if (2.0 * rampDistance(v) <= length)
+  auto ramp_time = [&](double w) { return w * j >= a * a ? w / a + a / j : 2.0 * std::sqrt(w / j); };
+  auto ramp_distance = [&](double w) { return w * ramp_time(w) / 2.0; };
+  if (2.0 * ramp_distance(v) <= length)
   {
-    return 2.0 * rampTime(v) + (length - 2.0 * rampDistance(v)) / v;  // cruise at v
+    return 2.0 * ramp_time(v) + (length - 2.0 * ramp_distance(v)) / v;  // cruise at v
   }
-  // The peak speed w below v with 2 rampDistance(w) = length (increasing in w): bisection.
+  // The peak speed w below v with 2 ramp_distance(w) = length (increasing in w): bisection.
   double lo = 0.0, hi = v;
   for (int k = 0; k < 200; ++k)
   {
     const double mid = (lo + hi) / 2.0;
-    (2.0 * rampDistance(mid) <= length ? lo : hi) = mid;
+    (2.0 * ramp_distance(mid) <= length ? lo : hi) = mid;
   }
-  return 2.0 * rampTime(lo);
+  return 2.0 * ramp_time(lo);
 }
 
 Trajectory::Trajectory(const std::vector<Vec3>& points, double feed, const PlannerLimits& limits, double entry_speed)
@@ -365,11 +365,12 @@ Trajectory Trajectory::stopFrom(const Sample& from) const
   }
 }
 
-TrajectoryStream::TrajectoryStream(Trajectory trajectory) : trajectory_(std::move(trajectory))
+TrajectoryStream::TrajectoryStream(Trajectory trajectory)
+    : trajectory_(std::move(trajectory)),
+      current_(trajectory_.at(0.0)),
+      raw_(current_),
+      window_(trajectory_.limits().smoothingWindow())
 {
-  current_ = trajectory_.at(0.0);
-  raw_ = current_;
-  window_ = trajectory_.limits().smoothingWindow();
   if (window_ > 1)
   {
     ring_.assign(window_, current_.position);  // before the start: at the start point

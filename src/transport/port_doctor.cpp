@@ -136,7 +136,7 @@ std::string permissionDenied(const std::string& device)
   if ((st.st_mode & (S_IRGRP | S_IWGRP)) != (S_IRGRP | S_IWGRP))
   {
     out << "; its group may not read and write it, so only " << owner << " can open it: run as " << owner
-        << ", or give the device to a group (a udev rule with GROUP=\"dialout\", MODE=\"0660\") and join it";
+        << R"(, or give the device to a group (a udev rule with GROUP="dialout", MODE="0660") and join it)";
   }
   else if (user_listed && !process_has)
   {
@@ -301,9 +301,9 @@ LineGuess guessLineSettings(const std::vector<uint8_t>& bytes, size_t framing_er
     guess.baud_suspect = framing_errors > 0;
     return guess;
   }
-  guess.text_share = static_cast<double>(text) / guess.bytes;
+  guess.text_share = static_cast<double>(text) / static_cast<double>(guess.bytes);
   guess.baud_suspect = guess.text_share < 0.9 || framing_errors * 50 > guess.bytes;
-  const auto share = [&](size_t n) { return static_cast<double>(n) / guess.bytes; };
+  const auto share = [&](size_t n) { return static_cast<double>(n) / static_cast<double>(guess.bytes); };
   std::ostringstream line;
   if (guess.baud_suspect)
   {
