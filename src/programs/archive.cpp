@@ -214,7 +214,7 @@ std::string ProgramArchive::diff(const std::string& from_path, const std::string
   ::close(out[1]);
   std::string text;
   char buffer[4096];
-  for (ssize_t n; (n = ::read(out[0], buffer, sizeof(buffer))) != 0;)
+  for (ssize_t n = 0; (n = ::read(out[0], buffer, sizeof(buffer))) != 0;)
   {
     if (n < 0)
     {

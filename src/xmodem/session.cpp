@@ -80,11 +80,11 @@ void fitToLine(Config& config, double characters_per_second)
 {
   if (characters_per_second <= 0)
     return;
-  const auto characterTimes = [characters_per_second](double characters)
+  const auto character_times = [characters_per_second](double characters)
   { return Milliseconds(static_cast<int64_t>(std::ceil(characters * 1000.0 / characters_per_second))); };
   constexpr double kEotCharacters = 12;
-  config.eot_quiet = std::max(config.eot_quiet, characterTimes(kEotCharacters));
-  config.char_timeout = config.purge_quiet = std::max(config.wait_floor, characterTimes(config.wait_characters));
+  config.eot_quiet = std::max(config.eot_quiet, character_times(kEotCharacters));
+  config.char_timeout = config.purge_quiet = std::max(config.wait_floor, character_times(config.wait_characters));
 }
 
 std::string Stats::summary() const
