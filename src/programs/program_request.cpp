@@ -23,12 +23,12 @@ std::string upper(const std::string& text)
 std::optional<ProgramRequest> parseWords(const std::string& words)
 {
   size_t i = 0;
-  auto skipSpaces = [&]
+  auto skip_spaces = [&]
   {
     while (i < words.size() && (words[i] == ' ' || words[i] == '\t'))
       ++i;
   };
-  skipSpaces();
+  skip_spaces();
   ProgramRequest request;
   for (const char* word : {"LOAD", "SEND", "SAVE"})
   {
@@ -40,7 +40,7 @@ std::optional<ProgramRequest> parseWords(const std::string& words)
   request.kind = request.word == "SAVE" ? ProgramRequest::Kind::kSave : ProgramRequest::Kind::kLoad;
   i += 4;
   const size_t before = i;
-  skipSpaces();
+  skip_spaces();
   if (i == before)
     return std::nullopt;  // "LOADO1234" is not a request
   if (i < words.size() && words[i] == 'O')
@@ -52,7 +52,7 @@ std::optional<ProgramRequest> parseWords(const std::string& words)
     number = number * 10 + static_cast<uint32_t>(words[i++] - '0');
     ++digits;
   }
-  skipSpaces();
+  skip_spaces();
   if (digits == 0 || i != words.size())
     return std::nullopt;
   request.number = number;
