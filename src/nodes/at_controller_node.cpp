@@ -930,10 +930,11 @@ class AtControllerNode
       operation.spindle = static_cast<int>(value);
     }
     operation.trajectory = std::make_shared<ap::Trajectory>(plan.points, plan.feeds, limits_);
-    ROS_INFO_STREAM("at_controller_node: follow_path: " << plan.points.size() - 1 << " segments, "
-                                                        << operation.trajectory->length() / ap::kPulsesPerMm
-                                                        << " mm in " << operation.trajectory->duration() << " s ("
-                                                        << operation.trajectory->steps() << " setpoints)");
+    // The S-curve streams the trapezoid's steps plus its average's window less one.
+    const size_t setpoints = ap::TrajectoryStream(*operation.trajectory).total();
+    ROS_INFO_STREAM("at_controller_node: follow_path: "
+                    << plan.points.size() - 1 << " segments, " << operation.trajectory->length() / ap::kPulsesPerMm
+                    << " mm in " << setpoints * limits_.period << " s (" << setpoints << " setpoints)");
     const uint64_t underruns_before = sender_->stats().underruns;
     const std::shared_ptr<ap::Job> job = sender_->start(operation);
     const uint64_t planned_setpoints = operation.trajectory->steps();
