@@ -2,14 +2,17 @@
 // of this process) and prints what the benchmark in bench/dnc/ measures: throughput against the
 // line rate, characters sent after each XOFF, and the resident memory of the process.
 //   dnc_drip_bench --bytes N [--baud B] [--exec-rate CPS] [--buffer N] [--high N] [--low N]
-//                  [--seconds S] [--dir DIR] [--line pty|memory]
+//                  [--seconds S] [--dir DIR] [--line pty|memory] [--rss-every BYTES]
 // --line pty (default): the sender on a SerialPort on a pty, the control's UART taking characters
 // at the line rate; memory: both on a SimulatedLine (a wire in memory, free of the pty's kernel
 // delivery delays, which under load can hold a DC3 for milliseconds).
 // The program is written to DIR (default /tmp) and deleted afterwards. --seconds stops the feed
-// (cancel) after S seconds, for programs too large to send whole at the line rate.
+// (cancel) after S seconds, for programs too large to send whole at the line rate. With --baud 0
+// the control takes characters as fast as they come (no UART model): the memory measurement, where
+// --rss-every samples the resident memory each time that many more bytes reached the control.
 #include <unistd.h>
 
+#include <atomic>
 #include <boost/program_options.hpp>
 #include <chrono>
 #include <cstdio>
@@ -76,6 +79,7 @@ int main(int argc, char** argv)
   std::string dir = "/tmp";
   std::string line = "pty";
   int realtime_priority = 0;
+  uint64_t rss_every = 0;
   sim::DripControlOptions control;
   control.execution_cps = 0;
   control.realtime = true;  // as a control's UART: see DripControlOptions::realtime
@@ -89,7 +93,8 @@ int main(int argc, char** argv)
       "seconds", po::value(&seconds)->default_value(0), "cancel after this long (0 = send it all)")(
       "dir", po::value(&dir)->default_value(dir), "where to generate the program")(
       "line", po::value(&line)->default_value(line), "pty or memory (SimulatedLine)")(
-      "realtime", po::value(&realtime_priority)->default_value(0), "sender SCHED_FIFO priority (0 = normal)");
+      "realtime", po::value(&realtime_priority)->default_value(0), "sender SCHED_FIFO priority (0 = normal)")(
+      "rss-every", po::value(&rss_every)->default_value(0), "sample RSS each time this many bytes arrived (0 = off)");
   po::variables_map vm;
   po::store(po::parse_command_line(argc, argv, options), vm);
   po::notify(vm);
@@ -110,22 +115,42 @@ int main(int argc, char** argv)
     Transport* host_end = nullptr;
     if (line == "memory")
     {
-      wire = std::make_unique<sim::SimulatedLine>(line_cps);
+      // --baud 0: a line as fast as memory (a billion characters a second), the memory measurement.
+      wire = std::make_unique<sim::SimulatedLine>(baud == 0 ? 1e9 : line_cps);
       control_end = &wire->control();
       host_end = &wire->host();
     }
     else
     {
-      control.line_cps = line_cps;
+      control.line_cps = baud == 0 ? 0 : line_cps;
       pty = std::make_unique<PtyMaster>();
       control_end = pty.get();
     }
     StopSignal stop;
     sim::DripControlStats stats;
-    uint64_t received = 0;
+    std::atomic<uint64_t> received{0};
     std::thread control_thread(
         [&] {
           stats = sim::runDripControl(*control_end, control, stop, [&](const uint8_t*, size_t n) { received += n; });
+        });
+    // RSS against bytes delivered: a sample each time another rss_every bytes reached the control.
+    std::atomic<bool> sampling{rss_every > 0};
+    std::string rss_samples;
+    std::thread sampler(
+        [&]
+        {
+          for (uint64_t mark = 0; sampling;)
+          {
+            const uint64_t now = received;
+            if (now >= mark)
+            {
+              rss_samples +=
+                  (rss_samples.empty() ? "" : ",") + std::to_string(now) + ":" + std::to_string(statusKb("VmRSS:"));
+              mark += rss_every;
+              continue;
+            }
+            std::this_thread::sleep_for(std::chrono::milliseconds(5));
+          }
         });
     if (!wire)
     {
@@ -154,6 +179,10 @@ int main(int argc, char** argv)
       stop.stop();
     }
     control_thread.join();
+    sampling = false;
+    sampler.join();
+    if (!rss_samples.empty())
+      std::printf("rss_samples=%s\n", rss_samples.c_str());
     const double cps = static_cast<double>(result.bytes) / elapsed;
     std::printf(
         "bytes_file=%llu bytes_sent=%llu seconds=%.3f chars_per_s=%.0f line_cps=%.0f line_fraction=%.4f "
