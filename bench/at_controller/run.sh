@@ -64,6 +64,18 @@ ratio() {  # value / 1 ms
 }
 field() { echo "$1" | grep -o "$2=[^ ]*" | cut -d= -f2; }
 printf '\n%-22s %12s %12s %14s %14s\n' "" "idle" "loaded" "idle/1ms" "loaded/1ms"
+# The headline: setpoint arrival intervals at the controller (the simulator's clock), then the
+# sender's own statistics for comparison.
+arrival() {  # line, which of p50|p99|max
+  sed -n "s/.*sim arrival:.*$2 \([0-9.e+-]*\) ms.*/\1/p" <<<"$1" | awk '{printf "%.4f", $1}'
+}
+for which in p50 p99 max; do
+  a=$(arrival "$idle" "$which"); b=$(arrival "$loaded" "$which")
+  printf '%-22s %12s %12s %14s %14s\n' "arrival $which (ms)" "$a" "$b" "$(ratio "$a")" "$(ratio "$b")"
+done
+printf '%-22s %12s %12s\n' "load average" "$(sed -n 's/.*| load \([0-9.]*\) .*/\1/p' <<<"$idle")" \
+  "$(sed -n 's/.*| load \([0-9.]*\) .*/\1/p' <<<"$loaded")"
+echo "sender's own statistics:"
 for key in interval_p50_ms interval_p99_ms interval_max_ms late_max_ms; do
   a=$(field "$idle" $key); b=$(field "$loaded" $key)
   printf '%-22s %12s %12s %14s %14s\n' "$key" "$a" "$b" "$(ratio "$a")" "$(ratio "$b")"
