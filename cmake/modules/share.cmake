@@ -23,6 +23,8 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   # Against a real Samba server (smbd started by the test on a free loopback port).
   cnc_core_gtest(test_smb_store test/unit/test_smb_store.cpp)
   target_link_libraries(test_smb_store cnc_bridge_share)
+  target_compile_definitions(test_smb_store PRIVATE
+                             SERVED_SHARE_CONF="${PROJECT_SOURCE_DIR}/config/share/served_share.smb.conf")
 endif()
 
 cnc_fuzz_target(fuzz_program_name test/fuzz/fuzz_program_name.cpp)

@@ -34,8 +34,9 @@ namespace
 po::options_description shareOptions()
 {
   po::options_description options("program folder");
-  options.add_options()("help,h", "this help")("share,s", po::value<std::string>(),
-                                               "smb://[user@]host[:port]/share[/folder], or a local directory")(
+  options.add_options()("help,h", "this help")("share,s", po::value<std::vector<std::string>>(),
+                                               "smb://[user@]host[:port]/share[/folder], or a local directory "
+                                               "(send: give it once per machine to publish to several)")(
       "credentials,A", po::value<std::string>()->default_value(""),
       "smbclient authentication file (username = ..., password = ..., domain = ...; mode 0600); guest if none")(
       "timeout,t", po::value<double>()->default_value(10.0), "seconds allowed for each SMB request");
@@ -84,13 +85,22 @@ bool parse(const std::string& command, const std::string& operands, const std::v
   return true;
 }
 
-std::unique_ptr<programs::ProgramStore> openStore(const po::variables_map& vm)
+std::unique_ptr<programs::ProgramStore> openStore(const po::variables_map& vm, const std::string& address)
 {
   const double timeout = vm["timeout"].as<double>();
   if (timeout <= 0)
     throw ConfigError("--timeout must be positive");
-  return share::openStore(vm["share"].as<std::string>(), vm["credentials"].as<std::string>(),
+  return share::openStore(address, vm["credentials"].as<std::string>(),
                           std::chrono::milliseconds(static_cast<int64_t>(timeout * 1000)));
+}
+
+/// The one share of receive and list.
+std::unique_ptr<programs::ProgramStore> openStore(const po::variables_map& vm)
+{
+  const auto& shares = vm["share"].as<std::vector<std::string>>();
+  if (shares.size() != 1)
+    throw ConfigError("give one --share here (several only for send)");
+  return openStore(vm, shares.front());
 }
 
 /// "1048576 bytes in 0.052 s (20.2 MB/s)"
@@ -130,17 +140,36 @@ int runShareSend(const std::vector<std::string>& args)
     return status;
   const std::string file = vm["file"].as<std::string>();
   const std::string name = vm["name"].as<std::string>();
-  auto store = openStore(vm);
-  const auto start = std::chrono::steady_clock::now();
-  ProgressLine progress("send " + file);
-  const uint64_t bytes = programs::putProgram(*store, file, name, protectedRange(vm),
-                                              programs::NamePattern(vm["name-pattern"].as<std::string>()),
-                                              showOn(progress), cancelOnStop());
-  progress.finish();
+  const programs::NamePattern pattern(vm["name-pattern"].as<std::string>());
+  const programs::ProtectedRange range = protectedRange(vm);
+  checkProtected(vm, file, name);  // once, before any share is touched
   const std::string sent_name = name.empty() ? file.substr(file.find_last_of('/') + 1) : name;
-  std::cout << "sent " << file << " to " << store->describe() << "/" << sent_name << ": " << rate(bytes, start)
-            << std::endl;
-  return 0;
+  // Fan-out: each share (machine) is reported on its own line; one that fails does not stop the
+  // others, and the exit status is 1 if any failed.
+  int failed = 0;
+  for (const std::string& address : vm["share"].as<std::vector<std::string>>())
+  {
+    try
+    {
+      auto store = openStore(vm, address);
+      const auto start = std::chrono::steady_clock::now();
+      ProgressLine progress("send " + file + " to " + store->describe());
+      const uint64_t bytes = programs::putProgram(*store, file, name, range, pattern, showOn(progress), cancelOnStop());
+      progress.finish();
+      std::cout << "sent " << file << " to " << store->describe() << "/" << sent_name << ": " << rate(bytes, start)
+                << std::endl;
+    }
+    catch (const CancelledError&)
+    {
+      throw;
+    }
+    catch (const Error& e)
+    {
+      ++failed;
+      std::cerr << "cnc_dnc send: error: " << e.what() << std::endl;
+    }
+  }
+  return failed > 0 ? 1 : 0;
 }
 
 int runShareReceive(const std::vector<std::string>& args)

@@ -38,8 +38,9 @@ namespace cnc_bridge::test
 class SambaServer
 {
  public:
-  /// Writes the configuration and the user's password; does not start smbd.
-  explicit SambaServer(const std::string& dir) : dir_(dir)
+  /// Writes the configuration (with \p extra sections appended) and the user's password; does not
+  /// start smbd.
+  explicit SambaServer(const std::string& dir, const std::string& extra = "") : dir_(dir)
   {
     if (::geteuid() != 0)
       throw std::runtime_error("the Samba tests start smbd, which must run as root");
@@ -62,7 +63,8 @@ class SambaServer
          << "  load printers = no\n  printing = bsd\n  printcap name = /dev/null\n  disable spoolss = yes\n"
          << "[guest]\n  path = " << dir_ << "/guest\n  guest ok = yes\n  read only = no\n"
          << "  force user = " << user << "\n"
-         << "[secure]\n  path = " << dir_ << "/secure\n  valid users = " << user << "\n  read only = no\n";
+         << "[secure]\n  path = " << dir_ << "/secure\n  valid users = " << user << "\n  read only = no\n"
+         << extra;
     conf.close();
     const std::string command = "smbpasswd -c " + config() + " -s -a " + user + " >" + dir_ + "/smbpasswd.log 2>&1";
     FILE* pipe = ::popen(command.c_str(), "w");

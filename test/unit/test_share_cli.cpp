@@ -181,3 +181,30 @@ TEST_F(ShareCliTest, HistoryAndDiffOfTheArchive)
   expectOneErrorLine(cncDnc({"diff", "--program-dir", programs, "O01500.nc", "9"}), "diff", "no version 9");
   EXPECT_EQ(cncDnc({"history", "O01500.nc"}).status, 1);
 }
+
+// One command publishes to several machines' shares; each is reported on its own line, and one
+// that fails (here a share that does not exist) does not stop the others.
+TEST_F(ShareCliTest, SendFansOutToSeveralSharesAndReportsEach)
+{
+  const std::string program = "%\nO02500 (FAN OUT)\nM30\n%\n";
+  const std::string source = local_.write("O02500.nc", program);
+  const std::string credentials = server_->credentials("fan.auth");
+  const std::string local_share = local_.file("served");
+  std::filesystem::create_directories(local_share);
+  const ToolRun run = cncDnc({"send", "--credentials", credentials, "--share", server_->url("secure"), "--share",
+                              server_->url("nosuch"), "--share", local_share + "/", source});
+  EXPECT_EQ(run.status, 1) << run.err;
+  const auto out = lines(run.out);
+  ASSERT_EQ(out.size(), 1u) << run.out;  // the local folder: a credentials file is for smb:// only
+  EXPECT_EQ(out[0].rfind("sent " + source + " to " + server_->url("secure") + "/O02500.nc", 0), 0u) << out[0];
+  EXPECT_NE(run.err.find("cnc_dnc send: error: cannot open " + server_->url("nosuch")), std::string::npos) << run.err;
+  EXPECT_EQ(readFile(server_->folder("secure") + "/O02500.nc"), program);
+
+  const ToolRun guest_and_local = cncDnc(
+      {"send", "--share", server_->url("guest"), "--share", local_share, "--share", server_->url("nosuch"), source});
+  EXPECT_EQ(guest_and_local.status, 1);
+  EXPECT_EQ(lines(guest_and_local.out).size(), 2u) << guest_and_local.out;
+  EXPECT_EQ(readFile(server_->folder("guest") + "/O02500.nc"), program);
+  EXPECT_EQ(readFile(local_share + "/O02500.nc"), program);
+  std::filesystem::remove(server_->folder("guest") + "/O02500.nc");
+}

@@ -2,6 +2,7 @@
 // both ways byte for byte, authentication and its errors, a server that vanishes mid-upload, a
 // control polling the share during uploads, protected programs, listings with O numbers.
 #include <gtest/gtest.h>
+#include <pwd.h>
 
 #include <atomic>
 #include <condition_variable>
@@ -352,6 +353,42 @@ TEST_F(SmbStoreTest, RenameAndRemove)
   EXPECT_EQ(store.read("O05001.nc"), "five");
   store.remove("O05001.nc");
   EXPECT_TRUE(store.list().empty());
+}
+
+// config/share/served_share.smb.conf as an administrator installs it (path and user replaced): the
+// PC publishes into the served folder as cnc_dnc and share_node do (a local store), and a control
+// logging in with the user's password lists and reads the program, and saves one back.
+TEST(ServedShare, SnippetServesThePublishedPrograms)
+{
+  TempDir dir("cnc_served_share");
+  const std::string served = dir.file("served");
+  std::filesystem::create_directories(served);
+  std::string snippet = readFile(SERVED_SHARE_CONF);
+  ASSERT_FALSE(snippet.empty()) << SERVED_SHARE_CONF;
+  const passwd* me = ::getpwuid(::geteuid());
+  auto replace = [&](const std::string& from, const std::string& to)
+  {
+    for (auto at = snippet.find(from); at != std::string::npos; at = snippet.find(from, at + to.size()))
+      snippet.replace(at, from.size(), to);
+  };
+  replace("/srv/cnc_programs", served);
+  replace("users = cnc", std::string("users = ") + me->pw_name);
+  replace("user = cnc", std::string("user = ") + me->pw_name);
+  test::SambaServer server(dir.path, snippet);
+  EXPECT_EQ(std::system(("testparm -s " + server.config() + " >/dev/null 2>&1").c_str()), 0);
+  server.start();
+
+  LocalProgramStore pc(served);
+  const std::string program = "%\nO06000 (SERVED)\nM30\n%\n";
+  pc.write("O06000.nc", program);
+  SmbProgramStore control(server.url("cnc_programs"), SmbCredentials::fromFile(server.credentials("control.auth")));
+  const auto listing = control.list();
+  ASSERT_EQ(listing.size(), 1u);
+  EXPECT_EQ(listing[0].name, "O06000.nc");
+  EXPECT_EQ(control.read("O06000.nc"), program);
+  control.write("O06001.nc", "%\nO06001 (SAVED AT THE CONTROL)\n%\n");
+  EXPECT_EQ(pc.read("O06001.nc"), "%\nO06001 (SAVED AT THE CONTROL)\n%\n");
+  EXPECT_THROW(SmbProgramStore(server.url("cnc_programs"), SmbCredentials{}).list(), LinkError);  // no guests
 }
 
 TEST(SmbUrl, Parses)
