@@ -12,6 +12,8 @@
 #include <cmath>
 #include <cstring>
 #include <ctime>
+#include <string>
+#include <vector>
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/log.h"
@@ -44,19 +46,17 @@ void sleepUntilNs(int64_t deadline)
 /// so the loop never waits for a page fault, and ask the kernel to keep the CPUs out of idle states
 /// slower to leave than zero microseconds (on a virtual machine: poll rather than halt the vCPU,
 /// which the host may not resume for milliseconds). \returns the descriptor that holds the request.
-int prepareForRealtime()
+int prepareForRealtime(std::vector<std::string>& refused)
 {
   if (::mlockall(MCL_CURRENT | MCL_FUTURE) != 0)
   {
-    CNC_LOG_WARN("setpoint sender: memory not locked (" << std::strerror(errno)
-                                                        << "): a page fault can delay a setpoint");
+    refused.push_back(std::string("memory not locked (mlockall: ") + std::strerror(errno) + ")");
   }
   const int fd = ::open("/dev/cpu_dma_latency", O_WRONLY | O_CLOEXEC);
   const int32_t no_latency = 0;
   if (fd < 0 || ::write(fd, &no_latency, sizeof no_latency) != static_cast<ssize_t>(sizeof no_latency))
   {
-    CNC_LOG_WARN("setpoint sender: CPU idle latency not limited (/dev/cpu_dma_latency: "
-                 << std::strerror(errno) << "): waking an idle CPU can delay a setpoint");
+    refused.push_back(std::string("CPU idle latency not limited (/dev/cpu_dma_latency: ") + std::strerror(errno) + ")");
     if (fd >= 0)
     {
       ::close(fd);
@@ -213,9 +213,10 @@ SetpointSender::SetpointSender(Options options) : options_(std::move(options))
     throw ConfigError("setpoint sender: the period must be positive");
   }
   buffer_.reserve(4096);
+  std::vector<std::string> refused;
   if (options_.realtime_priority > 0)
   {
-    cpu_latency_fd_ = prepareForRealtime();
+    cpu_latency_fd_ = prepareForRealtime(refused);
   }
   thread_ = std::thread([this] { run(); });
   if (options_.realtime_priority > 0)
@@ -225,10 +226,25 @@ SetpointSender::SetpointSender(Options options) : options_(std::move(options))
     const int error = pthread_setschedparam(thread_.native_handle(), SCHED_FIFO, &param);
     if (error != 0)
     {
-      CNC_LOG_WARN("setpoint sender: SCHED_FIFO priority " << options_.realtime_priority << " not granted ("
-                                                           << std::strerror(error)
-                                                           << "); streaming with the normal scheduler");
+      refused.insert(refused.begin(), "SCHED_FIFO priority " + std::to_string(options_.realtime_priority) +
+                                          " not granted (" + std::strerror(error) +
+                                          "): streaming with the normal scheduler");
     }
+  }
+  if (!refused.empty())
+  {
+    // One warning that says what was refused and what allows it (capabilities(7), limits.conf(5)).
+    std::string what;
+    for (const auto& r : refused)
+    {
+      what += (what.empty() ? "" : "; ") + r;
+    }
+    CNC_LOG_WARN("setpoint sender: real-time mode not granted: "
+                 << what << ". To allow it, give the program CAP_SYS_NICE and CAP_IPC_LOCK (setcap "
+                 << "cap_sys_nice,cap_ipc_lock+ep <node binary>), or add to /etc/security/limits.conf the lines "
+                 << "'<user> - rtprio " << options_.realtime_priority << "' and '<user> - memlock unlimited' "
+                 << "(the CPU idle latency request needs write access to /dev/cpu_dma_latency); a setpoint can be "
+                 << "late on a loaded machine");
   }
 }
 
