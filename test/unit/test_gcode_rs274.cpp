@@ -11,7 +11,10 @@
 //   (cross-check: peck_clearance=0.254)    G73/G83 clearance for our side (LinuxCNC's 0.010 in)
 //   (cross-check: rs274_drop=G187,G103)    lines with these words are blanked for rs274 (Haas-only
 //                                          hints that do not change the path)
+//   (cross-check: rs274_append=M2)         a line added at the end of rs274's copy
 //   (cross-check: rule=...)                where the dialects differ: which rule each side follows
+// A program copied verbatim from elsewhere keeps these lines in a sidecar file beside it,
+// PROGRAM.crosscheck (one directive a line, same spelling).
 #include <dirent.h>
 #include <gtest/gtest.h>
 
@@ -209,13 +212,24 @@ struct Directives
   ParserOptions options;
   std::string tool_table;
   std::vector<std::string> rs274_drop;
+  std::vector<std::string> rs274_append;
   std::vector<std::string> rules;
 };
 
+void readDirectivesFrom(const std::string& path, const std::string& dir, Directives& d);
+
+// Directives from the program's own comments, then from its sidecar file if there is one.
 Directives readDirectives(const std::string& path, const std::string& dir)
 {
   Directives d;
   d.options.dialect = Dialect::kLinuxCnc;
+  readDirectivesFrom(path, dir, d);
+  readDirectivesFrom(path + ".crosscheck", dir, d);
+  return d;
+}
+
+void readDirectivesFrom(const std::string& path, const std::string& dir, Directives& d)
+{
   std::ifstream in(path);
   std::string line;
   const std::string tag = "(cross-check: ";
@@ -253,12 +267,15 @@ Directives readDirectives(const std::string& path, const std::string& dir)
         d.rs274_drop.push_back(w);
       }
     }
+    else if (key == "rs274_append")
+    {
+      d.rs274_append.push_back(value);
+    }
     else if (key == "rule")
     {
       d.rules.push_back(value);
     }
   }
-  return d;
 }
 
 std::vector<Canon> ours(const std::string& path, const ParserOptions& options)
@@ -342,7 +359,9 @@ std::vector<std::string> programsIn(const std::string& dir)
     while (dirent* e = readdir(d))
     {
       const std::string n = e->d_name;
-      if (n.size() > 4 && (n.substr(n.size() - 4) == ".ngc" || n.substr(n.size() - 3) == ".nc"))
+      auto ends = [&n](const std::string& tail)
+      { return n.size() > tail.size() && n.compare(n.size() - tail.size(), tail.size(), tail) == 0; };
+      if (ends(".ngc") || ends(".nc") || ends(".gcode"))
       {
         files.push_back(n);
       }
@@ -364,7 +383,7 @@ size_t crossCheck(const std::string& dir, const std::string& file, cnc_bridge::t
     std::cout << "  " << file << ": " << rule << "\n";
   }
   std::string rs274_path = path;
-  if (!d.rs274_drop.empty())
+  if (!d.rs274_drop.empty() || !d.rs274_append.empty())
   {
     std::ifstream in(path);
     rs274_path = tmp.file(file);
@@ -383,6 +402,10 @@ size_t crossCheck(const std::string& dir, const std::string& file, cnc_bridge::t
         drop = drop || upper.find(w) != std::string::npos;
       }
       out << (drop ? "" : line) << "\n";
+    }
+    for (const std::string& extra : d.rs274_append)
+    {
+      out << extra << "\n";
     }
   }
   // Without a table of its own, rs274 would take tool lengths from somewhere: give it tools 0-99 of
