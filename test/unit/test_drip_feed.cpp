@@ -424,7 +424,9 @@ TEST_P(DripEndToEnd, AtEveryXoffQueuedPlusLaterWritesStayWithinTheAllowance)
   const auto run = runOnLine(planDrip(path, options), options, control, baud / 10.0);
   ASSERT_TRUE(run.result.completed()) << run.result.message;
   EXPECT_EQ(program, run.received);
-  EXPECT_GE(run.stats.xoff_events, baud <= 9600 ? 30u : 200u) << run.stats.summary();
+  // Enough XOFFs to exercise the allowance many times; how many exactly depends on how the
+  // simulated control's execution thread is scheduled (183-199 at 115200 on a loaded machine).
+  EXPECT_GE(run.stats.xoff_events, baud <= 9600 ? 30u : 100u) << run.stats.summary();
   EXPECT_LE(run.stats.max_after_xoff, options.xoff_allowance) << run.stats.summary();
   EXPECT_EQ(0u, run.stats.xoff_over_allowance) << run.stats.summary();
   EXPECT_EQ(0u, run.stats.overflow) << run.stats.summary();

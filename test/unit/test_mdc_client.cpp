@@ -338,9 +338,15 @@ TEST(MdcPoller, SkipsPollsWhileADncTransferHoldsThePort)
   MdcPoller poller(plan, 500ms, &mine);
   StopSignal stop;
   std::thread thread([&] { poller.run(fake, stop); });
-  // Not one byte while the transfer runs (a bounded wait for a write that must not come).
+  // Not one byte while the transfer runs (a bounded wait for a write that must not come), and
+  // the poller counts the polls it skipped (once its thread has run: on a loaded machine that can
+  // take longer than the wait above).
   EXPECT_FALSE(fake.waitForWritten(1, 200ms));
+  const auto deadline = std::chrono::steady_clock::now() + 10s;
+  while (poller.skippedForPortLock() == 0 && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(2ms);  // a counter of another thread: nothing to wait on but itself
   EXPECT_GT(poller.skippedForPortLock(), 0u);
+  EXPECT_EQ(fake.written().size(), 0u);
   EXPECT_THROW(poller.withClient([](MdcClient&) {}), LinkError);
   dnc.unlock();
   ASSERT_TRUE(fake.waitForWritten(6, 5s));
