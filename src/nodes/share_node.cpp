@@ -23,6 +23,7 @@
 #include "cnc_bridge/RemoveProgram.h"
 #include "cnc_bridge/SendProgram.h"
 #include "cnc_bridge/TransferAction.h"
+#include "cnc_bridge/WithdrawProgram.h"
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/program_dir.h"
 #include "cnc_bridge/programs/archive.h"
@@ -49,6 +50,7 @@ class ShareNode
   bool onList(ListPrograms::Request& request, ListPrograms::Response& response);
   bool onRemove(RemoveProgram::Request& request, RemoveProgram::Response& response);
   bool onHistory(ProgramHistory::Request& request, ProgramHistory::Response& response);
+  bool onWithdraw(WithdrawProgram::Request& request, WithdrawProgram::Response& response);
   bool onCompare(ComparePrograms::Request& request, ComparePrograms::Response& response);
   void archive(const std::string& name, const std::string& path, const std::string& direction);
   /// Serves the request files in the share's requests folder (each removed once read).
@@ -88,7 +90,7 @@ class ShareNode
   } counters_;
 
   std::unique_ptr<SingleGoalActionServer<TransferAction>> action_;
-  ros::ServiceServer send_srv_, receive_srv_, list_srv_, remove_srv_, history_srv_, compare_srv_;
+  ros::ServiceServer send_srv_, receive_srv_, list_srv_, remove_srv_, history_srv_, compare_srv_, withdraw_srv_;
   ros::WallTimer check_timer_;
   ros::Publisher requests_pub_;
   ros::Subscriber dprnt_sub_;
@@ -160,6 +162,7 @@ ShareNode::ShareNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   remove_srv_ = pnh.advertiseService("remove_program", &ShareNode::onRemove, this);
   history_srv_ = pnh.advertiseService("program_history", &ShareNode::onHistory, this);
   compare_srv_ = pnh.advertiseService("compare_programs", &ShareNode::onCompare, this);
+  withdraw_srv_ = pnh.advertiseService("withdraw_program", &ShareNode::onWithdraw, this);
   // ~check_period (s, default 5): how often the share is listed to keep the link state.
   check_timer_ =
       nh.createWallTimer(ros::WallDuration(params::positive(pnh, "check_period", 5.0)), &ShareNode::checkShare, this);
@@ -508,6 +511,38 @@ void ShareNode::archive(const std::string& name, const std::string& path, const 
     // The transfer itself succeeded: a full archive disk is reported, not turned into a failure.
     ROS_ERROR("%s was %s but not archived: %s", name.c_str(), direction.c_str(), e.what());
   }
+}
+
+bool ShareNode::onWithdraw(WithdrawProgram::Request& request, WithdrawProgram::Response& response)
+{
+  try
+  {
+    const std::string content = store_->read(request.file);
+    // Kept first: a program is never gone from both the share and the archive.
+    const auto kept = archive_->add(request.file, content, {"share_node", machine_, "withdrawn"});
+    if (kept)
+    {
+      response.version = kept->number;
+    }
+    else
+    {
+      for (const programs::ArchiveVersion& v : archive_->history(request.file))
+      {
+        if (v.crc32 == programs::crc32Hex(content) && v.size == content.size())
+          response.version = v.number;
+      }
+    }
+    store_->remove(request.file);
+    response.success = true;
+    response.message = "withdrew " + request.file + " from " + store_->describe() + " (archive version " +
+                       std::to_string(response.version) + ")";
+    ROS_INFO("%s", response.message.c_str());
+  }
+  catch (const Error& e)
+  {
+    response.message = e.what();
+  }
+  return true;
 }
 
 bool ShareNode::onHistory(ProgramHistory::Request& request, ProgramHistory::Response& response)

@@ -1,6 +1,7 @@
 // Program names, O numbers, first comments and the protected range (see program_name.h).
 #include "cnc_bridge/programs/program_name.h"
 
+#include <algorithm>
 #include <cctype>
 #include <cstdio>
 #include <fstream>
@@ -77,7 +78,7 @@ NamePattern::NamePattern(const std::string& pattern) : text_(pattern)
     {
       ++j;
       while (j < pattern.size() && std::isdigit(static_cast<unsigned char>(pattern[j])))
-        width = width * 10 + (pattern[j++] - '0');
+        width = std::min(width * 10 + (pattern[j++] - '0'), kMaxDigits + 1);  // "%0999...d" must not overflow
       if (width < 1 || width > kMaxDigits)
         throw ConfigError("program name pattern '" + pattern + "': the width of %0Nd must be 1 to 8");
     }

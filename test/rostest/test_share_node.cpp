@@ -25,6 +25,7 @@
 #include "cnc_bridge/RemoveProgram.h"
 #include "cnc_bridge/SendProgram.h"
 #include "cnc_bridge/TransferAction.h"
+#include "cnc_bridge/WithdrawProgram.h"
 #include "samba_server.h"
 #include "temp_dir.h"
 
@@ -223,6 +224,17 @@ TEST_F(ShareNodeTest, ArchiveKeepsEachDistinctVersionOnce)
   ASSERT_TRUE(ros::service::call(kNs + "compare_programs", compare));
   EXPECT_FALSE(compare.response.success);
   EXPECT_NE(compare.response.message.find("kept: 1, 2"), std::string::npos) << compare.response.message;
+
+  // Withdrawn: kept in the archive (here the content of version 2), then gone from the share.
+  WithdrawProgram withdraw;
+  withdraw.request.file = "O03000.nc";
+  ASSERT_TRUE(ros::service::call(kNs + "withdraw_program", withdraw));
+  EXPECT_TRUE(withdraw.response.success) << withdraw.response.message;
+  EXPECT_EQ(withdraw.response.version, 2u);
+  EXPECT_FALSE(test::exists(server_->folder("secure") + "/O03000.nc"));
+  ASSERT_TRUE(ros::service::call(kNs + "withdraw_program", withdraw));
+  EXPECT_FALSE(withdraw.response.success);  // nothing left to withdraw
+  EXPECT_NE(withdraw.response.message.find("no program 'O03000.nc'"), std::string::npos) << withdraw.response.message;
 
   // A program received from the control is kept too.
   writeFile(server_->folder("secure") + "/O03001.nc", "%\nO03001 (EDITED AT THE CONTROL)\n%\n");
