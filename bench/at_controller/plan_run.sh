@@ -7,7 +7,7 @@
 #   BUILD_DIR=$PWD/.build bench/at_controller/plan_run.sh [lines]
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
-build=${BUILD_DIR:-/work/main/.build}
+build=${BUILD_DIR:-$(cd "$(dirname "$0")/../.." && pwd)/.build}
 lines=${1:-100000}
 plan=$(find "$build" -name cnc_plan -type f -perm -u+x | head -n 1)
 [[ -n "$plan" ]] || { echo "cnc_plan not built in $build (build target cnc_plan)" >&2; exit 1; }

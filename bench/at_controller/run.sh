@@ -4,9 +4,9 @@
 # here). Prints the sender's setpoint interval p50/p99/max, underruns and lateness, the simulator's
 # arrival intervals, and each as a ratio to the 1 ms period the controller expects.
 # REALTIME_PRIORITY=N gives the sender thread SCHED_FIFO priority N (needs CAP_SYS_NICE / root).
-# usage: BUILD_DIR=/work/main/.build [REALTIME_PRIORITY=50] bench/at_controller/run.sh [SECONDS]
+# usage: BUILD_DIR=.build [REALTIME_PRIORITY=50] bench/at_controller/run.sh [SECONDS]
 set -euo pipefail
-build=${BUILD_DIR:-/work/main/.build}
+build=${BUILD_DIR:-$(cd "$(dirname "$0")/../.." && pwd)/.build}
 seconds=${1:-60}
 bin=$(dirname "$(find "$build" -type f -name at_stream_bench -perm -u+x | head -1)")
 [[ -x "$bin/at_stream_bench" && -x "$bin/sim_at_controller" ]] || { echo "build at_stream_bench and sim_at_controller in $build first" >&2; exit 1; }

@@ -13,9 +13,9 @@
 #     with the normal scheduler and with the sender at SCHED_FIFO 5;
 #  3. throughput at 115200 pacing into a control that executes instantly (>= 97% of line rate).
 # Programs are generated in /tmp and deleted. Builds nothing: runs BUILD_DIR's binaries.
-# usage: BUILD_DIR=/work/main/.build [MEMORY_MB=200] bench/dnc/run.sh
+# usage: BUILD_DIR=.build [MEMORY_MB=200] bench/dnc/run.sh
 set -euo pipefail
-build=${BUILD_DIR:-/work/main/.build}
+build=${BUILD_DIR:-$(cd "$(dirname "$0")/../.." && pwd)/.build}
 # SCHED_FIFO priority of the sender in measurements 2 and 3 (DripOptions::realtime_priority; the
 # simulated control's UART runs at 10); 0 = the normal scheduler.
 rt=${REALTIME:-5}

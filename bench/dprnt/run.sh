@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
-# DPRNT benchmarks (builds nothing; runs binaries from BUILD_DIR, default /work/main/.build):
+# DPRNT benchmarks (builds nothing; runs binaries from BUILD_DIR, default .build/):
 #   1. parser throughput on one core: bench_dprnt_parser (the parser alone, line assembly + parser,
 #      and parse + rules, which is what the node does per line), side by side with the peer a shop
 #      would otherwise use, a Python loop over a regular expression, and with the goal (1,000,000 lines/s);
 #   2. latency from the simulator's write to a subscriber at 100 lines/s over a pty, p50/p99, against
 #      the goal p99 < 2 ms.
-# usage: BUILD_DIR=/work/main/.build bench/dprnt/run.sh [LINES] [SAMPLES]
+# usage: BUILD_DIR=.build bench/dprnt/run.sh [LINES] [SAMPLES]
 set -euo pipefail
 root=$(cd "$(dirname "$0")/../.." && pwd)
 build=${BUILD_DIR:-$root/.build}

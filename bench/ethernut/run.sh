@@ -2,10 +2,10 @@
 # Coordinates per second streamed by the ethernut client to sim_ethernut over loopback (NEXT after
 # every set, tool moving instantly, no position reports), against the round-trip bound: a bare
 # 20-byte request/response echo between two processes over the same socket type, same run.
-# Builds nothing: uses sim_ethernut and bench_ethernut from BUILD_DIR (default /work/main/.build).
-#   BUILD_DIR=/work/main/.build bench/ethernut/run.sh [coordinates] [rounds]
+# Builds nothing: uses sim_ethernut and bench_ethernut from BUILD_DIR (default .build/).
+#   BUILD_DIR=.build bench/ethernut/run.sh [coordinates] [rounds]
 set -euo pipefail
-build=${BUILD_DIR:-/work/main/.build}
+build=${BUILD_DIR:-$(cd "$(dirname "$0")/../.." && pwd)/.build}
 n=${1:-20000}
 rounds=${2:-5}
 find_bin() { find "$build" -name "$1" -type f -perm -u+x | head -n 1; }

@@ -1,13 +1,13 @@
 #!/usr/bin/env bash
 # G-code parse rate: cnc_bridge's gcode::Reader vs the npm package gcode-parser (the parser behind
 # cncjs), same generated 1,000,000-line program, same machine, same run. Builds nothing: uses
-# bench_gcode from BUILD_DIR (default /work/main/.build). Installs gcode-parser with npm into
+# bench_gcode from BUILD_DIR (default .build/). Installs gcode-parser with npm into
 # bench/gcode/node_modules on first use (git-ignored). Then the parser's peak memory (ru_maxrss)
 # on a program of lines/10 and of lines: streaming, it must not grow with the file.
-#   BUILD_DIR=/work/main/.build bench/gcode/run.sh [lines]
+#   BUILD_DIR=.build bench/gcode/run.sh [lines]
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
-build=${BUILD_DIR:-/work/main/.build}
+build=${BUILD_DIR:-$(cd "$(dirname "$0")/../.." && pwd)/.build}
 lines=${1:-1000000}
 ours=$(find "$build" -name bench_gcode -type f -perm -u+x | head -n 1)
 [[ -n "$ours" ]] || { echo "bench_gcode not built in $build (build target bench_gcode)" >&2; exit 1; }

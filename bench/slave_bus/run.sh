@@ -6,10 +6,10 @@
 #     the median step;
 #  2. the same through slave_bus_node (rospy publisher -> node -> pty -> simulator -> 8 response
 #     topics), raw, side by side with the core session as a ratio.
-# Builds nothing: runs BUILD_DIR's binaries. usage: BUILD_DIR=/work/main/.build bench/slave_bus/run.sh [STEPS]
+# Builds nothing: runs BUILD_DIR's binaries. usage: BUILD_DIR=.build bench/slave_bus/run.sh [STEPS]
 set -euo pipefail
 root=$(cd "$(dirname "$0")/../.." && pwd)
-build=${BUILD_DIR:-/work/main/.build}
+build=${BUILD_DIR:-$root/.build}
 steps=${1:-2000}
 bin() { for d in "$build/devel/lib/cnc_bridge" "$build/bin"; do [[ -x "$d/$1" ]] && { echo "$d/$1"; return; }; done; echo "missing $1 in $build" >&2; exit 1; }
 sim=$(bin sim_slave_bus)

@@ -5,10 +5,10 @@
 # read off the link by the same tap (bench/xmodem/tap.c, in place of socat); ratios to sx->rx of
 # the same run. Then a 16 KiB program through a noisy 115200 wire (seeded), in CRC and checksum
 # mode. Builds nothing but the tap: runs cnc_dnc from BUILD_DIR.
-# usage: BUILD_DIR=/work/main/.build [ROUNDS=5] [SEEDS=8] bench/xmodem/run.sh [KILOBYTES]   (default 256)
+# usage: BUILD_DIR=.build [ROUNDS=5] [SEEDS=8] bench/xmodem/run.sh [KILOBYTES]   (default 256)
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
-build=${BUILD_DIR:-/work/main/.build}
+build=${BUILD_DIR:-$(dirname "$(dirname "$here")")/.build}
 bin="$build/devel/lib/cnc_bridge"
 [[ -x "$bin/cnc_dnc" ]] || bin="$build/bin"
 work=$(mktemp -d /tmp/bench_xmodem_tap.XXXXXX)
