@@ -14,6 +14,7 @@
 #include <unistd.h>
 
 #include <dirent.h>
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
@@ -555,8 +556,8 @@ class Tap
   std::thread a_to_b_, b_to_a_;
 };
 
-/// Starts lrzsz `rx FILE` in \p dir with its stdin and stdout on \p tty.
-pid_t startRx(const std::string& tty, const std::string& dir, const std::string& file)
+/// Starts lrzsz \p program (`rx FILE` or `sx FILE`) in \p dir with its stdin and stdout on \p tty.
+pid_t startLrzsz(const char* program, const std::string& tty, const std::string& dir, const std::string& file)
 {
   const pid_t pid = ::fork();
   if (pid == 0)
@@ -568,10 +569,15 @@ pid_t startRx(const std::string& tty, const std::string& dir, const std::string&
     ::dup2(fd, 1);
     const int null = ::open("/dev/null", O_WRONLY);
     ::dup2(null, 2);
-    ::execl("/usr/bin/rx", "rx", file.c_str(), static_cast<char*>(nullptr));
+    ::execl((std::string("/usr/bin/") + program).c_str(), program, file.c_str(), static_cast<char*>(nullptr));
     ::_exit(127);
   }
   return pid;
+}
+
+pid_t startRx(const std::string& tty, const std::string& dir, const std::string& file)
+{
+  return startLrzsz("rx", tty, dir, file);
 }
 }  // namespace
 
@@ -616,4 +622,34 @@ TEST(CncDncCli, SendStartsOnTheNakRxSentBeforeThePortWasOpened)
   ASSERT_GE(received.size(), payload.size());
   EXPECT_EQ(received.substr(0, payload.size()), payload);
   EXPECT_EQ(received.find_first_not_of('\x1a', payload.size()), std::string::npos) << "more than SUB padding";
+}
+
+// The other direction: lrzsz `sx` sends a program to `cnc_dnc receive`, which asks with a NAK
+// (checksum mode) and stores exactly what sx sent (its last block padded with SUB, which text
+// mode removes). Every byte goes through the tap, so the test also sees what cnc_dnc answered: a
+// block that came in late on a loaded machine may be NAKed and sent again, but every block is
+// ACKed.
+TEST(CncDncCli, ReceiveTakesTheExactProgramFromSx)
+{
+  TempDir dir("test_xmodem_cli");
+  const std::string payload = program(4322, 5 * 128 + 17);
+  writeFile(dir.path + "/O04322.nc", payload);
+  PtyMaster sx_side, dnc_side;
+  Tap tap(sx_side, dnc_side);
+  const std::string target = dir.path + "/received.nc";
+  Tool receive({"receive", "--port", dnc_side.slavePath(), "--mode", "checksum", "--timeout", "30", target}, dir.path);
+  const pid_t sx = startLrzsz("sx", sx_side.slavePath(), dir.path, "O04322.nc");
+  const ToolRun run = receive.finish();
+  exitStatus(sx);  // reaped; what it delivered is checked below
+  ASSERT_EQ(run.status, 0) << run.err;
+  EXPECT_EQ(readFile(target), payload);
+  const std::string from_dnc = tap.fromB();
+  ASSERT_FALSE(from_dnc.empty());
+  EXPECT_EQ(from_dnc[0], '\x15') << "cnc_dnc's start request is not a NAK";
+  const size_t blocks = (payload.size() + 127) / 128;
+  // The ACK of EOT may be the last byte before both programs close their ports, and the tap can
+  // lose it then.
+  EXPECT_GE(static_cast<size_t>(std::count(from_dnc.begin(), from_dnc.end(), '\x06')), blocks)
+      << "a block was not ACKed";
+  EXPECT_EQ(from_dnc.find_first_not_of("\x06\x15"), std::string::npos) << "cnc_dnc sent more than NAKs and ACKs";
 }

@@ -2,7 +2,8 @@
 // and the python3-xmodem package (test/data/xmodem/pyxmodem_peer.py), in both directions, files of
 // 0, 1, 127, 128, 129, 1024, 1025 bytes and 1 MB. The peer runs as a child process with its
 // stdin/stdout (or its device argument) on the pty slave; this process is the other end on the
-// master. Also the cnc_dnc tool against sim_haas_serial-free peers: cnc_dnc send -> rx.
+// master. The cnc_dnc tool itself against lrzsz, both ways (rx started before cnc_dnc send, sx
+// into cnc_dnc receive), is in test_xmodem_cli.cpp.
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <sys/wait.h>
