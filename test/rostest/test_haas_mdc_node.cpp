@@ -297,11 +297,14 @@ TEST(HaasMdcNode, WritesOutsideTheAllowListAreRefused)
 
 TEST(HaasMdcNode, RawQueriesAreReadOnly)
 {
+  const size_t mark = queriesReceived(ngc_queries).size();
   cnc_bridge::MdcQuery query;
   query.request.query = "?E100 1";
   ASSERT_TRUE(call(kNgc + "/haas_mdc_node/query", query));
   EXPECT_FALSE(query.response.success);
   EXPECT_NE(query.response.message.find("read-only"), std::string::npos);
+  EXPECT_EQ(writesReceivedSince(ngc_queries, mark), std::vector<std::string>{})
+      << "a refused raw write reached the NGC";
 
   query.request.query = "?Q100";
   ASSERT_TRUE(callWhenUp(kNgc + "/haas_mdc_node/query", query)) << query.response.message;
