@@ -34,6 +34,7 @@ def summary(problem, limit=400):
 # Result files by the start of their name: what each step of scripts/test.sh writes.
 KIND_OF_PREFIX = [("gtest-", "unit tests"), ("rostest-", "rostest runs"), ("roslaunch-check", "launch file checks"),
                   ("asan_", "sanitizer re-runs"), ("fuzz_", "fuzz targets"), ("step_", "steps that could not run"),
+                  ("MISSING-", "steps that could not run"),
                   ("scripts", "script tests"), ("two_hosts", "two hosts"), ("install_space", "install space")]
 
 

@@ -202,3 +202,15 @@ class CellLaunch(unittest.TestCase):
 
 if __name__ == "__main__":
     unittest.main()
+
+
+class RostestLaunchFiles(unittest.TestCase):
+    """Every rostest's launch file loads: an argument given twice to an include, an unknown
+    argument or a missing file would otherwise only show as a test that never ran."""
+
+    def test_every_rostest_file_loads(self):
+        files = sorted(glob.glob(os.path.join(ROOT, "test", "rostest", "*.test")))
+        self.assertGreater(len(files), 10)
+        for path in files:
+            with self.subTest(path=os.path.basename(path)):
+                load(path)
