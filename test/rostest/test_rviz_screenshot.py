@@ -12,6 +12,7 @@ one per machine, side by side (measured in the cell's view: four saddles of 750-
 three when one machine is hidden; the probe cloud and the toolbar's icons give blue regions below
 100 pixels or outside the scene).
 """
+import os
 import subprocess
 import sys
 import time
@@ -29,7 +30,16 @@ BACKGROUND = np.array([48, 48, 48])
 
 
 def screenshot(path):
-    xwd = subprocess.run(["xwd", "-root", "-silent"], capture_output=True, check=True).stdout
+    # A capture the X server refuses once (seen once in a full run) is taken again; three refusals
+    # fail with what xwd said.
+    for _ in range(3):
+        capture = subprocess.run(["xwd", "-root", "-silent"], capture_output=True)
+        if capture.returncode == 0:
+            break
+    else:
+        raise AssertionError(f"xwd -root failed 3 times on DISPLAY={os.environ.get('DISPLAY')}: "
+                             + capture.stderr.decode(errors="replace"))
+    xwd = capture.stdout
     subprocess.run(["convert", "xwd:-", path], input=xwd, check=True)
     return np.asarray(Image.open(path).convert("RGB")).astype(int)
 
