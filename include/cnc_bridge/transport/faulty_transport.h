@@ -1,6 +1,7 @@
 // A Transport decorator that damages traffic the way a noisy RS-232 line does: flipped bits,
-// dropped and doubled bytes, whole writes lost (a lost ACK). Seeded, so a failing transfer can be
-// replayed. Used by the fault-injection tests and by sim_haas_serial --faults.
+// dropped and doubled bytes, whole writes lost (a lost ACK). Reproducible from its random number
+// seed, so a failing transfer can be replayed. Used by the fault-injection tests and by
+// sim_haas_serial --faults.
 #pragma once
 
 #include <atomic>
