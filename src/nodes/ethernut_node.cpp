@@ -196,6 +196,12 @@ class EthernutNode : public ethernut::ClientListener
           s.feed_rate = std::nan("");
           s.spindle_speed = std::nan("");
         });
+    // ~enable_motion (bool, false) at start-up, ~set_motion_enabled at run time: ~run_job (and
+    // ~resume, which lets a held move go on) only while motion is enabled; disabling it pauses a
+    // running job (the board holds the move in progress).
+    motion_ = std::make_unique<RuntimeSwitch>(pnh_, "motion", "enable_motion", "set_motion_enabled",
+                                              [this](bool enabled, const std::string& caller)
+                                              { onMotionSwitched(enabled, caller); });
     state_->diagnostics().add("ethernut protocol", this, &EthernutNode::protocolDiagnostics);
     path_pub_ = nh_.advertise<nav_msgs::Path>("job/path", 1, true);
     markers_pub_ = nh_.advertise<visualization_msgs::MarkerArray>("job/markers", 1, true);
@@ -616,6 +622,11 @@ class EthernutNode : public ethernut::ClientListener
       ROS_WARN_STREAM("run_job: " << message);
       action_.setAborted(result, message);
     };
+    if (!motion_->enabled())
+    {
+      abort(motion_->refusal("job"));  // before anything is loaded or sent
+      return;
+    }
     std::string why;
     auto c = client(why);
     if (!c)
@@ -623,6 +634,7 @@ class EthernutNode : public ethernut::ClientListener
       abort(why);
       return;
     }
+    const GoalScope goal_scope(*this);
     if (c->state() == ethernut::SessionState::kPaused)
     {
       abort("the board is paused (a cancelled job holds its move there): call " + pnh_.resolveName("resume") +
@@ -765,7 +777,15 @@ class EthernutNode : public ethernut::ClientListener
       segment_continues_ = false;
       try
       {
-        c->startJob(source);
+        if (!startSegment(*c, source, feedback, cancelled))
+        {
+          result.coordinates_done = static_cast<uint32_t>(totals.done);
+          result.coordinate_count = static_cast<uint32_t>(count);
+          result.resends = totals.resends;
+          result.message = "cancelled while held (" + feedback.event + ")";
+          action_.setPreempted(result, result.message);
+          return;
+        }
       }
       catch (const Error& e)
       {
@@ -824,6 +844,105 @@ class EthernutNode : public ethernut::ClientListener
     }
   }
 
+  // Marks the node's one goal as running (a disable then holds it) for the scope of execute().
+  class GoalScope
+  {
+   public:
+    explicit GoalScope(EthernutNode& node) : node_(node) { set(true); }
+    ~GoalScope() { set(false); }
+    GoalScope(const GoalScope&) = delete;
+    GoalScope& operator=(const GoalScope&) = delete;
+
+   private:
+    void set(bool running)
+    {
+      std::lock_guard<std::mutex> lock(node_.job_mutex_);
+      node_.goal_running_ = running;
+      node_.motion_hold_.clear();
+    }
+    EthernutNode& node_;
+  };
+
+  // Starts the next segment of moves once motion is allowed: enabled, and no hold left from a
+  // disable during this job (~resume, refused while motion is disabled, ends the hold). The check
+  // and the start are one step under motion_mutex_, so a disable either comes before (the job is
+  // held here) or after (it pauses the board). \returns false if the goal was cancelled while held.
+  // \throws Error from Client::startJob.
+  bool startSegment(ethernut::Client& c, const std::function<bool(ethernut::Coordinate&)>& source,
+                    RunJobFeedback& feedback, bool& cancelled)
+  {
+    for (;;)
+    {
+      std::string hold;
+      uint64_t resumes = 0;
+      {
+        std::lock_guard<std::mutex> gate(motion_mutex_);
+        {
+          std::lock_guard<std::mutex> lock(job_mutex_);
+          hold = motion_hold_;
+          resumes = resume_count_;
+        }
+        if (motion_->enabled() && hold.empty())
+        {
+          c.startJob(source);
+          return true;
+        }
+      }
+      if (hold.empty())
+      {
+        hold = "motion disabled";  // onMotionSwitched has not run yet; it names the caller
+      }
+      showMotionHold(hold, "", false, feedback);
+      state_->update([&](MachineState& m) { m.execution = MachineState::EXECUTION_PAUSED; });
+      if (!waitForResume(resumes, cancelled))
+      {
+        return false;
+      }
+      showMotionHold("", hold, false, feedback);
+      state_->update([&](MachineState& m) { m.execution = MachineState::EXECUTION_ACTIVE; });
+    }
+  }
+
+  // Feedback (and state's message) for a motion hold that began (\p hold) or ended (\p hold empty,
+  // \p ended the hold that ended).
+  void showMotionHold(const std::string& hold, const std::string& ended, bool board_holds, RunJobFeedback& feedback)
+  {
+    feedback.paused = !hold.empty();
+    if (hold.empty())
+    {
+      feedback.event = "resumed after the hold (" + ended + ")";
+    }
+    else
+    {
+      feedback.event = hold + ": " +
+                       (board_holds ? "the board holds the move in progress" : "the job holds before its next move") +
+                       "; enable motion with " + pnh_.resolveName("set_motion_enabled") +
+                       " (std_srvs/SetBool, data: true), then call " + pnh_.resolveName("resume");
+    }
+    ROS_INFO_STREAM("run_job: " << feedback.event);
+    state_->update([&](MachineState& m) { m.message = feedback.event; });
+    action_.publishFeedback(feedback);
+  }
+
+  // Waits until ~resume succeeds after \p resumes resumes; false if the goal is cancelled first.
+  bool waitForResume(uint64_t resumes, bool& cancelled)
+  {
+    std::unique_lock<std::mutex> lock(job_mutex_);
+    while (resume_count_ == resumes)
+    {
+      lock.unlock();
+      if (action_.isPreemptRequested() || !ros::ok())
+      {
+        cancelled = true;
+        return false;
+      }
+      lock.lock();
+      // Cancel comes without a notification here: look again at least every 20 ms.
+      job_cv_.wait_for(lock, Milliseconds(20));
+    }
+    return true;
+  }
+
   struct Totals
   {
     uint64_t done = 0;  // sets acknowledged in the segments before this one
@@ -836,12 +955,19 @@ class EthernutNode : public ethernut::ClientListener
                             bool& cancelled)
   {
     uint64_t reported = UINT64_MAX;
+    std::string shown_hold;  // the motion hold the last feedback showed
     for (;;)
     {
       std::unique_lock<std::mutex> lock(job_mutex_);
       job_cv_.wait_for(lock, std::chrono::milliseconds(50), [&] { return job_.finished; });
       const JobProgress p = job_;
+      const std::string hold = motion_hold_;
       lock.unlock();
+      if (hold != shown_hold && !p.finished)
+      {
+        showMotionHold(hold, shown_hold, true, feedback);
+        shown_hold = hold;
+      }
       if (p.done != reported && (p.done > 0 || totals.done == 0))
       {
         reported = p.done;
@@ -853,7 +979,7 @@ class EthernutNode : public ethernut::ClientListener
         feedback.commanded.x = p.last.x * kMetresPerMm;
         feedback.commanded.y = p.last.y * kMetresPerMm;
         feedback.commanded.z = p.last.z * kMetresPerMm;
-        feedback.paused = false;
+        feedback.paused = !shown_hold.empty();
         action_.publishFeedback(feedback);
         state_->update([&](MachineState& m) { m.block = p.line; });
       }
@@ -1010,21 +1136,88 @@ class EthernutNode : public ethernut::ClientListener
   {
     return command(res, "paused", [](ethernut::Client& c) { c.pause(); });
   }
+  // ~resume: lets a held move go on (the board paused by ~pause, a cancel or a disable), a job on
+  // after the program's M00/M01 or after a disable; refused while motion is disabled.
   bool onResume(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res)
   {
+    std::lock_guard<std::mutex> gate(motion_mutex_);
+    if (!motion_->enabled())
     {
-      // A job held at the program's M00/M01 goes on; the board itself was never paused.
+      res.success = false;
+      res.message = motion_->refusal("resume");
+      return true;
+    }
+    std::string held;  // what the job waited at
+    {
       std::lock_guard<std::mutex> lock(job_mutex_);
       if (!program_stop_.empty())
       {
-        resume_requested_ = true;
-        res.success = true;
-        res.message = "resumed after the " + program_stop_;
-        job_cv_.notify_all();
+        resume_requested_ = true;  // the board itself was never paused at a program stop
+        held = "the " + program_stop_;
+      }
+      if (!motion_hold_.empty())
+      {
+        held += (held.empty() ? "the hold (" : " and the hold (") + motion_hold_ + ")";
+        motion_hold_.clear();
+      }
+      ++resume_count_;
+    }
+    job_cv_.notify_all();
+    std::string why;
+    const auto c = client(why);
+    if (held.empty() || (c && c->state() == ethernut::SessionState::kPaused))
+    {
+      command(res, "resumed", [](ethernut::Client& board) { board.resume(); });
+      if (!res.success)
+      {
         return true;
       }
     }
-    return command(res, "resumed", [](ethernut::Client& c) { c.resume(); });
+    if (!held.empty())
+    {
+      res.success = true;
+      res.message = "resumed after " + held;
+    }
+    return true;
+  }
+
+  // ~set_motion_enabled: disabling pauses a running job (the board holds the move in progress,
+  // as for a cancel) and holds the goal until motion is enabled again and ~resume is called.
+  void onMotionSwitched(bool enabled, const std::string& caller)
+  {
+    const std::string what = std::string("motion ") + (enabled ? "enabled" : "disabled") + " by " + caller;
+    std::lock_guard<std::mutex> gate(motion_mutex_);
+    bool running = false;
+    {
+      std::lock_guard<std::mutex> lock(job_mutex_);
+      running = goal_running_;
+      if (!enabled && running && motion_hold_.empty())
+      {
+        motion_hold_ = what;
+      }
+    }
+    job_cv_.notify_all();
+    state_->update([&](MachineState& m) { m.message = what; });
+    if (enabled || !running)
+    {
+      return;
+    }
+    std::string why;
+    const auto c = client(why);
+    if (!c || !c->jobActive())
+    {
+      return;  // between two segments of the job, or not connected: nothing streams
+    }
+    try
+    {
+      c->pause();
+    }
+    catch (const Error& e)
+    {
+      // The board did not confirm the pause: stop streaming at least (the job then ends).
+      ROS_ERROR_STREAM("run_job: pause on disable failed (" << e.what() << "): streaming stopped");
+      c->cancelJob();
+    }
   }
   bool onReset(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res)
   {
@@ -1131,6 +1324,7 @@ class EthernutNode : public ethernut::ClientListener
     status.add("last board error code", st.last_board_error);
     status.add("reconnects", reconnector_ ? reconnector_->reconnects() : 0u);
     kill_->addTo(status);
+    motion_->addTo(status);
   }
 
   ros::NodeHandle nh_;
@@ -1140,6 +1334,8 @@ class EthernutNode : public ethernut::ClientListener
   Milliseconds connect_timeout_{3000};
   ethernut::ClientOptions options_;
   std::unique_ptr<RuntimeSwitch> kill_;
+  std::unique_ptr<RuntimeSwitch> motion_;
+  std::mutex motion_mutex_;  // a segment's start, a disable's pause and ~resume: one at a time
   std::unique_ptr<ProgramDirectory> program_dir_;
   gcode::ParserOptions parser_options_;
   G53Moves g53_moves_ = G53Moves::kRefuse;
@@ -1163,6 +1359,9 @@ class EthernutNode : public ethernut::ClientListener
   JobProgress job_;
   std::string program_stop_;                    // the M00/M01 the job waits at ("" when none), under job_mutex_
   bool resume_requested_ = false;               // ~resume called while waiting there, under job_mutex_
+  bool goal_running_ = false;                   // execute() runs a goal, under job_mutex_
+  std::string motion_hold_;                     // "motion disabled by ..." holding the goal, under job_mutex_
+  uint64_t resume_count_ = 0;                   // successful ~resume calls, under job_mutex_
   std::atomic<bool> segment_continues_{false};  // the segment streaming ended at a program step
 
   std::unique_ptr<Reconnector> reconnector_;

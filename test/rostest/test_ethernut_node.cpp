@@ -248,6 +248,22 @@ std::unique_ptr<Client> actionClient()
   return client;
 }
 
+bool setMotion(bool enabled, std_srvs::SetBool::Response& res)
+{
+  std_srvs::SetBool set;
+  set.request.data = enabled;
+  const bool ok = ros::service::call(ns + "/ethernut_node/set_motion_enabled", set);
+  res = set.response;
+  return ok;
+}
+
+// How many of the board's received messages since its first \p from are named \p name.
+long simMessagesNamed(const std::string& name, size_t from)
+{
+  const auto names = simMessages();
+  return std::count(names.begin() + static_cast<long>(std::min(from, names.size())), names.end(), name);
+}
+
 RunJobGoal pointsGoal(const std::vector<std::array<double, 3>>& points_m)
 {
   RunJobGoal goal;
@@ -460,6 +476,117 @@ TEST(EthernutJob, PauseHoldsTheJobAndResumeFinishesIt)
     expected.push_back({static_cast<float>(p[0] * 1000), 0.0f, 0.0f});
   }
   expectSameCoordinates(simLog(), before, expected);
+}
+
+// ~set_motion_enabled false while a job streams: the board is paused (it holds the move in
+// progress) and receives no more sets, the goal stays active with feedback paused and why;
+// ~resume is refused while motion is disabled; enabled again, ~resume lets every set reach the
+// board. A job sent while motion is disabled is refused naming the service and the parameter,
+// and the board receives nothing of it.
+TEST(EthernutJob, DisablingMotionMidJobPausesTheBoardUntilEnabledAndResumed)
+{
+  ASSERT_TRUE(boardReady());
+  auto client = actionClient();
+  clearJob();
+  const size_t before = simLog().size();
+  const size_t messages_before = simMessages().size();
+  std::vector<std::array<double, 3>> points;  // 0.2 m apart at 2000 mm/s: 100 ms per move
+  for (int i = 0; i < 8; ++i)
+  {
+    points.push_back({(i % 2) * 0.2, 0.0, 0.0});
+  }
+  client->sendGoal(pointsGoal(points), Client::SimpleDoneCallback(), Client::SimpleActiveCallback(), &onFeedback);
+  ASSERT_TRUE(watch->waitFor([] { return !watch->feedback.empty() && watch->feedback.back().coordinate_index >= 1; }));
+  const std::string me = ros::this_node::getName();
+  const std::string set_motion = ns + "/ethernut_node/set_motion_enabled";
+  std_srvs::SetBool::Response set;
+  ASSERT_TRUE(setMotion(false, set));
+  EXPECT_EQ(set.message, "motion disabled by " + me);
+
+  // Held: the board got a pause request, the goal is active and its feedback says why.
+  ASSERT_TRUE(watch->waitFor([] { return !watch->feedback.empty() && watch->feedback.back().paused; }, 10.0));
+  {
+    std::lock_guard<std::mutex> lock(watch->mutex);
+    const std::string event = watch->feedback.back().event;
+    EXPECT_EQ(event.rfind("motion disabled by " + me + ": the board holds the move in progress", 0), 0u) << event;
+    EXPECT_NE(event.find(set_motion), std::string::npos) << event;
+    EXPECT_NE(event.find(ns + "/ethernut_node/resume"), std::string::npos) << event;
+  }
+  ASSERT_TRUE(waitForSimMessage("pause-request", messages_before));
+  ASSERT_TRUE(watch->waitFor([] { return watch->state.execution == MachineState::EXECUTION_PAUSED; }, 5.0));
+  const size_t held = simLog().size();
+  const size_t held_messages = simMessages().size();
+  EXPECT_LT(held - before, points.size());
+  // Nothing more reaches the board meanwhile: wait longer than three moves would take.
+  EXPECT_FALSE(watch->waitFor([&] { return simLog().size() > held; }, 0.4));
+  EXPECT_FALSE(client->getState().isDone());
+
+  // ~resume is refused while motion is disabled and names the switch; the board stays paused.
+  std_srvs::Trigger::Response res;
+  ASSERT_TRUE(call("resume", res));
+  EXPECT_FALSE(res.success);
+  EXPECT_NE(res.message.find("resume refused: motion is disabled"), std::string::npos) << res.message;
+  EXPECT_NE(res.message.find(set_motion), std::string::npos) << res.message;
+  EXPECT_NE(res.message.find(ns + "/ethernut_node/enable_motion"), std::string::npos) << res.message;
+
+  // A second client's job meanwhile is turned away and sends nothing (one goal at a time).
+  auto other = actionClient();
+  other->sendGoal(pointsGoal({{0.01, 0.02, 0.003}}));
+  ASSERT_TRUE(other->waitForResult(ros::Duration(20.0)));
+  EXPECT_NE(other->getState(), actionlib::SimpleClientGoalState::SUCCEEDED);
+  // Diagnostics show the switch and who moved it.
+  ASSERT_TRUE(watch->waitFor(
+      [&]
+      {
+        const auto it = watch->protocol.find("motion last change");
+        return it != watch->protocol.end() && it->second.rfind("disabled by " + me, 0) == 0 &&
+               watch->protocol["motion enabled"] == "False";
+      },
+      10.0));
+  EXPECT_EQ(simMessagesNamed("coordinates", held_messages), 0);
+  EXPECT_EQ(simMessagesNamed("READYTOSEND", held_messages), 0);
+  EXPECT_EQ(simLog().size(), held);
+
+  // Enabled again: ~resume goes on and every set of the job reaches the board, in order.
+  ASSERT_TRUE(setMotion(true, set));
+  EXPECT_EQ(set.message, "motion enabled by " + me);
+  ASSERT_TRUE(call("resume", res));
+  EXPECT_TRUE(res.success) << res.message;
+  EXPECT_EQ(res.message, "resumed after the hold (motion disabled by " + me + ")");
+  ASSERT_TRUE(client->waitForResult(ros::Duration(30.0)));
+  ASSERT_EQ(client->getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client->getState().getText();
+  EXPECT_EQ(client->getResult()->coordinates_done, points.size());
+  std::vector<std::array<float, 3>> expected;
+  for (const auto& p : points)
+  {
+    expected.push_back({static_cast<float>(p[0] * 1000), 0.0f, 0.0f});
+  }
+  expectSameCoordinates(simLog(), before, expected);
+  {
+    std::lock_guard<std::mutex> lock(watch->mutex);
+    EXPECT_FALSE(watch->feedback.back().paused);
+  }
+  EXPECT_TRUE(boardReady(10.0));
+
+  // A job while motion is disabled is refused naming the service and the parameter; the board
+  // receives nothing of it.
+  ASSERT_TRUE(setMotion(false, set));
+  const size_t refused_from = simMessages().size();
+  const size_t refused_log = simLog().size();
+  client->sendGoal(pointsGoal({{0.01, 0.02, 0.003}}));
+  ASSERT_TRUE(client->waitForResult(ros::Duration(20.0)));
+  EXPECT_EQ(client->getState(), actionlib::SimpleClientGoalState::ABORTED);
+  const std::string text = client->getResult()->message;
+  EXPECT_NE(text.find("job refused: motion is disabled"), std::string::npos) << text;
+  EXPECT_NE(text.find(set_motion), std::string::npos) << text;
+  EXPECT_NE(text.find(ns + "/ethernut_node/enable_motion"), std::string::npos) << text;
+  ASSERT_TRUE(setMotion(true, set));
+  // An alive request that arrives after the refusal was sent after it: whatever the refused job
+  // sent would be in the log before it.
+  ASSERT_TRUE(waitForSimMessage("alive-request", simMessages().size()));
+  EXPECT_EQ(simMessagesNamed("READYTOSEND", refused_from), 0);
+  EXPECT_EQ(simMessagesNamed("coordinates", refused_from), 0);
+  EXPECT_EQ(simLog().size(), refused_log);
 }
 
 TEST(EthernutJob, CancelStopsStreamingAndPausesTheBoard)
@@ -680,6 +807,33 @@ TEST(EthernutJob, DiagnosticsReportRoundTripsResendsAndKeepalives)
   // Coordinate -> NEXT includes the move (0.2 m at 2 m/s in the jobs above): longer than the link's.
   EXPECT_GT(diag("coordinate round trip max (ms)"), 50.0);
   EXPECT_GT(diag("coordinate round trip max (ms)"), diag("link round trip max (ms)"));
+}
+
+// Motion is off unless configured on (the launch file's default): a job is refused naming
+// ~set_motion_enabled and ~enable_motion, and the board receives nothing of it; switched on at run
+// time, jobs run (the tests below).
+TEST(EthernutLink, JobsAreRefusedUntilMotionIsEnabled)
+{
+  ASSERT_TRUE(boardReady());
+  auto client = actionClient();
+  const size_t before = simLog().size();
+  const size_t messages_before = simMessages().size();
+  client->sendGoal(pointsGoal({{0.001, 0.002, 0.003}}));
+  ASSERT_TRUE(client->waitForResult(ros::Duration(20.0)));
+  EXPECT_EQ(client->getState(), actionlib::SimpleClientGoalState::ABORTED);
+  const std::string text = client->getResult()->message;
+  EXPECT_EQ(text, "job refused: motion is disabled; enable it with " + ns +
+                      "/ethernut_node/set_motion_enabled (std_srvs/SetBool, data: true), or start the node with the "
+                      "parameter " +
+                      ns + "/ethernut_node/enable_motion true");
+  // An alive request that arrives after the refusal was sent after it.
+  ASSERT_TRUE(waitForSimMessage("alive-request", simMessages().size()));
+  EXPECT_EQ(simMessagesNamed("READYTOSEND", messages_before), 0);
+  EXPECT_EQ(simMessagesNamed("coordinates", messages_before), 0);
+  EXPECT_EQ(simLog().size(), before);
+  std_srvs::SetBool::Response set;
+  ASSERT_TRUE(setMotion(true, set));
+  EXPECT_TRUE(set.success);
 }
 
 // Default ~g53_moves (refuse): a program with G53 moves is refused before anything is sent, with
