@@ -54,3 +54,20 @@ if(TARGET cnc_dnc)
   target_sources(cnc_dnc PRIVATE src/cli/cnc_dnc_drip.cpp)
   target_link_libraries(cnc_dnc cnc_bridge_drip)
 endif()
+
+# Program requests punched by the control (docs/dnc_node.md, "Program requests from the control"):
+# the idle listener reads a punch with the XModem receiver or the backup parser and answers.
+cnc_core_module(cnc_bridge_requests src/dnc/program_requests.cpp)
+target_link_libraries(cnc_bridge_requests PUBLIC cnc_bridge_xmodem cnc_bridge_drip cnc_bridge_programs)
+if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
+  # A control played by lrzsz sx/rx (XModem) and by the test (text) on a pty pair.
+  cnc_core_gtest(test_program_requests test/unit/test_program_requests.cpp)
+  if(TARGET test_program_requests)
+    target_link_libraries(test_program_requests cnc_bridge_requests)
+    target_compile_definitions(test_program_requests PRIVATE XMODEM_TEST_DATA="${PROJECT_SOURCE_DIR}/test/data/xmodem")
+  endif()
+endif()
+if(NOT CNC_BRIDGE_CORE_ONLY AND TARGET dnc_node)
+  target_sources(dnc_node PRIVATE src/nodes/dnc_requests.cpp)
+  target_link_libraries(dnc_node cnc_bridge_requests)
+endif()

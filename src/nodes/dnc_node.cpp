@@ -118,6 +118,8 @@ DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   // DNC drip-feed (drip) and program backup (backup): ~drip_* and ~backup_* parameters,
   // dnc/current_line (docs/dnc_drip_feed.md).
   registerDripProtocols(*this, nh, pnh, serial_, *state_, feedback_period_);
+  // Program requests punched by the control (~requests, ~request_mode; dnc_requests.cpp).
+  setUpRequests(nh, pnh);
 
   if (keep_open_)
   {
@@ -146,6 +148,7 @@ DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh)
 
 DncNode::~DncNode()
 {
+  stopRequests();
   cancelRunning();
   {
     std::lock_guard<std::mutex> lock(goal_mutex_);
@@ -166,6 +169,7 @@ bool DncNode::tryReserve(const std::string& what)
       busy_ = true;
       running_ = what;
       cancel_ = false;  // a cancel for the previous transfer does not carry over
+      listen_stop_ = listening_;  // the request listener leaves the port (runReserved waits for it)
       return true;
     }
   }
@@ -176,8 +180,11 @@ bool DncNode::tryReserve(const std::string& what)
 
 void DncNode::release()
 {
-  std::lock_guard<std::mutex> lock(busy_mutex_);
-  busy_ = false;
+  {
+    std::lock_guard<std::mutex> lock(busy_mutex_);
+    busy_ = false;
+  }
+  idle_.notify_all();  // the request listener may take the port again
 }
 
 std::string DncNode::busyMessage()
@@ -298,6 +305,7 @@ TransferResult DncNode::runReserved(TransferGoal goal, const Feedback& feedback,
       });
   ROS_INFO("%s %s by %s", job.send ? "sending" : "receiving", job.path.c_str(), goal.protocol.c_str());
 
+  waitForListenerToLeave();
   try
   {
     // A status poller on the same line (haas_mdc_node) skips its polls while this is held. It
@@ -351,6 +359,8 @@ TransferResult DncNode::runReserved(TransferGoal goal, const Feedback& feedback,
   {
     ROS_INFO("%s", result.message.c_str());
     archiveProgram(job);
+    if (!job.send)
+      reportRequestInTransfer(job);
   }
   else
   {

@@ -260,23 +260,26 @@ void ShareNode::serveRequest(const std::optional<programs::ProgramRequest>& requ
   event.source = source;
   if (!request)
   {
-    event.outcome = "no (LOAD O1234), (SEND O1234) or (SAVE O1234) in it";
+    event.outcome = programs::kNoRequestOutcome;
   }
   else
   {
+    // The same decision as a request punched on RS-232 (dnc_node): what is sent, taken or refused.
+    const programs::RequestDecision decision =
+        programs::decideRequest(*request, *pattern_, *protected_, programs_->root());
     event.request = request->word;
     event.number = request->number;
-    event.program = pattern_->format(request->number);
-    TransferGoal goal;
-    goal.file = event.program;
-    const bool load = request->kind == programs::ProgramRequest::Kind::kLoad;
-    goal.direction = load ? TransferGoal::DIRECTION_SEND : TransferGoal::DIRECTION_RECEIVE;
-    if (load && !std::filesystem::exists(programs_->root() + "/" + event.program))
+    event.program = decision.program;
+    if (decision.action == programs::RequestDecision::Action::kRefuse)
     {
-      event.outcome = "no " + event.program + " in " + programs_->root();
+      event.outcome = decision.outcome;
     }
     else
     {
+      TransferGoal goal;
+      goal.file = decision.program;
+      goal.direction = decision.action == programs::RequestDecision::Action::kSend ? TransferGoal::DIRECTION_SEND
+                                                                                   : TransferGoal::DIRECTION_RECEIVE;
       const TransferResult result = run(goal, nullptr);
       event.success = result.success;
       event.outcome = result.message;

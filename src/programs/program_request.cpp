@@ -2,6 +2,9 @@
 #include "cnc_bridge/programs/program_request.h"
 
 #include <cctype>
+#include <filesystem>
+
+#include "cnc_bridge/common/error.h"
 
 #include "cnc_bridge/programs/program_name.h"
 
@@ -87,15 +90,54 @@ std::optional<ProgramRequest> recogniseRequest(const std::string& all, bool bare
   return std::nullopt;
 }
 
-std::string answerProgram(uint32_t number, const std::string& word, const std::string& reason)
+const char* const kNoRequestOutcome = "no (LOAD O1234), (SEND O1234) or (SAVE O1234) in it";
+
+RequestDecision decideRequest(const ProgramRequest& request, const NamePattern& pattern, const ProtectedRange& range,
+                              const std::string& program_root)
 {
-  std::string shown;
-  for (const char c : upper("CANNOT " + word + " " + programLabel(number) + ": " + reason))
+  RequestDecision decision;
+  decision.program = pattern.format(request.number);
+  const std::string label = programLabel(request.number);
+  if (request.kind == ProgramRequest::Kind::kSave)
+  {
+    decision.action = RequestDecision::Action::kReceive;
+    return decision;
+  }
+  if (range.contains(request.number))
+  {
+    try
+    {
+      range.check(decision.program, request.number, std::nullopt);
+    }
+    catch (const Error& e)
+    {
+      decision.outcome = e.what();
+      decision.shown = label + " PROTECTED - NOT SENT";
+      return decision;
+    }
+  }
+  std::error_code error;
+  if (!std::filesystem::is_regular_file(program_root + "/" + decision.program, error))
+  {
+    decision.outcome = "no " + decision.program + " in " + program_root;
+    decision.shown = label + " NOT FOUND IN PROGRAMS";
+    return decision;
+  }
+  decision.action = RequestDecision::Action::kSend;
+  return decision;
+}
+
+std::string answerProgram(uint32_t number, const std::string& shown)
+{
+  std::string comment;
+  for (const char c : upper(shown.substr(0, kAnswerCommentLength)))
   {
     const bool allowed =
         std::isalnum(static_cast<unsigned char>(c)) || std::string(" .,:-/").find(c) != std::string::npos;
-    shown.push_back(allowed ? c : ' ');
+    comment.push_back(allowed ? c : ' ');
   }
-  return "%\n" + programLabel(number) + " (" + shown + ")\nM30\n%\n";
+  while (!comment.empty() && comment.back() == ' ')
+    comment.pop_back();
+  return "%\n" + programLabel(number) + " (" + comment + ")\nM30\n%\n";
 }
 }  // namespace cnc_bridge::programs

@@ -1,5 +1,6 @@
 // libFuzzer target: the program-request recogniser on arbitrary text (punched programs, DPRNT
-// lines). Must not crash; a recognised request's answer program must carry the request's number.
+// lines). Must not crash; a recognised request's answer program must carry the request's number
+// and a comment no longer than kAnswerCommentLength.
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
@@ -16,7 +17,10 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size)
   {
     if (const auto request = recogniseRequest(text, bare))
     {
-      if (readHeader(answerProgram(request->number, request->word, text)).number != request->number)
+      // The answer carries its own number and a comment no longer than a control shows, whatever
+      // the reason's text (the recognised text stands in for any reason here).
+      const ProgramHeader header = readHeader(answerProgram(request->number, text));
+      if (header.number != request->number || header.comment.size() > kAnswerCommentLength)
         std::abort();
     }
   }

@@ -32,10 +32,3 @@ TEST(ProgramRequest, RecognisedInAPunchedProgramOrADprntLine)
        {"(LOADO1234)", "(LOAD)", "(LOAD O12X)", "(RELOAD O1)", "(LOAD O1234", "(UNLOAD 5)", "(LOAD O123456789)", ""})
     EXPECT_FALSE(recogniseRequest(not_one, true)) << not_one;
 }
-
-TEST(ProgramRequest, TheAnswerSaysWhyInCharactersTheControlShows)
-{
-  const std::string answer = answerProgram(1234, "LOAD", "no O01234.nc in /srv/programs (ask the office)");
-  EXPECT_EQ(answer, "%\nO01234 (CANNOT LOAD O01234: NO O01234.NC IN /SRV/PROGRAMS  ASK THE OFFICE )\nM30\n%\n");
-  EXPECT_EQ(readHeader(answer).number, 1234u);
-}

@@ -25,9 +25,11 @@
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
 #include "cnc_bridge/xmodem/session.h"
+#include "peer_process.h"
 #include "temp_dir.h"
 
 using namespace cnc_bridge;
+using cnc_bridge::test::Peer;
 using cnc_bridge::test::TempDir;
 using namespace cnc_bridge::xmodem;
 
@@ -56,57 +58,6 @@ Bytes readFile(const std::string& path)
   std::ifstream in(path, std::ios::binary);
   return Bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
 }
-
-/// A peer process. With \p stdio_on set, its stdin and stdout are the pty slave (lrzsz style).
-class Peer
-{
- public:
-  Peer(const std::vector<std::string>& argv, const std::string& cwd, const std::string& stdio_on)
-  {
-    pid_ = ::fork();
-    if (pid_ == 0)
-    {
-      if (::chdir(cwd.c_str()) != 0)
-        ::_exit(126);
-      if (!stdio_on.empty())
-      {
-        const int fd = ::open(stdio_on.c_str(), O_RDWR | O_NOCTTY);
-        if (fd < 0)
-          ::_exit(126);
-        ::dup2(fd, 0);
-        ::dup2(fd, 1);
-        ::close(fd);
-      }
-      const int null = ::open("/dev/null", O_WRONLY);
-      ::dup2(null, 2);  // lrzsz chatters on stderr
-      std::vector<char*> args;
-      for (const auto& a : argv)
-        args.push_back(const_cast<char*>(a.c_str()));
-      args.push_back(nullptr);
-      ::execv(args[0], args.data());
-      ::_exit(127);
-    }
-  }
-  /// Waits for the peer (its own timeouts bound the wait) and returns its exit status.
-  int wait()
-  {
-    int status = 0;
-    ::waitpid(pid_, &status, 0);
-    pid_ = -1;
-    return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-  }
-  ~Peer()
-  {
-    if (pid_ > 0)
-    {
-      ::kill(pid_, SIGKILL);
-      ::waitpid(pid_, nullptr, 0);
-    }
-  }
-
- private:
-  pid_t pid_ = -1;
-};
 
 /// What a padding-keeping receiver wrote: the payload byte for byte, then SUB up to the end of its
 /// last block. \p last_block: the size of the last block (our sender sends a short tail in a

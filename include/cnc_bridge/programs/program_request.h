@@ -10,6 +10,8 @@
 #include <optional>
 #include <string>
 
+#include "cnc_bridge/programs/program_name.h"
+
 namespace cnc_bridge::programs
 {
 /// \brief What the control asked for.
@@ -30,8 +32,41 @@ struct ProgramRequest
 /// looked at. Never throws.
 std::optional<ProgramRequest> recogniseRequest(const std::string& text, bool bare_line = false);
 
+/// \brief What to do about a request, the same on every wire (a punch on RS-232, a request file
+/// in a share, a DPRNT line), so that a control is answered alike whichever way it asked.
+struct RequestDecision
+{
+  enum class Action
+  {
+    kSend,     ///< send `program` to the control
+    kReceive,  ///< take the program the control sends next and keep it as `program`
+    kRefuse    ///< do neither: `outcome` and `shown` say why
+  };
+  Action action = Action::kRefuse;
+  std::string program;  ///< the program's file name (by the name pattern)
+  std::string outcome;  ///< refused: why, in words for the log and program_requests
+  std::string shown;    ///< refused: why, short and uppercase, for the control's screen
+};
+
+/// \brief Maps a request onto an action: LOAD/SEND of a program that is in \p program_root and not
+/// protected -> kSend; SAVE -> kReceive (receiving a protected number is allowed: it overwrites
+/// nothing on the control); anything else -> kRefuse with the reason. Does not throw.
+/// \param program_root the directory programs are sent from (the existence of the file is checked).
+RequestDecision decideRequest(const ProgramRequest& request, const NamePattern& pattern, const ProtectedRange& range,
+                              const std::string& program_root);
+
+/// \brief What a punch or request file that holds no request is answered with.
+extern const char* const kNoRequestOutcome;
+
+/// \brief The longest reason an answer program's comment carries: what a control shows of a
+/// program's comment in its program list without cutting it (a Haas shows about 30 characters).
+constexpr size_t kAnswerCommentLength = 32;
+
 /// \brief A short program that tells the operator at the control why a request was not served:
-/// `%`, `O<number> (CANNOT LOAD O01234: <REASON>)`, `M30`, `%`, the reason in the characters a
-/// control shows in a comment (uppercase letters, digits, space and . , : - /).
-std::string answerProgram(uint32_t number, const std::string& word, const std::string& reason);
+/// `%`, `O<number> (<SHOWN>)`, `M30`, `%`. \p shown is cut to kAnswerCommentLength and
+/// limited to what a control shows and takes in a comment (uppercase letters, digits, space and
+/// . , : - /; anything else becomes a space, so no parenthesis can end the comment early).
+/// \param number the answer's own O number: the number of the request program the operator
+/// punched, so the answer replaces it on the control and overwrites nothing else.
+std::string answerProgram(uint32_t number, const std::string& shown);
 }  // namespace cnc_bridge::programs

@@ -15,14 +15,17 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 
+#include "cnc_bridge/ProgramRequestEvent.h"
 #include "cnc_bridge/ReceiveProgram.h"
 #include "cnc_bridge/SendProgram.h"
 #include "cnc_bridge/TransferAction.h"
 #include "cnc_bridge/common/port_lock.h"
 #include "cnc_bridge/common/program_dir.h"
+#include "cnc_bridge/dnc/program_requests.h"
 #include "cnc_bridge/programs/archive.h"
 #include "cnc_bridge/programs/program_name.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
@@ -89,6 +92,27 @@ class DncNode
                            const std::function<void(const TransferFeedback&)>& feedback,
                            const std::atomic<bool>& cancel);
 
+  // Program requests punched by the control (src/nodes/dnc_requests.cpp, docs/dnc_node.md).
+  /// Reads the ~request* parameters; starts the listener thread if ~requests is set.
+  void setUpRequests(ros::NodeHandle& nh, ros::NodeHandle& pnh);
+  void stopRequests();
+  /// The listener thread: while the node is idle, waits on the port for a punch and serves it.
+  void requestWorker();
+  /// Waits on the port (the node idle) for one punch; nothing if stopped or refused. On a punch
+  /// the node is reserved for it (\p reserved set): the caller releases it.
+  std::optional<dnc::Punch> listenForPunch(bool& reserved);
+  /// Serves one punched program (the node reserved for it) and publishes what became of it.
+  void servePunch(const dnc::Punch& punch);
+  /// SAVE: the program the control punches next, into ~program_dir and the archive.
+  std::string saveNextPunch(const std::string& name, bool& success);
+  /// Refused request: the answer program that says why goes to the control.
+  std::string answerRefusal(const dnc::Punch& punch, const std::string& shown);
+  /// A received program that is a request (a punch that came during a receive transfer).
+  void reportRequestInTransfer(const TransferJob& job);
+  void publishRequest(ProgramRequestEvent& event);
+  /// Stops the listener (if it listens) and waits until it has left the port.
+  void waitForListenerToLeave();
+
   ros::NodeHandle nh_;
   ros::NodeHandle pnh_;
   SerialSettings serial_;
@@ -130,5 +154,20 @@ class DncNode
   std::unique_ptr<GoalHandle> current_goal_;  ///< the goal the worker runs
   bool stopping_ = false;
   std::thread worker_;
+
+  // Program requests. listening_ and stop_requests_ are guarded by busy_mutex_; idle_ signals a
+  // change of busy_ or listening_.
+  bool requests_ = false;
+  std::string request_protocol_;  ///< the protocol a LOAD is answered by (~request_mode)
+  dnc::RequestListenerOptions request_options_;
+  uint32_t answer_number_ = 1;  ///< the answer's O number when the request program has none
+  std::unique_ptr<dnc::RequestListener> listener_;
+  Transport* listener_link_ = nullptr;  ///< the link listener_ was made for
+  bool listening_ = false;
+  bool stop_requests_ = false;
+  std::atomic<bool> listen_stop_{false};
+  std::condition_variable idle_;
+  ros::Publisher requests_pub_;
+  std::thread request_thread_;
 };
 }  // namespace cnc_bridge

@@ -17,7 +17,6 @@
 #include <atomic>
 #include <boost/program_options.hpp>
 #include <csignal>
-#include <deque>
 #include <filesystem>
 #include <iostream>
 #include <memory>
@@ -31,6 +30,7 @@
 #include "cnc_bridge/transport/faulty_transport.h"
 #include "cnc_bridge/transport/forwarding_transport.h"
 #include "cnc_bridge/transport/paced_transport.h"
+#include "cnc_bridge/transport/pushback_transport.h"
 #include "cnc_bridge/transport/pty.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
 
@@ -42,33 +42,6 @@ namespace sim
 {
 namespace
 {
-/// A byte already read can be put back, so the protocol session that the byte starts sees it.
-class PushbackTransport : public ForwardingTransport
-{
- public:
-  explicit PushbackTransport(Transport& inner) : ForwardingTransport(inner) {}
-  void unread(uint8_t byte) { pushed_.push_front(byte); }
-
-  size_t read(uint8_t* buffer, size_t size, Milliseconds timeout) override
-  {
-    if (!pushed_.empty() && size > 0)
-    {
-      buffer[0] = pushed_.front();
-      pushed_.pop_front();
-      return 1;
-    }
-    return inner_.read(buffer, size, timeout);
-  }
-  void discardInput() override
-  {
-    pushed_.clear();
-    inner_.discardInput();
-  }
-
- private:
-  std::deque<uint8_t> pushed_;
-};
-
 /// The name a Haas gives a received program: its O number ("O05555.nc"), else a counter.
 std::string programName(const std::string& text, unsigned counter)
 {
