@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <sstream>
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/dnc/backup.h"
@@ -31,9 +32,11 @@ Clock::time_point deadlineAfter(Milliseconds timeout)
 
 [[noreturn]] void noPunch(Transport& link, Milliseconds timeout)
 {
-  throw TimeoutError(link.describe() + ": the control punched nothing within " +
-                     std::to_string(timeout.count() / 1000.0).substr(0, 5) +
-                     " s (start the punch on the control: SEND with the program selected)");
+  std::ostringstream message;
+  message << link.describe() << ": the control punched nothing within "
+          << static_cast<double>(timeout.count()) / 1000.0
+          << " s (start the punch on the control: SEND with the program selected)";
+  throw TimeoutError(message.str());
 }
 }  // namespace
 
@@ -47,7 +50,7 @@ RequestWire parseRequestWire(const std::string& text)
 }
 
 RequestListener::RequestListener(Transport& link, RequestListenerOptions options)
-    : link_(link), options_(std::move(options))
+    : link_(link), options_(options)
 {
 }
 
@@ -134,7 +137,8 @@ std::optional<Punch> RequestListener::listenText(const std::atomic<bool>& stop, 
   {
     if (stop || (cancel != nullptr && *cancel))
       return std::nullopt;
-    const size_t n = readSome(buffer, sizeof(buffer), std::max(Milliseconds(1), std::min(options_.poll, until(deadline))));
+    const size_t n =
+        readSome(buffer, sizeof(buffer), std::max(Milliseconds(1), std::min(options_.poll, until(deadline))));
     if (n == 0 && Clock::now() >= deadline)
       noPunch(link_, start_timeout);
     take(n);

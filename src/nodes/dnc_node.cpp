@@ -168,7 +168,7 @@ bool DncNode::tryReserve(const std::string& what)
     {
       busy_ = true;
       running_ = what;
-      cancel_ = false;  // a cancel for the previous transfer does not carry over
+      cancel_ = false;            // a cancel for the previous transfer does not carry over
       listen_stop_ = listening_;  // the request listener leaves the port (runReserved waits for it)
       return true;
     }

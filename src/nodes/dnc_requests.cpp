@@ -258,8 +258,7 @@ std::string DncNode::saveNextPunch(const std::string& name, bool& success)
     ScopedPortLock lock(port_lock_);
     // The control punches the program next: its own start, within ~start_timeout.
     const std::optional<dnc::Punch> program = listener_->listen(
-        listen_stop_, [] { return true; },
-        std::max(Milliseconds(1000), xmodem_config_.start_timeout), &cancel_);
+        listen_stop_, [] { return true; }, std::max(Milliseconds(1000), xmodem_config_.start_timeout), &cancel_);
     if (!program)
       return "not saved: the node stopped before the program came";
     AtomicFileWriter file(path);

@@ -201,7 +201,12 @@ TEST(RequestListener, APunchRefusedByTheNodeIsNotRead)
         cnc.drain();
       });
   bool asked = false;
-  EXPECT_FALSE(listener.listen(kNever, [&] { asked = true; return false; }));
+  EXPECT_FALSE(listener.listen(kNever,
+                               [&]
+                               {
+                                 asked = true;
+                                 return false;
+                               }));
   punch_thread.join();
   EXPECT_TRUE(asked);
 }

@@ -30,8 +30,8 @@
 #include "cnc_bridge/transport/faulty_transport.h"
 #include "cnc_bridge/transport/forwarding_transport.h"
 #include "cnc_bridge/transport/paced_transport.h"
-#include "cnc_bridge/transport/pushback_transport.h"
 #include "cnc_bridge/transport/pty.h"
+#include "cnc_bridge/transport/pushback_transport.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
 
 namespace po = boost::program_options;

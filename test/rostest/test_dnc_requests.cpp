@@ -1,0 +1,270 @@
+// dnc_node's program requests (test/rostest/dnc_requests.test): the node on one end of a socat pty
+// pair, the control on the other, played by independent XModem programs as a Haas set to XMODEM
+// behaves: python3-xmodem (test/data/xmodem/pyxmodem_peer.py) and lrzsz sx punch, as the sender
+// that waits for the PC's NAK; python3-xmodem receives what the node answers. Every wait is on a
+// peer's exit, a message or a service reply, with a deadline; nothing sleeps.
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <ros/ros.h>
+#include <sys/stat.h>
+#include <termios.h>
+#include <unistd.h>
+
+#include <condition_variable>
+#include <fstream>
+#include <future>
+#include <mutex>
+
+#include "../unit/peer_process.h"
+#include "../unit/temp_dir.h"
+#include "cnc_bridge/MachineState.h"
+#include "cnc_bridge/ProgramRequestEvent.h"
+#include "cnc_bridge/ReceiveProgram.h"
+#include "cnc_bridge/programs/archive.h"
+
+using cnc_bridge::ProgramRequestEvent;
+using cnc_bridge::test::Peer;
+using cnc_bridge::test::readFile;
+using cnc_bridge::test::TempDir;
+
+namespace
+{
+std::string param(const std::string& name)
+{
+  std::string value;
+  ros::NodeHandle("~").getParam(name, value);
+  return value;
+}
+
+std::string stripPadding(std::string text)
+{
+  while (!text.empty() && text.back() == '\x1a')
+    text.pop_back();
+  return text;
+}
+
+/// The pty pair: socat, and an open descriptor on the control's end so that socat keeps the pair
+/// when a peer closes it (the last close of a pty's slave would end socat).
+class PtyPair
+{
+ public:
+  PtyPair(const std::string& node_link, const std::string& control_link)
+      : socat_({"/usr/bin/socat", "pty,rawer,link=" + node_link, "pty,rawer,link=" + control_link}, "/tmp", "")
+  {
+    for (int i = 0; i < 500 && !(exists(node_link) && exists(control_link)); ++i)
+      ::usleep(10000);  // socat makes the links as it starts; nothing else to wait on
+    fd_ = ::open(control_link.c_str(), O_RDWR | O_NOCTTY);
+  }
+  ~PtyPair()
+  {
+    if (fd_ >= 0)
+      ::close(fd_);
+  }
+  bool ok() const { return fd_ >= 0; }
+  /// Drops the node's NAKs queued at the control while no peer listened.
+  void flush() const { ::tcflush(fd_, TCIFLUSH); }
+
+ private:
+  static bool exists(const std::string& path)
+  {
+    struct stat st;
+    return ::stat(path.c_str(), &st) == 0;
+  }
+  Peer socat_;
+  int fd_ = -1;
+};
+
+class DncRequestsTest : public ::testing::Test
+{
+ protected:
+  static void SetUpTestSuite() { pair_ = std::make_unique<PtyPair>(param("link"), param("control_link")); }
+  static void TearDownTestSuite() { pair_.reset(); }
+
+  void SetUp() override
+  {
+    ASSERT_TRUE(pair_->ok()) << "socat did not make the pty pair";
+    nh_ = ros::NodeHandle(param("namespace"));
+    control_ = param("control_link");
+    program_dir_ = param("program_dir");
+    python_ = param("python_peer");
+    events_sub_ = nh_.subscribe<ProgramRequestEvent>("program_requests", 20,
+                                                     [this](const ProgramRequestEvent::ConstPtr& e)
+                                                     {
+                                                       std::lock_guard<std::mutex> lock(mutex_);
+                                                       events_.push_back(*e);
+                                                       changed_.notify_all();
+                                                     });
+    state_sub_ = nh_.subscribe<cnc_bridge::MachineState>("state", 50,
+                                                         [this](const cnc_bridge::MachineState::ConstPtr& s)
+                                                         {
+                                                           std::lock_guard<std::mutex> lock(mutex_);
+                                                           states_.push_back(*s);
+                                                           changed_.notify_all();
+                                                         });
+    const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(20);
+    while (events_sub_.getNumPublishers() == 0 && ros::WallTime::now() < deadline)
+      ros::WallDuration(0.01).sleep();  // a subscriber's connection has no event to wait on
+    ASSERT_GT(events_sub_.getNumPublishers(), 0u) << "dnc_node never advertised program_requests";
+  }
+
+  /// The control punches \p program by XModem (python3-xmodem, or lrzsz sx) and exits 0 once done.
+  int punch(const std::string& program, bool by_sx = false)
+  {
+    const std::string file = dir_.write("punch.nc", program);
+    pair_->flush();
+    if (by_sx)
+    {
+      Peer sx({"/usr/bin/sx", file}, dir_.path, control_);
+      return sx.wait();
+    }
+    Peer python({"/usr/bin/python3", python_, "send", "checksum", control_, file}, dir_.path, "");
+    return python.wait();
+  }
+
+  /// The control receives (the operator pressed RECV): what it stored, or "" if it failed.
+  std::string receive()
+  {
+    const std::string file = dir_.file("received.nc");
+    std::remove(file.c_str());
+    Peer python({"/usr/bin/python3", python_, "recv", "checksum", control_, file}, dir_.path, "");
+    return python.wait() == 0 ? stripPadding(readFile(file)) : "";
+  }
+
+  /// The next program_requests message (within \p seconds).
+  std::optional<ProgramRequestEvent> nextEvent(double seconds = 20)
+  {
+    std::unique_lock<std::mutex> lock(mutex_);
+    if (!changed_.wait_for(lock, std::chrono::duration<double>(seconds), [&] { return events_.size() > taken_; }))
+      return std::nullopt;
+    return events_[taken_++];
+  }
+
+  static std::unique_ptr<PtyPair> pair_;
+  TempDir dir_{"test_dnc_requests"};
+  ros::NodeHandle nh_;
+  std::string control_, program_dir_, python_;
+  ros::Subscriber events_sub_, state_sub_;
+  std::mutex mutex_;
+  std::condition_variable changed_;
+  std::vector<ProgramRequestEvent> events_;
+  std::vector<cnc_bridge::MachineState> states_;
+  size_t taken_ = 0;
+};
+std::unique_ptr<PtyPair> DncRequestsTest::pair_;
+}  // namespace
+
+TEST_F(DncRequestsTest, LoadPunchedBySxIsAnsweredWithTheProgramByXmodem)
+{
+  const std::string program = "%\nO01234 (BRACKET OP1)\nG00 G90 X1. Y2.\nM30\n%\n";
+  std::ofstream(program_dir_ + "/O01234.nc") << program;
+  ASSERT_EQ(punch("%\nO00001 (LOAD O1234)\nM30\n%\n", true), 0) << "sx could not punch the request";
+  EXPECT_EQ(receive(), program);
+  const auto event = nextEvent();
+  ASSERT_TRUE(event);
+  EXPECT_EQ(event->request, "LOAD");
+  EXPECT_EQ(event->number, 1234u);
+  EXPECT_EQ(event->program, "O01234.nc");
+  EXPECT_TRUE(event->success) << event->outcome;
+  EXPECT_EQ(event->machine, "haas");
+  EXPECT_EQ(event->source, "rs232 " + param("link"));
+}
+
+TEST_F(DncRequestsTest, UnknownNumberIsAnsweredWithTheReason)
+{
+  ASSERT_EQ(punch("%\nO00007 (SEND O4444)\nM30\n%\n"), 0);
+  // The answer replaces the operator's request program O00007, and says why.
+  EXPECT_EQ(receive(), "%\nO00007 (O04444 NOT FOUND IN PROGRAMS)\nM30\n%\n");
+  const auto event = nextEvent();
+  ASSERT_TRUE(event);
+  EXPECT_EQ(event->request, "SEND");
+  EXPECT_EQ(event->number, 4444u);
+  EXPECT_FALSE(event->success);
+  EXPECT_NE(event->outcome.find("no O04444.nc in " + program_dir_), std::string::npos) << event->outcome;
+  EXPECT_NE(event->outcome.find("(O04444 NOT FOUND IN PROGRAMS)"), std::string::npos) << event->outcome;
+}
+
+TEST_F(DncRequestsTest, ProtectedNumberIsNotSentButExplained)
+{
+  std::ofstream(program_dir_ + "/O09010.nc") << "%\nO09010 (PROBE MACRO)\nM99\n%\n";
+  ASSERT_EQ(punch("%\nO00002 (LOAD O9010)\nM30\n%\n"), 0);
+  const std::string got = receive();
+  EXPECT_EQ(got, "%\nO00002 (O09010 PROTECTED - NOT SENT)\nM30\n%\n");
+  EXPECT_EQ(got.find("PROBE MACRO"), std::string::npos) << "the protected program reached the control";
+  const auto event = nextEvent();
+  ASSERT_TRUE(event);
+  EXPECT_FALSE(event->success);
+  EXPECT_NE(event->outcome.find("~allow_protected_programs"), std::string::npos) << event->outcome;
+}
+
+TEST_F(DncRequestsTest, SaveStoresTheNextPunchInProgramDirAndArchiveOnce)
+{
+  const std::string program = "%\nO05678 (FIXTURE PLATE)\nG00 X0. Y0.\nM30\n%\n";
+  cnc_bridge::programs::ProgramArchive archive(param("archive_dir"));
+  for (const int round : {1, 2})
+  {
+    ASSERT_EQ(punch("%\nO00003 (SAVE O5678)\nM30\n%\n"), 0);
+    ASSERT_EQ(punch(program, true), 0) << "sx could not punch the program";
+    const auto event = nextEvent();
+    ASSERT_TRUE(event);
+    EXPECT_EQ(event->request, "SAVE");
+    EXPECT_TRUE(event->success) << event->outcome;
+    EXPECT_EQ(readFile(program_dir_ + "/O05678.nc"), program);
+    const auto history = archive.history("O05678.nc");
+    ASSERT_EQ(history.size(), 1u) << "round " << round << ": identical content must be kept once";
+    EXPECT_EQ(history[0].source.direction, "received");
+    EXPECT_EQ(readFile(history[0].path), program);
+    if (round == 2)
+      EXPECT_NE(event->outcome.find("the archive holds it already"), std::string::npos) << event->outcome;
+  }
+}
+
+TEST_F(DncRequestsTest, RequestDuringATransferIsReportedNotDropped)
+{
+  ros::ServiceClient client = nh_.serviceClient<cnc_bridge::ReceiveProgram>("dnc_node/receive_program");
+  ASSERT_TRUE(client.waitForExistence(ros::Duration(20)));
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    states_.clear();
+  }
+  auto call = std::async(std::launch::async,
+                         [&]
+                         {
+                           cnc_bridge::ReceiveProgram srv;
+                           srv.request.file = "incoming.nc";
+                           srv.request.protocol = "xmodem";
+                           client.call(srv);
+                           return srv.response;
+                         });
+  {
+    std::unique_lock<std::mutex> lock(mutex_);
+    ASSERT_TRUE(changed_.wait_for(lock, std::chrono::seconds(20),
+                                  [&]
+                                  {
+                                    for (const auto& s : states_)
+                                      if (s.execution == cnc_bridge::MachineState::EXECUTION_ACTIVE)
+                                        return true;
+                                    return false;
+                                  }))
+        << "the receive never started";
+  }
+  const std::string request = "%\nO00004 (LOAD O1234)\nM30\n%\n";
+  ASSERT_EQ(punch(request), 0);
+  const auto response = call.get();
+  EXPECT_TRUE(response.success) << response.message;
+  EXPECT_EQ(readFile(program_dir_ + "/incoming.nc"), request);
+  const auto event = nextEvent();
+  ASSERT_TRUE(event);
+  EXPECT_EQ(event->request, "LOAD");
+  EXPECT_EQ(event->number, 1234u);
+  EXPECT_FALSE(event->success);
+  EXPECT_NE(event->outcome.find("during the transfer receiving incoming.nc"), std::string::npos) << event->outcome;
+}
+
+int main(int argc, char** argv)
+{
+  ::testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_dnc_requests");
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+  return RUN_ALL_TESTS();
+}
