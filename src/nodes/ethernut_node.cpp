@@ -25,6 +25,7 @@
 #include "cnc_bridge/gcode/gcode.h"
 #include "cnc_bridge/gcode/program_steps.h"
 #include "cnc_bridge/ros/gcode_params.h"
+#include "cnc_bridge/ros/machine_frame.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/ros/params.h"
@@ -332,6 +333,9 @@ class EthernutNode : public ethernut::ClientListener
     // anything is sent) or skip (left out of the stream and the preview).
     const bool skip_g53 = params::choice(pnh_, "g53_moves", "refuse", {"refuse", "skip"}) == "skip";
     g53_moves_ = skip_g53 ? G53Moves::kSkip : G53Moves::kRefuse;
+    // ~transform_timeout (s, 0.5): how long a points goal in another frame waits for its transform
+    // into the machine frame.
+    to_machine_ = std::make_unique<ToMachineFrame>(params::positive(pnh_, "transform_timeout", 0.5));
     // ~max_preview_points (int, 100000): job/path is thinned to at most this many poses.
     pnh_.param("max_preview_points", max_preview_points_, 100000);
     max_preview_points_ = std::max(max_preview_points_, 2);
@@ -651,8 +655,16 @@ class EthernutNode : public ethernut::ClientListener
     uint64_t count = 0;
     std::string program;
     std::string skipped_note;  // G53 moves left out
+    const std::string machine_frame = state_->frame("machine");
     if (!goal->file.empty())
     {
+      if (!goal->header.frame_id.empty() && goal->header.frame_id != machine_frame)
+      {
+        // A program's coordinates are its own work coordinates, streamed as they are.
+        abort("job refused: a G-code job is streamed in the program's coordinates; header.frame_id (\"" +
+              goal->header.frame_id + "\") applies to points only and must be empty or \"" + machine_frame + "\"");
+        return;
+      }
       if (!program_dir_)
       {
         abort("G-code jobs need ~program_dir (" + pnh_.resolveName("program_dir") + ")");
@@ -724,9 +736,21 @@ class EthernutNode : public ethernut::ClientListener
         abort("job refused: neither a file nor points given");
         return;
       }
-      auto points = std::make_shared<std::vector<ethernut::Coordinate>>();
-      for (const auto& p : goal->points)
+      // Points in another frame (the cell's world, a robot's base) into the machine frame.
+      ToMachineFrame::Transform transform;
+      try
       {
+        transform = to_machine_->lookup(machine_frame, goal->header.frame_id, "points");
+      }
+      catch (const Error& e)
+      {
+        abort(std::string("job refused: ") + e.what());
+        return;
+      }
+      auto points = std::make_shared<std::vector<ethernut::Coordinate>>();
+      for (const auto& given : goal->points)
+      {
+        const geometry_msgs::Point p = ToMachineFrame::apply(transform, given);
         if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
         {
           abort("job refused: point " + std::to_string(points->size()) + " is not finite");
@@ -1337,6 +1361,7 @@ class EthernutNode : public ethernut::ClientListener
   std::unique_ptr<RuntimeSwitch> motion_;
   std::mutex motion_mutex_;  // a segment's start, a disable's pause and ~resume: one at a time
   std::unique_ptr<ProgramDirectory> program_dir_;
+  std::unique_ptr<ToMachineFrame> to_machine_;
   gcode::ParserOptions parser_options_;
   G53Moves g53_moves_ = G53Moves::kRefuse;
   int max_preview_points_ = 100000;

@@ -589,6 +589,58 @@ TEST(EthernutJob, DisablingMotionMidJobPausesTheBoardUntilEnabledAndResumed)
   EXPECT_EQ(simLog().size(), refused_log);
 }
 
+// A points goal in world (ethernut_node.test places router/machine at (0.1, 0.2, 0.05) m, turned 90
+// degrees about Z) arrives at the board in machine coordinates; the preview is in the machine
+// frame. A goal in a frame with no transform is refused with tf2's reason, and a file job with a
+// frame too; the board receives nothing of either.
+TEST(EthernutJob, APointsGoalInWorldArrivesTransformed)
+{
+  ASSERT_TRUE(boardReady());
+  auto client = actionClient();
+  clearJob();
+  const size_t before = simLog().size();
+  // world (0.1, 0.21, 0.052) is 0.01 m along world Y from the machine zero: machine X 10 mm, Z 2 mm;
+  // world (0.08, 0.2, 0.05) is 0.02 m along world -X: machine Y 20 mm.
+  RunJobGoal goal = pointsGoal({{0.1, 0.21, 0.052}, {0.08, 0.2, 0.05}});
+  goal.header.frame_id = "world";
+  client->sendGoal(goal, Client::SimpleDoneCallback(), Client::SimpleActiveCallback(), &onFeedback);
+  ASSERT_TRUE(client->waitForResult(ros::Duration(30.0)));
+  ASSERT_EQ(client->getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client->getState().getText();
+  expectSameCoordinates(simLog(), before, {{10, 0, 2}, {0, 20, 0}});
+  {
+    std::lock_guard<std::mutex> lock(watch->mutex);
+    EXPECT_EQ(watch->path.header.frame_id, prefix + "machine");
+    ASSERT_EQ(watch->path.poses.size(), 2u);
+    EXPECT_NEAR(watch->path.poses[0].pose.position.x, 0.01, 1e-9);
+    EXPECT_NEAR(watch->path.poses[1].pose.position.y, 0.02, 1e-9);
+  }
+
+  const size_t refused_from = simMessages().size();
+  goal.header.frame_id = "nowhere";
+  client->sendGoal(goal);
+  ASSERT_TRUE(client->waitForResult(ros::Duration(20.0)));
+  EXPECT_EQ(client->getState(), actionlib::SimpleClientGoalState::ABORTED);
+  std::string text = client->getResult()->message;
+  EXPECT_EQ(
+      text.rfind("job refused: points in frame \"nowhere\" refused: no transform into \"" + prefix + "machine\": ", 0),
+      0u)
+      << text;
+  EXPECT_GT(text.size(), 80u) << "tf2's reason is missing: " << text;
+  RunJobGoal file_goal;
+  file_goal.file = "seed_hello.nc";
+  file_goal.header.frame_id = "world";
+  client->sendGoal(file_goal);
+  ASSERT_TRUE(client->waitForResult(ros::Duration(20.0)));
+  EXPECT_EQ(client->getState(), actionlib::SimpleClientGoalState::ABORTED);
+  text = client->getResult()->message;
+  EXPECT_NE(text.find("applies to points only"), std::string::npos) << text;
+  // An alive request that arrives after the refusals was sent after them.
+  ASSERT_TRUE(waitForSimMessage("alive-request", simMessages().size()));
+  EXPECT_EQ(simMessagesNamed("READYTOSEND", refused_from), 0);
+  EXPECT_EQ(simMessagesNamed("coordinates", refused_from), 0);
+  EXPECT_EQ(simLog().size(), before + 2);
+}
+
 TEST(EthernutJob, CancelStopsStreamingAndPausesTheBoard)
 {
   ASSERT_TRUE(boardReady());
