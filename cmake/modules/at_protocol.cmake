@@ -15,6 +15,7 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
     test/unit/test_at_codec.cpp
     test/unit/test_at_sequencer.cpp
     test/unit/test_at_planner.cpp
+    test/unit/test_at_program_path.cpp
     test/unit/test_at_sender.cpp)
   target_link_libraries(test_at_protocol cnc_bridge_at_protocol)
 endif()
@@ -30,7 +31,7 @@ if(NOT CNC_BRIDGE_CORE_ONLY)
   install(PROGRAMS scripts/plot_plan.py DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
 endif()
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
-  # cnc_plan's setpoints against the node's planning path (appendProgram, Trajectory, TrajectoryStream).
+  # cnc_plan's setpoints against the node's planning path (planProgram, Trajectory, TrajectoryStream).
   cnc_core_gtest(test_cnc_plan test/unit/test_cnc_plan.cpp)
   target_link_libraries(test_cnc_plan cnc_bridge_at_protocol)
   add_dependencies(test_cnc_plan cnc_plan)

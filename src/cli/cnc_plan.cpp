@@ -1,13 +1,16 @@
 // cnc_plan: dry-runs a path for the '@' controller without ROS or a controller. It reads a G-code
 // program or a point list, plans it exactly as at_controller_node's follow_path does (the same
-// appendProgram, Trajectory and TrajectoryStream), and writes the 1 ms setpoints as CSV, optionally
-// a PNG of position, velocity, acceleration and jerk per axis with the limits drawn, and prints the
-// total time and the worst ratio to the limits.
+// planProgram, Trajectory and TrajectoryStream: a program is split into operations at its own
+// M00, M01, G04, M02/M30 and, with --program-commands, at spindle, coolant and tool changes), and
+// writes the 1 ms setpoints of every operation in order as CSV, optionally a PNG of position,
+// velocity, acceleration and jerk per axis with the limits drawn, and prints the operations, the
+// total time and the worst ratio to the limits. The CSV's time runs on through G04 dwells; a stop
+// (M00, M01) adds no time, since it lasts until the operator resumes.
 //
 //   cnc_plan (--gcode FILE | --points FILE) [--profile trapezoid|scurve] [--max-speed X,Y,Z]
 //            [--max-accel X,Y,Z] [--max-jerk X,Y,Z] [--period S] [--corner-share F] [--feed MM_S]
 //            [--start X,Y,Z] [--dialect haas|fanuc|linuxcnc] [--tool-table FILE]
-//            [--csv FILE] [--png FILE]
+//            [--program-commands true|false] [--csv FILE] [--png FILE]
 // Units: mm, mm/s, mm/s^2, mm/s^3, s (the node's parameters are the same numbers in metres).
 // A point list has one point a line, "x y z [feed]" in mm (feed in mm/s for the segment to it).
 #include <unistd.h>
@@ -45,7 +48,7 @@ ap::Vec3 triple(const std::string& text, const char* name)
   return v;
 }
 
-void readPoints(const std::string& path, double fallback_feed, ap::PathPlan& plan)
+void readPoints(const std::string& path, double fallback_feed, ap::OperationPlan& plan)
 {
   std::ifstream in(path);
   if (!in)
@@ -110,6 +113,9 @@ int run(int argc, char** argv)
       "start", po::value<std::string>()->default_value("0,0,0"), "mm, where the path starts")(
       "dialect", po::value<std::string>()->default_value("haas"), "haas, fanuc or linuxcnc")(
       "tool-table", po::value<std::string>(), "LinuxCNC .tbl or .yaml for G41/G42")(
+      "program-commands", po::value<bool>()->default_value(true),
+      "the program's spindle, coolant and tool words become controller commands (as the node's "
+      "~program_commands; false refuses such programs, as the node does by default)")(
       "csv", po::value<std::string>(), "write the setpoints here")("png", po::value<std::string>(),
                                                                    "write a plot here (python3-matplotlib)");
   po::variables_map vm;
@@ -140,10 +146,10 @@ int run(int argc, char** argv)
   limits.validate();
 
   const auto t0 = std::chrono::steady_clock::now();
-  ap::PathPlan plan;
-  const ap::Vec3 start = triple(vm["start"].as<std::string>(), "start");
-  plan.points.push_back({start[0] * ap::kPulsesPerMm, start[1] * ap::kPulsesPerMm, start[2] * ap::kPulsesPerMm});
+  const ap::Vec3 mm = triple(vm["start"].as<std::string>(), "start");
+  const ap::Vec3 start{mm[0] * ap::kPulsesPerMm, mm[1] * ap::kPulsesPerMm, mm[2] * ap::kPulsesPerMm};
   const double feed = vm["feed"].as<double>();
+  std::vector<ap::OperationPlan> plans;
   if (vm.count("gcode"))
   {
     cnc_bridge::gcode::ParserOptions parser;
@@ -160,14 +166,23 @@ int run(int argc, char** argv)
       throw ConfigError("cannot read " + path);
     }
     // As follow_path with feed_rate 0: the program's F words, else the default feed.
-    ap::appendProgram(in, parser, 0.0, feed, plan);
+    ap::ProgramPlanOptions options;
+    options.fallback_feed = feed;
+    options.program_commands = vm["program-commands"].as<bool>();
+    options.program_commands_setting = "--program-commands";
+    plans = ap::planProgram(in, parser, options, start);
   }
   else
   {
-    readPoints(vm["points"].as<std::string>(), feed, plan);
+    plans.emplace_back().points.push_back(start);
+    readPoints(vm["points"].as<std::string>(), feed, plans.back());
   }
-  ap::roundToPulses(plan);
-  const ap::Trajectory trajectory(plan.points, plan.feeds, limits);
+  std::vector<ap::Trajectory> trajectories;
+  for (ap::OperationPlan& plan : plans)
+  {
+    ap::roundToPulses(plan);
+    trajectories.emplace_back(plan.points, plan.feeds, limits);
+  }
   const auto t1 = std::chrono::steady_clock::now();
 
   std::ofstream csv;
@@ -179,17 +194,22 @@ int run(int argc, char** argv)
       throw ConfigError("cannot write " + vm["csv"].as<std::string>());
     }
     csv << "t_s,x_pulses,y_pulses,z_pulses,feed_x,feed_y,feed_z,x_mm,y_mm,z_mm,vx_mm_s,vy_mm_s,vz_mm_s,"
-           "ax_mm_s2,ay_mm_s2,az_mm_s2,jx_mm_s3,jy_mm_s3,jz_mm_s3\n";
+           "ax_mm_s2,ay_mm_s2,az_mm_s2,jx_mm_s3,jy_mm_s3,jz_mm_s3,operation\n";
     csv.precision(10);
   }
   // Velocity, acceleration and jerk from the setpoints' exact positions (the controller gets
-  // whole pulses; these are what the planner asks of each axis).
-  ap::TrajectoryStream stream(trajectory);
+  // whole pulses; these are what the planner asks of each axis). Every operation starts and ends
+  // at rest, so the differences run on from one operation into the next.
   const double dt = limits.period;
-  ap::Vec3 p1 = stream.current().position, v1{}, a1{};
+  ap::Vec3 p1 = start, v1{}, a1{};
+  for (double& c : p1)
+  {
+    c = std::round(c);
+  }
   Limits worst;
-  ap::Setpoint sp;
   size_t k = 0;
+  double t = 0.0, dwell_s = 0.0;  // s: setpoints so far and G04 dwells between operations
+  size_t operation = 0;
   auto account = [&](const ap::Vec3& p, const ap::Setpoint* setpoint)
   {
     ap::Vec3 v, a, j;
@@ -204,8 +224,8 @@ int run(int argc, char** argv)
     }
     if (csv.is_open() && setpoint)
     {
-      csv << k * dt << ',' << setpoint->position[0] << ',' << setpoint->position[1] << ',' << setpoint->position[2]
-          << ',' << setpoint->feed[0] << ',' << setpoint->feed[1] << ',' << setpoint->feed[2];
+      csv << t << ',' << setpoint->position[0] << ',' << setpoint->position[1] << ',' << setpoint->position[2] << ','
+          << setpoint->feed[0] << ',' << setpoint->feed[1] << ',' << setpoint->feed[2];
       for (int i = 0; i < 3; ++i)
       {
         csv << ',' << p[i] / ap::kPulsesPerMm;
@@ -217,20 +237,44 @@ int run(int argc, char** argv)
           csv << ',' << (*q)[i];
         }
       }
-      csv << '\n';
+      csv << ',' << operation << '\n';
     }
     p1 = p;
     v1 = v;
     a1 = a;
   };
-  while (stream.next(sp))
+  size_t segments = 0;
+  double length = 0.0;
+  for (; operation < trajectories.size(); ++operation)
   {
-    ++k;
-    account(stream.current().position, &sp);
+    const size_t operation_segments = trajectories[operation].segments().size();
+    segments += operation_segments;
+    length += trajectories[operation].length();
+    if (plans[operation].moves())  // as the node: an operation without moves sends nothing
+    {
+      ap::TrajectoryStream stream(std::move(trajectories[operation]));
+      ap::Setpoint sp;
+      while (stream.next(sp))
+      {
+        ++k;
+        t = static_cast<double>(k) * dt + dwell_s;
+        account(stream.current().position, &sp);
+      }
+      // At rest after the last setpoint: the deceleration into rest counts too.
+      account(p1, nullptr);
+      account(p1, nullptr);
+    }
+    if (const auto& after = plans[operation].after)
+    {
+      std::printf("operation %zu: %zu segments, then %s\n", operation + 1, operation_segments,
+                  after->describe().c_str());
+      if (after->kind == cnc_bridge::gcode::ProgramStep::Kind::kDwell)
+      {
+        dwell_s += after->dwell_s;
+        t = static_cast<double>(k) * dt + dwell_s;
+      }
+    }
   }
-  // At rest after the last setpoint: the deceleration into rest counts too.
-  account(p1, nullptr);
-  account(p1, nullptr);
   const auto t2 = std::chrono::steady_clock::now();
   if (csv.is_open())
   {
@@ -243,11 +287,12 @@ int run(int argc, char** argv)
 
   const double plan_s = std::chrono::duration<double>(t1 - t0).count();
   const double stream_s = std::chrono::duration<double>(t2 - t1).count();
-  const size_t segments = trajectory.segments().size();
   const double worst_ratio =
       std::max({worst.speed, worst.accel, limits.profile == ap::Profile::kSCurve ? worst.jerk : 0.0});
-  std::printf("%s: %zu segments, %.3f mm, %zu setpoints, total time %.3f s\n", profile.c_str(), segments,
-              trajectory.length() / ap::kPulsesPerMm, k, static_cast<double>(k) * dt);
+  std::printf(
+      "%s: %zu operations, %zu segments, %.3f mm, %zu setpoints, total time %.3f s (%.3f s of it G04 "
+      "dwells; stops not counted)\n",
+      profile.c_str(), trajectories.size(), segments, length / ap::kPulsesPerMm, k, t, dwell_s);
   std::printf("worst limit ratio %.4f (speed %.4f, acceleration %.4f, jerk %.4f%s)\n", worst_ratio, worst.speed,
               worst.accel, worst.jerk, limits.profile == ap::Profile::kSCurve ? "" : ", not limited by a trapezoid");
   std::printf("planning %.3f s (%.0f segments/s), setpoints %.3f s (%.0f setpoints/s)\n", plan_s,

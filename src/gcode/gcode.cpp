@@ -47,26 +47,6 @@ std::string gName(int tenths)
   return name;
 }
 
-bool isCycle(int tenths)
-{
-  switch (tenths)
-  {
-    case 730:
-    case 740:
-    case 760:
-    case 810:
-    case 820:
-    case 830:
-    case 840:
-    case 850:
-    case 860:
-    case 890:
-      return true;
-    default:
-      return false;
-  }
-}
-
 // Scans one line into words. Returns false for a tape marker or a deleted block (block says which).
 bool scanLine(std::string_view text, const ParserOptions& options, uint32_t line, Scan& scan, Block& block)
 {

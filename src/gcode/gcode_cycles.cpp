@@ -51,7 +51,6 @@ void Parser::runCycle(const Scan& scan, Step& st)
   {
     throw ParseError(line, column, name + " with cutter compensation on: cancel it with G40 first");
   }
-  const double z_start = st.position.z;
   // LinuxCNC wants R and Z again whenever the cycle changes (its errors "R clearance plane
   // unspecified in cycle", "Z value unspecified"); Haas and Fanuc keep them across cycles.
   if (options_.dialect == Dialect::kLinuxCnc && state_.canned_cycle != g)

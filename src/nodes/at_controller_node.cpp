@@ -585,17 +585,7 @@ class AtControllerNode
 
   // ---- follow_path --------------------------------------------------------------------------------
 
-  /// One operation (M1@ ... M0@) of a goal, and the program's own step that follows it.
-  struct Plan
-  {
-    std::vector<ap::Vec3> points;  // pulses, from where the previous operation ends
-    std::vector<double> feeds;     // mm/s per segment
-    bool coolant = false;
-    double spindle_rpm = 0.0;
-    int32_t tool = -1;                        // tool change before the moves (T@), -1: none
-    bool cuts = false;                        // has a feed move (not only positioning rapids)
-    std::optional<gcode::ProgramStep> after;  // stop, optional stop, dwell or end after the moves
-  };
+  using Plan = ap::OperationPlan;
 
   /// The goal as operations of points in pulses, the first starting at the reported position: one
   /// for a path; for a program, one per stretch of moves between the program's own steps (M00,
@@ -604,11 +594,10 @@ class AtControllerNode
   /// \throws Error with the reason.
   std::vector<Plan> planFromGoal(const AtFollowPathGoal& goal, const std::array<int32_t, 3>& start)
   {
-    std::vector<Plan> plans(1);
-    Plan& plan = plans.front();
-    plan.points.push_back({double(start[0]), double(start[1]), double(start[2])});
-    plan.coolant =
+    const ap::Vec3 start_pulses{double(start[0]), double(start[1]), double(start[2])};
+    const bool coolant =
         goal.coolant == AtFollowPathGoal::COOLANT_ON || (goal.coolant == AtFollowPathGoal::COOLANT_DEFAULT && coolant_);
+    std::vector<Plan> plans;
     const double goal_feed = goal.feed_rate * 1000.0;  // m/s to mm/s
     const double fallback_feed = goal_feed > 0.0 ? goal_feed : default_feed_ * 1000.0;
     const bool has_file = !goal.gcode_file.empty();
@@ -628,10 +617,19 @@ class AtControllerNode
       {
         throw ConfigError("cannot read " + file);
       }
-      planProgram(in, goal, fallback_feed, goal_feed, plans);
+      ap::ProgramPlanOptions options;
+      options.goal_feed = goal_feed;
+      options.fallback_feed = fallback_feed;
+      options.coolant = coolant;
+      options.program_commands = pnh_.param("program_commands", false);
+      options.program_commands_setting = pnh_.resolveName("program_commands");
+      plans = ap::planProgram(in, gcode_options_, options, start_pulses);
     }
     else
     {
+      Plan& plan = plans.emplace_back();
+      plan.points.push_back(start_pulses);
+      plan.coolant = coolant;
       for (const auto& stamped : goal.path.poses)
       {
         // A pose names its frame, else the path's; empty means the machine frame.
@@ -647,17 +645,7 @@ class AtControllerNode
     }
     for (Plan& each : plans)
     {
-      for (auto& point : each.points)
-      {
-        for (double& c : point)
-        {
-          if (!(std::fabs(c) < 2.0e9))
-          {
-            throw ConfigError("a path point is outside the protocol's range (+-2147 m)");
-          }
-          c = std::round(c);  // whole pulses: the end point is exact
-        }
-      }
+      ap::roundToPulses(each);
       if (goal.spindle_speed > 0.0)
       {
         each.spindle_rpm = goal.spindle_speed;
@@ -672,103 +660,6 @@ class AtControllerNode
       plans.front().tool = goal.tool;
     }
     return plans;
-  }
-
-  /// Splits a program into operations at its own steps (see planFromGoal). The first plan holds
-  /// the start point already.
-  void planProgram(std::istream& in, const AtFollowPathGoal& goal, double fallback_feed, double goal_feed,
-                   std::vector<Plan>& plans)
-  {
-    using Kind = gcode::ProgramStep::Kind;
-    const bool program_commands = pnh_.param("program_commands", false);
-    gcode::ProgramSteps steps(in, gcode_options_);
-    gcode::ProgramStep step;
-    bool coolant = plans.back().coolant;
-    double spindle_rpm = 0.0;
-    int32_t tool = -1;
-    // Starts a new operation where the last one ends, with the modal values now in force.
-    const auto next_operation = [&](std::optional<gcode::ProgramStep> after)
-    {
-      Plan& last = plans.back();
-      last.after = std::move(after);
-      Plan fresh;
-      fresh.points.push_back(last.points.back());
-      fresh.coolant = coolant;
-      fresh.spindle_rpm = spindle_rpm;
-      plans.push_back(std::move(fresh));
-    };
-    while (steps.next(step))
-    {
-      if (step.isMachineCommand() && !program_commands)
-      {
-        throw ConfigError("program refused: line " + std::to_string(step.line) + ": " + step.describe() +
-                          " commands the machine; set " + pnh_.resolveName("program_commands") +
-                          " true to send the program's spindle, coolant and tool commands to the controller "
-                          "(S@, P1@/P0@, T@), or take them out of the program");
-      }
-      switch (step.kind)
-      {
-        case Kind::kMove:
-        {
-          const gcode::Move& move = step.move;
-          // Program millimetres are machine millimetres: 1000 pulses each.
-          plans.back().points.push_back(
-              {move.end.x * ap::kPulsesPerMm, move.end.y * ap::kPulsesPerMm, move.end.z * ap::kPulsesPerMm});
-          double feed = fallback_feed;
-          if (move.motion == gcode::Motion::kRapid)
-          {
-            feed = 1e9;  // as fast as the axes allow
-          }
-          else if (goal_feed <= 0.0 && move.feed_mm_per_min > 0.0)
-          {
-            feed = move.feed_mm_per_min / 60.0;
-          }
-          plans.back().feeds.push_back(feed);
-          plans.back().cuts = plans.back().cuts || move.motion != gcode::Motion::kRapid;
-          break;
-        }
-        case Kind::kSpindle:
-          if (step.spindle == gcode::Spindle::kCounterClockwise)
-          {
-            throw ConfigError("program refused: line " + std::to_string(step.line) + ": " + step.describe() +
-                              ": the controller turns the spindle clockwise only");
-          }
-          spindle_rpm = step.spindle == gcode::Spindle::kClockwise ? step.spindle_rpm : 0.0;
-          break;
-        case Kind::kCoolant:
-          coolant = step.coolant;
-          break;
-        case Kind::kToolChange:
-          tool = step.tool;
-          break;
-        default:  // stop, optional stop, dwell, end: the operation ends here
-          next_operation(step);
-          if (step.kind == Kind::kEnd)
-          {
-            plans.pop_back();
-            return;
-          }
-          continue;
-      }
-      if (step.kind != Kind::kMove)
-      {
-        // A new spindle, coolant or tool value: the next moves are a new operation with it (the
-        // protocol sets them only at an operation's start, P@ T@ S@ before the setpoints). Before
-        // the operation's first cut (after positioning rapids only) it applies to that operation.
-        Plan& last = plans.back();
-        if (last.cuts)
-        {
-          next_operation(std::nullopt);
-        }
-        plans.back().coolant = coolant;
-        plans.back().spindle_rpm = spindle_rpm;
-        if (step.kind == Kind::kToolChange)
-        {
-          plans.back().tool = tool;
-        }
-      }
-    }
-    (void)goal;
   }
 
   /// \p pose in <tf_prefix>machine: as it is when \p frame is that frame (or empty), else transformed
@@ -863,7 +754,7 @@ class AtControllerNode
       std::string end_note;
       for (const Plan& plan : plans)
       {
-        if (plan.points.size() > 1)
+        if (plan.moves())
         {
           refusal = motionRefusal("follow_path");
           if (!refusal.empty())

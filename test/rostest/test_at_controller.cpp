@@ -270,6 +270,7 @@ TEST_F(AtController, ProgramStopsHoldTheGoalUntilResumeAndM30EndsIt)
 {
   CommandLog received{command_log};
   const size_t mark = received.lines().size();
+  const auto start_position = state.last().position;
   std::mutex m;
   std::condition_variable cv;
   std::vector<cnc_bridge::AtFollowPathFeedback> feedback;
@@ -342,6 +343,15 @@ TEST_F(AtController, ProgramStopsHoldTheGoalUntilResumeAndM30EndsIt)
   EXPECT_EQ(std::count(since.begin(), since.end(), "S64"), 4);
   EXPECT_EQ(std::count(since.begin(), since.end(), "M0"), 4);
   EXPECT_EQ(since.back(), "M0");
+  // Operation after operation, every setpoint is the one cnc_plan's dry run of the program gives.
+  const auto sent = setpointLines(since);
+  const auto planned = cncPlanSetpoints(CNC_BRIDGE_AT_PROGRAMS "/program_stops.nc", start_position);
+  ASSERT_GT(sent.size(), 500u);  // some 25 mm of moves at up to 20 mm/s in 1 ms steps
+  ASSERT_EQ(sent.size(), planned.size());
+  for (size_t k = 0; k < sent.size(); ++k)
+  {
+    ASSERT_EQ(sent[k], planned[k]) << "setpoint " << k;
+  }
   // The dwell was announced.
   std::lock_guard<std::mutex> lock(m);
   EXPECT_TRUE(std::any_of(feedback.begin(), feedback.end(),

@@ -70,7 +70,7 @@ class ProgramSteps
         return false;
       queue(*block);
     }
-    step = std::move(pending_.front());
+    step = pending_.front();
     pending_.pop_front();
     return true;
   }
@@ -122,7 +122,7 @@ class ProgramSteps
     ProgramStep s = base;
     s.kind = kind;
     fill(s);
-    pending_.push_back(std::move(s));
+    pending_.push_back(s);
   }
 
   Reader reader_;
