@@ -5,6 +5,7 @@
 // peer's exit, a message or a service reply, with a deadline; nothing sleeps.
 #include <fcntl.h>
 #include <gtest/gtest.h>
+#include <poll.h>
 #include <ros/ros.h>
 #include <sys/stat.h>
 #include <termios.h>
@@ -63,6 +64,31 @@ class PtyPair
   bool ok() const { return fd_ >= 0; }
   /// Drops the node's NAKs queued at the control while no peer listened.
   void flush() const { ::tcflush(fd_, TCIFLUSH); }
+  /// The control punches text itself.
+  bool write(const std::string& text) const
+  {
+    return ::write(fd_, text.data(), text.size()) == static_cast<ssize_t>(text.size());
+  }
+  /// What the control receives until a whole '%'-framed program has come (or \p seconds passed).
+  std::string readProgram(double seconds) const
+  {
+    std::string got;
+    const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(seconds);
+    while (ros::WallTime::now() < deadline)
+    {
+      const size_t first = got.find('%');
+      if (first != std::string::npos && got.find("%\n", first + 1) != std::string::npos)
+        break;
+      pollfd p{fd_, POLLIN, 0};
+      if (::poll(&p, 1, static_cast<int>((deadline - ros::WallTime::now()).toSec() * 1000) + 1) <= 0)
+        continue;
+      char buffer[512];
+      const ssize_t n = ::read(fd_, buffer, sizeof(buffer));
+      if (n > 0)
+        got.append(buffer, static_cast<size_t>(n));
+    }
+    return got;
+  }
 
  private:
   static bool exists(const std::string& path)
@@ -77,12 +103,20 @@ class PtyPair
 class DncRequestsTest : public ::testing::Test
 {
  protected:
-  static void SetUpTestSuite() { pair_ = std::make_unique<PtyPair>(param("link"), param("control_link")); }
-  static void TearDownTestSuite() { pair_.reset(); }
+  static void SetUpTestSuite()
+  {
+    pair_ = std::make_unique<PtyPair>(param("link"), param("control_link"));
+    text_pair_ = std::make_unique<PtyPair>(param("text_link"), param("text_control_link"));
+  }
+  static void TearDownTestSuite()
+  {
+    pair_.reset();
+    text_pair_.reset();
+  }
 
   void SetUp() override
   {
-    ASSERT_TRUE(pair_->ok()) << "socat did not make the pty pair";
+    ASSERT_TRUE(pair_->ok() && text_pair_->ok()) << "socat did not make the pty pairs";
     nh_ = ros::NodeHandle(param("namespace"));
     control_ = param("control_link");
     program_dir_ = param("program_dir");
@@ -139,7 +173,7 @@ class DncRequestsTest : public ::testing::Test
     return events_[taken_++];
   }
 
-  static std::unique_ptr<PtyPair> pair_;
+  static std::unique_ptr<PtyPair> pair_, text_pair_;
   TempDir dir_{"test_dnc_requests"};
   ros::NodeHandle nh_;
   std::string control_, program_dir_, python_;
@@ -151,6 +185,7 @@ class DncRequestsTest : public ::testing::Test
   size_t taken_ = 0;
 };
 std::unique_ptr<PtyPair> DncRequestsTest::pair_;
+std::unique_ptr<PtyPair> DncRequestsTest::text_pair_;
 }  // namespace
 
 TEST_F(DncRequestsTest, LoadPunchedBySxIsAnsweredWithTheProgramByXmodem)
@@ -258,6 +293,44 @@ TEST_F(DncRequestsTest, RequestDuringATransferIsReportedNotDropped)
   EXPECT_EQ(event->number, 1234u);
   EXPECT_FALSE(event->success);
   EXPECT_NE(event->outcome.find("during the transfer receiving incoming.nc"), std::string::npos) << event->outcome;
+}
+
+// A control set to XON/XOFF punches text unasked; a LOAD is drip-fed, a refusal answered as text.
+TEST_F(DncRequestsTest, TextPunchIsDripFedTheProgramOrAnsweredAsText)
+{
+  ros::NodeHandle text_nh(param("text_namespace"));
+  std::vector<ProgramRequestEvent> events;
+  std::mutex events_mutex;
+  std::condition_variable arrived;
+  ros::Subscriber sub = text_nh.subscribe<ProgramRequestEvent>("program_requests", 10,
+                                                               [&](const ProgramRequestEvent::ConstPtr& e)
+                                                               {
+                                                                 std::lock_guard<std::mutex> lock(events_mutex);
+                                                                 events.push_back(*e);
+                                                                 arrived.notify_all();
+                                                               });
+  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(20);
+  while (sub.getNumPublishers() == 0 && ros::WallTime::now() < deadline)
+    ros::WallDuration(0.01).sleep();  // a subscriber's connection has no event to wait on
+  auto waitEvents = [&](size_t count)
+  {
+    std::unique_lock<std::mutex> lock(events_mutex);
+    return arrived.wait_for(lock, std::chrono::seconds(20), [&] { return events.size() >= count; });
+  };
+  const std::string program = "%\nO01234 (BRACKET OP2)\nG00 X1. Y2.\nM30\n%\n";
+  std::ofstream(param("text_program_dir") + "/O01234.nc") << program;
+
+  ASSERT_TRUE(text_pair_->write("%\nO00005 (LOAD O1234)\nM30\n%\n"));
+  EXPECT_EQ(text_pair_->readProgram(20), program);
+  ASSERT_TRUE(waitEvents(1));
+  EXPECT_TRUE(events[0].success) << events[0].outcome;
+  EXPECT_EQ(events[0].number, 1234u);
+
+  ASSERT_TRUE(text_pair_->write("%\r\nO00006 (LOAD O4444)\r\nM30\r\n%\r\n"));
+  EXPECT_EQ(text_pair_->readProgram(20), "%\nO00006 (O04444 NOT FOUND IN PROGRAMS)\nM30\n%\n");
+  ASSERT_TRUE(waitEvents(2));
+  EXPECT_FALSE(events[1].success);
+  EXPECT_NE(events[1].outcome.find("answered as text"), std::string::npos) << events[1].outcome;
 }
 
 int main(int argc, char** argv)
