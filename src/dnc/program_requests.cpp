@@ -33,8 +33,7 @@ Clock::time_point deadlineAfter(Milliseconds timeout)
 [[noreturn]] void noPunch(Transport& link, Milliseconds timeout)
 {
   std::ostringstream message;
-  message << link.describe() << ": the control punched nothing within "
-          << static_cast<double>(timeout.count()) / 1000.0
+  message << link.describe() << ": the control punched nothing within " << static_cast<double>(timeout.count()) / 1000.0
           << " s (start the punch on the control: SEND with the program selected)";
   throw TimeoutError(message.str());
 }
@@ -49,10 +48,7 @@ RequestWire parseRequestWire(const std::string& text)
   throw ConfigError("request mode '" + text + "' is not one of xmodem, drip");
 }
 
-RequestListener::RequestListener(Transport& link, RequestListenerOptions options)
-    : link_(link), options_(options)
-{
-}
+RequestListener::RequestListener(Transport& link, RequestListenerOptions options) : link_(link), options_(options) {}
 
 std::optional<Punch> RequestListener::listen(const std::atomic<bool>& stop, const StartCallback& may_start,
                                              Milliseconds start_timeout, const std::atomic<bool>* cancel)

@@ -214,6 +214,7 @@ Transport& DncNode::openLink()
       // What the control sent while the port was closed stays, as it does in a port kept open
       // (~keep_open): a receiving control's NAK, queued before a send starts, is its start request.
       link_ = std::make_unique<SerialPort>(serial_, InputOnOpen::kKeep);
+      ++link_generation_;
     }
     catch (const Error& e)
     {
@@ -564,6 +565,11 @@ void DncNode::transferDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& s
   status.add("retries", counters_.retries);
   status.add("timeouts", counters_.timeouts);
   status.add("bytes", counters_.bytes);
+  if (requests_)
+  {
+    status.add("program requests", counters_.requests);
+    status.add("program requests served", counters_.requests_served);
+  }
   status.add("default protocol", default_protocol_);
   status.add("program_dir", programs_->root());
 }

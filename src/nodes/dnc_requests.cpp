@@ -143,10 +143,15 @@ void DncNode::requestWorker()
 std::optional<dnc::Punch> DncNode::listenForPunch(bool& reserved)
 {
   Transport& link = openLink();
-  if (!listener_ || listener_link_ != &link)
+  uint64_t generation = 0;
+  {
+    std::lock_guard<std::mutex> lock(link_mutex_);
+    generation = link_generation_;
+  }
+  if (!listener_ || listener_generation_ != generation)  // a new port after a link error
   {
     listener_ = std::make_unique<dnc::RequestListener>(link, request_options_);
-    listener_link_ = &link;
+    listener_generation_ = generation;
   }
   auto may_start = [this, &reserved]
   {
@@ -323,6 +328,11 @@ void DncNode::reportRequestInTransfer(const TransferJob& job)
 
 void DncNode::publishRequest(ProgramRequestEvent& event)
 {
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    ++counters_.requests;
+    counters_.requests_served += event.success ? 1 : 0;
+  }
   event.header.stamp = ros::Time::now();
   event.machine = state_->machineName();
   event.source = "rs232 " + serial_.device;

@@ -135,6 +135,7 @@ class DncNode
   std::string running_;    ///< what holds the node while busy_, for the refusal of another
   std::mutex link_mutex_;  ///< guards link_ for cancelRunning()
   std::unique_ptr<SerialPort> link_;
+  uint64_t link_generation_ = 0;  ///< counts the links opened (guarded by link_mutex_)
   std::atomic<bool> cancel_{false};
 
   std::mutex stats_mutex_;
@@ -142,6 +143,7 @@ class DncNode
   {
     uint64_t transfers = 0, completed = 0, failed = 0, cancelled = 0, refused = 0;
     uint64_t blocks = 0, retries = 0, timeouts = 0, bytes = 0;
+    uint64_t requests = 0, requests_served = 0;  ///< program requests punched by the control
     std::string last_result;
   } counters_;
 
@@ -162,7 +164,7 @@ class DncNode
   dnc::RequestListenerOptions request_options_;
   uint32_t answer_number_ = 1;  ///< the answer's O number when the request program has none
   std::unique_ptr<dnc::RequestListener> listener_;
-  Transport* listener_link_ = nullptr;  ///< the link listener_ was made for
+  uint64_t listener_generation_ = 0;  ///< link_generation_ of the link listener_ was made for
   bool listening_ = false;
   bool stop_requests_ = false;
   std::atomic<bool> listen_stop_{false};
