@@ -2,6 +2,8 @@
 #include "cnc_bridge/mdc/mdc_monitor.h"
 
 #include <algorithm>
+#include <cmath>
+#include <limits>
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/log.h"
@@ -201,6 +203,7 @@ std::vector<CycleEventData> MdcMonitor::apply(const Reply& reply, Clock::time_po
         const int variable = *reading.variable;
         const double value = reading.value;
         status_.variables[variable] = value;
+        status_.variable_errors.erase(variable);
         for (size_t axis = 0; axis < axes_.size() && axis < 3; ++axis)
         {
           auto& pair = axes_[axis];
@@ -231,10 +234,71 @@ std::vector<CycleEventData> MdcMonitor::apply(const Reply& reply, Clock::time_po
   catch (const ProtocolError& e)
   {
     CNC_LOG_WARN("MDC: ignored a malformed " << toString(reply.kind) << " reply: " << e.what());
+    if (reply.kind == ReplyKind::kMacro && reply.answered && reply.answered->code == 600 && reply.answered->argument)
+    {
+      variableFailed(static_cast<int>(*reply.answered->argument), std::string("malformed reply: ") + e.what());
+    }
     return events;
   }
   ++status_.updates;
   return events;
+}
+
+namespace
+{
+// Equal as published values: the same number, or both unknown (NaN).
+bool sameValues(const std::vector<double>& a, const std::vector<double>& b)
+{
+  if (a.size() != b.size())
+    return false;
+  for (size_t i = 0; i < a.size(); ++i)
+  {
+    if (!(a[i] == b[i] || (std::isnan(a[i]) && std::isnan(b[i]))))
+      return false;
+  }
+  return true;
+}
+}  // namespace
+
+std::optional<std::vector<double>> VariableWatch::update(const MachineStatus& status)
+{
+  std::vector<double> values;
+  values.reserve(numbers_.size());
+  for (int n : numbers_)
+  {
+    const auto value = status.variables.find(n);
+    if (value != status.variables.end())
+      values.push_back(value->second);
+    else if (status.variable_errors.count(n))
+      values.push_back(std::numeric_limits<double>::quiet_NaN());
+    else
+      return std::nullopt;  // not polled yet on this connection
+  }
+  if (published_ && sameValues(*published_, values))
+    return std::nullopt;
+  published_ = values;
+  return values;
+}
+
+std::optional<std::vector<double>> VariableWatch::linkLost()
+{
+  const std::vector<double> unknown(numbers_.size(), std::numeric_limits<double>::quiet_NaN());
+  if (!published_ || sameValues(*published_, unknown))
+    return std::nullopt;
+  published_ = unknown;
+  return unknown;
+}
+
+std::string VariableWatch::errors(const MachineStatus& status) const
+{
+  std::string text;
+  for (int n : numbers_)
+  {
+    const auto error = status.variable_errors.find(n);
+    if (error != status.variable_errors.end())
+      text += (text.empty() ? "#" : "; #") + std::to_string(n) + ": " + error->second;
+  }
+  return text;
 }
 
 std::vector<CycleEventData> MdcMonitor::applyProgramStatus(const ProgramStatus& ps, Clock::time_point now)
@@ -522,7 +586,8 @@ void MdcPoller::run(Transport& transport, StopSignal& stop)
   {
     std::lock_guard<std::mutex> lock(mutex_);
     client_ = &client;
-    port_generation_.reset();  // a freshly opened port has our settings
+    monitor_.forgetVariables();  // values of an earlier connection may be stale
+    port_generation_.reset();    // a freshly opened port has our settings
     hold_cycle_ends_ = ask_cycle_time;
     held_events_.clear();
   }
@@ -580,6 +645,8 @@ void MdcPoller::run(Transport& transport, StopSignal& stop)
     {
       const Reply reply = client.request(next->first, reply_timeout_);
       unanswered_in_a_row = 0;
+      if (reply.kind == ReplyKind::kUnknownQuery)
+        noteVariableFailure(next->first, "rejected by the control (\"" + reply.line + "\")");
       notify(reply);
       if (reply.kind == ReplyKind::kUnknownQuery)
         scheduler.rejected(Clock::now(), plan_.counters_period);
@@ -590,6 +657,11 @@ void MdcPoller::run(Transport& transport, StopSignal& stop)
     catch (const TimeoutError& e)
     {
       CNC_LOG_DEBUG(e.what());
+      if (noteVariableFailure(next->first, "no reply within " + std::to_string(reply_timeout_.count()) + " ms") &&
+          listener_)
+      {
+        listener_(monitor_.status(), {});
+      }
       scheduler.unanswered(Clock::now(), plan_.counters_period);
       if (plan_.max_unanswered > 0 && ++unanswered_in_a_row >= plan_.max_unanswered)
       {
@@ -603,6 +675,15 @@ void MdcPoller::run(Transport& transport, StopSignal& stop)
     }
     stats_ = sum(base_stats_, client.stats());
   }
+}
+
+bool MdcPoller::noteVariableFailure(const Query& query, const std::string& why)
+{
+  // Called with mutex_ held.
+  if (query.letter != 'Q' || query.code != 600 || !query.argument)
+    return false;
+  monitor_.variableFailed(static_cast<int>(*query.argument), why);
+  return true;
 }
 
 void MdcPoller::withClient(const std::function<void(MdcClient&)>& action)

@@ -135,6 +135,13 @@ SimMachine SimMachine::fromScript(std::istream& in, const std::string& name)
           to_double(value);
           phase.set[key] = value;
         }
+        else if (key.size() > 3 && key.compare(0, 3, "var") == 0)
+        {
+          const double n = to_double(key.substr(3));
+          if (n != std::floor(n) || n < 1 || n > 99999)
+            fail("varN needs a variable number N, not " + key);
+          phase.variables[static_cast<int>(n)] = to_double(value);
+        }
         else
           fail("unknown key " + key);
       }
@@ -186,8 +193,10 @@ SimMachine::State SimMachine::stateAt(Clock::time_point now) const
   // Settings carry over from the previous loop's end, so apply the whole timeline first when
   // this is not the first loop, then the phases up to the current one.
   double axis_end[3] = {0, 0, 0};
-  auto apply_phase = [&](const Phase& phase)
+  auto apply_phase = [&](const Phase& phase, double began)
   {
+    for (const auto& [n, value] : phase.variables)
+      state.variables[n] = {value, began};
     for (const auto& [key, value] : phase.set)
     {
       if (key == "mode")
@@ -208,19 +217,26 @@ SimMachine::State SimMachine::stateAt(Clock::time_point now) const
     if (phase.z)
       axis_end[2] = *phase.z;
   };
+  // When each phase of this loop began (s since start).
+  double began = static_cast<double>(state.loop) * total;
   if (state.loop > 0)
   {
+    double previous = began - total;
     for (const auto& phase : phases_)
-      apply_phase(phase);
+    {
+      apply_phase(phase, previous);
+      previous += phase.seconds;
+    }
   }
   long long parts = 0;
   for (size_t i = 0; i < index; ++i)
   {
-    apply_phase(phases_[i]);
+    apply_phase(phases_[i], began);
+    began += phases_[i].seconds;
     parts += phases_[i].parts_increment;
   }
   const double from[3] = {axis_end[0], axis_end[1], axis_end[2]};
-  apply_phase(phases_[index]);
+  apply_phase(phases_[index], began);
   parts += phases_[index].parts_increment;
   state.parts = base_parts + state.loop * increments_per_loop + parts;
   state.x = from[0] + (axis_end[0] - from[0]) * fraction;
@@ -311,6 +327,7 @@ std::string SimMachine::answer(const std::string& raw, Clock::time_point now)
         if (n == std::floor(n) && n >= 1 && n < 1000)
         {
           variables_[static_cast<int>(n)] = v;
+          written_at_[static_cast<int>(n)] = std::chrono::duration<double>(now - start_).count();
           return "!";
         }
       }
@@ -370,6 +387,8 @@ std::string SimMachine::answer(const std::string& raw, Clock::time_point now)
         value = s.spindle;
       else if (n == 3901)
         value = static_cast<double>(s.parts);
+      else if (s.variables.count(n) && (!written_at_.count(n) || written_at_.at(n) < s.variables.at(n).second))
+        value = s.variables.at(n).first;  // set by the script's phase, after any write
       else if (variables_.count(n))
         value = variables_[n];
       if (classic_)

@@ -12,6 +12,7 @@
 #include <mutex>
 
 #include "cnc_bridge/CycleEvent.h"
+#include "cnc_bridge/MacroVariables.h"
 #include "cnc_bridge/MdcQuery.h"
 #include "cnc_bridge/MdcReadVariable.h"
 #include "cnc_bridge/MdcWriteVariable.h"
@@ -139,6 +140,9 @@ class HaasMdcNode
     pnh.param("spindle_variable", spindle_var_, 3027);
     // ~variables: more macro variables polled via Q600 and shown in diagnostics (#100s, counters).
     extra_vars_ = intList(pnh, "variables", {});
+    // ~watch_variables: macro variables polled like those and published on `variables` when one
+    // changes (a robot's orchestration waits on them: the program sets #500 = 1, the part is ready).
+    watch_ = std::make_unique<mdc::VariableWatch>(intList(pnh, "watch_variables", {}));
     // ~units: linear unit of positions: auto (from G20/G21, #4006), inch or mm.
     pnh.param<std::string>("units", units_, "auto");
     if (units_ != "auto" && units_ != "inch" && units_ != "mm")
@@ -154,9 +158,15 @@ class HaasMdcNode
     {
       throw ConfigError(pnh.resolveName("position_variables") + " and work_position_variables need 3 entries or none");
     }
-    for (const auto* list : {&position_vars_, &work_vars_, &extra_vars_})
+    const std::vector<const std::vector<int>*> lists{&position_vars_, &work_vars_, &extra_vars_, &watch_->numbers()};
+    for (const auto* list : lists)
     {
-      plan.variables.insert(plan.variables.end(), list->begin(), list->end());
+      for (int variable : *list)
+      {
+        // Each variable once per poll cycle, however many lists name it.
+        if (std::find(plan.variables.begin(), plan.variables.end(), variable) == plan.variables.end())
+          plan.variables.push_back(variable);
+      }
     }
     if (spindle_var_ > 0)
     {
@@ -187,6 +197,10 @@ class HaasMdcNode
     state_ = std::make_unique<MachineStatePublisher>(nh, pnh, hardware_id_);
     state_->diagnostics().add("mdc", this, &HaasMdcNode::diagnose);
     events_pub_ = nh.advertise<CycleEvent>("events", 20);
+    if (!watch_->numbers().empty())
+    {
+      variables_pub_ = nh.advertise<MacroVariables>("variables", 1, true);
+    }
     poller_->setListener([this](const mdc::MachineStatus& s, const std::vector<mdc::CycleEventData>& events)
                          { onStatus(s, events); });
     read_srv_ = pnh.advertiseService("read_variable", &HaasMdcNode::readVariable, this);
@@ -198,6 +212,8 @@ class HaasMdcNode
     {
       if (link != LinkState::kUp)
       {
+        std::lock_guard<std::mutex> lock(watch_mutex_);
+        publishVariables(watch_->linkLost(), ros::Time::now());
         state_->update(
             [](MachineState& m)
             {
@@ -291,6 +307,14 @@ class HaasMdcNode
             }
           }
         });
+    {
+      std::lock_guard<std::mutex> lock(watch_mutex_);
+      publishVariables(watch_->update(s), now);
+    }
+    if (const std::string errors = watch_->errors(s); !errors.empty())
+    {
+      ROS_WARN_STREAM_THROTTLE(10.0, "haas_mdc_node: watched variables without a value: " << errors);
+    }
     for (const auto& e : events)
     {
       CycleEvent msg;
@@ -305,6 +329,19 @@ class HaasMdcNode
       events_pub_.publish(msg);
       ROS_INFO_STREAM("haas_mdc_node: " << e.text << " (program " << e.program << ", parts " << e.part_count << ")");
     }
+  }
+
+  // Publishes the watched variables' values, if VariableWatch says they are due.
+  void publishVariables(const std::optional<std::vector<double>>& values, const ros::Time& stamp)
+  {
+    if (!values)
+      return;
+    MacroVariables msg;
+    msg.header.stamp = stamp;
+    msg.machine = state_->machineName();
+    msg.numbers.assign(watch_->numbers().begin(), watch_->numbers().end());
+    msg.values = *values;
+    variables_pub_.publish(msg);
   }
 
   double metresPerUnit(const mdc::MachineStatus& s) const
@@ -429,6 +466,10 @@ class HaasMdcNode
       status.add("M30 counter #1", *s.m30_counter1);
     for (const auto& [variable, value] : s.variables)
       status.add("#" + std::to_string(variable), value);
+    for (const auto& [variable, why] : s.variable_errors)
+      status.add("#" + std::to_string(variable) + " error", why);
+    if (const std::string errors = watch_->errors(s); !errors.empty())
+      status.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN, "watched variables without a value: " + errors);
   }
 
   ros::NodeHandle nh_, pnh_;
@@ -441,10 +482,13 @@ class HaasMdcNode
   int spindle_var_ = 3027;
   std::string units_;
   std::unique_ptr<mdc::WritePolicy> policy_;
+  std::unique_ptr<mdc::VariableWatch> watch_;  // update() and linkLost() under watch_mutex_
+  std::mutex watch_mutex_;
   std::unique_ptr<PortLock> port_lock_;
   std::unique_ptr<mdc::MdcPoller> poller_;
   std::unique_ptr<MachineStatePublisher> state_;
   ros::Publisher events_pub_;
+  ros::Publisher variables_pub_;
   ros::ServiceServer read_srv_, write_srv_, query_srv_;
   uint64_t last_unanswered_ = 0;
 

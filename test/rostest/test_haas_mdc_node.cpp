@@ -12,8 +12,10 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <condition_variable>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <mutex>
 #include <optional>
@@ -21,6 +23,7 @@
 
 #include "cnc_bridge/CycleEvent.h"
 #include "cnc_bridge/MachineState.h"
+#include "cnc_bridge/MacroVariables.h"
 #include "cnc_bridge/MdcQuery.h"
 #include "cnc_bridge/MdcReadVariable.h"
 #include "cnc_bridge/MdcWriteVariable.h"
@@ -31,6 +34,7 @@
 
 using cnc_bridge::CycleEvent;
 using cnc_bridge::MachineState;
+using cnc_bridge::MacroVariables;
 
 namespace
 {
@@ -97,6 +101,7 @@ struct Recorder
   std::condition_variable changed;
   std::vector<MachineState> ngc_states, classic_states;
   std::vector<CycleEvent> events;
+  std::vector<MacroVariables> variables;  // the NGC node's `variables` topic
   std::vector<MdcDiagnostics> ngc_diagnostics, classic_diagnostics;
 
   template <class Predicate>
@@ -193,6 +198,83 @@ TEST(HaasMdcNode, StateFollowsTheScriptedMachineThroughIdleBusyHoldAndAlarm)
       0.0));
   // Tool 3 during the cycle, spindle at 8000 rpm.
   EXPECT_TRUE(recorder->sawState([](const MachineState& s) { return s.tool == 3 && s.spindle_speed == 8000.0; }, 20.0));
+}
+
+// ~watch_variables [500] on the `variables` topic: the script's program sets #500 to 1 when the
+// part is done and back to 0 at the next loop. The topic follows it, publishes nothing while the
+// value stays (three more polls of #500 reach the control and nothing new arrives), says NaN
+// (not known) while the link is down, and never repeats the values it published last.
+TEST(HaasMdcNode, VariablesTopicFollowsAVariableTheProgramSets)
+{
+  auto value_is = [](double v)
+  {
+    return [v](const MacroVariables& m)
+    { return m.numbers == std::vector<uint32_t>{500} && m.values.size() == 1 && m.values[0] == v; };
+  };
+  auto unknown = [](const MacroVariables& m) { return m.values.size() == 1 && std::isnan(m.values[0]); };
+  // Index of the first recorded message from \p from on that matches, once it arrived.
+  auto await = [&](const std::function<bool(const MacroVariables&)>& match, size_t from) -> std::optional<size_t>
+  {
+    std::optional<size_t> found;
+    recorder->waitFor(
+        [&]
+        {
+          for (size_t i = from; i < recorder->variables.size(); ++i)
+            if (match(recorder->variables[i]))
+              return (found = i).has_value();
+          return false;
+        },
+        25.0);
+    return found;
+  };
+  // 0 (the part being cut), then 1 (done): one 9 s loop of the script, allow two.
+  const auto zero = await(value_is(0.0), 0);
+  ASSERT_TRUE(zero);
+  const auto one = await(value_is(1.0), *zero + 1);
+  ASSERT_TRUE(one);
+  size_t polls = 0;
+  {
+    std::lock_guard<std::mutex> lock(recorder->mutex);
+    const auto& m = recorder->variables[*one];
+    EXPECT_EQ(m.machine, "haas_ngc");
+    EXPECT_FALSE(m.header.stamp.isZero());
+    for (size_t i = *zero + 1; i < *one; ++i)
+      EXPECT_TRUE(unknown(recorder->variables[i]) || value_is(0.0)(recorder->variables[i]));
+    polls = recorder->variables.size();
+  }
+  // Unchanged polls publish nothing: three more ?Q600 500 reach the control (one query at a time,
+  // so the replies to the first two were handled), then two state messages as a barrier for
+  // anything the node published before them; #500 stays 1 for 3 s, until the script's drop.
+  const auto q600 = [] { return queriesReceived(ngc_queries); };
+  size_t seen = 0;
+  for (int more = 0; more < 3; ++more)
+  {
+    ASSERT_TRUE(waitForQuery(ngc_queries, "?Q600 500", q600().size()));
+    ++seen;
+  }
+  size_t states = 0;
+  {
+    std::lock_guard<std::mutex> lock(recorder->mutex);
+    states = recorder->ngc_states.size();
+  }
+  ASSERT_TRUE(recorder->waitFor([&] { return recorder->ngc_states.size() >= states + 2; }, 5.0));
+  {
+    std::lock_guard<std::mutex> lock(recorder->mutex);
+    EXPECT_EQ(recorder->variables.size(), polls) << "published again without a change after " << seen << " polls";
+  }
+  // The script's drop: not known while the link is down; then 0 again on the next loop.
+  const auto lost = await(unknown, *one + 1);
+  ASSERT_TRUE(lost);
+  ASSERT_TRUE(await(value_is(0.0), *lost + 1));
+  std::lock_guard<std::mutex> lock(recorder->mutex);
+  for (size_t i = 1; i < recorder->variables.size(); ++i)
+  {
+    const auto& a = recorder->variables[i - 1].values;
+    const auto& b = recorder->variables[i].values;
+    EXPECT_FALSE(a.size() == b.size() &&
+                 (a == b || (unknown(recorder->variables[i - 1]) && unknown(recorder->variables[i]))))
+        << "message " << i << " repeats the one before";
+  }
 }
 
 TEST(HaasMdcNode, PositionsAreConvertedFromInchesToMetres)
@@ -538,6 +620,13 @@ int main(int argc, char** argv)
                                            rec.events.push_back(*e);
                                            rec.changed.notify_all();
                                          });
+  auto variables = nh.subscribe<MacroVariables>(kNgc + "/variables", 100,
+                                                [&](const MacroVariables::ConstPtr& m)
+                                                {
+                                                  std::lock_guard<std::mutex> lock(rec.mutex);
+                                                  rec.variables.push_back(*m);
+                                                  rec.changed.notify_all();
+                                                });
   auto diagnostics = nh.subscribe<diagnostic_msgs::DiagnosticArray>(
       "/diagnostics", 100,
       [&](const diagnostic_msgs::DiagnosticArray::ConstPtr& array)

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <condition_variable>
 #include <map>
 #include <thread>
@@ -789,4 +790,108 @@ TEST(MdcClient, ASevenBitSerialLineIsSetUpAgainAndReopened)
     EXPECT_NO_THROW(port.applySettings());
   }
   EXPECT_NO_THROW(SerialPort again(settings));
+}
+
+// The watched variables of the `variables` topic: published once every one was polled (a value,
+// or NaN with its error), then only on a change; all NaN once when the link is lost.
+TEST(MdcVariableWatch, PublishesOnceEveryVariableWasPolledThenOnlyOnChange)
+{
+  VariableWatch watch({500, 501});
+  MachineStatus s;
+  s.variables[500] = 0.0;
+  EXPECT_FALSE(watch.update(s));  // #501 not polled yet
+  s.variable_errors[501] = "no reply within 1000 ms";
+  auto values = watch.update(s);
+  ASSERT_TRUE(values);
+  ASSERT_EQ(values->size(), 2u);
+  EXPECT_EQ((*values)[0], 0.0);
+  EXPECT_TRUE(std::isnan((*values)[1]));
+  EXPECT_EQ(watch.errors(s), "#501: no reply within 1000 ms");
+  EXPECT_FALSE(watch.update(s));  // nothing changed, NaN included
+  s.variables[500] = 1.0;
+  values = watch.update(s);
+  ASSERT_TRUE(values);
+  EXPECT_EQ((*values)[0], 1.0);
+  EXPECT_FALSE(watch.update(s));
+  s.variable_errors.erase(501);
+  s.variables[501] = 3.0;
+  values = watch.update(s);
+  ASSERT_TRUE(values);
+  EXPECT_EQ((*values)[1], 3.0);
+  EXPECT_EQ(watch.errors(s), "");
+  values = watch.linkLost();
+  ASSERT_TRUE(values);
+  EXPECT_TRUE(std::isnan((*values)[0]) && std::isnan((*values)[1]));
+  EXPECT_FALSE(watch.linkLost());                 // once
+  EXPECT_TRUE(watch.update(s));                   // the values again after the loss, unchanged or not
+  EXPECT_FALSE(VariableWatch({500}).linkLost());  // nothing published yet: nothing to take back
+}
+
+// A variable without a value is reported with the reason: rejected by the control, no reply, a
+// malformed reply; the reason goes once a value arrives, and the poll goes on meanwhile.
+TEST(MdcPoller, AVariableWithoutAValueIsReportedWithTheReason)
+{
+  FakeTransport fake;
+  scriptedControl(fake,
+                  [](const std::string& query, int asked) -> std::string
+                  {
+                    if (query == "?Q500")
+                      return "PROGRAM, O1, IDLE, PARTS, 1";
+                    if (query == "?Q600 500")
+                      return "MACRO, 1.5";
+                    if (query == "?Q600 9999")
+                      return "?, ?Q600 9999";
+                    if (query == "?Q600 777")
+                      return asked < 1 ? "" : "MACRO, 2";  // the first one unanswered
+                    if (query == "?Q600 601")
+                      return "MACRO, abc";
+                    return "?, " + query;
+                  });
+  PollPlan plan = fastPlan();
+  plan.variables = {500, 9999, 777, 601};
+  plan.max_unanswered = 0;
+  MdcPoller poller(plan, 30ms);
+  Reported reported;
+  std::vector<std::string> errors_of_777;
+  poller.setListener(
+      [&](const MachineStatus& s, const std::vector<CycleEventData>&)
+      {
+        std::lock_guard<std::mutex> lock(reported.mutex);
+        reported.status = s;
+        if (s.variable_errors.count(777) &&
+            (errors_of_777.empty() || errors_of_777.back() != s.variable_errors.at(777)))
+          errors_of_777.push_back(s.variable_errors.at(777));
+        reported.changed.notify_all();
+      });
+  StopSignal stop;
+  std::thread thread(
+      [&]
+      {
+        try
+        {
+          poller.run(fake, stop);
+        }
+        catch (const Error&)
+        {
+        }
+      });
+  EXPECT_TRUE(reported.waitFor(
+      [&]
+      {
+        const auto& s = reported.status;
+        return s.variables.count(500) && s.variables.count(777) && s.variable_errors.count(9999) &&
+               s.variable_errors.count(601);
+      }));
+  stop.stop();
+  thread.join();
+  const auto s = poller.status();
+  EXPECT_EQ(s.variables.at(500), 1.5);
+  EXPECT_EQ(s.variable_errors.at(9999), "rejected by the control (\"?, ?Q600 9999\")");
+  EXPECT_NE(s.variable_errors.at(601).find("malformed reply"), std::string::npos) << s.variable_errors.at(601);
+  EXPECT_EQ(s.variables.count(601), 0u);
+  EXPECT_EQ(s.variables.at(777), 2.0);
+  EXPECT_EQ(s.variable_errors.count(777), 0u);  // gone with the value
+  ASSERT_EQ(errors_of_777.size(), 1u);
+  EXPECT_EQ(errors_of_777[0], "no reply within 30 ms");
+  EXPECT_EQ(s.variable_errors.count(500), 0u);
 }

@@ -165,3 +165,28 @@ TEST(MdcSim, LastAndPreviousCycleTimesAreThoseOfTheCyclesThatEnded)
   c.start(t0);
   EXPECT_EQ(c.answer("?Q303", t0 + 5100ms), "LAST CYCLE, 000:00:03");
 }
+
+// `varN=VALUE` in a phase: the program sets the variable on entering the phase, every loop; a ?E
+// write wins until the next phase that sets it (the cell's #500 handshake is made of this).
+TEST(MdcSim, ScriptedVariablesFollowThePhasesAndAWriteWinsUntilTheNextSet)
+{
+  SimMachine m = script(
+      "var 500 7\n"
+      "phase 1.0 status=IDLE var500=0\n"
+      "phase 1.0 status=BUSY\n"
+      "phase 1.0 status=IDLE var500=1 var501=2.5\n");
+  const SimMachine::Clock::time_point t0{};
+  m.start(t0);
+  EXPECT_EQ(m.answer("?Q600 500", t0 + 500ms), "MACRO, 0.000000");
+  EXPECT_EQ(m.answer("?Q600 500", t0 + 1500ms), "MACRO, 0.000000");
+  EXPECT_EQ(m.answer("?Q600 500", t0 + 2500ms), "MACRO, 1.000000");
+  EXPECT_EQ(m.answer("?Q600 501", t0 + 2500ms), "MACRO, 2.500000");
+  EXPECT_EQ(m.answer("?Q600 500", t0 + 3500ms), "MACRO, 0.000000");  // the next loop
+  EXPECT_EQ(m.answer("?Q600 501", t0 + 3500ms), "MACRO, 2.500000");  // kept from the loop before
+  EXPECT_EQ(m.answer("?E500 5", t0 + 3600ms), "!");
+  EXPECT_EQ(m.answer("?Q600 500", t0 + 4500ms), "MACRO, 5.000000");
+  EXPECT_EQ(m.answer("?Q600 500", t0 + 5500ms), "MACRO, 1.000000");  // set again by the script
+  EXPECT_THROW(script("phase 1.0 var0=1\n"), ConfigError);
+  EXPECT_THROW(script("phase 1.0 varx=1\n"), ConfigError);
+  EXPECT_THROW(script("phase 1.0 var500=one\n"), ConfigError);
+}

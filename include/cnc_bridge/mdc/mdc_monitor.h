@@ -88,8 +88,11 @@ struct MachineStatus
   std::optional<int64_t> tool_changes;
   std::optional<int64_t> m30_counter1, m30_counter2;
   std::optional<double> last_cycle_s, previous_cycle_s, power_on_s, motion_s;
-  std::map<int, double> variables;  ///< Q600 values by variable number
-  Units units = Units::kUnknown;    ///< from #4006 when it is polled
+  std::map<int, double> variables;  ///< Q600 values by variable number, read on this connection
+  /// Why the last poll of a variable gave no value ("no reply within 1000 ms", the control's
+  /// rejection, a malformed reply), by variable number; gone once a value arrives.
+  std::map<int, std::string> variable_errors;
+  Units units = Units::kUnknown;  ///< from #4006 when it is polled
   /// Work zero X Y Z in machine coordinates (device units), see MdcMonitor::setWorkOffsetAxes().
   std::optional<double> work_offset[3];
   uint64_t updates = 0;  ///< replies folded in
@@ -134,6 +137,15 @@ class MdcMonitor
   const MachineStatus& status() const { return status_; }
   bool inCycle() const { return in_cycle_; }
 
+  /// \brief A poll of \p variable gave no value, for the reason \p why (kept until a value arrives).
+  void variableFailed(int variable, const std::string& why) { status_.variable_errors[variable] = why; }
+  /// \brief Forgets the variables' values and errors (a new connection: only what it reads counts).
+  void forgetVariables()
+  {
+    status_.variables.clear();
+    status_.variable_errors.clear();
+  }
+
  private:
   std::vector<CycleEventData> applyProgramStatus(const ProgramStatus& ps, Clock::time_point now);
 
@@ -148,6 +160,30 @@ class MdcMonitor
   bool seen_status_ = false;
   bool in_cycle_ = false;
   std::optional<Clock::time_point> cycle_start_;
+};
+
+/// \brief Decides when the values of watched macro variables are published (the `variables`
+/// topic of haas_mdc_node): once every one of them was polled on the connection (a value, or an
+/// error: then NaN), and after that only when a value changes. Not thread-safe.
+class VariableWatch
+{
+ public:
+  explicit VariableWatch(std::vector<int> numbers) : numbers_(std::move(numbers)) {}
+  const std::vector<int>& numbers() const { return numbers_; }
+
+  /// \returns the values in the order of numbers() (NaN: no value, see
+  /// MachineStatus::variable_errors) when they are to be published, else nullopt.
+  std::optional<std::vector<double>> update(const MachineStatus& status);
+  /// \brief The link is down: nothing is known. \returns all NaN once, if values were published
+  /// since the last loss; the next connection's first complete poll is published again.
+  std::optional<std::vector<double>> linkLost();
+  /// \returns "#500: no reply within 1000 ms; #9999: ..." for the watched variables that have an
+  /// error in \p status; empty when none has.
+  std::string errors(const MachineStatus& status) const;
+
+ private:
+  std::vector<int> numbers_;
+  std::optional<std::vector<double>> published_;  ///< the values last published
 };
 
 /// \brief What to poll and how often.
@@ -223,6 +259,8 @@ class MdcPoller
  private:
   class PortUse;
   void notify(const Reply& reply);
+  /// Records why a Q600 poll gave no value (with mutex_ held). \returns false for other queries.
+  bool noteVariableFailure(const Query& query, const std::string& why);
   /// Takes the port lock for one use (with mutex_ held). \returns false if it is busy.
   bool takePort(MdcClient& client);
   /// Asks for the control's cycle time for cycle ends held back by notify(), then delivers them.

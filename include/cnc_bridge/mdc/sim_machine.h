@@ -31,8 +31,10 @@ namespace mdc
 /// Phase keys: `mode=MEM|MDI|JOG|ZERO RET|EDIT` (underscores stand for spaces), `status=IDLE|BUSY|
 /// FEED_HOLD|ALARM`, `program=O00110`, `tool=N`, `parts+=N` (counted on entering the phase),
 /// `x=`, `y=`, `z=` (axis targets, reached linearly at the end of the phase), `spindle=RPM`,
-/// and the flag `drop` (every connection is closed on entering the phase). Unset keys keep the
-/// previous phase's value.
+/// `varN=VALUE` (macro variable #N set on entering the phase, as the running program would: e.g.
+/// `var500=1` when the part is ready for a robot; a `?E` write after that wins until the next
+/// phase that sets it), and the flag `drop` (every connection is closed on entering the phase).
+/// Unset keys keep the previous phase's value.
 class SimMachine
 {
  public:
@@ -73,6 +75,9 @@ class SimMachine
     double x = 0, y = 0, z = 0;
     size_t phase = 0;
     long long loop = 0;
+    /// Variables set by the phases so far (`varN=`): value, and when (s since start()) the phase
+    /// that set it began.
+    std::map<int, std::pair<double, double>> variables;
   };
   State stateAt(Clock::time_point now) const;
 
@@ -90,6 +95,7 @@ class SimMachine
     std::map<std::string, std::string> set;
     long long parts_increment = 0;
     std::optional<double> x, y, z;
+    std::map<int, double> variables;  ///< varN=VALUE
     bool drop = false;
     size_t line = 0;
   };
@@ -98,7 +104,8 @@ class SimMachine
   bool inch_ = true;
   bool classic_ = false;
   double work_[3] = {0, 0, 0};
-  std::map<int, double> variables_;
+  std::map<int, double> variables_;   ///< initial values (`var`) and `?E` writes
+  std::map<int, double> written_at_;  ///< when (s since start()) each `?E` write came
   std::vector<Phase> phases_;
   Clock::time_point start_ = Clock::now();
   std::optional<std::pair<long long, size_t>> last_drop_;
