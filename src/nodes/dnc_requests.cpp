@@ -49,6 +49,11 @@ void DncNode::setUpRequests(ros::NodeHandle& nh, ros::NodeHandle& pnh)
   // ~backup_quiet_timeout (s, default 5): a text punch without its closing '%' ends after this
   // much silence (as a backup does).
   request_options_.text_quiet = params::seconds(pnh, "backup_quiet_timeout", 5.0);
+  // ~request_load_words (string, default "LOAD SEND"), ~request_save_words (string, default
+  // "SAVE"): the words that make a punched program's comment a request, as share_node's.
+  request_words_ = programs::RequestWords::parse(
+      pnh.param<std::string>("request_load_words", "LOAD SEND"), pnh.param<std::string>("request_save_words", "SAVE"),
+      pnh.resolveName("request_load_words"), pnh.resolveName("request_save_words"));
   // ~request_answer_number (int, default 1): the O number of an answer program when the request
   // program the operator punched has none (it normally has: the answer then replaces it).
   const int answer = pnh.param("request_answer_number", 1);
@@ -186,14 +191,14 @@ std::optional<dnc::Punch> DncNode::listenForPunch(bool& reserved)
 void DncNode::servePunch(const dnc::Punch& punch)
 {
   ProgramRequestEvent event;
-  const auto request = programs::recogniseRequest(punch.text);
+  const auto request = programs::recogniseRequest(punch.text, false, request_words_);
   if (!request)
   {
     // Not a request: the program is kept in the archive (not in ~program_dir, where it could
     // replace a program nobody asked to replace), so nothing punched is lost.
     const programs::ProgramHeader header = programs::readHeader(punch.text);
     const std::string name = header.number ? name_pattern_->format(*header.number) : "unrequested.nc";
-    event.outcome = std::string(programs::kNoRequestOutcome) + " (" + name + " punched " + punch.how + ")";
+    event.outcome = programs::noRequestOutcome(request_words_) + " (" + name + " punched " + punch.how + ")";
     try
     {
       if (const auto kept =
@@ -313,7 +318,7 @@ void DncNode::reportRequestInTransfer(const TransferJob& job)
   std::string head(4096, '\0');
   in.read(head.data(), static_cast<std::streamsize>(head.size()));
   head.resize(static_cast<size_t>(in.gcount()));
-  const auto request = programs::recogniseRequest(head);
+  const auto request = programs::recogniseRequest(head, false, request_words_);
   if (!request)
     return;
   // The control punched a request while the node was receiving: it became that transfer's file.

@@ -65,6 +65,7 @@ class ShareNode
   std::unique_ptr<programs::ProgramStore> store_;
   std::unique_ptr<programs::ProgramStore> requests_;  ///< the share's requests folder, if any
   std::string requests_folder_;
+  programs::RequestWords request_words_;
   std::string credentials_file_;
   Milliseconds timeout_{10000};
   std::string url_;
@@ -127,6 +128,11 @@ ShareNode::ShareNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   // ~requests_folder (string, default "requests"; "" for none): a folder of the share where the
   // control drops request files ((LOAD O1234), (SEND O1234), (SAVE O1234)), served at each check.
   requests_folder_ = pnh.param<std::string>("requests_folder", "requests");
+  // ~request_load_words (string, default "LOAD SEND"), ~request_save_words (string, default
+  // "SAVE"): the words that make a comment or DPRNT line a request, as dnc_node's.
+  request_words_ = programs::RequestWords::parse(
+      pnh.param<std::string>("request_load_words", "LOAD SEND"), pnh.param<std::string>("request_save_words", "SAVE"),
+      pnh.resolveName("request_load_words"), pnh.resolveName("request_save_words"));
   if (!requests_folder_.empty())
     programs::checkName(requests_folder_);
   credentials_file_ = pnh.param<std::string>("credentials_file", "");
@@ -243,13 +249,14 @@ void ShareNode::serveRequestFiles()
       ROS_WARN("request file %s: %s", file.name.c_str(), e.what());
       continue;
     }
-    serveRequest(programs::recogniseRequest(text), "share " + requests_folder_ + "/" + file.name);
+    serveRequest(programs::recogniseRequest(text, false, request_words_),
+                 "share " + requests_folder_ + "/" + file.name);
   }
 }
 
 void ShareNode::onDprntLine(const DprntLine::ConstPtr& line)
 {
-  if (const auto request = programs::recogniseRequest(line->text, true))
+  if (const auto request = programs::recogniseRequest(line->text, true, request_words_))
     serveRequest(request, "dprnt");
 }
 
@@ -260,7 +267,7 @@ void ShareNode::serveRequest(const std::optional<programs::ProgramRequest>& requ
   event.source = source;
   if (!request)
   {
-    event.outcome = programs::kNoRequestOutcome;
+    event.outcome = programs::noRequestOutcome(request_words_);
   }
   else
   {

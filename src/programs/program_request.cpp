@@ -1,6 +1,7 @@
 // Request recognition and the answer program (see program_request.h).
 #include "cnc_bridge/programs/program_request.h"
 
+#include <algorithm>
 #include <cctype>
 #include <filesystem>
 
@@ -23,7 +24,7 @@ std::string upper(const std::string& text)
 }
 
 /// "LOAD O1234" (after trimming, uppercase) -> the request; anything else -> nothing.
-std::optional<ProgramRequest> parseWords(const std::string& words)
+std::optional<ProgramRequest> parseWords(const std::string& words, const RequestWords& known)
 {
   size_t i = 0;
   auto skip_spaces = [&]
@@ -33,19 +34,27 @@ std::optional<ProgramRequest> parseWords(const std::string& words)
   };
   skip_spaces();
   ProgramRequest request;
-  for (const char* word : {"LOAD", "SEND", "SAVE"})
+  bool save = false;
+  for (const auto* list : {&known.load, &known.save})
   {
-    if (words.compare(i, 4, word) == 0)
-      request.word = word;
+    for (const std::string& word : *list)
+    {
+      // The word must be followed by a space ("LOADO1234" is not a request); of two words that
+      // both fit, the longer one counts.
+      const size_t end = i + word.size();
+      if (words.compare(i, word.size(), word) == 0 && end < words.size() && (words[end] == ' ' || words[end] == '\t') &&
+          word.size() > request.word.size())
+      {
+        request.word = word;
+        save = list == &known.save;
+      }
+    }
   }
   if (request.word.empty())
     return std::nullopt;
-  request.kind = request.word == "SAVE" ? ProgramRequest::Kind::kSave : ProgramRequest::Kind::kLoad;
-  i += 4;
-  const size_t before = i;
+  request.kind = save ? ProgramRequest::Kind::kSave : ProgramRequest::Kind::kLoad;
+  i += request.word.size();
   skip_spaces();
-  if (i == before)
-    return std::nullopt;  // "LOADO1234" is not a request
   if (i < words.size() && words[i] == 'O')
     ++i;
   uint32_t number = 0;
@@ -63,7 +72,54 @@ std::optional<ProgramRequest> parseWords(const std::string& words)
 }
 }  // namespace
 
-std::optional<ProgramRequest> recogniseRequest(const std::string& all, bool bare_line)
+RequestWords RequestWords::parse(const std::string& load, const std::string& save, const std::string& load_name,
+                                 const std::string& save_name)
+{
+  auto split = [](const std::string& text, const std::string& name)
+  {
+    std::vector<std::string> words;
+    std::string word;
+    for (const char c : upper(text) + " ")
+    {
+      if (c != ' ' && c != ',' && c != '\t')
+      {
+        word.push_back(c);
+        continue;
+      }
+      if (word.empty())
+        continue;
+      const bool letters = std::all_of(word.begin(), word.end(), [](char l) { return l >= 'A' && l <= 'Z'; });
+      if (!letters || word.size() < 2 || word.size() > 12)
+        throw ConfigError(name + ": '" + word + "' is not a request word (2 to 12 letters)");
+      words.push_back(word);
+      word.clear();
+    }
+    if (words.empty())
+      throw ConfigError(name + " holds no word (e.g. 'LOAD SEND')");
+    return words;
+  };
+  RequestWords words;
+  words.load = split(load, load_name);
+  words.save = split(save, save_name);
+  for (const std::string& word : words.load)
+  {
+    if (std::find(words.save.begin(), words.save.end(), word) != words.save.end())
+      throw ConfigError("'" + word + "' is in both " + load_name + " and " + save_name);
+  }
+  return words;
+}
+
+std::string RequestWords::describe() const
+{
+  std::vector<std::string> all = load;
+  all.insert(all.end(), save.begin(), save.end());
+  std::string out;
+  for (size_t n = 0; n < all.size(); ++n)
+    out += (n == 0 ? "" : n + 1 == all.size() ? " or " : ", ") + ("(" + all[n] + " O1234)");
+  return out;
+}
+
+std::optional<ProgramRequest> recogniseRequest(const std::string& all, bool bare_line, const RequestWords& words)
 {
   const std::string text = upper(all.substr(0, kLookAt));
   for (size_t open = text.find('('); open != std::string::npos; open = text.find('(', open + 1))
@@ -71,7 +127,7 @@ std::optional<ProgramRequest> recogniseRequest(const std::string& all, bool bare
     const size_t close = text.find_first_of(")\r\n", open + 1);
     if (close == std::string::npos || text[close] != ')')
       continue;
-    if (auto request = parseWords(text.substr(open + 1, close - open - 1)))
+    if (auto request = parseWords(text.substr(open + 1, close - open - 1), words))
       return request;
   }
   if (bare_line)
@@ -82,7 +138,7 @@ std::optional<ProgramRequest> recogniseRequest(const std::string& all, bool bare
       size_t end = text.find_first_of("\r\n", start);
       if (end == std::string::npos)
         end = text.size();
-      if (auto request = parseWords(text.substr(start, end - start)))
+      if (auto request = parseWords(text.substr(start, end - start), words))
         return request;
       start = end + 1;
     }
@@ -90,7 +146,10 @@ std::optional<ProgramRequest> recogniseRequest(const std::string& all, bool bare
   return std::nullopt;
 }
 
-const char* const kNoRequestOutcome = "no (LOAD O1234), (SEND O1234) or (SAVE O1234) in it";
+std::string noRequestOutcome(const RequestWords& words)
+{
+  return "no " + words.describe() + " in it";
+}
 
 RequestDecision decideRequest(const ProgramRequest& request, const NamePattern& pattern, const ProtectedRange& range,
                               const std::string& program_root)

@@ -295,7 +295,8 @@ TEST_F(DncRequestsTest, RequestDuringATransferIsReportedNotDropped)
   EXPECT_NE(event->outcome.find("during the transfer receiving incoming.nc"), std::string::npos) << event->outcome;
 }
 
-// A control set to XON/XOFF punches text unasked; a LOAD is drip-fed, a refusal answered as text.
+// A control set to XON/XOFF punches text unasked; a LOAD (here: GET) is drip-fed, a refusal answered
+// as text.
 TEST_F(DncRequestsTest, TextPunchIsDripFedTheProgramOrAnsweredAsText)
 {
   ros::NodeHandle text_nh(param("text_namespace"));
@@ -320,10 +321,12 @@ TEST_F(DncRequestsTest, TextPunchIsDripFedTheProgramOrAnsweredAsText)
   const std::string program = "%\nO01234 (BRACKET OP2)\nG00 X1. Y2.\nM30\n%\n";
   std::ofstream(param("text_program_dir") + "/O01234.nc") << program;
 
-  ASSERT_TRUE(text_pair_->write("%\nO00005 (LOAD O1234)\nM30\n%\n"));
+  // This node's words are LOAD and GET (~request_load_words).
+  ASSERT_TRUE(text_pair_->write("%\nO00005 (GET O1234)\nM30\n%\n"));
   EXPECT_EQ(text_pair_->readProgram(20), program);
   ASSERT_TRUE(waitEvents(1));
   EXPECT_TRUE(events[0].success) << events[0].outcome;
+  EXPECT_EQ(events[0].request, "GET");
   EXPECT_EQ(events[0].number, 1234u);
 
   ASSERT_TRUE(text_pair_->write("%\r\nO00006 (LOAD O4444)\r\nM30\r\n%\r\n"));

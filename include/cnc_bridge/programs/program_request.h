@@ -1,14 +1,16 @@
 // Program requests from the control: the operator asks for a program without walking to a PC, as
 // DNC systems allow. The request is a short program the control punches or drops in a share's
 // requests/ folder, whose comment reads (LOAD O1234) or (SEND O1234) (send me program 1234) or
-// (SAVE O1234) (take the program that follows), or a DPRNT line `LOAD O1234`. The words, the O
-// and the spaces are matched loosely because operators type them at the control: `(load 1234)`,
-// `( LOAD O01234 )` and `LOAD O1234` on a DPRNT line all count.
+// (SAVE O1234) (take the program that follows), or a DPRNT line `LOAD O1234` (or a shop's own
+// words: RequestWords). The words, the O and the spaces are matched loosely because operators
+// type them at the control: `(load 1234)`, `( LOAD O01234 )` and `LOAD O1234` on a DPRNT line all
+// count.
 #pragma once
 
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "cnc_bridge/programs/program_name.h"
 
@@ -24,13 +26,29 @@ struct ProgramRequest
   };
   Kind kind = Kind::kLoad;
   uint32_t number = 0;
-  std::string word;  ///< LOAD, SEND or SAVE as recognised
+  std::string word;  ///< the word as recognised (LOAD, SEND, SAVE, or one of RequestWords)
+};
+
+/// \brief The words that make a comment a request (a shop may use its own: `(GET O1234)`).
+struct RequestWords
+{
+  std::vector<std::string> load = {"LOAD", "SEND"};  ///< send me the program
+  std::vector<std::string> save = {"SAVE"};          ///< take the program that follows
+
+  /// \brief Words from parameter text, separated by spaces or commas ("LOAD SEND GET").
+  /// \throws ConfigError for an empty list, a word that is not 2 to 12 letters, or a word in both
+  ///         lists, naming \p load_name or \p save_name.
+  static RequestWords parse(const std::string& load, const std::string& save, const std::string& load_name,
+                            const std::string& save_name);
+  /// \brief "(LOAD O1234), (SEND O1234) or (SAVE O1234)", for messages.
+  std::string describe() const;
 };
 
 /// \brief Finds a request in \p text: the first `(WORD O1234)` comment in it, or, when
 /// \p bare_line is set, a line that is just `WORD O1234` (a DPRNT line). Only the first 4 KB are
 /// looked at. Never throws.
-std::optional<ProgramRequest> recogniseRequest(const std::string& text, bool bare_line = false);
+std::optional<ProgramRequest> recogniseRequest(const std::string& text, bool bare_line = false,
+                                               const RequestWords& words = RequestWords());
 
 /// \brief What to do about a request, the same on every wire (a punch on RS-232, a request file
 /// in a share, a DPRNT line), so that a control is answered alike whichever way it asked.
@@ -55,8 +73,9 @@ struct RequestDecision
 RequestDecision decideRequest(const ProgramRequest& request, const NamePattern& pattern, const ProtectedRange& range,
                               const std::string& program_root);
 
-/// \brief What a punch or request file that holds no request is answered with.
-extern const char* const kNoRequestOutcome;
+/// \brief What a punch or request file that holds no request is answered with:
+/// "no (LOAD O1234), (SEND O1234) or (SAVE O1234) in it".
+std::string noRequestOutcome(const RequestWords& words = RequestWords());
 
 /// \brief The longest reason an answer program's comment carries: what a control shows of a
 /// program's comment in its program list without cutting it (a Haas shows about 30 characters).

@@ -28,6 +28,7 @@
 #include "cnc_bridge/dnc/program_requests.h"
 #include "cnc_bridge/programs/archive.h"
 #include "cnc_bridge/programs/program_name.h"
+#include "cnc_bridge/programs/program_request.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
@@ -162,6 +163,7 @@ class DncNode
   bool requests_ = false;
   std::string request_protocol_;  ///< the protocol a LOAD is answered by (~request_mode)
   dnc::RequestListenerOptions request_options_;
+  programs::RequestWords request_words_;
   uint32_t answer_number_ = 1;  ///< the answer's O number when the request program has none
   std::unique_ptr<dnc::RequestListener> listener_;
   uint64_t listener_generation_ = 0;  ///< link_generation_ of the link listener_ was made for
