@@ -7,7 +7,8 @@ cnc_core_module(cnc_bridge_at_protocol
   src/at_protocol/sequencer.cpp
   src/at_protocol/planner.cpp
   src/at_protocol/program_path.cpp
-  src/at_protocol/sender.cpp)
+  src/at_protocol/sender.cpp
+  src/at_protocol/deadman.cpp)
 target_link_libraries(cnc_bridge_at_protocol PUBLIC cnc_bridge_gcode)
 
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
@@ -16,7 +17,8 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
     test/unit/test_at_sequencer.cpp
     test/unit/test_at_planner.cpp
     test/unit/test_at_program_path.cpp
-    test/unit/test_at_sender.cpp)
+    test/unit/test_at_sender.cpp
+    test/unit/test_at_deadman.cpp)
   target_link_libraries(test_at_protocol cnc_bridge_at_protocol)
 endif()
 

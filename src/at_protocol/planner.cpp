@@ -462,7 +462,52 @@ void TrajectoryStream::stop()
   // The trapezoid behind the setpoints decelerates from where it is; the moving average follows
   // it, so the S-curve stops within its limits too.
   stop_.emplace(trajectory_.stopFrom(raw_));
+  stop_offset_ = raw_.distance;
   index_ = 0;
+}
+
+PathRest restOfPath(const std::vector<Vec3>& points, const std::vector<double>& feeds, double distance,
+                    const Vec3& from)
+{
+  if (points.empty() || feeds.size() + 1 != points.size())
+  {
+    throw ConfigError("planner: " + std::to_string(feeds.size()) + " feeds for " + std::to_string(points.size()) +
+                      " points (one per segment needed)");
+  }
+  PathRest rest;
+  rest.points.push_back(from);
+  double along = 0.0;  // pulses from points[0] to points[p]
+  for (size_t p = 1; p < points.size(); ++p)
+  {
+    Vec3 delta;
+    for (int i = 0; i < 3; ++i)
+    {
+      delta[i] = points[p][i] - points[p - 1][i];
+    }
+    along += norm(delta);
+    if (along > distance + 1e-3)
+    {
+      // A corner still ahead: the segment that reaches it keeps its feed.
+      rest.points.push_back(points[p]);
+      rest.feeds.push_back(feeds[p - 1]);
+    }
+  }
+  if (rest.feeds.empty())
+  {
+    return rest;
+  }
+  // A stop that rests exactly on the next corner (or the end): that corner is not repeated.
+  Vec3 first;
+  for (int i = 0; i < 3; ++i)
+  {
+    first[i] = rest.points[1][i] - from[i];
+  }
+  if (norm(first) < kSamePoint)
+  {
+    rest.points.erase(rest.points.begin() + 1);
+    rest.feeds.erase(rest.feeds.begin());
+  }
+  return rest;
 }
 }  // namespace at_protocol
 }  // namespace cnc_bridge

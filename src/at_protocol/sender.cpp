@@ -193,8 +193,9 @@ void Job::finish(State state, const std::string& message)
   done_cv_.notify_all();
 }
 
-void Job::publish(const Setpoint& setpoint, uint64_t sent, uint64_t total)
+void Job::publish(const Setpoint& setpoint, uint64_t sent, uint64_t total, double distance)
 {
+  distance_.store(distance, std::memory_order_relaxed);
   for (int i = 0; i < 3; ++i)
   {
     position_[i].store(setpoint.position[i], std::memory_order_relaxed);
@@ -634,7 +635,7 @@ void SetpointSender::runJob(const std::shared_ptr<Job>& job)
       }
       last_write_ns_ = now;
       setpoints_.fetch_add(1, std::memory_order_relaxed);
-      job->publish(setpoint, stream.sent(), stream.total());
+      job->publish(setpoint, stream.sent(), stream.total(), stream.distance());
       due += period_ns;
     }
     // Epilogue: #@ ends the operation (coolant off, step 16), M0@ the machining (spindle 0).

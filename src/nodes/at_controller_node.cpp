@@ -17,12 +17,14 @@
 #include <fstream>
 #include <memory>
 #include <optional>
+#include <sstream>
 
 #include "cnc_bridge/AtFollowPathAction.h"
 #include "cnc_bridge/AtJog.h"
 #include "cnc_bridge/AtSpindle.h"
 #include "cnc_bridge/AtToolChange.h"
 #include "cnc_bridge/at_protocol/codec.h"
+#include "cnc_bridge/at_protocol/deadman.h"
 #include "cnc_bridge/at_protocol/planner.h"
 #include "cnc_bridge/at_protocol/program_path.h"
 #include "cnc_bridge/at_protocol/sender.h"
@@ -123,6 +125,23 @@ class AtControllerNode
     // warning naming what allows it.
     int priority = 50;
     pnh.param("realtime_priority", priority, 50);
+    // ~jog_timeout: s a jog moves after its last ~jog call (the deadman, as teleoperation commands
+    // have one); a client renews it by calling ~jog again. 0 turns the deadman off.
+    const double jog_timeout = pnh.param("jog_timeout", 0.5);
+    if (!(jog_timeout >= 0.0))
+    {
+      throw ConfigError(pnh.resolveName("jog_timeout") + " must be 0 (no deadman) or a positive number of seconds");
+    }
+    jog_deadman_ = std::make_unique<ap::Deadman>(jog_timeout);
+    if (!jog_deadman_->enabled())
+    {
+      ROS_WARN_STREAM("at_controller_node: " << pnh.resolveName("jog_timeout")
+                                             << " is 0: the jog deadman is off, a jog goes on until the next jog, "
+                                                "set_auto or a disable, even if its client has gone");
+    }
+    // One-shot, started by each jog; a steady clock, so a change of the system time cannot stop or delay it.
+    jog_timer_ = nh.createSteadyTimer(ros::WallDuration(std::max(jog_timeout, 0.001)), &AtControllerNode::onJogTimer,
+                                      this, true, false);
 
     const std::string hardware_id = host_ + ":" + std::to_string(command_port_);
     state_ = std::make_unique<MachineStatePublisher>(nh, pnh, hardware_id);
@@ -356,6 +375,7 @@ class AtControllerNode
     else if (std::holds_alternative<ap::AutoModeReport>(report))
     {
       jog_axis_ = -1;
+      jog_deadman_->disarm();  // the controller left jog mode (its mode selector)
       state_->update(
           [&](MachineState& s)
           {
@@ -400,7 +420,8 @@ class AtControllerNode
   // ---- services ---------------------------------------------------------------------------------
 
   /// ~set_motion_enabled: disabling stops what moves (a running path decelerates along the path to
-  /// a stop and holds; a jog gets feed 0) and says so in state.
+  /// a stop and holds, its goal paused until enabled and ~resume; a jog gets feed 0) and says so in
+  /// state.
   void onMotionSwitched(bool enabled, const std::string& caller)
   {
     state_->update([&](MachineState& s)
@@ -411,12 +432,14 @@ class AtControllerNode
     }
     {
       std::lock_guard<std::mutex> lock(job_mutex_);
+      motion_disabled_by_ = caller;
       if (running_job_ && !running_job_->done())
       {
         disabled_by_ = caller;
         running_job_->cancel();
       }
     }
+    jog_deadman_->disarm();  // the jog gets feed 0 here
     if (jog_axis_ >= 0)
     {
       try
@@ -485,6 +508,10 @@ class AtControllerNode
   bool setAuto(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res)
   {
     res.success = sendAll({ap::AutoMode{}}, res.message);
+    if (res.success)
+    {
+      jog_deadman_->disarm();  // auto mode ends the jog
+    }
     return true;
   }
 
@@ -512,12 +539,67 @@ class AtControllerNode
                             static_cast<char>(std::tolower(ap::toChar(axis))) + ")");
       }
       res.success = sendAll({ap::JogMode{axis}, ap::JogFeed{static_cast<int>(feed)}}, res.message);
+      if (res.success)
+      {
+        renewJogDeadman(feed > 0);
+      }
     }
     catch (const Error& e)
     {
       res.message = e.what();
     }
     return true;
+  }
+
+  /// A jog command went out: a moving jog (re)arms the deadman for ~jog_timeout, feed 0 disarms it.
+  void renewJogDeadman(bool moving)
+  {
+    if (!jog_deadman_->enabled())
+    {
+      return;
+    }
+    jog_timer_.stop();
+    if (!moving)
+    {
+      jog_deadman_->disarm();
+      return;
+    }
+    jog_deadman_->renew(ap::Deadman::Clock::now());
+    jog_timer_.setPeriod(ros::WallDuration(std::chrono::duration<double>(jog_deadman_->timeout()).count()));
+    jog_timer_.start();
+  }
+
+  /// The deadman's timer: a jog with no ~jog call for ~jog_timeout gets feed 0 (as a disable does).
+  void onJogTimer(const ros::SteadyTimerEvent&)
+  {
+    ap::Deadman::Clock::duration remaining{};
+    if (!jog_deadman_->expire(ap::Deadman::Clock::now(), &remaining))
+    {
+      if (remaining > ap::Deadman::Clock::duration::zero())
+      {
+        // Woken before the deadline (the clocks of the timer and the deadman differ slightly).
+        jog_timer_.stop();
+        jog_timer_.setPeriod(ros::WallDuration(std::chrono::duration<double>(remaining).count()));
+        jog_timer_.start();
+      }
+      return;
+    }
+    const std::string why = "jog stopped: " + jog_deadman_->describe("jog command");
+    std::string sent;
+    const bool stopped = sendAll({ap::JogFeed{0}}, sent);
+    {
+      std::lock_guard<std::mutex> lock(jog_stop_mutex_);
+      last_jog_stop_ = stopped ? why : why + ", but feed 0 could not be sent: " + sent;
+    }
+    if (stopped)
+    {
+      ROS_WARN_STREAM("at_controller_node: " << why << " (" << pnh_.resolveName("jog_timeout") << "): sent F0@");
+    }
+    else
+    {
+      ROS_ERROR_STREAM("at_controller_node: " << why << ", but feed 0 could not be sent: " << sent);
+    }
+    state_->update([&](MachineState& s) { s.message = stopped ? why : why + " (feed 0 not sent: " + sent + ")"; });
   }
 
   bool spindle(AtSpindle::Request& req, AtSpindle::Response& res)
@@ -754,17 +836,9 @@ class AtControllerNode
       std::string end_note;
       for (const Plan& plan : plans)
       {
-        if (plan.moves())
+        if (plan.moves() && !runPlan(*goal, plan, result, feedback))
         {
-          refusal = motionRefusal("follow_path");
-          if (!refusal.empty())
-          {
-            return abort(refusal + " (before the operation after " + feedback.event + ")");
-          }
-          if (!runOperation(*goal, plan, result, feedback))
-          {
-            return;  // cancelled, disabled or failed: the goal has ended
-          }
+          return;  // cancelled or failed: the goal has ended
         }
         if (plan.after)
         {
@@ -775,15 +849,7 @@ class AtControllerNode
           }
           if (!carryOut(*plan.after, feedback))
           {
-            result.message = "cancelled at the " + plan.after->describe();
-            state_->update(
-                [&](MachineState& s)
-                {
-                  s.execution = MachineState::EXECUTION_STOPPED;
-                  s.message = result.message;
-                });
-            follow_path_.setPreempted(result, result.message);
-            return;
+            return endCancelled(result, "cancelled at the " + plan.after->describe());
           }
         }
       }
@@ -801,10 +867,103 @@ class AtControllerNode
     }
   }
 
-  /// Runs one operation to its end. \returns true if it succeeded (the goal goes on); otherwise
-  /// the goal has been ended (cancelled, disabled, e-stop, link failure).
+  /// Ends the goal PREEMPTED (a cancel while nothing moves: nothing more is sent).
+  void endCancelled(AtFollowPathResult& result, const std::string& message)
+  {
+    result.message = message;
+    state_->update(
+        [&](MachineState& s)
+        {
+          s.execution = MachineState::EXECUTION_STOPPED;
+          s.message = result.message;
+        });
+    follow_path_.setPreempted(result, result.message);
+  }
+
+  /// Where an operation stopped when motion was disabled: it decelerated along the path to rest.
+  struct DisabledStop
+  {
+    std::string by;         ///< who disabled motion
+    ap::Vec3 position{};    ///< pulses, the last setpoint (the controller holds it)
+    double distance = 0.0;  ///< pulses along the operation's path
+    uint64_t sent = 0;      ///< setpoints of the operation sent
+    uint64_t planned = 0;   ///< setpoints the operation had
+  };
+
+  /// Runs one operation of a goal. Motion disabled before or during it pauses the goal (the path
+  /// decelerates to a stop and holds, the goal stays active) until motion is enabled and ~resume
+  /// is called; the rest of the path is then planned from the stop point, from rest, to its end.
+  /// \returns true if the operation reached its end (the goal goes on); otherwise the goal has
+  /// ended (cancelled, e-stop, link failure).
+  bool runPlan(const AtFollowPathGoal& goal, const Plan& plan, AtFollowPathResult& result,
+               AtFollowPathFeedback& feedback)
+  {
+    Plan rest = plan;
+    for (;;)
+    {
+      while (!motion_->enabled())
+      {
+        // Disabled between operations (during a dwell or a program stop): nothing is moving.
+        std::string by;
+        {
+          std::lock_guard<std::mutex> lock(job_mutex_);
+          by = motion_disabled_by_;
+        }
+        const std::string event =
+            "motion disabled by " + by + " (" + pnh_.resolveName("set_motion_enabled") + ") before the next operation";
+        if (!holdUntilResume("stop when motion was disabled by " + by, event, feedback))
+        {
+          endCancelled(result, "cancelled while held: " + event);
+          return false;
+        }
+      }
+      const std::string refusal = motionRefusal("follow_path");
+      if (!refusal.empty())
+      {
+        // The e-stop (E1 or unknown) between operations: the goal cannot go on.
+        result.message =
+            refusal + (feedback.event.empty() ? "" : " (before the operation after " + feedback.event + ")");
+        ROS_WARN_STREAM("at_controller_node: follow_path: " << result.message);
+        follow_path_.setAborted(result, result.message);
+        return false;
+      }
+      DisabledStop stop;
+      if (runOperation(goal, rest, result, feedback, stop))
+      {
+        return true;
+      }
+      if (stop.by.empty())
+      {
+        return false;  // cancelled, e-stop or link failure: the goal has ended
+      }
+      std::ostringstream event;
+      event << "motion disabled by " << stop.by << " (" << pnh_.resolveName("set_motion_enabled")
+            << "): decelerated to a stop along the path at X" << stop.position[0] / ap::kPulsesPerMm << " Y"
+            << stop.position[1] / ap::kPulsesPerMm << " Z" << stop.position[2] / ap::kPulsesPerMm << " mm after "
+            << stop.sent << " of " << stop.planned << " planned setpoints";
+      ROS_WARN_STREAM("at_controller_node: follow_path: " << event.str() << "; holding");
+      if (!holdUntilResume("stop when motion was disabled by " + stop.by, event.str(), feedback))
+      {
+        endCancelled(result, "cancelled while held: " + event.str());
+        return false;
+      }
+      const ap::PathRest left = ap::restOfPath(rest.points, rest.feeds, stop.distance, stop.position);
+      if (left.empty())
+      {
+        return true;  // it came to rest on the end point
+      }
+      rest.points = left.points;
+      rest.feeds = left.feeds;
+      rest.tool = -1;  // the tool was changed before the stop
+    }
+  }
+
+  /// Runs one operation to its end. \returns true if it succeeded (the goal goes on). Otherwise
+  /// either \p stop.by names who disabled motion (the operation decelerated to a stop and ended
+  /// with #@ M0@; the goal goes on, paused) or the goal has been ended (cancelled, e-stop, link
+  /// failure).
   bool runOperation(const AtFollowPathGoal& goal_msg, const Plan& plan, AtFollowPathResult& result,
-                    AtFollowPathFeedback& feedback)
+                    AtFollowPathFeedback& feedback, DisabledStop& stop)
   {
     const AtFollowPathGoal* goal = &goal_msg;
     ap::Operation operation;
@@ -831,8 +990,8 @@ class AtControllerNode
                     << plan.points.size() - 1 << " segments, " << operation.trajectory->length() / ap::kPulsesPerMm
                     << " mm in " << setpoints * limits_.period << " s (" << setpoints << " setpoints)");
     const uint64_t underruns_before = sender_->stats().underruns;
+    jog_deadman_->disarm();  // the controller leaves jog mode for machining
     const std::shared_ptr<ap::Job> job = sender_->start(operation);
-    const uint64_t planned_setpoints = operation.trajectory->steps();
     {
       std::lock_guard<std::mutex> lock(job_mutex_);
       running_job_ = job;
@@ -842,7 +1001,7 @@ class AtControllerNode
     {
       // Disabled between the check above and the start: stop at once.
       std::lock_guard<std::mutex> lock(job_mutex_);
-      disabled_by_ = "a call while the goal started";
+      disabled_by_ = motion_disabled_by_;
       job->cancel();
     }
     state_->update(
@@ -861,8 +1020,8 @@ class AtControllerNode
             s.spindle_speed = *operation.spindle * spindle_max_rpm_ / ap::kMaxFeed;
           }
         });
+    feedback.paused = false;
     bool cancelled = false;
-    ros::WallRate feedback_rate(10.0);
     while (!job->waitFor(Milliseconds(100)))
     {
       if (!cancelled && (follow_path_.isPreemptRequested() || !ros::ok() || stopping_))
@@ -884,14 +1043,8 @@ class AtControllerNode
     bool ignored;
     result.final_position = toPoint(reported(ignored));
     result.message = job->message();
-    const bool stopped_by_disable = !disabled_by.empty() && job->state() == ap::Job::State::kCancelled;
-    if (stopped_by_disable)
-    {
-      result.message = "motion disabled by " + disabled_by + " (" + pnh_.resolveName("set_motion_enabled") +
-                       "): decelerated to a stop along the path after " + std::to_string(job->sent()) + " of " +
-                       std::to_string(planned_setpoints) + " planned setpoints and holds there; enable motion " +
-                       "and send the rest of the path as a new goal";
-    }
+    // A cancel of the goal wins over a disable that came at the same time.
+    const bool stopped_by_disable = !disabled_by.empty() && !cancelled && job->state() == ap::Job::State::kCancelled;
     state_->update(
         [&](MachineState& s)
         {
@@ -901,14 +1054,21 @@ class AtControllerNode
           s.mode = jog_axis_ >= 0 ? MachineState::MODE_MANUAL : MachineState::MODE_AUTO;
           s.coolant = MachineState::COOLANT_OFF;  // #@ ends the operation's coolant
           s.spindle_speed = 0.0;                  // M0@ stops the spindle (step 18)
-          s.message = stopped_by_disable
-                          ? result.message
-                          : "follow_path " + std::string(ap::Job::toString(job->state())) + ": " + job->message();
+          s.message = "follow_path " + std::string(ap::Job::toString(job->state())) + ": " + job->message();
         });
     if (stopped_by_disable)
     {
-      ROS_WARN_STREAM("at_controller_node: follow_path: " << result.message);
-      follow_path_.setAborted(result, result.message);
+      const ap::Setpoint last = job->current();
+      stop.by = disabled_by;
+      stop.position = {double(last.position[0]), double(last.position[1]), double(last.position[2])};
+      stop.distance = job->distance();
+      if (job->sent() == 0)
+      {
+        stop.position = plan.points.front();  // stopped before its first setpoint: still at the start
+        stop.distance = 0.0;
+      }
+      stop.sent = job->sent();
+      stop.planned = operation.trajectory->steps();
       return false;
     }
     switch (job->state())
@@ -945,18 +1105,27 @@ class AtControllerNode
       follow_path_.publishFeedback(feedback);
       return true;
     }
-    feedback.event += ": waiting for " + pnh_.resolveName("resume");
+    state_->update([&](MachineState& s) { s.block = step.line; });
+    return holdUntilResume(step.describe(), step.describe(), feedback);
+  }
+
+  /// Holds the goal (nothing is sent) until ~resume: state PAUSED, feedback paused with
+  /// "<event>: waiting for ~resume". \p hold completes "resumed after ..." in resume's answer.
+  /// \returns false if the goal was cancelled meanwhile.
+  bool holdUntilResume(const std::string& hold, const std::string& event, AtFollowPathFeedback& feedback)
+  {
+    feedback.event = event + ": waiting for " + pnh_.resolveName("resume");
     feedback.paused = true;
+    feedback.stopping = false;
     {
       std::lock_guard<std::mutex> lock(job_mutex_);
-      program_stop_ = step.describe();
+      hold_ = hold;
       resume_requested_ = false;
     }
     state_->update(
         [&](MachineState& s)
         {
           s.execution = MachineState::EXECUTION_PAUSED;
-          s.block = step.line;
           s.message = feedback.event;
         });
     ROS_INFO_STREAM("at_controller_node: follow_path: " << feedback.event);
@@ -964,7 +1133,7 @@ class AtControllerNode
     const bool resumed = waitWhileRunning(std::chrono::hours(24 * 365), true);
     {
       std::lock_guard<std::mutex> lock(job_mutex_);
-      program_stop_.clear();
+      hold_.clear();
     }
     feedback.paused = false;
     return resumed;
@@ -996,19 +1165,27 @@ class AtControllerNode
     }
   }
 
-  /// ~resume: a goal held at the program's M00/M01 goes on.
+  /// ~resume: a goal held at the program's M00/M01, or paused because motion was disabled, goes
+  /// on, if motion may start (enabled, e-stop released).
   bool resume(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res)
   {
     std::lock_guard<std::mutex> lock(job_mutex_);
-    if (program_stop_.empty())
+    if (hold_.empty())
     {
       res.success = false;
-      res.message = "nothing to resume: no follow_path goal is held at a program stop (M00/M01)";
+      res.message =
+          "nothing to resume: no follow_path goal is held (at a program stop M00/M01, or paused by "
+          "motion disabled)";
+      return true;
+    }
+    res.message = motionRefusal("resume");
+    if (!res.message.empty())
+    {
       return true;
     }
     resume_requested_ = true;
     res.success = true;
-    res.message = "resumed after the " + program_stop_;
+    res.message = "resumed after the " + hold_;
     job_cv_.notify_all();
     return true;
   }
@@ -1074,6 +1251,11 @@ class AtControllerNode
     motion_->addTo(status);
     status.add("mode", jog_axis_ >= 0 ? std::string("jog ") + "XYZ"[jog_axis_] : std::string("auto or unknown"));
     status.add("at home", at_home_.load());
+    status.add("jog deadman (s, 0: off)", std::chrono::duration<double>(jog_deadman_->timeout()).count());
+    {
+      std::lock_guard<std::mutex> lock(jog_stop_mutex_);
+      status.add("last jog stop", last_jog_stop_.empty() ? std::string("none") : last_jog_stop_);
+    }
     status.add("spindle value (0..255)", sequencer.spindle());
     status.add("report mode", report_mode_);
   }
@@ -1087,12 +1269,13 @@ class AtControllerNode
   tf2_ros::Buffer tf_buffer_;  // path goals in other frames
   tf2_ros::TransformListener tf_listener_{tf_buffer_};
   double transform_timeout_ = 0.5;
-  std::mutex job_mutex_;            // guards running_job_, disabled_by_, program_stop_, resume_requested_
+  std::mutex job_mutex_;            // guards running_job_, disabled_by_, motion_disabled_by_, hold_, resume_requested_
   std::condition_variable job_cv_;  // ~resume
-  std::string program_stop_;        // the M00/M01 a goal is held at ("" when none)
+  std::string hold_;                // what a held goal waits after, for ~resume's answer ("" when none)
   bool resume_requested_ = false;
   std::shared_ptr<ap::Job> running_job_;
-  std::string disabled_by_;  // who disabled motion while running_job_ ran
+  std::string disabled_by_;         // who disabled motion while running_job_ ran
+  std::string motion_disabled_by_;  // who disabled motion last
   std::unique_ptr<ProgramDirectory> program_dir_;
   ap::PlannerLimits limits_;
   double default_feed_ = 0.01;
@@ -1124,6 +1307,11 @@ class AtControllerNode
   std::atomic<int> jog_axis_{-1};
   std::atomic<uint64_t> report_errors_{0};
   uint64_t underruns_seen_ = 0;
+
+  std::unique_ptr<ap::Deadman> jog_deadman_;  // ~jog_timeout
+  ros::SteadyTimer jog_timer_;                // one-shot, fires when the deadman may expire
+  std::mutex jog_stop_mutex_;                 // guards last_jog_stop_
+  std::string last_jog_stop_;                 // the deadman's last stop, for diagnostics
 
   SingleGoalActionServer<AtFollowPathAction> follow_path_;
   ros::ServiceServer set_auto_srv_, jog_srv_, spindle_srv_, coolant_srv_, tool_srv_, home_srv_, resume_srv_;

@@ -5,6 +5,10 @@
 // setpoint and the axes follow it with a first-order lag; it reports position, mode, home and
 // emergency stop, and ignores jog requests while machining as the original controller does.
 //
+// Jog (with --jog-speed): in jog mode a feed F<n>@ above 0 moves the jog axis in the positive
+// direction at n/255 of --jog-speed until the next feed or mode change, as if the operator held the
+// joystick that way (the paper leaves the direction to the joystick); F0@ stops it.
+//
 // Emergency stop: stdin lines "estop on" / "estop off", SIGUSR1 (on) / SIGUSR2 (off), or a fault
 // script. Also on stdin: "auto", "jog X|Y|Z" (the mode selector), "home".
 #include <signal.h>
@@ -44,6 +48,7 @@ struct Options
   int report_period_ms = 10;  // position reports while moving
   int heartbeat_ms = 1000;    // position report while idle
   double home_speed = 20.0;   // mm/s towards home
+  double jog_speed = 0.0;     // mm/s that the jog feed F255 stands for; 0: jog mode moves nothing
   std::array<int32_t, 3> home{0, 0, 0};
   std::string fault_script;
   std::string pid_file;
@@ -503,7 +508,13 @@ class SimController
         report(EStopReport{estop_});
       }
 
-      // Axes: first-order lag towards the target; homing moves the target at the homing speed.
+      // Axes: first-order lag towards the target; homing moves the target at the homing speed,
+      // a jog at its feed.
+      if (jog_axis_ && sequencer_.jogFeed() > 0 && options_.jog_speed > 0.0 && !estop_)
+      {
+        target_[static_cast<int>(*jog_axis_)] +=
+            sequencer_.jogFeed() / double(kMaxFeed) * options_.jog_speed * kPulsesPerMm * dt;
+      }
       if (homing_)
       {
         const double step = options_.home_speed * kPulsesPerMm * dt;
@@ -616,6 +627,8 @@ int main(int argc, char** argv)
       "position report interval while idle (ms)")("home", po::value(&home)->default_value("0,0,0"),
                                                   "home position, pulses \"x,y,z\"")(
       "home-speed", po::value(&options.home_speed)->default_value(options.home_speed), "homing speed (mm/s)")(
+      "jog-speed", po::value(&options.jog_speed)->default_value(options.jog_speed),
+      "speed (mm/s) of the jog feed F255: a jog feed moves the jog axis (positive direction); 0: jog moves nothing")(
       "fault-script", po::value(&options.fault_script), "file of \"setpoint <n> estop-on|estop-off\" lines")(
       "pid-file", po::value(&options.pid_file), "write the process id here (for SIGUSR1/SIGUSR2 e-stop)")(
       "command-log", po::value(&options.command_log), "append every command message received to this file")(
@@ -641,6 +654,10 @@ int main(int argc, char** argv)
     if (!(options.lag_ms > 0.0) || options.report_period_ms < 1 || options.heartbeat_ms < 1)
     {
       throw ConfigError("--lag-ms, --report-period-ms and --heartbeat-ms must be positive");
+    }
+    if (!(options.jog_speed >= 0.0))
+    {
+      throw ConfigError("--jog-speed must be 0 or a positive number of mm/s");
     }
     SimController sim(options, stop);
     the_sim = &sim;

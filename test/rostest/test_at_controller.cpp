@@ -1,6 +1,7 @@
 // at_controller_node on sim_at_controller with motion enabled: a G-code program is followed to
 // its end point, a second goal is rejected while one runs, jog is refused while machining, cancel decelerates to a
-// stop, an emergency stop mid-path aborts the goal with the reason, and home returns to the home position.
+// stop, disabling motion mid-path pauses the goal until enabled and resumed, a jog stops by itself when its client
+// goes silent, an emergency stop mid-path aborts the goal with the reason, and home returns to the home position.
 #include <signal.h>
 
 #include <unistd.h>
@@ -22,6 +23,7 @@ using namespace at_test;
 namespace
 {
 std::string node, ns, prefix, pid_file, command_log, profile = "trapezoid";
+double jog_timeout = 0.5;  // the node's ~jog_timeout
 
 pid_t simulatorPid()
 {
@@ -34,6 +36,13 @@ pid_t simulatorPid()
 bool near(const geometry_msgs::Point& p, double x, double y, double z, double tolerance)
 {
   return std::fabs(p.x - x) <= tolerance && std::fabs(p.y - y) <= tolerance && std::fabs(p.z - z) <= tolerance;
+}
+
+std_srvs::SetBool::Response switchMotion(bool enabled)
+{
+  std_srvs::SetBool::Request request;
+  request.data = enabled;
+  return call<std_srvs::SetBool>(node + "/set_motion_enabled", request);
 }
 
 struct AtController : ::testing::Test
@@ -206,28 +215,36 @@ TEST_F(AtController, ASecondGoalIsRejectedAndTheFirstRunsToItsEnd)
       << state.last().position;
 }
 
-// ~set_motion_enabled false mid-path: the path decelerates to a stop and holds, the goal ends with
-// who disabled it, the controller receives no setpoint after the operation's end (M0@), and motion
-// is refused, naming the service and the parameter, until it is enabled again.
+// ~set_motion_enabled false mid-path pauses the goal: the path decelerates to a stop and holds,
+// the goal stays active (feedback and state say paused, by whom and where), the controller
+// receives no setpoint after the operation's end (M0@), and ~resume is refused, naming
+// ~set_motion_enabled, until motion is enabled again. Then ~resume plans the rest of the path from
+// the stop point and the goal succeeds on the path's end point.
 TEST_F(AtController, DisablingMotionMidPathStopsItAndTheControllerGetsNoMoreSetpoints)
 {
   CommandLog received{command_log};
   const auto start = state.last().position;
-  client.sendGoal(lineGoal(start.x + 0.1, start.y, start.z, 0.02, prefix + "machine"));  // 5 s of setpoints
+  const double end_x = start.x + 0.05;
+  std::mutex m;
+  std::vector<cnc_bridge::AtFollowPathFeedback> feedback;
+  client.sendGoal(lineGoal(end_x, start.y, start.z, 0.02, prefix + "machine"),  // 2.5 s of setpoints
+                  FollowPathClient::SimpleDoneCallback(), FollowPathClient::SimpleActiveCallback(),
+                  [&](const cnc_bridge::AtFollowPathFeedbackConstPtr& f)
+                  {
+                    std::lock_guard<std::mutex> lock(m);
+                    feedback.push_back(*f);
+                  });
   ASSERT_TRUE(state.waitFor([&](const auto& s) { return s.position.x > start.x + 0.01; }));
   const size_t at_disable = received.lines().size();
-  std_srvs::SetBool::Request disable;
-  disable.data = false;
-  const auto switched = call<std_srvs::SetBool>(node + "/set_motion_enabled", disable);
+  const auto switched = switchMotion(false);
   EXPECT_TRUE(switched.success);
   EXPECT_EQ(switched.message, "motion disabled by " + ros::this_node::getName());
-  ASSERT_TRUE(client.waitForResult(ros::Duration(10.0)));
-  EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::ABORTED) << client.getState().getText();
-  const std::string text = client.getResult()->message;
-  EXPECT_NE(text.find("motion disabled by " + ros::this_node::getName() + " (" + node + "/set_motion_enabled)"),
-            std::string::npos)
-      << text;
-  EXPECT_LT(client.getResult()->setpoints, 4000u);
+  const std::string why = "motion disabled by " + ros::this_node::getName() + " (" + node +
+                          "/set_motion_enabled): decelerated to a stop along the path at X";
+  ASSERT_TRUE(state.waitFor([](const auto& s) { return s.execution == cnc_bridge::MachineState::EXECUTION_PAUSED; }))
+      << state.last().message;
+  EXPECT_EQ(state.last().message.find(why), 0u) << state.last().message;
+  EXPECT_NE(state.last().message.find("waiting for " + node + "/resume"), std::string::npos) << state.last().message;
   // The controller's side: the deceleration (a ramp of some 50 ms from 20 mm/s) and the
   // operation's end, then nothing.
   const auto until_end = received.linesUntil(at_disable, "M0");
@@ -236,30 +253,141 @@ TEST_F(AtController, DisablingMotionMidPathStopsItAndTheControllerGetsNoMoreSetp
   EXPECT_EQ(until_end[until_end.size() - 2], "#");
   const size_t after_end = at_disable + until_end.size();
   // The axes settle on the last setpoint ("feed x feed y feed z", pulses of 1 um) and hold there.
-  std::istringstream last_setpoint(until_end[until_end.size() - 3]);
-  double feed, x = NAN;
-  last_setpoint >> feed >> x;
-  ASSERT_FALSE(std::isnan(x)) << until_end[until_end.size() - 3];
-  const double held_x = x * 1e-6;
+  const auto last_setpoint = setpointLines({until_end[until_end.size() - 3]});
+  ASSERT_EQ(last_setpoint.size(), 1u) << until_end[until_end.size() - 3];
+  const double held_x = last_setpoint[0][1] * 1e-6;
+  EXPECT_EQ(last_setpoint[0][0], 0);  // at rest: feed 0
   EXPECT_TRUE(state.waitFor([&](const auto& s) { return std::fabs(s.position.x - held_x) <= 1.5e-6; }))
       << state.last().position.x << " vs " << held_x;
+  EXPECT_LT(held_x, end_x - 0.01);
   // A measurement window (that nothing arrives needs a span of time): no setpoint, no motion.
   ros::WallDuration(0.5).sleep();
   EXPECT_EQ(received.lines().size(), after_end);
   EXPECT_NEAR(state.last().position.x, held_x, 1.5e-6);
-  EXPECT_LT(held_x, start.x + 0.09);
-  // Refused while disabled, naming both the run-time switch and the start-up parameter.
+  // Paused, not ended: the goal is active, its feedback says why and where.
+  EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::ACTIVE) << client.getState().getText();
+  {
+    std::lock_guard<std::mutex> lock(m);
+    ASSERT_FALSE(feedback.empty());
+    EXPECT_TRUE(feedback.back().paused);
+    EXPECT_EQ(feedback.back().event.find(why), 0u) << feedback.back().event;
+  }
+  // ~resume and motion are refused while disabled, naming the run-time switch; nothing is sent.
+  const auto early = call<std_srvs::Trigger>(node + "/resume");
+  EXPECT_FALSE(early.success);
+  EXPECT_NE(early.message.find("resume refused: motion is disabled; enable it with " + node + "/set_motion_enabled"),
+            std::string::npos)
+      << early.message;
   const auto jog = call<cnc_bridge::AtJog>(node + "/jog", jogRequest("x", 0.01));
   EXPECT_FALSE(jog.success);
   EXPECT_NE(jog.message.find(node + "/set_motion_enabled"), std::string::npos) << jog.message;
   EXPECT_NE(jog.message.find(node + "/enable_motion"), std::string::npos) << jog.message;
   EXPECT_EQ(received.lines().size(), after_end);
-  disable.data = true;
-  EXPECT_EQ(call<std_srvs::SetBool>(node + "/set_motion_enabled", disable).message,
-            "motion enabled by " + ros::this_node::getName());
-  client.sendGoal(lineGoal(start.x, start.y, start.z, 0.02, prefix + "machine"));
+  EXPECT_FALSE(client.getState().isDone());
+
+  // Enabled and resumed: the rest of the path from the stop point, to the exact end point.
+  EXPECT_EQ(switchMotion(true).message, "motion enabled by " + ros::this_node::getName());
+  const auto resumed = call<std_srvs::Trigger>(node + "/resume");
+  EXPECT_TRUE(resumed.success) << resumed.message;
+  EXPECT_EQ(resumed.message, "resumed after the stop when motion was disabled by " + ros::this_node::getName());
   ASSERT_TRUE(client.waitForResult(ros::Duration(20.0)));
   EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client.getState().getText();
+  EXPECT_TRUE(state.waitFor([&](const auto& s) { return near(s.position, end_x, start.y, start.z, 1.5e-6); }))
+      << state.last().position;
+  // The controller's side: one more operation that starts from rest at the stop point (no jump:
+  // its first step is less than a period at full speed away) and ends on the end point at rest.
+  const auto rest = received.linesUntil(after_end, "M0");
+  ASSERT_GE(rest.size(), 5u);
+  EXPECT_EQ(rest[0], "M1");
+  const auto setpoints = setpointLines(rest);
+  ASSERT_GT(setpoints.size(), 100u);
+  EXPECT_LE(std::abs(setpoints.front()[1] - last_setpoint[0][1]), 50);  // 50 mm/s for 1 ms: 50 pulses
+  EXPECT_EQ(setpoints.back()[1], std::lround(end_x * 1e6));
+  EXPECT_EQ(setpoints.back()[0], 0);
+  EXPECT_EQ(rest[rest.size() - 2], "#");
+}
+
+// A cancel while the goal is paused by a disable ends it PREEMPTED; nothing more reaches the
+// controller (a later set_auto is the barrier: it is the next thing the controller receives).
+TEST_F(AtController, CancelWhilePausedByDisableEndsTheGoalWithNothingMoreSent)
+{
+  CommandLog received{command_log};
+  const auto start = state.last().position;
+  client.sendGoal(lineGoal(start.x - 0.05, start.y, start.z, 0.02, prefix + "machine"));
+  ASSERT_TRUE(state.waitFor([&](const auto& s) { return s.position.x < start.x - 0.005; }));
+  const size_t at_disable = received.lines().size();
+  EXPECT_TRUE(switchMotion(false).success);
+  ASSERT_TRUE(state.waitFor([](const auto& s) { return s.execution == cnc_bridge::MachineState::EXECUTION_PAUSED; }));
+  const auto until_end = received.linesUntil(at_disable, "M0");
+  ASSERT_FALSE(until_end.empty()) << "the operation did not end";
+  client.cancelGoal();
+  ASSERT_TRUE(client.waitForResult(ros::Duration(10.0)));
+  EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::PREEMPTED) << client.getState().getText();
+  EXPECT_NE(client.getResult()->message.find("cancelled while held: motion disabled by "), std::string::npos)
+      << client.getResult()->message;
+  EXPECT_TRUE(switchMotion(true).success);
+  EXPECT_TRUE(call<std_srvs::Trigger>(node + "/set_auto").success);
+  EXPECT_EQ(received.linesUntil(at_disable + until_end.size(), "A"), std::vector<std::string>{"A"});
+  EXPECT_FALSE(call<std_srvs::Trigger>(node + "/resume").success);  // nothing held any more
+}
+
+// The jog deadman, as the simulator sees it: a jog whose client goes silent gets feed 0 from the
+// node (F0@ after the jog's F@, nothing else) no sooner than ~jog_timeout after the call, and the
+// simulated axis stops: it moved for at least the timeout and for no longer than the timeout plus
+// a tolerance (its reported position).
+TEST_F(AtController, AJogStopsWithinTheJogTimeoutAfterItsClientGoesSilent)
+{
+  CommandLog received{command_log};
+  const size_t mark = received.lines().size();
+  const double start_x = state.last().position.x;
+  const double speed = 0.01;  // m/s: F51@ of 0.05 m/s
+  const auto called = std::chrono::steady_clock::now();
+  const auto jog = call<cnc_bridge::AtJog>(node + "/jog", jogRequest("x", speed));
+  ASSERT_TRUE(jog.success) << jog.message;
+  ASSERT_TRUE(state.waitFor([&](const auto& s) { return s.position.x > start_x + 0.001; }));  // moving
+  const double tolerance = 1.5;                                                               // s, for a loaded machine
+  const auto lines = received.linesUntil(mark, "F0", jog_timeout + tolerance + 1.0);
+  const double stopped_after = std::chrono::duration<double>(std::chrono::steady_clock::now() - called).count();
+  EXPECT_EQ(lines, (std::vector<std::string>{"JX", "F51", "F0"}));
+  EXPECT_GE(stopped_after, jog_timeout);  // the deadman never fires before its time
+  EXPECT_TRUE(state.waitFor([&](const auto& s) { return s.message == "jog stopped: no jog command for 0.5 s"; }))
+      << state.last().message;
+  // Settled, then a measurement window in which the reported position does not move.
+  ros::WallDuration(0.3).sleep();
+  const double stopped_x = state.last().position.x;
+  ros::WallDuration(0.3).sleep();
+  EXPECT_NEAR(state.last().position.x, stopped_x, 1e-9);
+  EXPECT_GE(stopped_x - start_x, speed * jog_timeout - 1e-4);
+  EXPECT_LE(stopped_x - start_x, speed * (jog_timeout + tolerance));
+  EXPECT_TRUE(call<std_srvs::Trigger>(node + "/set_auto").success);
+}
+
+// A client that keeps calling ~jog (10 Hz, as a joystick teleoperation node publishes) renews the
+// deadman: the axis keeps moving for four timeouts with no F0@ in between; once it goes silent the
+// jog stops.
+TEST_F(AtController, ARenewedJogKeepsMovingPastOneTimeout)
+{
+  CommandLog received{command_log};
+  const size_t mark = received.lines().size();
+  const double start_x = state.last().position.x;
+  const double speed = 0.01;
+  const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(4 * jog_timeout);
+  int calls = 0;
+  for (ros::WallRate rate(10.0); std::chrono::steady_clock::now() < until; rate.sleep())  // the client's pace
+  {
+    ASSERT_TRUE(call<cnc_bridge::AtJog>(node + "/jog", jogRequest("x", speed)).success);
+    ++calls;
+  }
+  const double renewed_x = state.last().position.x;
+  const auto lines = received.linesUntil(mark, "F0", jog_timeout + 2.5);
+  ASSERT_FALSE(lines.empty()) << "no F0@ after the client went silent";
+  // Every call's J@ F@, then a single F0@ at the end.
+  EXPECT_EQ(std::count(lines.begin(), lines.end(), "F51"), calls);
+  EXPECT_EQ(std::count(lines.begin(), lines.end(), "F0"), 1);
+  EXPECT_EQ(lines.size(), 2u * calls + 1);
+  // It moved for more than three timeouts' worth while renewed (four timeouts of calls).
+  EXPECT_GT(renewed_x - start_x, speed * 3 * jog_timeout);
+  EXPECT_TRUE(call<std_srvs::Trigger>(node + "/set_auto").success);
 }
 
 // The program's own steps in a G-code goal (test/data/at_controller/program_stops.nc, with
@@ -461,6 +589,7 @@ int main(int argc, char** argv)
   pnh.getParam("pid_file", pid_file);
   pnh.getParam("command_log", command_log);
   pnh.getParam("profile", profile);  // the node's ~profile, for cnc_plan
+  ros::param::get(node + "/jog_timeout", jog_timeout);
   ros::AsyncSpinner spinner(2);
   spinner.start();
   return RUN_ALL_TESTS();

@@ -402,3 +402,59 @@ TEST(AtPlannerSCurve, CancelDeceleratesWithinTheLimitsAndStopsShortOfTheEnd)
   // The stop takes the deceleration ramp plus the average's window, no more.
   EXPECT_LT(out.setpoints.size(), 1500u + 200u + limits.smoothingWindow());
 }
+
+// A path stopped part-way (as motion disabled mid-path stops it) goes on from rest: the rest of
+// the path starts at the stop point, keeps every corner beyond it with its feed, and ends exactly
+// on the path's end point; stop and restart together stay within the limits at every sample.
+TEST(AtPlanner, TheRestOfAStoppedPathGoesOnFromTheStopPointToTheExactEnd)
+{
+  for (const PlannerLimits& limits : {PlannerLimits{}, scurveLimits()})
+  {
+    SCOPED_TRACE(limits.profile == Profile::kSCurve ? "scurve" : "trapezoid");
+    const std::vector<Vec3> points{mm(0, 0, 0), mm(20, 0, 0), mm(20, 10, -1), mm(5, 10, -1)};
+    const std::vector<double> feeds{40.0, 10.0, 25.0};
+    TrajectoryStream first(Trajectory(points, feeds, limits));
+    const Streamed before = stream(first, 400);  // stopped at speed on the first segment
+    const Vec3 stop = before.positions.back();
+    ASSERT_EQ(stop[1], 0.0);
+    ASSERT_LT(stop[0], 20000.0);
+    // Where it rests, along the path: the stop point's own distance from the start.
+    EXPECT_NEAR(first.distance(), stop[0], 1.0);
+
+    const PathRest rest = restOfPath(points, feeds, first.distance(), stop);
+    ASSERT_EQ(rest.points.size(), 4u);
+    EXPECT_EQ(rest.points[0], stop);
+    EXPECT_EQ(rest.points[1], points[1]);
+    EXPECT_EQ(rest.points[3], points[3]);
+    EXPECT_EQ(rest.feeds, feeds);
+
+    TrajectoryStream second(Trajectory(rest.points, rest.feeds, limits));  // from rest: entry speed 0
+    const Streamed after = stream(second);
+    EXPECT_EQ(after.setpoints.back().position, (std::array<int32_t, 3>{5000, 10000, -1000}));
+    EXPECT_EQ(after.setpoints.back().feed, (std::array<int, 3>{0, 0, 0}));
+    std::vector<Vec3> whole = before.positions;
+    whole.insert(whole.end(), after.positions.begin() + 1, after.positions.end());
+    const Ratios r = worstRatios(whole, limits);
+    EXPECT_LE(r.speed, 1.0 + 1e-9);
+    EXPECT_LE(r.accel, 1.0 + 1e-6);
+    if (limits.profile == Profile::kSCurve)
+    {
+      EXPECT_LE(r.jerk, 1.0 + 1e-6);
+    }
+  }
+}
+
+TEST(AtPlanner, TheRestOfAPathStoppedAtACornerOrAtItsEnd)
+{
+  const std::vector<Vec3> points{mm(0, 0, 0), mm(20, 0, 0), mm(20, 10, 0)};
+  const std::vector<double> feeds{40.0, 10.0};
+  // Resting on the corner: the corner is not repeated, the last segment keeps its feed.
+  const PathRest at_corner = restOfPath(points, feeds, 20000.0, mm(20, 0, 0));
+  EXPECT_EQ(at_corner.points, (std::vector<Vec3>{mm(20, 0, 0), mm(20, 10, 0)}));
+  EXPECT_EQ(at_corner.feeds, std::vector<double>{10.0});
+  // Resting at the end: nothing left.
+  const PathRest at_end = restOfPath(points, feeds, 30000.0, mm(20, 10, 0));
+  EXPECT_TRUE(at_end.empty());
+  EXPECT_EQ(at_end.points, std::vector<Vec3>{mm(20, 10, 0)});
+  EXPECT_THROW(restOfPath(points, {40.0}, 0.0, mm(0, 0, 0)), ConfigError);
+}

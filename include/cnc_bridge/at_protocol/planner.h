@@ -142,6 +142,24 @@ class Trajectory
   bool entry_feasible_ = true;
 };
 
+/// \brief The rest of a path after a stop on it: what is left to follow when a path that stopped
+/// part-way (a cancel's deceleration, see Trajectory::stopFrom) goes on from rest.
+struct PathRest
+{
+  std::vector<Vec3> points;   ///< the stop point, then every corner beyond it, to the path's end
+  std::vector<double> feeds;  ///< mm/s per segment, as the path had them
+  /// Nothing left: the stop point is the path's end.
+  bool empty() const { return feeds.empty(); }
+};
+
+/// \brief The polyline \p points (with \p feeds per segment, as Trajectory takes them) from
+/// \p distance pulses along it on, starting at \p from (where the stop rests: on the path, up to
+/// the rounding to whole pulses). A corner within a thousandth of a pulse of \p distance counts
+/// as passed.
+/// \throws ConfigError if feeds.size() != points.size() - 1.
+PathRest restOfPath(const std::vector<Vec3>& points, const std::vector<double>& feeds, double distance,
+                    const Vec3& from);
+
 /// \brief Streams a trajectory one setpoint per call, and switches to a deceleration ramp on
 /// request. Used by the sender thread only: not thread-safe.
 ///
@@ -168,6 +186,9 @@ class TrajectoryStream
   size_t total() const { return sent_ - index_ + active().steps() + tail_; }
   /// The sample of the last setpoint handed out (pulses; the smoothed one for an S-curve).
   const Sample& current() const { return current_; }
+  /// Pulses along the streamed trajectory (not its stop ramp) of the trapezoid's sample behind the
+  /// last setpoint: once the stream is done, where along the path it came to rest.
+  double distance() const { return stop_offset_ + raw_.distance; }
 
  private:
   const Trajectory& active() const { return stop_ ? *stop_ : trajectory_; }
@@ -175,7 +196,8 @@ class TrajectoryStream
 
   Trajectory trajectory_;
   std::optional<Trajectory> stop_;
-  size_t index_ = 0;  // steps of *active_ streamed
+  double stop_offset_ = 0.0;  // pulses along trajectory_ where stop_ starts
+  size_t index_ = 0;          // steps of *active_ streamed
   size_t sent_ = 0;
   bool stopping_ = false;
   Sample current_;

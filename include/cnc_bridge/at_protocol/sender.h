@@ -85,13 +85,16 @@ class Job
   uint64_t total() const { return total_.load(std::memory_order_relaxed); }
   /// The last setpoint sent (axes read one by one: they may come from consecutive steps).
   Setpoint current() const;
+  /// Pulses along the operation's path of the last setpoint (see TrajectoryStream::distance): once
+  /// the job was cancelled, where along the path it came to rest.
+  double distance() const { return distance_.load(std::memory_order_relaxed); }
   const Operation& operation() const { return operation_; }
 
  private:
   friend class SetpointSender;
   explicit Job(Operation operation) : operation_(std::move(operation)) {}
   void finish(State state, const std::string& message);
-  void publish(const Setpoint& setpoint, uint64_t sent, uint64_t total);
+  void publish(const Setpoint& setpoint, uint64_t sent, uint64_t total, double distance);
 
   Operation operation_;
   std::atomic<bool> cancel_requested_{false};
@@ -99,6 +102,7 @@ class Job
   std::atomic<State> state_{State::kRunning};
   std::atomic<uint64_t> sent_{0};
   std::atomic<uint64_t> total_{0};
+  std::atomic<double> distance_{0.0};
   std::array<std::atomic<int32_t>, 3> position_{};
   std::array<std::atomic<int>, 3> feed_{};
   mutable std::mutex mutex_;
