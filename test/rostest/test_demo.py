@@ -42,7 +42,7 @@ BAG_TOPICS = [
     "/cell/ethernut_mill/ethernut_node/run_job/result", "/cell/at_router/at_controller_node/follow_path/goal",
     "/cell/at_router/at_controller_node/follow_path/feedback", "/cell/at_router/at_controller_node/follow_path/result",
     "/cell/ethernut_mill/job/path", "/cell/at_router/job/path", "/cell/laser/slaves/x/command",
-    "/cell/laser/slaves/x/response", "/tf", "/tf_static",
+    "/cell/laser/slaves/x/response", "/cell/haas_vf2/variables", "/tf", "/tf_static",
 ]
 
 
