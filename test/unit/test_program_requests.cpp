@@ -7,6 +7,8 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <chrono>
+#include <filesystem>
 #include <thread>
 
 #include "cnc_bridge/common/error.h"
@@ -209,6 +211,39 @@ TEST(RequestListener, APunchRefusedByTheNodeIsNotRead)
                                }));
   punch_thread.join();
   EXPECT_TRUE(asked);
+}
+
+// The Haas of the capture, as sim_haas_serial xmodem plays it: it NAKs while it waits to receive,
+// punches its program on the PC's NAK once its operator pressed SEND (--send), and answers the
+// EOT of a program it received with CAN CAN CAN. The answer must be taken as delivered.
+TEST(RequestListener, TheSimulatedHaasPunchesARequestAndStoresTheAnswer)
+{
+  TempDir dir("test_program_requests");
+  const std::string link = dir.file("haas");
+  const std::string memory = dir.file("memory");
+  std::filesystem::create_directory(memory);
+  dir.write("request.nc", "%\nO00031 (LOAD O1234)\nM30\n%\n");
+  Peer haas({SIM_HAAS_SERIAL, "xmodem", "--link", link, "--dir", memory, "--program", dir.file("request.nc"),
+             "--send-on", "signal", "--send", "--nak-interval", "0.2", "--timeout-scale", "0.2"},
+            dir.path, "");
+  for (int i = 0; i < 1000 && !test::exists(link); ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));  // the simulator makes its pty as it starts
+  SerialSettings settings;
+  settings.device = link;
+  SerialPort pc(settings);
+  RequestListener listener(pc, xmodemOptions());
+  const auto punch = listener.listen(kNever, kAlways);
+  ASSERT_TRUE(punch);
+  const auto request = recogniseRequest(punch->text);
+  ASSERT_TRUE(request);
+  EXPECT_EQ(request->number, 1234u);
+  const std::string answer = answerProgram(31, "O01234 NOT FOUND IN PROGRAMS");
+  EXPECT_EQ(listener.answer(answer), "answered by XModem (1 blocks)");  // CAN CAN CAN after EOT: delivered
+  // The control stores a received program under its O number, atomically.
+  const std::string stored = memory + "/O00031.nc";
+  for (int i = 0; i < 500 && !test::exists(stored); ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));  // its rename has no event to wait on here
+  EXPECT_EQ(readFile(stored), answer);
 }
 
 TEST(RequestListener, RequestModeNames)
