@@ -1,9 +1,11 @@
 // Cross-check of the G-code parser against LinuxCNC's rs274 (Debian linuxcnc-uspace), the
 // descendant of the NIST RS274/NGC interpreter: every program in test/data/gcode/rs274/ is run
 // through `rs274 -g` and through gcode::Reader, and every move must end at the same point within
-// 0.001 mm (arcs: end point and centre). rs274 prints program coordinates (its G92 and G5x offsets
-// printed beside them are added back) with four decimals in the program's units, so inch programs
-// are compared within that print resolution (0.00005 in = 0.00127 mm) plus 0.001 mm.
+// 0.001 mm. Arcs must also turn about the same centre the same way: each of our chord ends lies at
+// the radius rs274's centre gives it (start radius to end radius, linearly). rs274 prints program
+// coordinates (its G92 and G5x offsets printed beside them are added back) with four decimals in the
+// program's units, so inch programs are compared within that print resolution (0.00005 in =
+// 0.00127 mm) plus 0.001 mm.
 //
 // A program's first comment lines may say how it is read:
 //   (cross-check: dialect=haas)            our parser's dialect (default linuxcnc)
@@ -53,7 +55,11 @@ struct Canon
   Kind kind;
   Vec3 end;
   bool has_centre = false;
-  Vec3 centre;  // in the arc's plane (the normal axis left 0)
+  Vec3 centre;                   // rs274: in the arc's plane (the normal axis left 0)
+  Plane plane = Plane::kXY;      // rs274: the arc's plane
+  double rotation = 0;           // rs274: turns, positive counterclockwise about the plane's normal
+  Vec3 start;                    // ours: where the arc starts
+  std::vector<Vec3> chord_ends;  // ours: every chord's end point
   uint32_t line = 0;
   std::string text;
 };
@@ -147,6 +153,8 @@ Rs274Result runRs274(const std::string& program, const std::string& tool_table)
       {
         c.kind = Kind::kArc;
         c.has_centre = true;
+        c.plane = plane;
+        c.rotation = v[4];
         // ARC_FEED(first_end, second_end, first_centre, second_centre, rotation, axis_end, ...):
         // XY (x, y, .., z), XZ (z, x, .., y), YZ (y, z, .., x).
         if (plane == Plane::kXY)
@@ -186,25 +194,46 @@ Rs274Result runRs274(const std::string& program, const std::string& tool_table)
   return result;
 }
 
-// Circumcentre of three points in a plane (axes u, v of the chords' arc).
-bool centreOf(const Vec3& a, const Vec3& b, const Vec3& c, Plane plane, Vec3& out)
+// Axis values of a point in a plane's (u, v) axes: XY (x, y), ZX (z, x), YZ (y, z), as rs274 prints them.
+void inPlane(const Vec3& p, Plane plane, double& u, double& v)
 {
-  auto get = [](const Vec3& p, int i) { return i == 0 ? p.x : (i == 1 ? p.y : p.z); };
-  const int u = plane == Plane::kXY ? 0 : (plane == Plane::kZX ? 2 : 1);
-  const int v = plane == Plane::kXY ? 1 : (plane == Plane::kZX ? 0 : 2);
-  const double ax = get(a, u), ay = get(a, v), bx = get(b, u), by = get(b, v), cx = get(c, u), cy = get(c, v);
-  const double d = 2 * (ax * (by - cy) + bx * (cy - ay) + cx * (ay - by));
-  if (std::fabs(d) < 1e-12)
+  u = plane == Plane::kXY ? p.x : (plane == Plane::kZX ? p.z : p.y);
+  v = plane == Plane::kXY ? p.y : (plane == Plane::kZX ? p.x : p.z);
+}
+
+// How far our arc strays from rs274's: the largest difference between a chord end's distance from
+// rs274's centre and the radius it should have there (start radius to end radius, linearly, as both
+// interpolators turn a slightly inconsistent arc into a spiral). A circumcentre of our chord ends
+// would be ill-conditioned for short arcs; this is not. Sets `turns_same_way` from the first chord.
+double arcError(const Canon& mine, const Canon& reference, bool& turns_same_way)
+{
+  double cu, cv, su, sv, eu, ev;
+  inPlane(reference.centre, reference.plane, cu, cv);
+  inPlane(mine.start, reference.plane, su, sv);
+  inPlane(mine.end, reference.plane, eu, ev);
+  const double rs = std::hypot(su - cu, sv - cv);
+  const double re = std::hypot(eu - cu, ev - cv);
+  const size_t n = mine.chord_ends.size();
+  double worst = 0;
+  for (size_t k = 0; k < n; ++k)
   {
-    return false;
+    double pu, pv;
+    inPlane(mine.chord_ends[k], reference.plane, pu, pv);
+    const double expected = rs + (re - rs) * static_cast<double>(k + 1) / static_cast<double>(n);
+    worst = std::max(worst, std::fabs(std::hypot(pu - cu, pv - cv) - expected));
   }
-  const double a2 = ax * ax + ay * ay, b2 = bx * bx + by * by, c2 = cx * cx + cy * cy;
-  const double ux = (a2 * (by - cy) + b2 * (cy - ay) + c2 * (ay - by)) / d;
-  const double uy = (a2 * (cx - bx) + b2 * (ax - cx) + c2 * (bx - ax)) / d;
-  out = Vec3();
-  (u == 0 ? out.x : (u == 1 ? out.y : out.z)) = ux;
-  (v == 0 ? out.x : (v == 1 ? out.y : out.z)) = uy;
-  return true;
+  turns_same_way = true;
+  if (n > 0)
+  {
+    double pu, pv;
+    inPlane(mine.chord_ends[0], reference.plane, pu, pv);
+    const double cross = (su - cu) * (pv - cv) - (sv - cv) * (pu - cu);
+    if (std::fabs(cross) > 1e-9)
+    {
+      turns_same_way = (cross > 0) == (reference.rotation > 0);
+    }
+  }
+  return worst;
 }
 
 struct Directives
@@ -291,34 +320,10 @@ std::vector<Canon> ours(const std::string& path, const ParserOptions& options)
     c.kind = Kind::kArc;
     c.end = last.end;
     c.line = last.line;
-    // The plane: the axis that the chords' end points keep nearest constant is not reliable for
-    // helices, so use the three points in each plane and keep the one whose centre is finite and
-    // equidistant; the XY plane is tried first (compensation arcs and most CAM arcs).
-    if (arc.size() >= 2)
+    c.start = arc.front().start;
+    for (const Move& chord : arc)
     {
-      const Vec3& a = arc.front().start;
-      const Vec3& b = arc[arc.size() / 2].start;
-      for (Plane plane : {Plane::kXY, Plane::kZX, Plane::kYZ})
-      {
-        Vec3 centre;
-        if (!centreOf(a, b, last.end, plane, centre))
-        {
-          continue;
-        }
-        // The plane's normal axis must not be what varies most (a helix moves along it linearly).
-        const double spread_x = std::fabs(a.x - last.end.x) + std::fabs(a.x - b.x);
-        const double spread_y = std::fabs(a.y - last.end.y) + std::fabs(a.y - b.y);
-        const double spread_z = std::fabs(a.z - last.end.z) + std::fabs(a.z - b.z);
-        const double normal = plane == Plane::kXY ? spread_z : (plane == Plane::kZX ? spread_y : spread_x);
-        const double in_plane = spread_x + spread_y + spread_z - normal;
-        if (normal > in_plane)
-        {
-          continue;
-        }
-        c.has_centre = true;
-        c.centre = centre;
-        break;
-      }
+      c.chord_ends.push_back(chord.end);
     }
     out.push_back(c);
     arc.clear();
@@ -442,13 +447,15 @@ size_t crossCheck(const std::string& dir, const std::string& file, cnc_bridge::t
     const Canon& b = reference.moves[k];
     const double end_error = distance(a.end, b.end);
     const bool kind_ok = a.kind == b.kind;
-    const bool centre_ok = !(a.has_centre && b.has_centre) || distance(a.centre, b.centre) <= tolerance;
-    if (!kind_ok || end_error > tolerance || !centre_ok)
+    bool turns_same_way = true;
+    const double arc_error = kind_ok && b.has_centre ? arcError(a, b, turns_same_way) : 0.0;
+    if (!kind_ok || end_error > tolerance || arc_error > tolerance || !turns_same_way)
     {
       ++bad;
       ADD_FAILURE() << "move " << k << " (our line " << a.line << "): ours " << name(a.kind) << " to " << a.end.x << " "
                     << a.end.y << " " << a.end.z << ", rs274 " << b.text << " (" << b.end.x << " " << b.end.y << " "
-                    << b.end.z << "), end error " << end_error << " mm";
+                    << b.end.z << "), end error " << end_error << " mm, off rs274's arc by " << arc_error << " mm"
+                    << (turns_same_way ? "" : ", turning the other way");
     }
   }
   return n;
