@@ -108,6 +108,13 @@ void DncNode::requestWorker()
     {
       punch = listenForPunch(reserved);
     }
+    catch (const CancelledError&)
+    {
+      // The port was interrupted for a transfer's cancel or the node's end: nothing to report
+      // unless a punch was being read.
+      if (reserved)
+        error = "cancelled while the punch was read";
+    }
     catch (const LinkError& e)
     {
       error = e.what();
