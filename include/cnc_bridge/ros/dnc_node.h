@@ -3,7 +3,9 @@
 // on the same line stays quiet), runs one transfer at a time (a second request while one runs is
 // refused: a ~transfer goal is rejected with the reason, never preempts the running one), and
 // dispatches each transfer to a protocol handler by name. XModem (xmodem, xmodem-crc, xmodem-1k) is registered here;
-// other protocols (drip-feed, backup) register with registerProtocol() in the constructor.
+// other protocols (drip-feed, backup) register with registerProtocol() in the constructor. With
+// ~requests, a thread listens on the idle port for request programs the control punches
+// (src/nodes/dnc_requests.cpp) and leaves the port to any transfer asked for meanwhile.
 #pragma once
 
 #include <actionlib/server/action_server.h>
