@@ -48,7 +48,7 @@ endif()
 
 if(NOT CNC_BRIDGE_CORE_ONLY AND CATKIN_ENABLE_TESTING)
   find_package(rostest REQUIRED)
-  foreach(test at_controller at_controller_disabled)
+  foreach(test at_controller at_controller_disabled at_controller_link)
     add_rostest_gtest(test_${test} test/rostest/${test}.test test/rostest/test_${test}.cpp)
     target_link_libraries(test_${test} ${catkin_LIBRARIES})
     add_dependencies(test_${test} at_controller_node sim_at_controller ${PROJECT_NAME}_generate_messages_cpp)

@@ -1078,6 +1078,14 @@ class AtControllerNode
       case ap::Job::State::kCancelled:
         follow_path_.setPreempted(result, result.message);
         return false;
+      case ap::Job::State::kFailed:
+        // The protocol has no host watchdog: the controller holds the last setpoint it received.
+        result.message = "command link lost after " + std::to_string(job->sent()) + " setpoints: " + job->message() +
+                         "; the controller holds the last setpoint it received, the node reconnects (send the "
+                         "rest as a new goal)";
+        ROS_WARN_STREAM("at_controller_node: follow_path: " << result.message);
+        follow_path_.setAborted(result, result.message);
+        return false;
       default:
         ROS_WARN_STREAM("at_controller_node: follow_path: " << result.message);
         follow_path_.setAborted(result, result.message);

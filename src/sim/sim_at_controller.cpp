@@ -11,6 +11,11 @@
 //
 // Emergency stop: stdin lines "estop on" / "estop off", SIGUSR1 (on) / SIGUSR2 (off), or a fault
 // script. Also on stdin: "auto", "jog X|Y|Z" (the mode selector), "home".
+//
+// Link faults, for tests of the node's link handling: the fault script's "drop-command-link" closes
+// the command connection after a given setpoint (the next connection starts a fresh sequence, as a
+// controller whose host reconnected); SIGHUP starts a report link outage (the report connection is
+// closed and every new one closed at once, so no report arrives) and the next SIGHUP ends it.
 #include <signal.h>
 #include <time.h>
 #include <unistd.h>
@@ -56,11 +61,18 @@ struct Options
   bool estop_unreported = false;  // no E report on connection: a controller that reports only changes
 };
 
-/// One fault-script line: after the n-th setpoint received, switch the emergency stop.
+/// One fault-script line: after the n-th setpoint received, switch the emergency stop or drop the
+/// command connection.
 struct Fault
 {
+  enum class Action
+  {
+    kEStopOn,
+    kEStopOff,
+    kDropCommandLink
+  };
   uint64_t after_setpoints = 0;
-  bool estop = true;
+  Action action = Action::kEStopOn;
 };
 
 std::vector<Fault> readFaultScript(const std::string& path)
@@ -85,14 +97,16 @@ std::vector<Fault> readFaultScript(const std::string& path)
     {
       continue;
     }
-    // Format: "setpoint <n> estop-on|estop-off"
+    // Format: "setpoint <n> estop-on|estop-off|drop-command-link"
     if (trigger != "setpoint" || !(words >> fault.after_setpoints >> action) ||
-        (action != "estop-on" && action != "estop-off"))
+        (action != "estop-on" && action != "estop-off" && action != "drop-command-link"))
     {
       throw ConfigError("sim_at_controller: fault script line \"" + line +
-                        "\" is not \"setpoint <n> estop-on|estop-off\"");
+                        "\" is not \"setpoint <n> estop-on|estop-off|drop-command-link\"");
     }
-    fault.estop = action == "estop-on";
+    fault.action = action == "estop-on"    ? Fault::Action::kEStopOn
+                   : action == "estop-off" ? Fault::Action::kEStopOff
+                                           : Fault::Action::kDropCommandLink;
     faults.push_back(fault);
   }
   return faults;
@@ -155,6 +169,8 @@ class SimController
 
   /// Emergency stop from a signal, stdin or the fault script. Thread-safe.
   void setEStop(bool on) { estop_request_ = on ? 1 : 0; }
+  /// Starts or ends a report link outage (SIGHUP). Async-signal-safe: one lock-free atomic.
+  void toggleReportOutage() { report_outage_.fetch_xor(1); }
   void console(const std::string& line)
   {
     std::lock_guard<std::mutex> lock(mutex_);
@@ -182,12 +198,24 @@ class SimController
       }
       // Reads time out every 200 ms, so a stop request ends this loop without an interrupt.
       std::cerr << "sim_at_controller: command link from " << peer->describe() << std::endl;
+      {
+        // A new host connection starts a fresh sequence (M1@ ... M0@) in the control loop.
+        std::lock_guard<std::mutex> lock(mutex_);
+        queue_.clear();
+        new_command_link_ = true;
+      }
+      drop_command_link_ = false;
       CommandReassembler reassembler;
       uint8_t buffer[4096];
       try
       {
         while (!stop_.stopped())
         {
+          if (drop_command_link_.exchange(false))
+          {
+            std::cerr << "sim_at_controller: command link dropped (fault script)" << std::endl;
+            break;  // the connection closes with peer
+          }
           const size_t n = peer->read(buffer, sizeof(buffer), Milliseconds(200));
           if (n == 0)
           {
@@ -265,12 +293,17 @@ class SimController
     {
       try
       {
+        dropReportLinkDuringOutage();
         if (reportLinkUp())
         {
-          stop_.waitFor(Milliseconds(100));
+          stop_.waitFor(Milliseconds(20));
           continue;
         }
         auto peer = server.accept(Milliseconds(200));
+        if (peer && report_outage_)
+        {
+          continue;  // closed at once: no report gets through
+        }
         if (peer)
         {
           std::cerr << "sim_at_controller: report link to " << peer->describe() << std::endl;
@@ -288,7 +321,8 @@ class SimController
   {
     while (!stop_.stopped())
     {
-      if (!reportLinkUp())
+      dropReportLinkDuringOutage();
+      if (!reportLinkUp() && !report_outage_)
       {
         try
         {
@@ -302,6 +336,24 @@ class SimController
         }
       }
       stop_.waitFor(Milliseconds(200));
+    }
+  }
+
+  /// Closes the report connection while an outage (SIGHUP) lasts.
+  void dropReportLinkDuringOutage()
+  {
+    if (!report_outage_)
+    {
+      return;
+    }
+    std::shared_ptr<TcpConnection> link;
+    {
+      std::lock_guard<std::mutex> lock(report_mutex_);
+      link.swap(report_link_);
+    }
+    if (link)
+    {
+      std::cerr << "sim_at_controller: report link outage (SIGHUP): connection closed" << std::endl;
     }
   }
 
@@ -409,9 +461,19 @@ class SimController
       ++setpoints_received_;
       for (const auto& fault : faults_)
       {
-        if (fault.after_setpoints == setpoints_received_)
+        if (fault.after_setpoints != setpoints_received_)
         {
-          setEStop(fault.estop);
+          continue;
+        }
+        if (fault.action == Fault::Action::kDropCommandLink)
+        {
+          std::cerr << "sim_at_controller: fault script: dropping the command link after setpoint "
+                    << setpoints_received_ << std::endl;
+          drop_command_link_ = true;
+        }
+        else
+        {
+          setEStop(fault.action == Fault::Action::kEStopOn);
         }
       }
       if (!estop_)
@@ -464,6 +526,11 @@ class SimController
       std::deque<std::string> console;
       {
         std::lock_guard<std::mutex> lock(mutex_);
+        if (new_command_link_)
+        {
+          new_command_link_ = false;
+          sequencer_.reset();
+        }
         while (!queue_.empty())
         {
           const bool setpoint = std::holds_alternative<Setpoint>(queue_.front());
@@ -573,7 +640,8 @@ class SimController
   std::mutex mutex_;  // guards queue_, console_, arrivals bookkeeping
   std::deque<Command> queue_;
   std::deque<std::string> console_;
-  std::ofstream command_log_;  // guarded by mutex_
+  bool new_command_link_ = false;  // the control loop resets the sequencer; guarded by mutex_
+  std::ofstream command_log_;      // guarded by mutex_
   int64_t last_arrival_ns_ = 0;
   IntervalHistogram arrivals_;
   std::atomic<uint64_t> ignored_{0};
@@ -582,6 +650,8 @@ class SimController
   std::shared_ptr<TcpConnection> report_link_;
   std::atomic<bool> greet_{false};
   std::atomic<int> estop_request_{-1};
+  std::atomic<bool> drop_command_link_{false};  // set by the fault script, taken by the command loop
+  std::atomic<int> report_outage_{0};           // SIGHUP toggles it (int: fetch_xor)
 
   // Owned by the control loop.
   Sequencer sequencer_;
@@ -601,6 +671,14 @@ void onEStopSignal(int signal)
   if (the_sim)
   {
     the_sim->setEStop(signal == SIGUSR1);  // only an atomic store: async-signal-safe
+  }
+}
+
+void onReportOutageSignal(int)
+{
+  if (the_sim)
+  {
+    the_sim->toggleReportOutage();
   }
 }
 }  // namespace
@@ -629,7 +707,8 @@ int main(int argc, char** argv)
       "home-speed", po::value(&options.home_speed)->default_value(options.home_speed), "homing speed (mm/s)")(
       "jog-speed", po::value(&options.jog_speed)->default_value(options.jog_speed),
       "speed (mm/s) of the jog feed F255: a jog feed moves the jog axis (positive direction); 0: jog moves nothing")(
-      "fault-script", po::value(&options.fault_script), "file of \"setpoint <n> estop-on|estop-off\" lines")(
+      "fault-script", po::value(&options.fault_script),
+      "file of \"setpoint <n> estop-on|estop-off|drop-command-link\" lines")(
       "pid-file", po::value(&options.pid_file), "write the process id here (for SIGUSR1/SIGUSR2 e-stop)")(
       "command-log", po::value(&options.command_log), "append every command message received to this file")(
       "estop-unreported", po::bool_switch(&options.estop_unreported),
@@ -641,7 +720,9 @@ int main(int argc, char** argv)
     po::notify(vm);
     if (vm.count("help"))
     {
-      std::cout << description << "\nstdin: estop on|off, auto, jog X|Y|Z, home; SIGUSR1 e-stop on, SIGUSR2 off\n";
+      std::cout << description
+                << "\nstdin: estop on|off, auto, jog X|Y|Z, home; SIGUSR1 e-stop on, SIGUSR2 off; SIGHUP report link "
+                   "outage on/off\n";
       return 0;
     }
     char comma1 = 0, comma2 = 0;
@@ -668,6 +749,12 @@ int main(int argc, char** argv)
     sigemptyset(&action.sa_mask);
     sigaction(SIGUSR1, &action, nullptr);
     sigaction(SIGUSR2, &action, nullptr);
+    struct sigaction outage
+    {
+    };
+    outage.sa_handler = onReportOutageSignal;
+    sigemptyset(&outage.sa_mask);
+    sigaction(SIGHUP, &outage, nullptr);
     sim.run();
     the_sim = nullptr;
   }

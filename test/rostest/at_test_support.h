@@ -41,6 +41,10 @@ class StateWatch
                                                       std::lock_guard<std::mutex> lock(mutex_);
                                                       last_ = *state;
                                                       ++count_;
+                                                      if (state->link != cnc_bridge::MachineState::LINK_UP)
+                                                      {
+                                                        ++not_up_;
+                                                      }
                                                     }
                                                     cv_.notify_all();
                                                   });
@@ -56,6 +60,20 @@ class StateWatch
     std::lock_guard<std::mutex> lock(mutex_);
     return last_;
   }
+  /// States seen so far whose link was not UP (each change of the state is published).
+  uint64_t linkNotUpCount()
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return not_up_;
+  }
+  /// \returns true if, within \p seconds, the link was seen not UP (after \p not_up_before such
+  /// states) and is UP again.
+  bool waitForLinkBackUp(uint64_t not_up_before, double seconds)
+  {
+    std::unique_lock<std::mutex> lock(mutex_);
+    return cv_.wait_for(lock, std::chrono::duration<double>(seconds),
+                        [&] { return not_up_ > not_up_before && last_.link == cnc_bridge::MachineState::LINK_UP; });
+  }
 
  private:
   ros::Subscriber sub_;
@@ -63,6 +81,7 @@ class StateWatch
   std::condition_variable cv_;
   cnc_bridge::MachineState last_;
   uint64_t count_ = 0;
+  uint64_t not_up_ = 0;
 };
 
 template <class Service>
