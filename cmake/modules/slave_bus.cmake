@@ -4,9 +4,13 @@ cnc_core_module(cnc_bridge_slave_bus
   src/slave_bus/array_protocol.cpp
   src/slave_bus/value_codec.cpp
   src/slave_bus/bus_session.cpp
+  src/slave_bus/slave_table.cpp
+  src/slave_bus/step_queue.cpp
+  src/slave_bus/bus_monitor.cpp
   src/slave_bus/sim_master.cpp)
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
-  cnc_core_gtest(test_slave_bus test/unit/test_slave_bus.cpp test/unit/test_slave_bus_session.cpp)
+  cnc_core_gtest(test_slave_bus test/unit/test_slave_bus.cpp test/unit/test_slave_bus_session.cpp
+    test/unit/test_slave_bus_table.cpp)
   target_link_libraries(test_slave_bus cnc_bridge_slave_bus)
 endif()
 cnc_tool(sim_slave_bus src/sim/sim_slave_bus.cpp)

@@ -1,21 +1,13 @@
 // slave_bus_node: drives a universal-CNC master board (docs/protocols/slave_bus.md) over
 // its serial link. Each step is one serial array frame that carries a payload for every slave, so
 // all slaves get their data together; the slaves' answers come back as per-slave topics, and axis
-// slaves' positions feed state, joint_states and tf. The protocol lives in the core
-// (cnc_bridge/slave_bus); this class turns it into ROS.
+// slaves' positions feed state, joint_states and tf. The protocol, the slave table, the step queue
+// and the bus counters live in the core (cnc_bridge/slave_bus); this class maps them to ROS.
 #include <ros/ros.h>
 
-#include <algorithm>
-#include <atomic>
-#include <chrono>
 #include <cmath>
-#include <condition_variable>
-#include <deque>
-#include <map>
 #include <memory>
-#include <mutex>
 #include <set>
-#include <thread>
 #include <type_traits>
 
 #include "cnc_bridge/BusFrame.h"
@@ -26,53 +18,20 @@
 #include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/ros/params.h"
 #include "cnc_bridge/ros/runtime_switch.h"
+#include "cnc_bridge/slave_bus/bus_monitor.h"
 #include "cnc_bridge/slave_bus/bus_session.h"
-#include "cnc_bridge/slave_bus/value_codec.h"
-#include "cnc_bridge/transport/backoff.h"
+#include "cnc_bridge/slave_bus/slave_table.h"
+#include "cnc_bridge/slave_bus/step_queue.h"
+#include "cnc_bridge/transport/reconnecting_link.h"
 #include "cnc_bridge/transport/serial_port.h"
 
 namespace cnc_bridge
 {
 namespace
 {
-using slave_bus::Encoding;
+using slave_bus::Role;
 using slave_bus::StepPayloads;
 using slave_bus::UplinkRecord;
-
-enum class Role
-{
-  kAxisX,
-  kAxisY,
-  kAxisZ,
-  kTool,
-  kGeneric
-};
-
-Role parseRole(const std::string& text)
-{
-  if (text == "x" || text == "axis_x")
-    return Role::kAxisX;
-  if (text == "y" || text == "axis_y")
-    return Role::kAxisY;
-  if (text == "z" || text == "axis_z")
-    return Role::kAxisZ;
-  if (text == "tool")
-    return Role::kTool;
-  if (text == "generic")
-    return Role::kGeneric;
-  throw ConfigError("role '" + text + "' is not one of x, y, z, tool, generic");
-}
-
-bool isAxis(Role role)
-{
-  return role == Role::kAxisX || role == Role::kAxisY || role == Role::kAxisZ;
-}
-
-/// Roles whose payloads make the machine move or cut: refused unless ~enable_motion.
-bool startsMotion(Role role)
-{
-  return role != Role::kGeneric;
-}
 
 template <class T>
 T member(XmlRpc::XmlRpcValue& item, const std::string& key, const T& fallback, const std::string& where)
@@ -101,73 +60,102 @@ T member(XmlRpc::XmlRpcValue& item, const std::string& key, const T& fallback, c
   }
   throw ConfigError(where + "." + key + " has the wrong type");
 }
+
+/// ~framing and ~wirepacker_crc / ~max_payload: the master's dialect.
+slave_bus::WireFormat wireFormat(const ros::NodeHandle& pnh)
+{
+  // ~wirepacker_crc: spec (CRC-8 over the length byte and the data, as the packet format documents
+  // it) or library (data only, as the released ESP32_I2C_Slave library computes it): framed mode.
+  const std::string crc = pnh.param<std::string>("wirepacker_crc", "spec");
+  // ~max_payload: most data bytes of one WirePacker frame of the master (each slave's payload is
+  // one I2C frame; in framed mode so is the whole step); 0 = 251 (spec) or 124 (library buffers).
+  const int max_payload = pnh.param("max_payload", 0);
+  if (max_payload < 0 || max_payload > static_cast<int>(slave_bus::kMaxPayload))
+  {
+    throw ConfigError(pnh.resolveName("max_payload") + " must be 0 (the default of ~wirepacker_crc) or 1.." +
+                      std::to_string(slave_bus::kMaxPayload));
+  }
+  return slave_bus::WireFormat::of(slave_bus::parseWireCrc(crc), static_cast<size_t>(max_payload));
+}
+
+/// ~slaves: list of {address, name, role (x|y|z|tool|generic), encoding (bytes|hundreds|be16|be16s),
+/// scale (device units per metre, axes only)}; ~bus_size: slaves in every frame (the paper's master
+/// firmware is built for a fixed count, e.g. 8); 0 (default): the highest configured address.
+slave_bus::SlaveTable slaveTable(const ros::NodeHandle& pnh, const slave_bus::WireFormat& wire)
+{
+  XmlRpc::XmlRpcValue list;
+  const std::string where = pnh.resolveName("slaves");
+  if (!pnh.getParam("slaves", list))
+  {
+    throw ConfigError("Required parameter " + where + " not given.");
+  }
+  if (list.getType() != XmlRpc::XmlRpcValue::TypeArray)
+  {
+    throw ConfigError(where + " must be a non-empty list");
+  }
+  std::vector<slave_bus::SlaveConfig> slaves;
+  for (int i = 0; i < list.size(); ++i)
+  {
+    const std::string entry = where + "[" + std::to_string(i) + "]";
+    if (list[i].getType() != XmlRpc::XmlRpcValue::TypeStruct)
+    {
+      throw ConfigError(entry + " is not a {address, name, role, ...} map");
+    }
+    slave_bus::SlaveConfig slave;
+    const int address = member<int>(list[i], "address", 0, entry);
+    slave.address = static_cast<uint8_t>(address >= 0 && address <= 255 ? address : 0);
+    slave.name = member<std::string>(list[i], "name", "", entry);
+    try
+    {
+      slave.role = slave_bus::parseRole(member<std::string>(list[i], "role", "generic", entry));
+      slave.encoding = slave_bus::parseEncoding(member<std::string>(list[i], "encoding", "bytes", entry));
+    }
+    catch (const ConfigError& e)
+    {
+      throw ConfigError(entry + ": " + e.what());
+    }
+    slave.scale = member<double>(list[i], "scale", 1.0, entry);
+    slaves.push_back(slave);
+  }
+  const int bus_size = pnh.param("bus_size", 0);
+  return slave_bus::SlaveTable(std::move(slaves), static_cast<size_t>(std::max(0, bus_size)), wire, where,
+                               pnh.resolveName("bus_size"));
+}
 }  // namespace
 
 class SlaveBusNode
 {
  public:
   SlaveBusNode(ros::NodeHandle nh, ros::NodeHandle pnh)
-      : nh_(nh), settings_(params::serialSettings(pnh, 115200)), state_(nh, pnh, settings_.describe())
+      : settings_(params::serialSettings(pnh, 115200)),
+        state_(nh, pnh, settings_.describe()),
+        // ~framing: raw (the paper's bytes, for its stock master firmware) or framed (every frame in
+        // a WirePacker frame with CRC-8, both directions; recommended where the firmware supports it).
+        framing_(slave_bus::parseFraming(pnh.param<std::string>("framing", "raw"))),
+        table_(slaveTable(pnh, wireFormat(pnh))),
+        // ~max_queued_steps: steps waiting for the link; more are refused (and counted), not dropped
+        // silently. ~command_delay (s): a step of queued commands leaves this long after its first
+        // command, so that commands published together (x, y, then the tool) travel in one frame.
+        queue_(table_.busSize(), static_cast<size_t>(std::max(1, pnh.param("max_queued_steps", 100))),
+               params::seconds(pnh, "command_delay", 0.005)),
+        monitor_(table_),
+        // ~enable_motion (start-up value) and ~set_motion_enabled (at run time): axis and tool payloads
+        // (bus/frame or commands) are refused unless motion is enabled.
+        motion_(pnh, "motion", "enable_motion", "set_motion_enabled")
   {
-    std::string framing = "raw";
-    // ~framing: raw (the paper's bytes, for its stock master firmware) or framed (every frame in a
-    // WirePacker frame with CRC-8, both directions; recommended where the firmware supports it).
-    pnh.param("framing", framing, framing);
-    framing_ = slave_bus::parseFraming(framing);
-    std::string crc = "spec";
-    // ~wirepacker_crc: spec (CRC-8 over the length byte and the data, as the packet format documents
-    // it) or library (data only, as the released ESP32_I2C_Slave library computes it): framed mode.
-    pnh.param("wirepacker_crc", crc, crc);
-    int max_payload = 0;
-    // ~max_payload: most data bytes of one WirePacker frame of the master (each slave's payload is
-    // one I2C frame; in framed mode so is the whole step); 0 = 251 (spec) or 124 (library buffers).
-    pnh.param("max_payload", max_payload, max_payload);
-    if (max_payload < 0 || max_payload > static_cast<int>(slave_bus::kMaxPayload))
-    {
-      throw ConfigError(pnh.resolveName("max_payload") + " must be 0 (the default of ~wirepacker_crc) or 1.." +
-                        std::to_string(slave_bus::kMaxPayload));
-    }
-    wire_ = slave_bus::WireFormat::of(slave_bus::parseWireCrc(crc), static_cast<size_t>(max_payload));
-    // ~enable_motion (start-up value) and ~set_motion_enabled (at run time): axis and tool payloads
-    // (bus/frame or commands) are refused unless motion is enabled.
-    motion_ = std::make_unique<RuntimeSwitch>(pnh, "motion", "enable_motion", "set_motion_enabled");
     // ~reply_timeout (s): how long a slave that got a payload has to answer before it counts a timeout.
     reply_timeout_ = params::seconds(pnh, "reply_timeout", 0.5);
-    // ~command_delay (s): a step of queued commands leaves this long after its first command, so
-    // that commands published together (x, y, then the tool) travel in one frame.
-    command_delay_ = params::seconds(pnh, "command_delay", 0.005);
     // ~resync_gap (s): a partial uplink record followed by this much silence is dropped.
     resync_gap_ = params::seconds(pnh, "resync_gap", 0.05);
-    int max_queued = 100;
-    // ~max_queued_steps: steps waiting for the link; more are refused (and counted), not dropped silently.
-    pnh.param("max_queued_steps", max_queued, max_queued);
-    max_queued_ = static_cast<size_t>(std::max(1, max_queued));
-    loadSlaves(pnh);
-    int bus_size = 0;
-    // ~bus_size: slaves in every frame (the paper's master firmware is built for a fixed count, e.g.
-    // 8); 0 (default): the highest configured address.
-    pnh.param("bus_size", bus_size, bus_size);
-    if (bus_size == 0)
+    for (const auto& slave : table_.slaves())
     {
-      bus_size = static_cast<int>(highest_address_);
-    }
-    if (bus_size < static_cast<int>(highest_address_) || bus_size > static_cast<int>(slave_bus::kMaxSlaves))
-    {
-      throw ConfigError(pnh.resolveName("bus_size") + " must be between the highest slave address (" +
-                        std::to_string(highest_address_) + ") and " + std::to_string(slave_bus::kMaxSlaves));
-    }
-    bus_size_ = static_cast<size_t>(bus_size);
-
-    for (auto& slave : slaves_)
-    {
-      slave.response_pub = nh.advertise<SlaveResponse>("slaves/" + slave.name + "/response", 50);
-      const size_t index = static_cast<size_t>(&slave - slaves_.data());
-      slave.command_sub =
-          nh.subscribe<SlaveCommand>("slaves/" + slave.name + "/command", 50,
-                                     [this, index](const SlaveCommand::ConstPtr& msg) { onCommand(index, *msg); });
+      const size_t index = response_pubs_.size();
+      response_pubs_.push_back(nh.advertise<SlaveResponse>("slaves/" + slave.name + "/response", 50));
+      command_subs_.push_back(nh.subscribe<SlaveCommand>("slaves/" + slave.name + "/command", 50,
+                                                         [this, index](const SlaveCommand::ConstPtr& msg)
+                                                         { onCommand(index, *msg); }));
     }
     frame_sub_ = nh.subscribe("bus/frame", 50, &SlaveBusNode::onFrame, this);
-
     state_.update(
         [&](MachineState& s)
         {
@@ -177,406 +165,147 @@ class SlaveBusNode
           s.spindle_speed = NAN;
         });
     state_.diagnostics().add("slave bus", this, &SlaveBusNode::diagnose);
-
-    Reconnector::Callbacks callbacks;
-    callbacks.connect = [this] { connect(); };
-    callbacks.session = [this] { ioLoop(); };
-    callbacks.on_state = [this](LinkState link, const std::string& why) { state_.setLink(link, why); };
-    callbacks.disconnect = [this] { disconnect(); };
-    reconnector_ = std::make_unique<Reconnector>("slave bus", callbacks);
-    reconnector_->start();
-    ROS_INFO_STREAM("slave_bus_node: " << slaves_.size() << " slaves on a bus of " << bus_size_ << ", "
+    link_ = std::make_unique<ReconnectingLink>("slave bus " + settings_.describe(),
+                                               [this] { return std::make_unique<SerialPort>(settings_); });
+    link_->start([this](Transport& port) { ioLoop(port); },
+                 [this](LinkState link, const std::string& why) { state_.setLink(link, why); });
+    ROS_INFO_STREAM("slave_bus_node: " << table_.slaves().size() << " slaves on a bus of " << table_.busSize() << ", "
                                        << slave_bus::toString(framing_) << " framing, WirePacker CRC "
-                                       << slave_bus::toString(wire_.crc) << ", payloads up to " << wire_.max_data
-                                       << " bytes, " << settings_.describe()
-                                       << (motion_->enabled() ? ", motion enabled" : ", motion disabled"));
+                                       << slave_bus::toString(table_.wire().crc) << ", payloads up to "
+                                       << table_.wire().max_data << " bytes, " << settings_.describe()
+                                       << (motion_.enabled() ? ", motion enabled" : ", motion disabled"));
   }
 
   ~SlaveBusNode()
   {
-    shutting_down_ = true;
-    reconnector_->stop();  // stops its loop, then calls disconnect(), which ends ioLoop()
+    queue_.stop();  // ends the I/O thread's wait for a step
+    link_->stop();  // interrupts the port, ends the session, joins the thread
   }
 
  private:
-  struct Slave
-  {
-    uint8_t address = 0;
-    std::string name;
-    Role role = Role::kGeneric;
-    Encoding encoding = Encoding::kBytes;
-    double scale = 1.0;  // device units per metre (axes)
-    ros::Publisher response_pub;
-    ros::Subscriber command_sub;
-    // Counters, under stats_mutex_.
-    uint64_t payloads_sent = 0;  ///< non-empty payloads in frames that went out
-    uint64_t replies = 0;
-    uint64_t timeouts = 0;
-    uint64_t decode_errors = 0;
-    uint64_t read_failures = 0;  ///< master status 3: its I2C read of this slave failed
-    uint64_t too_long = 0;       ///< master status 4: the payload did not fit its I2C frame
-  };
-
-  struct Step
-  {
-    StepPayloads payloads;
-    bool from_commands = false;
-    std::chrono::steady_clock::time_point first_command;
-  };
-
-  void loadSlaves(ros::NodeHandle& pnh)
-  {
-    XmlRpc::XmlRpcValue list;
-    // ~slaves: list of {address, name, role (x|y|z|tool|generic), encoding (bytes|hundreds|be16|be16s),
-    // scale (device units per metre, axes only)}.
-    if (!pnh.getParam("slaves", list))
-    {
-      throw ConfigError("Required parameter " + pnh.resolveName("slaves") + " not given.");
-    }
-    if (list.getType() != XmlRpc::XmlRpcValue::TypeArray || list.size() == 0)
-    {
-      throw ConfigError(pnh.resolveName("slaves") + " must be a non-empty list");
-    }
-    std::set<int> addresses;
-    std::set<std::string> names;
-    std::set<Role> axes;
-    for (int i = 0; i < list.size(); ++i)
-    {
-      const std::string where = pnh.resolveName("slaves") + "[" + std::to_string(i) + "]";
-      if (list[i].getType() != XmlRpc::XmlRpcValue::TypeStruct)
-      {
-        throw ConfigError(where + " is not a {address, name, role, ...} map");
-      }
-      Slave slave;
-      const int address = member<int>(list[i], "address", 0, where);
-      if (address < 1 || address > static_cast<int>(slave_bus::kMaxSlaves) || !addresses.insert(address).second)
-      {
-        throw ConfigError(where + ".address must be unique and in 1.." + std::to_string(slave_bus::kMaxSlaves));
-      }
-      slave.address = static_cast<uint8_t>(address);
-      slave.name = member<std::string>(list[i], "name", "", where);
-      std::string error;
-      if (slave.name.empty() || !ros::names::validate(slave.name, error) || slave.name.find('/') != std::string::npos ||
-          !names.insert(slave.name).second)
-      {
-        throw ConfigError(where + ".name '" + slave.name + "' must be a unique, valid topic name part");
-      }
-      try
-      {
-        slave.role = parseRole(member<std::string>(list[i], "role", "generic", where));
-        slave.encoding = slave_bus::parseEncoding(member<std::string>(list[i], "encoding", "bytes", where));
-      }
-      catch (const ConfigError& e)
-      {
-        throw ConfigError(where + ": " + e.what());
-      }
-      slave.scale = member<double>(list[i], "scale", 1.0, where);
-      if (!(std::isfinite(slave.scale) && slave.scale != 0.0))
-      {
-        throw ConfigError(where + ".scale must be a finite, non-zero number of device units per metre");
-      }
-      if (isAxis(slave.role) && !axes.insert(slave.role).second)
-      {
-        throw ConfigError(where + ": a second slave for the same axis");
-      }
-      highest_address_ = std::max<size_t>(highest_address_, slave.address);
-      slaves_.push_back(slave);
-    }
-    axis_count_ = axes.size();
-    for (size_t i = 0; i < slaves_.size(); ++i)
-    {
-      by_address_[slaves_[i].address] = i;
-    }
-  }
-
   // ---- ROS inputs -------------------------------------------------------------------------------
 
   void onFrame(const BusFrame::ConstPtr& msg)
   {
-    Step step;
-    step.payloads.resize(bus_size_);
-    std::set<uint8_t> seen;
+    std::vector<std::pair<uint8_t, std::vector<uint8_t>>> payloads;
     for (const auto& payload : msg->payloads)
     {
-      std::string why;
-      if (payload.address < 1 || payload.address > bus_size_)
-      {
-        why =
-            "address " + std::to_string(payload.address) + " is outside the bus (1.." + std::to_string(bus_size_) + ")";
-      }
-      else if (!seen.insert(payload.address).second)
-      {
-        why = "two payloads for address " + std::to_string(payload.address);
-      }
-      else if (payload.data.size() > wire_.max_data)
-      {
-        why = "payload for address " + std::to_string(payload.address) + " has " + std::to_string(payload.data.size()) +
-              " bytes: " + payloadLimit();
-      }
-      else if (!payload.data.empty() && !motionAllowed(payload.address))
-      {
-        why = motion_->refusal("address " + std::to_string(payload.address) + " (an axis, tool or unconfigured slave)");
-      }
-      if (!why.empty())
-      {
-        refuse("bus/frame refused: " + why);
-        return;
-      }
-      step.payloads[payload.address - 1] = payload.data;
+      payloads.emplace_back(payload.address, payload.data);
     }
-    enqueue(std::move(step), false);
+    StepPayloads step;
+    try
+    {
+      step = table_.framePayloads(payloads);
+    }
+    catch (const ProtocolError& e)
+    {
+      return refuse(std::string("bus/frame refused: ") + e.what());
+    }
+    for (const auto& [address, data] : payloads)
+    {
+      if (!data.empty() && !motion_.enabled() && table_.startsMotion(address))
+      {
+        return refuse("bus/frame refused: " +
+                      motion_.refusal("address " + std::to_string(address) + " (an axis, tool or unconfigured slave)"));
+      }
+    }
+    if (!queue_.pushFrame(std::move(step)))
+    {
+      refuseFull();
+    }
   }
 
   void onCommand(size_t index, const SlaveCommand& msg)
   {
-    const Slave& slave = slaves_[index];
+    const slave_bus::SlaveConfig& slave = table_.slaves()[index];
+    if (slave_bus::startsMotion(slave.role) && !motion_.enabled())
+    {
+      return refuse("slaves/" + slave.name +
+                    "/command refused: " + motion_.refusal("slave " + slave.name + " (it moves or cuts)"));
+    }
     std::vector<uint8_t> payload;
     try
     {
-      payload = commandPayload(slave, msg);
+      payload = table_.commandPayload(index, msg.values, msg.data);
     }
     catch (const Error& e)
     {
-      refuse("slaves/" + slave.name + "/command refused: " + e.what());
-      return;
+      return refuse("slaves/" + slave.name + "/command refused: " + e.what());
     }
-    Step step;
-    step.payloads.resize(bus_size_);
-    step.payloads[slave.address - 1] = std::move(payload);
-    enqueue(std::move(step), true);
-  }
-
-  std::vector<uint8_t> commandPayload(const Slave& slave, const SlaveCommand& msg) const
-  {
-    if (startsMotion(slave.role) && !motion_->enabled())
+    if (!queue_.pushCommand(slave.address - 1u, std::move(payload)))
     {
-      throw DisabledError(motion_->refusal("slave " + slave.name + " (it moves or cuts)"));
+      refuseFull();
     }
-    if (msg.values.empty() == msg.data.empty())
-    {
-      throw ProtocolError("give either values or data");
-    }
-    if (!msg.data.empty())
-    {
-      if (msg.data.size() > wire_.max_data)
-      {
-        throw ProtocolError(std::to_string(msg.data.size()) + " bytes: " + payloadLimit());
-      }
-      return msg.data;
-    }
-    std::vector<int32_t> values;
-    if (isAxis(slave.role))
-    {
-      if (msg.values.size() != 1)
-      {
-        throw ProtocolError("an axis takes one value, its position in m");
-      }
-      // m -> device units (steps, pulses, 1/100 mm...: whatever ~scale says per metre).
-      const double device = std::round(msg.values[0] * slave.scale);
-      if (!std::isfinite(device) || device < slave_bus::minValue(slave.encoding) ||
-          device > slave_bus::maxValue(slave.encoding))
-      {
-        throw ProtocolError("position " + std::to_string(msg.values[0]) + " m is " + std::to_string(device) +
-                            " device units, outside what " + slave_bus::toString(slave.encoding) + " carries");
-      }
-      values.push_back(static_cast<int32_t>(device));
-    }
-    else
-    {
-      for (const double value : msg.values)
-      {
-        if (!std::isfinite(value) || std::fabs(value - std::round(value)) > 1e-9 || std::fabs(value) > 1e9)
-        {
-          throw ProtocolError("value " + std::to_string(value) + " is not an integer");
-        }
-        values.push_back(static_cast<int32_t>(std::round(value)));
-      }
-    }
-    auto payload = slave_bus::encodeValues(values, slave.encoding);
-    if (payload.size() > wire_.max_data)
-    {
-      throw ProtocolError("too many values for one payload: " + payloadLimit());
-    }
-    return payload;
-  }
-
-  /// Why a payload is too long, in words an operator can act on.
-  std::string payloadLimit() const
-  {
-    return "one I2C frame of the master carries at most " + std::to_string(wire_.max_data) + " bytes (~max_payload" +
-           (wire_.crc == slave_bus::WireCrc::kLibrary && wire_.max_data == slave_bus::WireFormat::kLibraryMaxData
-                ? "; the ESP32_I2C_Slave library's 128-byte buffers)"
-                : ")");
-  }
-
-  bool motionAllowed(uint8_t address) const
-  {
-    if (motion_->enabled())
-    {
-      return true;
-    }
-    const auto found = by_address_.find(address);
-    return found != by_address_.end() && !startsMotion(slaves_[found->second].role);
   }
 
   void refuse(const std::string& why)
   {
-    {
-      std::lock_guard<std::mutex> lock(stats_mutex_);
-      ++refused_;
-    }
+    monitor_.refused();
     ROS_ERROR_STREAM_THROTTLE(1.0, why);
   }
 
-  /// Explicit frames queue as they are; commands join the last queued command step if their slot is
-  /// still free there (so a second command to the same slave waits for the following step: none is lost).
-  void enqueue(Step step, bool from_commands)
+  void refuseFull()
   {
-    std::lock_guard<std::mutex> lock(queue_mutex_);
-    if (from_commands)
-    {
-      const size_t slot = static_cast<size_t>(std::find_if(step.payloads.begin(), step.payloads.end(),
-                                                           [](const std::vector<uint8_t>& p) { return !p.empty(); }) -
-                                              step.payloads.begin());
-      for (auto it = queue_.rbegin(); it != queue_.rend(); ++it)
-      {
-        if (!it->from_commands)
-        {
-          break;  // do not reorder commands across an explicit frame
-        }
-        if (it->payloads[slot].empty())
-        {
-          it->payloads[slot] = std::move(step.payloads[slot]);
-          return;
-        }
-        break;
-      }
-      step.from_commands = true;
-      step.first_command = std::chrono::steady_clock::now();
-    }
-    if (queue_.size() >= max_queued_)
-    {
-      std::lock_guard<std::mutex> stats_lock(stats_mutex_);
-      ++refused_;
-      ROS_ERROR_STREAM_THROTTLE(
-          1.0, "slave bus: " << queue_.size() << " steps already queued (~max_queued_steps): step refused");
-      return;
-    }
-    queue_.push_back(std::move(step));
-    queue_cv_.notify_all();
-  }
-
-  /// Waits up to \p idle for a step that may leave now (woken at once by enqueue() and by
-  /// disconnect()). \returns false if there is none yet.
-  bool takeStep(Step& step, Milliseconds idle)
-  {
-    std::unique_lock<std::mutex> lock(queue_mutex_);
-    const auto deadline = std::chrono::steady_clock::now() + idle;
-    for (;;)
-    {
-      if (stopping_)
-      {
-        return false;
-      }
-      auto wait_until = deadline;
-      if (!queue_.empty())
-      {
-        Step& front = queue_.front();
-        const auto age = std::chrono::steady_clock::now() - front.first_command;
-        if (!front.from_commands || queue_.size() > 1 || age >= command_delay_)
-        {
-          step = std::move(front);
-          queue_.pop_front();
-          return true;
-        }
-        // A step of commands: more commands may still join it until command_delay has passed.
-        wait_until = std::min(deadline, front.first_command + command_delay_);
-      }
-      if (std::chrono::steady_clock::now() >= deadline)
-      {
-        return false;
-      }
-      queue_cv_.wait_until(lock, wait_until);
-    }
+    refuse("slave bus: " + std::to_string(queue_.size()) + " steps already queued (~max_queued_steps): step refused");
   }
 
   // ---- link -------------------------------------------------------------------------------------
 
-  void connect()
+  /// The session on the open port (the link's thread): sends queued steps one at a time and
+  /// publishes what comes back, until the port fails or the node stops.
+  void ioLoop(Transport& port)
   {
-    auto port = std::make_unique<SerialPort>(settings_);
-    std::lock_guard<std::mutex> lock(link_mutex_);
-    session_.reset();
-    port_ = std::move(port);
-    session_ = std::make_unique<slave_bus::BusSession>(*port_, framing_, bus_size_, resync_gap_, wire_);
+    slave_bus::BusSession session(port, framing_, table_.busSize(), resync_gap_, table_.wire());
+    StepPayloads step;
+    for (;;)
+    {
+      // Idle, the thread waits on the queue, not on the port: a new step leaves at once. What the
+      // master writes meanwhile (late answers, status) waits in the port and is read right after.
+      if (queue_.take(step, Milliseconds(20)))
+      {
+        sendStep(session, step);
+        continue;
+      }
+      if (queue_.stopped())
+      {
+        return;
+      }
+      try
+      {
+        handle(session.poll(Milliseconds(0)));
+      }
+      catch (const Error&)
+      {
+        monitor_.sessionStats(session.stats());  // the bytes up to the failure count too
+        throw;                                   // the link reopens the port after a backoff
+      }
+      monitor_.sessionStats(session.stats());
+    }
   }
 
-  void disconnect()
+  void sendStep(slave_bus::BusSession& session, const StepPayloads& step)
   {
-    if (shutting_down_)
-    {
-      std::lock_guard<std::mutex> lock(queue_mutex_);
-      stopping_ = true;
-      queue_cv_.notify_all();
-    }
-    std::lock_guard<std::mutex> lock(link_mutex_);
-    if (port_)
-    {
-      port_->interrupt();
-    }
-  }
-
-  /// The I/O thread: sends queued steps one at a time and publishes what comes back.
-  void ioLoop()
-  {
+    state_.update([](MachineState& s) { s.execution = MachineState::EXECUTION_ACTIVE; });
+    slave_bus::BusSession::StepResult result;
     try
     {
-      while (!stopping_)
-      {
-        Step step;
-        // Idle, the thread waits on the queue, not on the link: a new step leaves at once. What the
-        // master writes meanwhile (late answers, status) waits in the port and is read right after.
-        if (takeStep(step, Milliseconds(20)))
-        {
-          state_.update([](MachineState& s) { s.execution = MachineState::EXECUTION_ACTIVE; });
-          slave_bus::BusSession::StepResult result;
-          try
-          {
-            result = session_->step(step.payloads, reply_timeout_);
-          }
-          catch (const ProtocolError& e)
-          {
-            refuse(std::string("step not sent: ") + e.what());
-            continue;
-          }
-          handle(result.replies);
-          handle(result.master_status);
-          recordStep(step.payloads, result.missing);
-          std::lock_guard<std::mutex> lock(queue_mutex_);
-          if (queue_.empty())
-          {
-            state_.update([](MachineState& s) { s.execution = MachineState::EXECUTION_READY; });
-          }
-          continue;
-        }
-        handle(session_->poll(Milliseconds(0)));
-        snapshotStats();
-      }
+      result = session.step(step, reply_timeout_);
     }
-    catch (const CancelledError&)
+    catch (const ProtocolError& e)
     {
-      if (!stopping_)
-      {
-        throw LinkError(settings_.describe() + ": interrupted");
-      }
+      return refuse(std::string("step not sent: ") + e.what());
     }
-    catch (const Error&)
+    catch (const Error& e)
     {
-      snapshotStats();
-      std::lock_guard<std::mutex> lock(link_mutex_);
-      session_.reset();
-      port_.reset();  // the Reconnector opens it again after a backoff
-      throw;
+      refuse(std::string("step lost with the link (send it again once the link is up): ") + e.what());
+      throw;  // the link reopens the port after a backoff
+    }
+    handle(result.replies);
+    handle(result.master_status);
+    monitor_.stepSent(step, result.missing, session.stats());
+    if (queue_.size() == 0)
+    {
+      state_.update([](MachineState& s) { s.execution = MachineState::EXECUTION_READY; });
     }
   }
 
@@ -586,22 +315,23 @@ class SlaveBusNode
     {
       if (record.address == 0)
       {
-        onMasterStatus(record);
+        const std::string what = monitor_.masterStatus(record);  // counted whether or not it is logged
+        ROS_WARN_STREAM_THROTTLE(1.0, what);
         continue;
       }
-      const auto found = by_address_.find(record.address);
-      if (found == by_address_.end())
+      const int index = table_.indexOf(record.address);
+      if (index < 0)
       {
-        std::lock_guard<std::mutex> lock(stats_mutex_);
-        ++unknown_replies_;
+        monitor_.reply(-1, true);
         continue;
       }
-      publishResponse(slaves_[found->second], record);
+      publishResponse(static_cast<size_t>(index), record);
     }
   }
 
-  void publishResponse(Slave& slave, const UplinkRecord& record)
+  void publishResponse(size_t index, const UplinkRecord& record)
   {
+    const slave_bus::SlaveConfig& slave = table_.slaves()[index];
     SlaveResponse msg;
     msg.header.stamp = ros::Time::now();
     msg.name = slave.name;
@@ -610,33 +340,24 @@ class SlaveBusNode
     bool decoded = true;
     try
     {
-      for (const int32_t value : slave_bus::decodeValues(record.payload, slave.encoding))
-      {
-        // Axis answers are device units: back to metres with the same scale.
-        msg.values.push_back(isAxis(slave.role) ? value / slave.scale : value);
-      }
+      msg.values = table_.replyValues(index, record.payload);
     }
     catch (const ProtocolError&)
     {
       decoded = false;
-      msg.values.clear();
     }
-    {
-      std::lock_guard<std::mutex> lock(stats_mutex_);
-      ++slave.replies;
-      slave.decode_errors += decoded ? 0 : 1;
-    }
-    if (isAxis(slave.role) && msg.values.size() == 1)
+    monitor_.reply(static_cast<int>(index), decoded);
+    if (slave_bus::isAxis(slave.role) && msg.values.size() == 1)
     {
       updateAxis(slave.role, msg.values[0], msg.header.stamp);
     }
-    slave.response_pub.publish(msg);
+    response_pubs_[index].publish(msg);
   }
 
   void updateAxis(Role role, double metres, const ros::Time& stamp)
   {
     axis_seen_.insert(role);
-    const bool all_known = axis_seen_.size() == axis_count_;
+    const bool all_known = axis_seen_.size() == table_.axisCount();
     state_.update(
         [&](MachineState& s)
         {
@@ -646,174 +367,36 @@ class SlaveBusNode
         });
   }
 
-  void onMasterStatus(const UplinkRecord& record)
-  {
-    const auto code = record.payload.empty() ? 0 : record.payload[0];
-    std::lock_guard<std::mutex> lock(stats_mutex_);
-    ++master_reports_[code];
-    // Codes 3 and 4 name the slave: count them against it (an unconfigured address stays bus-wide).
-    const auto found = record.payload.size() > 1 ? by_address_.find(record.payload[1]) : by_address_.end();
-    if (found != by_address_.end())
-    {
-      Slave& slave = slaves_[found->second];
-      if (code == static_cast<uint8_t>(slave_bus::MasterStatus::kSlaveNoAnswer))
-      {
-        ++slave.read_failures;
-      }
-      else if (code == static_cast<uint8_t>(slave_bus::MasterStatus::kPayloadTooLong))
-      {
-        ++slave.too_long;
-      }
-    }
-    if (code == static_cast<uint8_t>(slave_bus::MasterStatus::kBadFrame))
-    {
-      ROS_WARN_STREAM_THROTTLE(1.0, "slave bus master: a step frame arrived corrupted and was dropped");
-    }
-    else
-    {
-      ROS_WARN_STREAM_THROTTLE(
-          1.0,
-          "slave bus master: " << slave_bus::toString(static_cast<slave_bus::MasterStatus>(code))
-                               << (record.payload.size() > 1 ? " (address " + std::to_string(record.payload[1]) + ")"
-                                                             : std::string()));
-    }
-  }
-
-  /// After a step went out: its payloads per slave, its timeouts and the session's counters, in one
-  /// critical section so that one diagnostics message shows them consistently.
-  void recordStep(const StepPayloads& payloads, const std::vector<uint8_t>& missing)
-  {
-    std::lock_guard<std::mutex> lock(stats_mutex_);
-    for (size_t i = 0; i < payloads.size(); ++i)
-    {
-      const auto found = by_address_.find(static_cast<uint8_t>(i + 1));
-      if (!payloads[i].empty() && found != by_address_.end())
-      {
-        ++slaves_[found->second].payloads_sent;
-      }
-    }
-    session_stats_ = session_->stats();
-    for (const uint8_t address : missing)
-    {
-      const auto found = by_address_.find(address);
-      if (found != by_address_.end())
-      {
-        ++slaves_[found->second].timeouts;
-      }
-      else
-      {
-        ++unconfigured_timeouts_;
-      }
-    }
-  }
-
-  void snapshotStats()
-  {
-    std::lock_guard<std::mutex> lock(stats_mutex_);
-    session_stats_ = session_->stats();
-  }
-
-  // ---- diagnostics ------------------------------------------------------------------------------
-
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status)
   {
-    std::lock_guard<std::mutex> lock(stats_mutex_);
-    const auto& s = session_stats_;
-    uint64_t timeouts = unconfigured_timeouts_;
-    for (const auto& slave : slaves_)
-    {
-      timeouts += slave.timeouts;
-    }
-    const uint64_t link_errors = s.link.crc_errors + s.link.framing_errors;
-    const uint64_t bad_frames = master_reports_[static_cast<uint8_t>(slave_bus::MasterStatus::kBadFrame)];
-    const uint64_t read_failures = master_reports_[static_cast<uint8_t>(slave_bus::MasterStatus::kSlaveNoAnswer)];
-    const uint64_t too_long = master_reports_[static_cast<uint8_t>(slave_bus::MasterStatus::kPayloadTooLong)];
-    const uint64_t slave_errors = read_failures + too_long;
-    if (timeouts > last_timeouts_ || link_errors > last_link_errors_ || bad_frames > last_bad_frames_ ||
-        slave_errors > last_slave_errors_)
-    {
-      status.summary(diagnostic_msgs::DiagnosticStatus::WARN,
-                     "slaves timed out, frames were corrupted, or the master reported a slave error");
-    }
-    else
-    {
-      status.summary(diagnostic_msgs::DiagnosticStatus::OK, "steps flowing");
-    }
-    last_timeouts_ = timeouts;
-    last_link_errors_ = link_errors;
-    last_bad_frames_ = bad_frames;
-    last_slave_errors_ = slave_errors;
+    const slave_bus::BusMonitor::Report report = monitor_.report();
+    status.summary(report.trouble ? diagnostic_msgs::DiagnosticStatus::WARN : diagnostic_msgs::DiagnosticStatus::OK,
+                   report.summary);
     status.add("framing", slave_bus::toString(framing_));
-    status.add("WirePacker CRC", slave_bus::toString(wire_.crc));
-    status.add("max payload", wire_.max_data);
-    status.add("bus size", bus_size_);
-    motion_->addTo(status);
-    status.add("frames sent", s.steps_sent);
-    status.add("bytes sent", s.bytes_sent);
-    status.add("bytes received", s.bytes_received);
-    status.add("replies", s.replies);
-    status.add("timeouts", timeouts);
-    status.add("uplink CRC errors", s.link.crc_errors);
-    status.add("uplink framing errors", s.link.framing_errors);
-    status.add("uplink garbage bytes", s.link.garbage_bytes);
-    status.add("uplink resyncs", s.resyncs);
-    status.add("frames the master dropped (bad CRC)", bad_frames);
-    status.add("payloads for absent slaves",
-               master_reports_[static_cast<uint8_t>(slave_bus::MasterStatus::kNoSuchSlave)]);
-    status.add("slave reads that failed (master status 3)", read_failures);
-    status.add("payloads too long for the master (status 4)", too_long);
-    status.add("replies from unconfigured addresses", unknown_replies_);
-    status.add("refused inputs", refused_);
-    // Per slave, one numeric key each, "<name>: <counter>", so that tools and tests can read them.
-    for (const auto& slave : slaves_)
+    status.add("WirePacker CRC", slave_bus::toString(table_.wire().crc));
+    status.add("max payload", table_.wire().max_data);
+    status.add("bus size", table_.busSize());
+    motion_.addTo(status);
+    for (const auto& [key, value] : report.counters)
     {
-      const std::string prefix = slave.name + ": ";
-      status.add(prefix + "address", static_cast<int>(slave.address));
-      status.add(prefix + "payloads sent", slave.payloads_sent);
-      status.add(prefix + "replies", slave.replies);
-      status.add(prefix + "timeouts", slave.timeouts);
-      status.add(prefix + "undecodable replies", slave.decode_errors);
-      status.add(prefix + "failed reads (status 3)", slave.read_failures);
-      status.add(prefix + "payloads too long (status 4)", slave.too_long);
+      status.add(key, value);
     }
   }
 
-  ros::NodeHandle nh_;
   SerialSettings settings_;
   MachineStatePublisher state_;
-  slave_bus::Framing framing_ = slave_bus::Framing::kRaw;
-  slave_bus::WireFormat wire_;
-  std::unique_ptr<RuntimeSwitch> motion_;
+  slave_bus::Framing framing_;
+  const slave_bus::SlaveTable table_;
+  slave_bus::StepQueue queue_;
+  slave_bus::BusMonitor monitor_;
+  RuntimeSwitch motion_;
   Milliseconds reply_timeout_{500};
-  Milliseconds command_delay_{5};
   Milliseconds resync_gap_{50};
-  size_t max_queued_ = 100;
-  size_t bus_size_ = 0;
-  size_t highest_address_ = 0;
-  size_t axis_count_ = 0;
-  std::vector<Slave> slaves_;  // fixed after construction: subscribers keep indices into it
-  std::map<uint8_t, size_t> by_address_;
-  std::set<Role> axis_seen_;  // I/O thread only
+  std::vector<ros::Publisher> response_pubs_;  // by slave index
+  std::vector<ros::Subscriber> command_subs_;
   ros::Subscriber frame_sub_;
-
-  std::mutex queue_mutex_;
-  std::condition_variable queue_cv_;
-  std::deque<Step> queue_;
-  std::atomic<bool> shutting_down_{false};
-  std::atomic<bool> stopping_{false};  // set under queue_mutex_ so that a waiting takeStep() sees it
-
-  std::mutex link_mutex_;  // guards port_ against disconnect() from another thread
-  std::unique_ptr<SerialPort> port_;
-  std::unique_ptr<slave_bus::BusSession> session_;  // I/O thread only
-  std::unique_ptr<Reconnector> reconnector_;
-
-  std::mutex stats_mutex_;  // lock order: queue_mutex_ before stats_mutex_
-  slave_bus::BusSession::Stats session_stats_;
-  std::map<uint8_t, uint64_t> master_reports_;
-  uint64_t unknown_replies_ = 0;
-  uint64_t unconfigured_timeouts_ = 0;
-  uint64_t refused_ = 0;
-  uint64_t last_timeouts_ = 0, last_link_errors_ = 0, last_bad_frames_ = 0, last_slave_errors_ = 0;
+  std::set<Role> axis_seen_;  // link thread only
+  std::unique_ptr<ReconnectingLink> link_;
 };
 }  // namespace cnc_bridge
 

@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 #include <ros/ros.h>
 #include <sensor_msgs/JointState.h>
+#include <std_srvs/SetBool.h>
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/transform_listener.h>
 
@@ -357,6 +358,50 @@ TEST(SlaveBusNode, MotionDisabledRefusesAxesButGenericSlavesAnswerOverTheFramedL
       waitForDiagnostic("laser2/slave_bus_node: slave bus", "aux5: payloads sent", [](double v) { return v == 1; }));
   EXPECT_TRUE(
       waitForDiagnostic("laser2/slave_bus_node: slave bus", "x: payloads sent", [](double v) { return v == 0; }));
+}
+
+// Motion switched at run time (~set_motion_enabled): on, an axis command reaches the simulated
+// master and its slave answers; off again, the next one is refused and the master gets nothing
+// more for the axis, while a generic slave's command still goes out.
+TEST(SlaveBusNode, MotionSwitchedOffAtRunTimeRefusesTheNextAxisCommand)
+{
+  const std::string node = "/cell/laser2/slave_bus_node";
+  const std::string status = "laser2/slave_bus_node: slave bus";
+  Responses responses("/cell/laser2", {"x", "aux5"});
+  auto x = advertiseAndWait<cnc_bridge::SlaveCommand>("/cell/laser2/slaves/x/command");
+  auto aux5 = advertiseAndWait<cnc_bridge::SlaveCommand>("/cell/laser2/slaves/aux5/command");
+  std_srvs::SetBool enable;
+  enable.request.data = true;
+  ASSERT_TRUE(ros::service::call(node + "/set_motion_enabled", enable));
+  EXPECT_TRUE(enable.response.success) << enable.response.message;
+  cnc_bridge::SlaveCommand cmd;
+  cmd.values = {0.02};
+  x.publish(cmd);
+  ASSERT_TRUE(responses.waitFor([](auto& r) { return !r["x"].empty(); }));
+  ASSERT_TRUE(waitForDiagnostic(status, "x: payloads sent", [](double v) { return v == 1; }));
+
+  enable.request.data = false;
+  ASSERT_TRUE(ros::service::call(node + "/set_motion_enabled", enable));
+  DiagnosticsWatch::Values before;
+  ASSERT_TRUE(diagnostics->waitForStatus(
+      status,
+      [](const DiagnosticsWatch::Values& v)
+      {
+        const auto found = v.find("motion enabled");
+        return found != v.end() && found->second == "False";
+      },
+      &before));
+  cmd.values = {0.03};
+  x.publish(cmd);
+  cnc_bridge::SlaveCommand lamp;
+  lamp.data = {1};
+  aux5.publish(lamp);  // sent after the refused axis command: once it is answered, x would have been too
+  ASSERT_TRUE(waitForDiagnostic(status, "aux5: payloads sent",
+                                [&](double v) { return v == number(before, "aux5: payloads sent") + 1; }));
+  ASSERT_TRUE(
+      waitForDiagnostic(status, "refused inputs", [&](double v) { return v == number(before, "refused inputs") + 1; }));
+  EXPECT_TRUE(waitForDiagnostic(status, "x: payloads sent", [](double v) { return v == 1; }));
+  EXPECT_EQ(responses.of("x").size(), 1u);
 }
 
 TEST(SlaveBusNode, LibraryCrcLinkRefusesPayloadsOverTheLibrarysFrameSize)
