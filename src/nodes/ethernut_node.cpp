@@ -1209,7 +1209,7 @@ class EthernutNode : public ethernut::ClientListener
   // as for a cancel) and holds the goal until motion is enabled again and ~resume is called.
   void onMotionSwitched(bool enabled, const std::string& caller)
   {
-    const std::string what = std::string("motion ") + (enabled ? "enabled" : "disabled") + " by " + caller;
+    std::string what = std::string("motion ") + (enabled ? "enabled" : "disabled") + " by " + caller;
     std::lock_guard<std::mutex> gate(motion_mutex_);
     bool running = false;
     {
@@ -1218,6 +1218,10 @@ class EthernutNode : public ethernut::ClientListener
       if (!enabled && running && motion_hold_.empty())
       {
         motion_hold_ = what;
+      }
+      if (enabled && !motion_hold_.empty())
+      {
+        what += "; the job stays held until " + pnh_.resolveName("resume");  // enabling alone moves nothing
       }
     }
     job_cv_.notify_all();
@@ -1243,6 +1247,7 @@ class EthernutNode : public ethernut::ClientListener
       c->cancelJob();
     }
   }
+
   bool onReset(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res)
   {
     return command(res, "reset: job cancelled, board cleared to 0/0/0", [](ethernut::Client& c) { c.reset(); });

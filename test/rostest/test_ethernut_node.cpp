@@ -550,6 +550,11 @@ TEST(EthernutJob, DisablingMotionMidJobPausesTheBoardUntilEnabledAndResumed)
   // Enabled again: ~resume goes on and every set of the job reaches the board, in order.
   ASSERT_TRUE(setMotion(true, set));
   EXPECT_EQ(set.message, "motion enabled by " + me);
+  // Enabling alone moves nothing: state says the job waits for ~resume.
+  const std::string held_message =
+      "motion enabled by " + me + "; the job stays held until " + ns + "/ethernut_node/resume";
+  EXPECT_TRUE(watch->waitFor([&] { return watch->state.message == held_message; }, 5.0)) << watch->state.message;
+  EXPECT_EQ(simMessagesNamed("READYTOSEND", held_messages), 0);
   ASSERT_TRUE(call("resume", res));
   EXPECT_TRUE(res.success) << res.message;
   EXPECT_EQ(res.message, "resumed after the hold (motion disabled by " + me + ")");
