@@ -63,7 +63,7 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   # A control played by lrzsz sx/rx (XModem) and by the test (text) on a pty pair.
   cnc_core_gtest(test_program_requests test/unit/test_program_requests.cpp)
   if(TARGET test_program_requests)
-    target_link_libraries(test_program_requests cnc_bridge_requests)
+    target_link_libraries(test_program_requests cnc_bridge_requests yaml-cpp)
     target_compile_definitions(test_program_requests PRIVATE XMODEM_TEST_DATA="${PROJECT_SOURCE_DIR}/test/data/xmodem"
                                                              SIM_HAAS_SERIAL="$<TARGET_FILE:sim_haas_serial>")
     add_dependencies(test_program_requests sim_haas_serial)

@@ -3,21 +3,25 @@
 // exists: lrzsz `sx` punches the request by XModem, as a Haas set to XMODEM does (it waits for the
 // PC's NAK, then sends checksum blocks: the capture in test/data/xmodem/haas_xmodem_capture.json),
 // and the python3-xmodem package (test/data/xmodem/pyxmodem_peer.py) receives the answer. The text
-// punch of a control set to XON/XOFF is written by the test on a pty.
+// punch of a control set to XON/XOFF is written by the test on a pty; the bytes of a real Haas punch
+// come from OpenDNC's capture (test/data/xmodem/haas_xmodem_capture.json).
 #include <gtest/gtest.h>
 
 #include <atomic>
 #include <chrono>
 #include <filesystem>
+#include <memory>
 #include <thread>
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/dnc/program_requests.h"
 #include "cnc_bridge/programs/program_name.h"
 #include "cnc_bridge/programs/program_request.h"
+#include "cnc_bridge/transport/fake_transport.h"
 #include "cnc_bridge/transport/pty.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/xmodem/packet.h"
+#include "haas_capture.h"
 #include "peer_process.h"
 #include "temp_dir.h"
 
@@ -244,6 +248,42 @@ TEST(RequestListener, TheSimulatedHaasPunchesARequestAndStoresTheAnswer)
   for (int i = 0; i < 500 && !test::exists(stored); ++i)
     std::this_thread::sleep_for(std::chrono::milliseconds(10));  // its rename has no event to wait on here
   EXPECT_EQ(readFile(stored), answer);
+}
+
+// The bytes a real Haas punched (OpenDNC's capture, exchange cnc_to_pc: the control sends O05555
+// after the PC's NAK, checksum blocks beginning with LF %, EOT) are read whole by the listener, and
+// the PC side writes what the capture's PC wrote: NAK, an ACK per block and one for EOT.
+TEST(RequestListener, AHaasPunchFromTheCaptureIsReadWhole)
+{
+  std::vector<test::Bytes> control;
+  test::Bytes pc_wrote_in_capture;
+  for (const auto& event : test::capture("cnc_to_pc"))
+  {
+    if (event.from_pc)
+      pc_wrote_in_capture.insert(pc_wrote_in_capture.end(), event.bytes.begin(), event.bytes.end());
+    else
+      control.push_back(event.bytes);
+  }
+  FakeTransport cnc("haas");
+  auto next = std::make_shared<size_t>(0);
+  cnc.onWrite(
+      [&control, next](FakeTransport& t, const test::Bytes&)
+      {
+        if (*next < control.size())
+          t.feed(control[(*next)++]);  // each NAK or ACK of the PC answered by the next transmission
+      });
+  RequestListenerOptions options = xmodemOptions();
+  options.xmodem.eot_quiet = Milliseconds(20);
+  RequestListener listener(cnc, options);
+  const auto punch = listener.listen(kNever, kAlways);
+  ASSERT_TRUE(punch);
+  EXPECT_EQ(punch->text, readFile(std::string(XMODEM_TEST_DATA) + "/haas_O05555.nc"));
+  EXPECT_EQ(punch->how, "by XModem, 8 blocks");
+  // The capture's PC sent two NAKs before block 1 came; this one needed one.
+  test::Bytes expected = pc_wrote_in_capture;
+  expected.erase(expected.begin());
+  EXPECT_EQ(cnc.written(), expected);
+  EXPECT_FALSE(recogniseRequest(punch->text)) << "O05555 is a program, not a request";
 }
 
 TEST(RequestListener, RequestModeNames)

@@ -23,6 +23,7 @@
 #include "cnc_bridge/xmodem/file_transfer.h"
 #include "cnc_bridge/xmodem/packet.h"
 #include "cnc_bridge/xmodem/session.h"
+#include "haas_capture.h"
 #include "temp_dir.h"
 
 using namespace cnc_bridge;
@@ -32,14 +33,6 @@ using namespace cnc_bridge::test;
 namespace
 {
 using Bytes = std::vector<uint8_t>;
-
-Bytes fromHex(const std::string& hex)
-{
-  Bytes out;
-  for (size_t i = 0; i + 1 < hex.size(); i += 2)
-    out.push_back(static_cast<uint8_t>(std::stoi(hex.substr(i, 2), nullptr, 16)));
-  return out;
-}
 
 /// A scripted peer: each write to \p link is answered with the next transmission of \p script
 /// (a receiver's NAK or ACK gets the sender's next packet), until the script runs out.
@@ -65,21 +58,6 @@ size_t filesIn(const std::string& dir)
     ::closedir(d);
   }
   return n;
-}
-
-struct CaptureEvent
-{
-  bool from_pc;
-  Bytes bytes;
-};
-
-std::vector<CaptureEvent> capture(const std::string& exchange)
-{
-  const YAML::Node root = YAML::LoadFile(std::string(XMODEM_TEST_DATA) + "/haas_xmodem_capture.json");
-  std::vector<CaptureEvent> events;
-  for (const auto& event : root["exchanges"][exchange]["events"])
-    events.push_back({event["from"].as<std::string>() == "pc", fromHex(event["hex"].as<std::string>())});
-  return events;
 }
 
 /// Timeouts short enough for tests on an in-memory link, long enough for a loaded machine.
