@@ -17,6 +17,7 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
     test/unit/test_at_sequencer.cpp
     test/unit/test_at_planner.cpp
     test/unit/test_at_program_path.cpp
+    test/unit/test_at_sender_realtime.cpp
     test/unit/test_at_sender.cpp
     test/unit/test_at_deadman.cpp)
   target_link_libraries(test_at_protocol cnc_bridge_at_protocol)
