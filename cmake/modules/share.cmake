@@ -5,7 +5,9 @@ cnc_core_module(cnc_bridge_programs
   src/programs/program_name.cpp
   src/programs/program_store.cpp
   src/programs/archive.cpp
-  src/programs/program_request.cpp)
+  src/programs/program_request.cpp
+  src/programs/fan_out.cpp
+  src/programs/daily_time.cpp)
 
 find_path(SMBCLIENT_INCLUDE_DIR libsmbclient.h PATH_SUFFIXES samba-4.0)
 find_library(SMBCLIENT_LIBRARY smbclient)
@@ -18,7 +20,7 @@ target_link_libraries(cnc_bridge_share PUBLIC cnc_bridge_programs ${SMBCLIENT_LI
 
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   cnc_core_gtest(test_program_name test/unit/test_program_name.cpp test/unit/test_program_archive.cpp
-  test/unit/test_program_request.cpp)
+  test/unit/test_program_request.cpp test/unit/test_fan_out.cpp test/unit/test_daily_time.cpp)
   target_link_libraries(test_program_name cnc_bridge_programs)
   # Against a real Samba server (smbd started by the test on a free loopback port).
   cnc_core_gtest(test_smb_store test/unit/test_smb_store.cpp)

@@ -18,6 +18,7 @@
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/programs/archive.h"
+#include "cnc_bridge/programs/fan_out.h"
 #include "cnc_bridge/share/smb_store.h"
 #include "cnc_bridge/sim/sim_support.h"
 #include "progress_line.h"
@@ -146,30 +147,26 @@ int runShareSend(const std::vector<std::string>& args)
   const std::string sent_name = name.empty() ? file.substr(file.find_last_of('/') + 1) : name;
   // Fan-out: each share (machine) is reported on its own line; one that fails does not stop the
   // others, and the exit status is 1 if any failed.
-  int failed = 0;
-  for (const std::string& address : vm["share"].as<std::vector<std::string>>())
-  {
-    try
-    {
-      auto store = openStore(vm, address);
-      const auto start = std::chrono::steady_clock::now();
-      ProgressLine progress("send " + file + " to " + store->describe());
-      const uint64_t bytes = programs::putProgram(*store, file, name, range, pattern, showOn(progress), cancelOnStop());
-      progress.finish();
-      std::cout << "sent " << file << " to " << store->describe() << "/" << sent_name << ": " << rate(bytes, start)
-                << std::endl;
-    }
-    catch (const CancelledError&)
-    {
-      throw;
-    }
-    catch (const Error& e)
-    {
-      ++failed;
-      std::cerr << "cnc_dnc send: error: " << e.what() << std::endl;
-    }
-  }
-  return failed > 0 ? 1 : 0;
+  const auto results = programs::fanOut(
+      vm["share"].as<std::vector<std::string>>(),
+      [&](const std::string& address)
+      {
+        auto store = openStore(vm, address);
+        const auto start = std::chrono::steady_clock::now();
+        ProgressLine progress("send " + file + " to " + store->describe());
+        const uint64_t bytes =
+            programs::putProgram(*store, file, name, range, pattern, showOn(progress), cancelOnStop());
+        progress.finish();
+        return "sent " + file + " to " + store->describe() + "/" + sent_name + ": " + rate(bytes, start);
+      },
+      [](const programs::TargetResult& result)
+      {
+        if (result.success)
+          std::cout << result.message << std::endl;
+        else
+          std::cerr << "cnc_dnc send: error: " << result.message << std::endl;
+      });
+  return programs::allSucceeded(results) ? 0 : 1;
 }
 
 int runShareReceive(const std::vector<std::string>& args)
