@@ -593,6 +593,9 @@ void Parser::applyWords(const Scan& scan, Step& st)
         group(6, column);
         next.path_mode = PathMode::kBlend;
         next.path_tolerance_mm = scan.has(kP) ? scan.value[kP] : 0.0;  // scaled below with the units
+        // LinuxCNC G64 P- Q-: Q is the naive CAM detector's tolerance (CAM posts write it).
+        next.naive_cam_tolerance_mm = scan.has(kQ) ? scan.value[kQ] : 0.0;
+        st.q_used = scan.has(kQ);
         break;
       case 1870:
         // Haas G187: P1/P2/P3 rough/medium/finish smoothing, E corner tolerance; bare G187: default.
@@ -635,6 +638,7 @@ void Parser::applyWords(const Scan& scan, Step& st)
   if (next.path_mode == PathMode::kBlend && (seen_group[6]))
   {
     next.path_tolerance_mm *= scale;
+    next.naive_cam_tolerance_mm *= scale;
   }
 
   // ---- F S T, M codes (spindle, tool, coolant; stops and calls are reported). ----
@@ -963,7 +967,7 @@ void Parser::finishBlock(const Scan& scan, Step& st, bool l_used)
   {
     throw ParseError(st.line, scan.column[kL], "L (repeats) without a canned cycle or a subprogram call");
   }
-  if (scan.has(kQ) && !st.next.canned_cycle)
+  if (scan.has(kQ) && !st.next.canned_cycle && !st.q_used)
   {
     throw ParseError(st.line, scan.column[kQ], "Q without a canned cycle");
   }

@@ -174,6 +174,7 @@ struct Parser::Step
   int non_modal = 0;  // tenths: 40 (G04), 280, 300, 920, 921, 922, 923
   uint32_t non_modal_column = 0;
   bool comp_changed = false;  // G40/G41/G42 in this block
+  bool q_used = false;        // Q taken by this block's G64 (LinuxCNC naive CAM tolerance)
 
   double scale() const { return next.units == Units::kInches ? kMmPerInch : 1.0; }
 };

@@ -685,6 +685,23 @@ TEST(GcodeCam, PathModeHintsAreKeptInTheModalState)
   EXPECT_EQ(p.state().lookahead_blocks, 5);
   p.parseLine("G20 G64 P0.001");
   EXPECT_DOUBLE_EQ(p.state().path_tolerance_mm, 0.0254);
+  EXPECT_DOUBLE_EQ(p.state().naive_cam_tolerance_mm, 0.0);
+  // LinuxCNC G64 P- Q-: Q is the naive CAM detector's tolerance (SheetCam's LinuxCNC post writes
+  // "G64 P0.01 q00.01"); it is a hint like P, not a stray cycle word.
+  p.parseLine("G21 G64 P0.01 q00.02");
+  EXPECT_DOUBLE_EQ(p.state().path_tolerance_mm, 0.01);
+  EXPECT_DOUBLE_EQ(p.state().naive_cam_tolerance_mm, 0.02);
+  p.parseLine("G20 G64 P0.001 Q0.002");
+  EXPECT_NEAR(p.state().naive_cam_tolerance_mm, 0.0508, 1e-12);
+  try
+  {
+    p.parseLine("G1 X1 Q0.01 F100");
+    ADD_FAILURE() << "Q without G64 or a canned cycle was accepted";
+  }
+  catch (const ParseError& e)
+  {
+    EXPECT_EQ(e.reason(), "Q without a canned cycle");
+  }
   p.parseLine("G61");
   EXPECT_EQ(p.state().path_mode, PathMode::kExactStop);
 }

@@ -161,8 +161,10 @@ struct ModalState
 
   PathMode path_mode = PathMode::kUnspecified;
   double path_tolerance_mm = 0.0;  ///< G64 P (LinuxCNC), G187 E (Haas); 0: the control's default
-  int32_t smoothing_level = 0;     ///< G187 P1..P3 (Haas rough/medium/finish), 0: default
-  int32_t lookahead_blocks = -1;   ///< G103 P (Haas; 0: the control's maximum), -1: not programmed
+  /// G64 Q (LinuxCNC naive CAM detector: collinear moves within it are merged); 0: not programmed
+  double naive_cam_tolerance_mm = 0.0;
+  int32_t smoothing_level = 0;    ///< G187 P1..P3 (Haas rough/medium/finish), 0: default
+  int32_t lookahead_blocks = -1;  ///< G103 P (Haas; 0: the control's maximum), -1: not programmed
 };
 
 /// \brief One straight move of the tool: a G00/G01 block, or one chord of a G02/G03 arc.
