@@ -1,7 +1,11 @@
 // at_controller_node when its links to sim_at_controller fail: the command link lost in the middle
 // of a goal fails the goal with the link error and the node reconnects for the next goal; the
-// report link lost makes the e-stop unknown, which refuses motion until the controller reports E0.
+// report link lost makes the e-stop unknown, which refuses motion until the controller reports E0;
+// the node killed mid-goal leaves the controller holding its last setpoint, and the node started
+// again (respawn) runs the next goal.
+#include <ros/network.h>
 #include <signal.h>
+#include <xmlrpcpp/XmlRpcClient.h>
 
 #include <algorithm>
 #include <cmath>
@@ -22,6 +26,34 @@ pid_t simulatorPid()
   pid_t pid = 0;
   in >> pid;
   return pid;
+}
+
+/// The process id of the node \p name, as its own XML-RPC server tells it (ROS slave API getPid);
+/// 0 if it cannot be asked.
+pid_t nodePid(const std::string& name)
+{
+  XmlRpc::XmlRpcValue args, result, uri;
+  args[0] = ros::this_node::getName();
+  args[1] = name;
+  if (!ros::master::execute("lookupNode", args, result, uri, true))
+  {
+    return 0;
+  }
+  std::string host;
+  uint32_t port = 0;
+  if (!ros::network::splitURI(static_cast<std::string>(uri), host, port))
+  {
+    return 0;
+  }
+  XmlRpc::XmlRpcClient client(host.c_str(), static_cast<int>(port), "/");
+  XmlRpc::XmlRpcValue caller, answer;
+  caller[0] = ros::this_node::getName();
+  if (!client.execute("getPid", caller, answer) || answer.getType() != XmlRpc::XmlRpcValue::TypeArray ||
+      answer.size() < 3)
+  {
+    return 0;
+  }
+  return static_cast<int>(answer[2]);
 }
 
 /// Setpoint lines ("feed pos feed pos feed pos") among \p lines.
@@ -132,6 +164,59 @@ TEST_F(AtControllerLink, ReportLinkLossMakesTheEmergencyStopUnknownAndRefusesMot
   const auto again = call<cnc_bridge::AtJog>(node + "/jog", jogRequest("x", 0.0));
   EXPECT_TRUE(again.success) << again.message;
   EXPECT_TRUE(call<std_srvs::Trigger>(node + "/set_auto").success);
+}
+
+// Node death: the node killed (SIGKILL: no shutdown, no deceleration) in the middle of a goal.
+// The controller receives no more setpoints and no end of the operation; it holds the last
+// setpoint it received (the protocol has no host watchdog). The launch respawns the node, which
+// reads the held position from the controller and runs the next goal. Last in this file: it
+// replaces the node the tests above used.
+TEST_F(AtControllerLink, NodeDeathStopsTheSetpointsTheControllerHoldsTheLastOneAndARespawnedNodeRunsTheNextGoal)
+{
+  CommandLog received{command_log};
+  const size_t mark = received.lines().size();
+  const auto start = state.last().position;
+  client.sendGoal(lineGoal(start.x - 0.03, start.y, start.z, 0.02, ""));
+  ASSERT_TRUE(state.waitFor([&](const auto& s) { return s.position.x < start.x - 0.005; }));
+  const pid_t pid = nodePid(node);
+  ASSERT_GT(pid, 0);
+  ASSERT_EQ(kill(pid, SIGKILL), 0);
+  // Measurement windows (that nothing more arrives needs a span of time): what was on its way
+  // arrives within the first, nothing in the second.
+  ros::WallDuration(0.3).sleep();
+  const auto after_death = received.lines();
+  ros::WallDuration(0.5).sleep();
+  EXPECT_EQ(received.lines().size(), after_death.size());
+  // Long dead by now: a state stamped later comes from the respawned node (states are restamped
+  // and published at ~state_rate).
+  const ros::Time dead_by = ros::Time::now();
+  const std::vector<std::string> of_goal(after_death.begin() + static_cast<long>(mark), after_death.end());
+  EXPECT_EQ(std::count(of_goal.begin(), of_goal.end(), "#"), 0);
+  ASSERT_GT(countSetpoints(of_goal), 100u);
+  std::istringstream last(of_goal.back());
+  long feed = 0, held_x = 0;
+  ASSERT_TRUE(last >> feed >> held_x) << of_goal.back();
+
+  // Respawned: the new node's state (from the controller's greeting on the new report link) is
+  // the held setpoint, to the pulse.
+  ASSERT_TRUE(state.waitFor(
+      [&](const auto& s)
+      {
+        return s.header.stamp > dead_by && s.link == cnc_bridge::MachineState::LINK_UP && s.position_valid &&
+               s.estop == cnc_bridge::MachineState::ESTOP_OFF;
+      },
+      30.0))
+      << "no state from a respawned node";
+  EXPECT_NE(nodePid(node), pid);
+  EXPECT_NEAR(state.last().position.x, held_x * 1e-6, 1.5e-6);
+  EXPECT_GT(state.last().position.x, start.x - 0.025);  // stopped part-way
+  FollowPathClient next{node + "/follow_path", false};
+  ASSERT_TRUE(next.waitForServer(ros::Duration(20.0)));
+  next.sendGoal(lineGoal(start.x, start.y, start.z, 0.02, ""));
+  ASSERT_TRUE(next.waitForResult(ros::Duration(20.0)));
+  EXPECT_EQ(next.getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << next.getState().getText();
+  EXPECT_TRUE(state.waitFor([&](const auto& s) { return std::fabs(s.position.x - start.x) <= 1.5e-6; }))
+      << state.last().position;
 }
 
 int main(int argc, char** argv)
