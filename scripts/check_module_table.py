@@ -27,7 +27,7 @@ COLUMNS = ("folder", "cmake fragment", "library", "node", "simulator", "unit tes
            "benchmark", "doc pages")
 TARGET_COLUMNS = ("library", "node", "simulator", "unit tests", "fuzz targets")
 # A CMake target is declared by one of these (the package's own helpers and CMake's/catkin's).
-DECLARATION = re.compile(r"\b(?:cnc_core_module|cnc_node|cnc_tool|cnc_core_gtest|cnc_fuzz_target|add_library|"
+DECLARATION = re.compile(r"\b(?:cnc_core_module|cnc_sim_library|cnc_node|cnc_tool|cnc_core_gtest|cnc_fuzz_target|add_library|"
                          r"add_executable|catkin_add_gtest|add_rostest_gtest)\(\s*([A-Za-z0-9_]+)")
 # Repository paths written in the guide's prose and examples (patterns with <, *, { or $ are skipped).
 REPO_PATH = re.compile(r"(?<![\w./$-])((?:src|include|test|scripts|bench|docs|cmake|launch|config|msg|srv|action|urdf|"

@@ -3,15 +3,17 @@
 cnc_core_module(cnc_bridge_ethernut
   src/ethernut/protocol.cpp
   src/ethernut/client.cpp
-  src/ethernut/settings.cpp
-  src/ethernut/board.cpp)
+  src/ethernut/settings.cpp)
+# The simulated board (a peer model, not shipped in the protocol library): sim_ethernut and tests.
+cnc_sim_library(cnc_bridge_ethernut_sim src/sim/ethernut/board.cpp)
+target_link_libraries(cnc_bridge_ethernut_sim PUBLIC cnc_bridge_ethernut)
 cnc_tool(sim_ethernut src/sim/sim_ethernut.cpp)
-target_link_libraries(sim_ethernut cnc_bridge_ethernut)
+target_link_libraries(sim_ethernut cnc_bridge_ethernut_sim)
 cnc_tool(bench_ethernut bench/ethernut/bench_ethernut.cpp)
 target_link_libraries(bench_ethernut cnc_bridge_ethernut)
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   cnc_core_gtest(test_ethernut test/unit/test_ethernut_codec.cpp test/unit/test_ethernut_client.cpp)
-  target_link_libraries(test_ethernut cnc_bridge_ethernut)
+  target_link_libraries(test_ethernut cnc_bridge_ethernut_sim)
 endif()
 cnc_fuzz_target(fuzz_ethernut_stream test/fuzz/fuzz_ethernut_stream.cpp)
 if(NOT CNC_BRIDGE_CORE_ONLY)

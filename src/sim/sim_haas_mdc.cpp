@@ -16,9 +16,9 @@
 #include <sstream>
 
 #include "cnc_bridge/common/error.h"
-#include "cnc_bridge/mdc/sim_machine.h"
 #include "cnc_bridge/sim/sim_support.h"
 #include "cnc_bridge/transport/pty.h"
+#include "sim/mdc/sim_machine.h"
 
 namespace asio = boost::asio;
 using asio::ip::tcp;
@@ -241,7 +241,7 @@ int main(int argc, char** argv)
   std::string script, host, link, query_log;
   int port = 0;
   options.add_options()("help,h", "this help")("script", po::value(&script),
-                                               "machine script (see include/cnc_bridge/mdc/sim_machine.h)")(
+                                               "machine script (see src/sim/mdc/sim_machine.h)")(
       "port", po::value(&port)->default_value(0), "TCP port (Haas setting 143); 0 picks a free one")(
       "host", po::value(&host)->default_value("127.0.0.1"), "address to listen on")(
       "link", po::value(&link), "serial mode: a pty, with this symbolic link to its device")(

@@ -10,9 +10,9 @@
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/log.h"
 #include "cnc_bridge/sim/sim_support.h"
-#include "cnc_bridge/slave_bus/sim_master.h"
 #include "cnc_bridge/transport/paced_transport.h"
 #include "cnc_bridge/transport/pty.h"
+#include "sim/slave_bus/sim_master.h"
 
 namespace
 {

@@ -10,10 +10,10 @@
 #include <mutex>
 #include <thread>
 
-#include "cnc_bridge/ethernut/board.h"
 #include "cnc_bridge/ethernut/client.h"
 #include "cnc_bridge/transport/fake_transport.h"
 #include "cnc_bridge/transport/tcp.h"
+#include "sim/ethernut/board.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::ethernut;

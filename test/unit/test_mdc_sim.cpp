@@ -7,7 +7,7 @@
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/mdc/mdc_monitor.h"
-#include "cnc_bridge/mdc/sim_machine.h"
+#include "sim/mdc/sim_machine.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::mdc;

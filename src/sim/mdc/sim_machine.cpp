@@ -1,5 +1,5 @@
 // SimMachine: the scripted Haas control behind sim_haas_mdc (see sim_machine.h).
-#include "cnc_bridge/mdc/sim_machine.h"
+#include "sim/mdc/sim_machine.h"
 
 #include <cmath>
 #include <cstdio>

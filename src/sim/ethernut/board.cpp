@@ -1,6 +1,6 @@
 // Simulated ethernut board (board.h): one loop per connection that reads 20-byte messages,
 // answers them per Table 1 and advances the simulated tool between reads.
-#include "cnc_bridge/ethernut/board.h"
+#include "sim/ethernut/board.h"
 
 #include <chrono>
 #include <cmath>

@@ -1,5 +1,5 @@
 // The simulated master and slaves (see sim_master.h).
-#include "cnc_bridge/slave_bus/sim_master.h"
+#include "sim/slave_bus/sim_master.h"
 
 #include <algorithm>
 
