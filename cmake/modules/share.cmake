@@ -57,6 +57,12 @@ if(NOT CNC_BRIDGE_CORE_ONLY)
     target_link_libraries(test_share_node ${catkin_LIBRARIES} ${GTEST_LIBRARIES})
     target_include_directories(test_share_node PRIVATE ${PROJECT_SOURCE_DIR}/test/unit)
     add_dependencies(test_share_node share_node ${PROJECT_NAME}_generate_messages_cpp)
+    # Two share_nodes on local folders, started by the test: ~publish_to_machines.
+    add_rostest_gtest(test_share_fan_out test/rostest/share_fan_out.test test/rostest/test_share_fan_out.cpp)
+    target_link_libraries(test_share_fan_out ${catkin_LIBRARIES} ${GTEST_LIBRARIES})
+    target_include_directories(test_share_fan_out PRIVATE ${PROJECT_SOURCE_DIR}/test/unit)
+    target_compile_definitions(test_share_fan_out PRIVATE SHARE_NODE="$<TARGET_FILE:share_node>")
+    add_dependencies(test_share_fan_out share_node ${PROJECT_NAME}_generate_messages_cpp)
   endif()
 endif()
 

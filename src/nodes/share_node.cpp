@@ -8,14 +8,18 @@
 
 #include <atomic>
 #include <chrono>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <future>
 #include <iterator>
 #include <memory>
 #include <mutex>
+#include <thread>
 
 #include "cnc_bridge/ComparePrograms.h"
 #include "cnc_bridge/DprntLine.h"
+#include "cnc_bridge/FanOutProgram.h"
 #include "cnc_bridge/ListPrograms.h"
 #include "cnc_bridge/ProgramHistory.h"
 #include "cnc_bridge/ProgramRequestEvent.h"
@@ -27,6 +31,7 @@
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/program_dir.h"
 #include "cnc_bridge/programs/archive.h"
+#include "cnc_bridge/programs/fan_out.h"
 #include "cnc_bridge/programs/program_request.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/node_main.h"
@@ -52,6 +57,9 @@ class ShareNode
   bool onHistory(ProgramHistory::Request& request, ProgramHistory::Response& response);
   bool onWithdraw(WithdrawProgram::Request& request, WithdrawProgram::Response& response);
   bool onCompare(ComparePrograms::Request& request, ComparePrograms::Response& response);
+  bool onPublishToMachines(FanOutProgram::Request& request, FanOutProgram::Response& response);
+  /// Calls \p machine's ~send_program with \p file; \returns its message, throws its failure.
+  std::string sendThrough(const std::string& machine, const std::string& file);
   void archive(const std::string& name, const std::string& path, const std::string& direction);
   /// Serves the request files in the share's requests folder (each removed once read).
   void serveRequestFiles();
@@ -77,6 +85,8 @@ class ShareNode
   bool enable_remove_ = false;
   ros::Duration feedback_period_;
   std::unique_ptr<MachineStatePublisher> state_;
+  ros::NodeHandle nh_;
+  ros::WallDuration publish_timeout_;
 
   std::mutex busy_mutex_;
   bool busy_ = false;
@@ -91,13 +101,14 @@ class ShareNode
   } counters_;
 
   std::unique_ptr<SingleGoalActionServer<TransferAction>> action_;
-  ros::ServiceServer send_srv_, receive_srv_, list_srv_, remove_srv_, history_srv_, compare_srv_, withdraw_srv_;
+  ros::ServiceServer send_srv_, receive_srv_, list_srv_, remove_srv_, history_srv_, compare_srv_, withdraw_srv_,
+      publish_srv_;
   ros::WallTimer check_timer_;
   ros::Publisher requests_pub_;
   ros::Subscriber dprnt_sub_;
 };
 
-ShareNode::ShareNode(ros::NodeHandle nh, ros::NodeHandle pnh)
+ShareNode::ShareNode(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh)
 {
   // ~url (string, required): smb://[user@]host[:port]/share[/folder] (or a local directory).
   url_ = params::required<std::string>(pnh, "url");
@@ -169,6 +180,10 @@ ShareNode::ShareNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   history_srv_ = pnh.advertiseService("program_history", &ShareNode::onHistory, this);
   compare_srv_ = pnh.advertiseService("compare_programs", &ShareNode::onCompare, this);
   withdraw_srv_ = pnh.advertiseService("withdraw_program", &ShareNode::onWithdraw, this);
+  // ~publish_timeout (s, default 60): how long ~publish_to_machines waits for each machine's
+  // ~send_program to answer.
+  publish_timeout_ = ros::WallDuration(params::positive(pnh, "publish_timeout", 60.0));
+  publish_srv_ = pnh.advertiseService("publish_to_machines", &ShareNode::onPublishToMachines, this);
   // ~check_period (s, default 5): how often the share is listed to keep the link state.
   check_timer_ =
       nh.createWallTimer(ros::WallDuration(params::positive(pnh, "check_period", 5.0)), &ShareNode::checkShare, this);
@@ -595,6 +610,78 @@ bool ShareNode::onCompare(ComparePrograms::Request& request, ComparePrograms::Re
   {
     response.message = e.what();
   }
+  return true;
+}
+
+std::string ShareNode::sendThrough(const std::string& machine, const std::string& file)
+{
+  // A share_node's name, or the namespace a share_node runs in.
+  std::string service = nh_.resolveName(machine) + "/send_program";
+  if (!ros::service::exists(service, false))
+  {
+    const std::string in_namespace = nh_.resolveName(machine) + "/share_node/send_program";
+    if (!ros::service::exists(in_namespace, false))
+      throw LinkError("no machine answers at " + service + " nor " + in_namespace +
+                      ": is its share_node running, and is the name right?");
+    service = in_namespace;
+  }
+  // roscpp service calls have no timeout: the call runs on a thread of its own, which a machine
+  // that never answers leaves behind until its connection closes.
+  auto answer = std::make_shared<std::promise<std::optional<SendProgram::Response>>>();
+  std::future<std::optional<SendProgram::Response>> result = answer->get_future();
+  std::thread(
+      [service, file, answer]
+      {
+        SendProgram call;
+        call.request.file = file;
+        if (ros::service::call(service, call))
+          answer->set_value(call.response);
+        else
+          answer->set_value(std::nullopt);
+      })
+      .detach();
+  if (result.wait_for(std::chrono::duration<double>(publish_timeout_.toSec())) != std::future_status::ready)
+  {
+    char seconds[32];
+    std::snprintf(seconds, sizeof seconds, "%g", publish_timeout_.toSec());
+    throw TimeoutError("no answer from " + service + " within " + seconds +
+                       " s (~publish_timeout); the send may still finish there");
+  }
+  const std::optional<SendProgram::Response> response = result.get();
+  if (!response)
+    throw LinkError("the call of " + service + " failed: its share_node stopped or refused the connection");
+  if (!response->success)
+    throw Error(response->message);
+  return response->message;
+}
+
+bool ShareNode::onPublishToMachines(FanOutProgram::Request& request, FanOutProgram::Response& response)
+{
+  std::vector<std::string> failed;
+  const auto results = programs::fanOut(
+      request.machines, [&](const std::string& machine) { return sendThrough(machine, request.file); },
+      [&](const programs::TargetResult& result)
+      {
+        response.machines.push_back(result.target);
+        response.succeeded.push_back(result.success);
+        response.messages.push_back(result.message);
+        if (result.success)
+        {
+          ROS_INFO("publish %s to %s: %s", request.file.c_str(), result.target.c_str(), result.message.c_str());
+        }
+        else
+        {
+          failed.push_back(result.target + " (" + result.message + ")");
+          ROS_ERROR("publish %s to %s failed: %s", request.file.c_str(), result.target.c_str(), result.message.c_str());
+        }
+      });
+  response.success = programs::allSucceeded(results);
+  response.message = std::to_string(results.size() - failed.size()) + " of " + std::to_string(results.size()) +
+                     " machines got " + request.file;
+  for (size_t i = 0; i < failed.size(); ++i)
+    response.message += (i == 0 ? "; failed: " : ", ") + failed[i];
+  if (results.empty())
+    response.message = "no machines given: nothing published";
   return true;
 }
 
