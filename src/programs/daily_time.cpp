@@ -11,10 +11,10 @@ std::optional<DailyTime> DailyTime::parse(const std::string& text, const std::st
 {
   if (text.empty())
     return std::nullopt;
-  static const std::regex form("([0-9]{1,2}):([0-9]{2})");
+  static const std::regex kForm("([0-9]{1,2}):([0-9]{2})");
   std::smatch match;
   DailyTime time;
-  if (std::regex_match(text, match, form))
+  if (std::regex_match(text, match, kForm))
   {
     time.hour = std::stoi(match[1]);
     time.minute = std::stoi(match[2]);

@@ -1,5 +1,7 @@
 #include "cnc_bridge/programs/fan_out.h"
 
+#include <algorithm>
+
 #include "cnc_bridge/common/error.h"
 
 namespace cnc_bridge::programs
@@ -36,13 +38,7 @@ std::vector<TargetResult> fanOut(const std::vector<std::string>& targets,
 
 bool allSucceeded(const std::vector<TargetResult>& results)
 {
-  if (results.empty())
-    return false;
-  for (const TargetResult& result : results)
-  {
-    if (!result.success)
-      return false;
-  }
-  return true;
+  return !results.empty() &&
+         std::all_of(results.begin(), results.end(), [](const TargetResult& result) { return result.success; });
 }
 }  // namespace cnc_bridge::programs
