@@ -8,9 +8,6 @@
 #include <ros/ros.h>
 #include <std_srvs/SetBool.h>
 #include <std_srvs/Trigger.h>
-#include <tf2_geometry_msgs/tf2_geometry_msgs.h>
-#include <tf2_ros/buffer.h>
-#include <tf2_ros/transform_listener.h>
 
 #include <cmath>
 #include <condition_variable>
@@ -33,6 +30,7 @@
 #include "cnc_bridge/gcode/gcode.h"
 #include "cnc_bridge/gcode/program_steps.h"
 #include "cnc_bridge/ros/gcode_params.h"
+#include "cnc_bridge/ros/machine_frame.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/ros/params.h"
@@ -108,7 +106,7 @@ class AtControllerNode
     }
     limits_.validate();
     // ~transform_timeout: s a path goal in another frame waits for its transform into the machine frame.
-    transform_timeout_ = params::positive(pnh, "transform_timeout", 0.5);
+    to_machine_ = std::make_unique<ToMachineFrame>(params::positive(pnh, "transform_timeout", 0.5));
     // ~default_feed_rate: m/s along the path when neither the goal nor the program gives one.
     default_feed_ = params::positive(pnh, "default_feed_rate", 0.01);
     // ~gcode_dialect (string, "haas"): haas, fanuc or linuxcnc, where the controls read G-code
@@ -717,7 +715,8 @@ class AtControllerNode
         // A pose names its frame, else the path's; empty means the machine frame.
         const std::string& frame =
             stamped.header.frame_id.empty() ? goal.path.header.frame_id : stamped.header.frame_id;
-        const geometry_msgs::Pose pose = inMachineFrame(stamped.pose, frame);
+        const geometry_msgs::Pose pose =
+            ToMachineFrame::apply(to_machine_->lookup(state_->frame("machine"), frame, "path"), stamped.pose);
         const auto& p = pose.position;
         // Metres to pulses, rounded so that the end point is a whole pulse.
         plan.points.push_back({std::round(p.x * ap::kPulsesPerMetre), std::round(p.y * ap::kPulsesPerMetre),
@@ -742,30 +741,6 @@ class AtControllerNode
       plans.front().tool = goal.tool;
     }
     return plans;
-  }
-
-  /// \p pose in <tf_prefix>machine: as it is when \p frame is that frame (or empty), else transformed
-  /// with tf2 (the latest transform, waiting up to ~transform_timeout for it).
-  /// \throws ConfigError with tf2's reason when there is no transform.
-  geometry_msgs::Pose inMachineFrame(const geometry_msgs::Pose& pose, const std::string& frame)
-  {
-    const std::string machine = state_->frame("machine");
-    if (frame.empty() || frame == machine)
-    {
-      return pose;
-    }
-    geometry_msgs::TransformStamped transform;
-    try
-    {
-      transform = tf_buffer_.lookupTransform(machine, frame, ros::Time(0), ros::Duration(transform_timeout_));
-    }
-    catch (const tf2::TransformException& e)
-    {
-      throw ConfigError("path in frame \"" + frame + "\" refused: no transform into \"" + machine + "\": " + e.what());
-    }
-    geometry_msgs::Pose out;
-    tf2::doTransform(pose, out, transform);
-    return out;
   }
 
   /// Publishes the planned corners (pulses) of every operation as job/path in <tf_prefix>machine, metres.
@@ -1274,9 +1249,7 @@ class AtControllerNode
   std::string report_mode_;
   Milliseconds connect_timeout_{2000};
   std::unique_ptr<RuntimeSwitch> motion_;
-  tf2_ros::Buffer tf_buffer_;  // path goals in other frames
-  tf2_ros::TransformListener tf_listener_{tf_buffer_};
-  double transform_timeout_ = 0.5;
+  std::unique_ptr<ToMachineFrame> to_machine_;  // path goals in other frames
   std::mutex job_mutex_;            // guards running_job_, disabled_by_, motion_disabled_by_, hold_, resume_requested_
   std::condition_variable job_cv_;  // ~resume
   std::string hold_;                // what a held goal waits after, for ~resume's answer ("" when none)
