@@ -16,6 +16,7 @@
 #include <unistd.h>
 #include <array>
 
+#include <algorithm>
 #include <boost/program_options.hpp>
 #include <chrono>
 #include <cmath>
@@ -289,10 +290,13 @@ int run(int argc, char** argv)
   const double stream_s = std::chrono::duration<double>(t2 - t1).count();
   const double worst_ratio =
       std::max({worst.speed, worst.accel, limits.profile == ap::Profile::kSCurve ? worst.jerk : 0.0});
+  // Operations without moves (a spindle or coolant change after the last cut) send nothing.
+  const auto operations_sent =
+      static_cast<size_t>(std::count_if(plans.begin(), plans.end(), [](const auto& p) { return p.moves(); }));
   std::printf(
       "%s: %zu operations, %zu segments, %.3f mm, %zu setpoints, total time %.3f s (%.3f s of it G04 "
       "dwells; stops not counted)\n",
-      profile.c_str(), trajectories.size(), segments, length / ap::kPulsesPerMm, k, t, dwell_s);
+      profile.c_str(), operations_sent, segments, length / ap::kPulsesPerMm, k, t, dwell_s);
   std::printf("worst limit ratio %.4f (speed %.4f, acceleration %.4f, jerk %.4f%s)\n", worst_ratio, worst.speed,
               worst.accel, worst.jerk, limits.profile == ap::Profile::kSCurve ? "" : ", not limited by a trapezoid");
   std::printf("planning %.3f s (%.0f segments/s), setpoints %.3f s (%.0f setpoints/s)\n", plan_s,
