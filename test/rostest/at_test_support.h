@@ -163,4 +163,17 @@ class CommandLog
  private:
   std::string path_;
 };
+/// Waits, before a test, until the action server is there and the controller reports its links
+/// up, its position and a clear e-stop (fails the test otherwise).
+inline void waitUntilReady(FollowPathClient& client, StateWatch& state)
+{
+  ASSERT_TRUE(client.waitForServer(ros::Duration(10.0)));
+  ASSERT_TRUE(state.waitFor(
+      [](const auto& s)
+      {
+        return s.link == cnc_bridge::MachineState::LINK_UP && s.position_valid &&
+               s.estop == cnc_bridge::MachineState::ESTOP_OFF;
+      }))
+      << "link " << int(state.last().link);
+}
 }  // namespace at_test

@@ -49,17 +49,7 @@ struct AtController : ::testing::Test
 {
   StateWatch state{ns + "/state"};
   FollowPathClient client{node + "/follow_path", false};
-  void SetUp() override
-  {
-    ASSERT_TRUE(client.waitForServer(ros::Duration(10.0)));
-    ASSERT_TRUE(state.waitFor(
-        [](const auto& s)
-        {
-          return s.link == cnc_bridge::MachineState::LINK_UP && s.position_valid &&
-                 s.estop == cnc_bridge::MachineState::ESTOP_OFF;
-        }))
-        << "link " << int(state.last().link);
-  }
+  void SetUp() override { waitUntilReady(client, state); }
 };
 }  // namespace
 

@@ -12,6 +12,18 @@
 
 namespace cnc_bridge::test
 {
+/// In a forked child: runs \p argv (argv[0] a path, no PATH search) in place of this process, or
+/// exits with 127 if it cannot.
+[[noreturn]] inline void execOrExit(const std::vector<std::string>& argv)
+{
+  std::vector<char*> args;
+  for (const auto& a : argv)
+    args.push_back(const_cast<char*>(a.c_str()));
+  args.push_back(nullptr);
+  ::execv(args[0], args.data());
+  ::_exit(127);
+}
+
 /// A peer process. With \p stdio_on set, its stdin and stdout are the pty slave (lrzsz style).
 class Peer
 {
@@ -34,12 +46,7 @@ class Peer
       }
       const int null = ::open("/dev/null", O_WRONLY);
       ::dup2(null, 2);  // lrzsz chatters on stderr
-      std::vector<char*> args;
-      for (const auto& a : argv)
-        args.push_back(const_cast<char*>(a.c_str()));
-      args.push_back(nullptr);
-      ::execv(args[0], args.data());
-      ::_exit(127);
+      execOrExit(argv);
     }
   }
   /// Waits for the peer (its own timeouts bound the wait) and returns its exit status.

@@ -29,6 +29,7 @@
 #include "cnc_bridge/transport/pty.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
+#include "peer_process.h"
 #include "temp_dir.h"
 
 using namespace cnc_bridge;
@@ -80,12 +81,7 @@ pid_t spawn(const std::vector<std::string>& argv, int out_fd, int err_fd)
     ::dup2(err_fd, 2);
     const int null = ::open("/dev/null", O_RDONLY);
     ::dup2(null, 0);
-    std::vector<char*> args;
-    for (const auto& a : argv)
-      args.push_back(const_cast<char*>(a.c_str()));
-    args.push_back(nullptr);
-    ::execv(args[0], args.data());
-    ::_exit(127);
+    cnc_bridge::test::execOrExit(argv);
   }
   return pid;
 }
