@@ -5,10 +5,12 @@
 // services, the action, state and diagnostics onto it. One transfer at a time; a periodic check
 // of the share keeps the link state (UP while the share answers, DOWN with the reason).
 #include <ros/ros.h>
+#include <std_srvs/Trigger.h>
 
 #include <atomic>
 #include <chrono>
 #include <cstdio>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <future>
@@ -16,6 +18,7 @@
 #include <memory>
 #include <mutex>
 #include <thread>
+#include <tuple>
 
 #include "cnc_bridge/ComparePrograms.h"
 #include "cnc_bridge/DprntLine.h"
@@ -31,6 +34,7 @@
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/program_dir.h"
 #include "cnc_bridge/programs/archive.h"
+#include "cnc_bridge/programs/daily_time.h"
 #include "cnc_bridge/programs/fan_out.h"
 #include "cnc_bridge/programs/program_request.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
@@ -56,6 +60,16 @@ class ShareNode
   bool onRemove(RemoveProgram::Request& request, RemoveProgram::Response& response);
   bool onHistory(ProgramHistory::Request& request, ProgramHistory::Response& response);
   bool onWithdraw(WithdrawProgram::Request& request, WithdrawProgram::Response& response);
+  /// Keeps \p file in the archive, then removes it from the share; throws what stopped it.
+  WithdrawProgram::Response withdraw(const std::string& file);
+  /// Withdraws every program in the share, each outcome logged and published on withdrawals;
+  /// \returns a summary. The path of both ~withdraw_at and ~withdraw_all.
+  std::pair<bool, std::string> withdrawAll(const std::string& source);
+  bool onWithdrawAll(std_srvs::Trigger::Request& request, std_srvs::Trigger::Response& response);
+  /// Arms the timer for the next ~withdraw_at (not today's again when \p done_today).
+  void scheduleWithdrawal(bool done_today);
+  void onWithdrawTime(const ros::WallTimerEvent& event);
+  void armWithdrawalTimer(std::time_t seconds);
   bool onCompare(ComparePrograms::Request& request, ComparePrograms::Response& response);
   bool onPublishToMachines(FanOutProgram::Request& request, FanOutProgram::Response& response);
   /// Calls \p machine's ~send_program with \p file; \returns its message, throws its failure.
@@ -87,6 +101,12 @@ class ShareNode
   std::unique_ptr<MachineStatePublisher> state_;
   ros::NodeHandle nh_;
   ros::WallDuration publish_timeout_;
+  std::optional<programs::DailyTime> withdraw_at_;
+  std::atomic<std::time_t> next_withdrawal_{0};
+  /// Armed once per time; a one-shot timer is re-armed from its own callback by setPeriod/start.
+  ros::WallTimer withdraw_timer_;
+  ros::Publisher withdrawals_pub_;
+  ros::ServiceServer withdraw_all_srv_;
 
   std::mutex busy_mutex_;
   bool busy_ = false;
@@ -184,6 +204,18 @@ ShareNode::ShareNode(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh)
   // ~send_program to answer.
   publish_timeout_ = ros::WallDuration(params::positive(pnh, "publish_timeout", 60.0));
   publish_srv_ = pnh.advertiseService("publish_to_machines", &ShareNode::onPublishToMachines, this);
+  // ~withdraw_at (string "HH:MM", local time, default "": never): every day at that time every
+  // program in the share is withdrawn (kept in the archive, then removed); ~withdraw_all does it
+  // on request.
+  withdrawals_pub_ = nh.advertise<ProgramRequestEvent>("withdrawals", 50);
+  withdraw_all_srv_ = pnh.advertiseService("withdraw_all", &ShareNode::onWithdrawAll, this);
+  XmlRpc::XmlRpcValue withdraw_at;
+  if (pnh.getParam("withdraw_at", withdraw_at) && withdraw_at.getType() != XmlRpc::XmlRpcValue::TypeString)
+    throw ConfigError(pnh.resolveName("withdraw_at") + " must be a string \"HH:MM\": quote it in YAML ('18:00'), " +
+                      "which otherwise reads 18:00 as a number");
+  withdraw_at_ = programs::DailyTime::parse(pnh.param<std::string>("withdraw_at", ""), pnh.resolveName("withdraw_at"));
+  if (withdraw_at_)
+    scheduleWithdrawal(false);
   // ~check_period (s, default 5): how often the share is listed to keep the link state.
   check_timer_ =
       nh.createWallTimer(ros::WallDuration(params::positive(pnh, "check_period", 5.0)), &ShareNode::checkShare, this);
@@ -538,36 +570,130 @@ void ShareNode::archive(const std::string& name, const std::string& path, const 
   }
 }
 
+WithdrawProgram::Response ShareNode::withdraw(const std::string& file)
+{
+  WithdrawProgram::Response response;
+  const std::string content = store_->read(file);
+  // Kept first: a program is never gone from both the share and the archive.
+  const auto kept = archive_->add(file, content, {"share_node", machine_, "withdrawn"});
+  if (kept)
+  {
+    response.version = kept->number;
+  }
+  else
+  {
+    for (const programs::ArchiveVersion& v : archive_->history(file))
+    {
+      if (v.crc32 == programs::crc32Hex(content) && v.size == content.size())
+        response.version = v.number;
+    }
+  }
+  store_->remove(file);
+  response.success = true;
+  response.message = "withdrew " + file + " from " + store_->describe() + " (archive version " +
+                     std::to_string(response.version) + ")";
+  ROS_INFO("%s", response.message.c_str());
+  return response;
+}
+
 bool ShareNode::onWithdraw(WithdrawProgram::Request& request, WithdrawProgram::Response& response)
 {
   try
   {
-    const std::string content = store_->read(request.file);
-    // Kept first: a program is never gone from both the share and the archive.
-    const auto kept = archive_->add(request.file, content, {"share_node", machine_, "withdrawn"});
-    if (kept)
-    {
-      response.version = kept->number;
-    }
-    else
-    {
-      for (const programs::ArchiveVersion& v : archive_->history(request.file))
-      {
-        if (v.crc32 == programs::crc32Hex(content) && v.size == content.size())
-          response.version = v.number;
-      }
-    }
-    store_->remove(request.file);
-    response.success = true;
-    response.message = "withdrew " + request.file + " from " + store_->describe() + " (archive version " +
-                       std::to_string(response.version) + ")";
-    ROS_INFO("%s", response.message.c_str());
+    response = withdraw(request.file);
   }
   catch (const Error& e)
   {
     response.message = e.what();
   }
   return true;
+}
+
+std::pair<bool, std::string> ShareNode::withdrawAll(const std::string& source)
+{
+  std::vector<programs::ProgramEntry> files;
+  try
+  {
+    files = store_->list();
+  }
+  catch (const Error& e)
+  {
+    const std::string message = std::string("withdrawal of every program not done: ") + e.what();
+    ROS_ERROR("%s", message.c_str());
+    return {false, message};
+  }
+  size_t withdrawn = 0;
+  std::string failures;
+  for (const programs::ProgramEntry& file : files)
+  {
+    ProgramRequestEvent event;
+    event.machine = machine_;
+    event.source = source;
+    event.request = "WITHDRAW";
+    event.program = file.name;
+    try
+    {
+      event.outcome = withdraw(file.name).message;
+      event.success = true;
+      ++withdrawn;
+    }
+    catch (const Error& e)
+    {
+      event.outcome = e.what();
+      failures += (failures.empty() ? "; failed: " : ", ") + file.name + " (" + e.what() + ")";
+      ROS_ERROR("withdrawal of %s: %s", file.name.c_str(), e.what());
+    }
+    event.header.stamp = ros::Time::now();
+    withdrawals_pub_.publish(event);
+  }
+  const std::string summary = "withdrew " + std::to_string(withdrawn) + " of " + std::to_string(files.size()) +
+                              " programs from " + store_->describe() + " into " + archive_->root() + failures;
+  ROS_INFO("%s: %s", source.c_str(), summary.c_str());
+  return {withdrawn == files.size(), summary};
+}
+
+bool ShareNode::onWithdrawAll(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response)
+{
+  std::tie(response.success, response.message) = withdrawAll("~withdraw_all");
+  return true;
+}
+
+void ShareNode::scheduleWithdrawal(bool done_today)
+{
+  const std::time_t now = std::time(nullptr);
+  const std::time_t next = programs::nextDailyTime(*withdraw_at_, now, done_today);
+  next_withdrawal_ = next;
+  armWithdrawalTimer(next - now);
+  char when[32];
+  std::tm local{};
+  ::localtime_r(&next, &local);
+  std::strftime(when, sizeof when, "%Y-%m-%d %H:%M %Z", &local);
+  ROS_INFO("next withdrawal of every program from %s: %s", store_->describe().c_str(), when);
+}
+
+void ShareNode::armWithdrawalTimer(std::time_t seconds)
+{
+  const ros::WallDuration delay(static_cast<double>(seconds));
+  if (!withdraw_timer_.isValid())
+  {
+    withdraw_timer_ = nh_.createWallTimer(delay, &ShareNode::onWithdrawTime, this, true);
+    return;
+  }
+  withdraw_timer_.stop();
+  withdraw_timer_.setPeriod(delay);
+  withdraw_timer_.start();
+}
+
+void ShareNode::onWithdrawTime(const ros::WallTimerEvent&)
+{
+  // The wall clock may have been set back since the timer was armed: wait for the time itself.
+  if (std::time(nullptr) < next_withdrawal_)
+  {
+    armWithdrawalTimer(next_withdrawal_ - std::time(nullptr));
+    return;
+  }
+  withdrawAll("~withdraw_at " + withdraw_at_->str());
+  scheduleWithdrawal(true);
 }
 
 bool ShareNode::onHistory(ProgramHistory::Request& request, ProgramHistory::Response& response)
@@ -704,6 +830,8 @@ void ShareNode::diagnostics(diagnostic_updater::DiagnosticStatusWrapper& status)
   status.add("check failures", counters_.check_failures);
   status.add("round trip (s)", counters_.round_trip);
   status.add("last error", counters_.last_error);
+  if (withdraw_at_)
+    status.add("next withdrawal (unix time)", static_cast<int64_t>(next_withdrawal_.load()));
 }
 }  // namespace cnc_bridge
 

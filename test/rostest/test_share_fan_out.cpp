@@ -1,7 +1,9 @@
-// share_node's ~publish_to_machines: two share_nodes, each on a local folder standing for a
-// machine's share, started as processes of their own; one call publishes a program to both (byte
-// for byte) and to a machine that does not exist, which is reported in its own entry without
-// stopping the others.
+// Two share_nodes of a cell, each on a local folder standing for a machine's share, started as
+// processes of their own. ~publish_to_machines: one call publishes a program to both (byte for
+// byte) and to a machine that does not exist, which is reported in its own entry without stopping
+// the others. ~withdraw_all (the path ~withdraw_at takes at its time of day): every program of the
+// share kept in the archive, then removed, each outcome on withdrawals; a bad ~withdraw_at stops
+// the node with the reason.
 #include <gtest/gtest.h>
 #include <ros/ros.h>
 #include <signal.h>
@@ -9,10 +11,15 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <std_srvs/Trigger.h>
+
+#include <condition_variable>
 #include <filesystem>
+#include <mutex>
 #include <random>
 
 #include "cnc_bridge/FanOutProgram.h"
+#include "cnc_bridge/ProgramRequestEvent.h"
 #include "temp_dir.h"
 
 using namespace cnc_bridge;
@@ -32,7 +39,7 @@ class ShareFanOutTest : public ::testing::Test
     for (const char* machine : {"vf2", "st10"})
     {
       std::filesystem::create_directories(share(machine));
-      start(machine, {"_url:=" + share(machine)});
+      start(machine, {"_url:=" + share(machine), "_withdraw_at:=03:00"});
     }
     for (const char* machine : {"vf2", "st10"})
       ASSERT_TRUE(ros::service::waitForService(std::string("/cell/") + machine + "/share_node/publish_to_machines",
@@ -51,7 +58,7 @@ class ShareFanOutTest : public ::testing::Test
   std::string share(const std::string& machine) const { return dir_.file("share_" + machine); }
 
   /// Starts a share_node as /cell/<machine>/share_node with \p params (_name:=value).
-  void start(const std::string& machine, std::vector<std::string> params)
+  pid_t start(const std::string& machine, std::vector<std::string> params)
   {
     params.push_back("_program_dir:=" + programs_);
     params.push_back("_machine:=" + machine);
@@ -69,6 +76,7 @@ class ShareFanOutTest : public ::testing::Test
       ::_exit(127);
     }
     nodes_.push_back(node);
+    return node;
   }
 
   TempDir dir_{"cnc_share_fan_out"};
@@ -122,6 +130,72 @@ TEST_F(ShareFanOutTest, OneCallPublishesToEachMachineAndReportsTheMissingOne)
   EXPECT_NE(call.response.messages[1].find("O04444.nc"), std::string::npos) << call.response.messages[1];
   EXPECT_FALSE(test::exists(share("vf2") + "/O04444.nc"));
   EXPECT_FALSE(test::exists(share("st10") + "/O04444.nc"));
+}
+
+TEST_F(ShareFanOutTest, WithdrawAllKeepsEveryProgramInTheArchiveAndEmptiesTheShare)
+{
+  std::mutex mutex;
+  std::condition_variable arrived;
+  std::vector<ProgramRequestEvent> events;
+  ros::NodeHandle nh;
+  ros::Subscriber sub = nh.subscribe<ProgramRequestEvent>("/cell/vf2/withdrawals", 10,
+                                                          [&](const ProgramRequestEvent::ConstPtr& event)
+                                                          {
+                                                            std::lock_guard<std::mutex> lock(mutex);
+                                                            events.push_back(*event);
+                                                            arrived.notify_all();
+                                                          });
+  const std::string first = "%\nO01000 (OP1)\nG0 X1.\nM30\n%\n";
+  const std::string second = program(3000);
+  writeFile(share("vf2") + "/O01000.nc", first);
+  writeFile(share("vf2") + "/O01001.nc", second);
+  writeFile(share("st10") + "/O01000.nc", first);  // another machine's: stays
+  // The subscription must be connected before the call, or the events could go to no one.
+  for (int i = 0; i < 100 && sub.getNumPublishers() == 0; ++i)
+    ros::WallDuration(0.05).sleep();
+  ASSERT_EQ(sub.getNumPublishers(), 1u);
+
+  std_srvs::Trigger call;
+  ASSERT_TRUE(ros::service::call("/cell/vf2/share_node/withdraw_all", call));
+  EXPECT_TRUE(call.response.success) << call.response.message;
+  EXPECT_NE(call.response.message.find("withdrew 2 of 2 programs"), std::string::npos) << call.response.message;
+  EXPECT_FALSE(test::exists(share("vf2") + "/O01000.nc"));
+  EXPECT_FALSE(test::exists(share("vf2") + "/O01001.nc"));
+  EXPECT_EQ(readFile(programs_ + ".archive/O01000.nc/v0001.nc"), first);
+  EXPECT_EQ(readFile(programs_ + ".archive/O01001.nc/v0001.nc"), second);
+  EXPECT_NE(readFile(programs_ + ".archive/O01001.nc/v0001.meta").find("withdrawn"), std::string::npos);
+  EXPECT_EQ(readFile(share("st10") + "/O01000.nc"), first);
+  {
+    std::unique_lock<std::mutex> lock(mutex);
+    ASSERT_TRUE(arrived.wait_for(lock, std::chrono::seconds(10), [&] { return events.size() >= 2; }));
+    for (const ProgramRequestEvent& event : events)
+    {
+      EXPECT_TRUE(event.success) << event.outcome;
+      EXPECT_EQ(event.request, "WITHDRAW");
+      EXPECT_EQ(event.source, "~withdraw_all");
+      EXPECT_EQ(event.machine, "vf2");
+      EXPECT_NE(event.outcome.find("archive version 1"), std::string::npos) << event.outcome;
+    }
+    EXPECT_EQ(events[0].program, "O01000.nc");
+    EXPECT_EQ(events[1].program, "O01001.nc");
+  }
+
+  // Nothing left: nothing to do, which is no failure.
+  ASSERT_TRUE(ros::service::call("/cell/vf2/share_node/withdraw_all", call));
+  EXPECT_TRUE(call.response.success) << call.response.message;
+  EXPECT_NE(call.response.message.find("withdrew 0 of 0 programs"), std::string::npos) << call.response.message;
+}
+
+TEST_F(ShareFanOutTest, AWithdrawalTimeThatIsNoTimeOfDayStopsTheNode)
+{
+  std::filesystem::create_directories(share("hmc"));
+  const pid_t node = start("hmc", {"_url:=" + share("hmc"), "_withdraw_at:=25:00"});
+  int status = 0;
+  ASSERT_EQ(::waitpid(node, &status, 0), node);  // it ends by itself
+  nodes_.pop_back();
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 1);
+  EXPECT_FALSE(ros::service::exists("/cell/hmc/share_node/publish_to_machines", false));
 }
 
 int main(int argc, char** argv)
