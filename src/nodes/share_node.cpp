@@ -45,6 +45,31 @@
 
 namespace cnc_bridge
 {
+namespace
+{
+/// ~url (smb://[user@]host[:port]/share[/folder], or a local directory) or ~serve_dir (a local
+/// folder the PC's Samba serves to the controls): exactly one. A served folder is written like a
+/// local ~url; the parameter says what it is for, and is checked to be an existing folder.
+std::string shareAddress(const ros::NodeHandle& pnh)
+{
+  const std::string url = pnh.param<std::string>("url", "");
+  const std::string serve_dir = pnh.param<std::string>("serve_dir", "");
+  if (url.empty() == serve_dir.empty())
+    throw ConfigError("give exactly one of " + pnh.resolveName("url") + " (a machine's share) and " +
+                      pnh.resolveName("serve_dir") + " (a folder the PC serves to the controls), not " +
+                      (url.empty() ? "neither" : "both"));
+  if (!url.empty())
+    return url;
+  if (serve_dir.compare(0, 6, "smb://") == 0)
+    throw ConfigError(pnh.resolveName("serve_dir") + " is a local folder the PC's Samba serves, not " + serve_dir +
+                      ": give a machine's share as ~url");
+  if (!std::filesystem::is_directory(serve_dir))
+    throw ConfigError(pnh.resolveName("serve_dir") + " " + serve_dir +
+                      " is not a folder: create it and serve it with Samba (config/share/served_share.smb.conf)");
+  return serve_dir;
+}
+}  // namespace
+
 class ShareNode
 {
  public:
@@ -130,8 +155,7 @@ class ShareNode
 
 ShareNode::ShareNode(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh)
 {
-  // ~url (string, required): smb://[user@]host[:port]/share[/folder] (or a local directory).
-  url_ = params::required<std::string>(pnh, "url");
+  url_ = shareAddress(pnh);
   // ~credentials_file (string, default "": guest): smbclient authentication file, mode 0600.
   // ~timeout (s, default 10): limit of every SMB request.
   store_ =

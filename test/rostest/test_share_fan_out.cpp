@@ -3,7 +3,8 @@
 // byte) and to a machine that does not exist, which is reported in its own entry without stopping
 // the others. ~withdraw_all (the path ~withdraw_at takes at its time of day): every program of the
 // share kept in the archive, then removed, each outcome on withdrawals; a bad ~withdraw_at stops
-// the node with the reason.
+// the node with the reason. ~serve_dir: the second node's folder is one the PC serves.
+#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <ros/ros.h>
 #include <signal.h>
@@ -37,10 +38,10 @@ class ShareFanOutTest : public ::testing::Test
     programs_ = dir_.file("programs");
     std::filesystem::create_directories(programs_);
     for (const char* machine : {"vf2", "st10"})
-    {
       std::filesystem::create_directories(share(machine));
-      start(machine, {"_url:=" + share(machine), "_withdraw_at:=03:00"});
-    }
+    // One machine's share, and a folder the PC serves to the other.
+    start("vf2", {"_url:=" + share("vf2"), "_withdraw_at:=03:00"});
+    start("st10", {"_serve_dir:=" + share("st10")});
     for (const char* machine : {"vf2", "st10"})
       ASSERT_TRUE(ros::service::waitForService(std::string("/cell/") + machine + "/share_node/publish_to_machines",
                                                ros::Duration(20)));
@@ -57,8 +58,9 @@ class ShareFanOutTest : public ::testing::Test
 
   std::string share(const std::string& machine) const { return dir_.file("share_" + machine); }
 
-  /// Starts a share_node as /cell/<machine>/share_node with \p params (_name:=value).
-  pid_t start(const std::string& machine, std::vector<std::string> params)
+  /// Starts a share_node as /cell/<machine>/share_node with \p params (_name:=value); its
+  /// stderr into \p errors if given.
+  pid_t start(const std::string& machine, std::vector<std::string> params, const std::string& errors = "")
   {
     params.push_back("_program_dir:=" + programs_);
     params.push_back("_machine:=" + machine);
@@ -68,6 +70,8 @@ class ShareFanOutTest : public ::testing::Test
     if (node == 0)
     {
       ::prctl(PR_SET_PDEATHSIG, SIGKILL);  // a killed test leaves no node behind
+      if (!errors.empty())
+        ::dup2(::open(errors.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644), STDERR_FILENO);
       std::vector<char*> argv{const_cast<char*>(SHARE_NODE)};
       for (std::string& param : params)
         argv.push_back(param.data());
@@ -77,6 +81,18 @@ class ShareFanOutTest : public ::testing::Test
     }
     nodes_.push_back(node);
     return node;
+  }
+
+  /// Starts a share_node with \p params that must stop at once with status 1; \returns its stderr.
+  std::string refuse(const std::string& machine, const std::vector<std::string>& params)
+  {
+    const std::string errors = dir_.file(machine + ".stderr");
+    const pid_t node = start(machine, params, errors);
+    int status = 0;
+    EXPECT_EQ(::waitpid(node, &status, 0), node);  // it ends by itself
+    nodes_.pop_back();
+    EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 1) << machine << ": status " << status;
+    return readFile(errors);
   }
 
   TempDir dir_{"cnc_share_fan_out"};
@@ -119,6 +135,11 @@ TEST_F(ShareFanOutTest, OneCallPublishesToEachMachineAndReportsTheMissingOne)
   EXPECT_NE(call.response.message.find("/cell/hmc/share_node"), std::string::npos) << call.response.message;
   EXPECT_EQ(readFile(share("vf2") + "/O01234.nc"), content);
   EXPECT_EQ(readFile(share("st10") + "/O01234.nc"), content);
+  // The served folder holds the program and nothing else (no temporary name left behind).
+  std::vector<std::string> served;
+  for (const auto& entry : std::filesystem::directory_iterator(share("st10")))
+    served.push_back(entry.path().filename().string());
+  EXPECT_EQ(served, (std::vector<std::string>{"O01234.nc"}));
 
   // A program neither machine has: each reports it, nothing is written anywhere.
   call.request.file = "O04444.nc";
@@ -189,13 +210,25 @@ TEST_F(ShareFanOutTest, WithdrawAllKeepsEveryProgramInTheArchiveAndEmptiesTheSha
 TEST_F(ShareFanOutTest, AWithdrawalTimeThatIsNoTimeOfDayStopsTheNode)
 {
   std::filesystem::create_directories(share("hmc"));
-  const pid_t node = start("hmc", {"_url:=" + share("hmc"), "_withdraw_at:=25:00"});
-  int status = 0;
-  ASSERT_EQ(::waitpid(node, &status, 0), node);  // it ends by itself
-  nodes_.pop_back();
-  ASSERT_TRUE(WIFEXITED(status));
-  EXPECT_EQ(WEXITSTATUS(status), 1);
+  const std::string error = refuse("hmc", {"_url:=" + share("hmc"), "_withdraw_at:=25:00"});
+  EXPECT_NE(error.find("withdraw_at \"25:00\" is not a time of day"), std::string::npos) << error;
   EXPECT_FALSE(ros::service::exists("/cell/hmc/share_node/publish_to_machines", false));
+}
+
+TEST_F(ShareFanOutTest, ExactlyOneOfUrlAndServeDir)
+{
+  std::filesystem::create_directories(share("hmc"));
+  // A node of its own for each case: private parameters outlive their node.
+  std::string error = refuse("both", {"_url:=" + share("hmc"), "_serve_dir:=" + share("hmc")});
+  EXPECT_NE(error.find("give exactly one of /cell/both/share_node/url"), std::string::npos) << error;
+  EXPECT_NE(error.find("not both"), std::string::npos) << error;
+  error = refuse("neither", {});
+  EXPECT_NE(error.find("not neither"), std::string::npos) << error;
+  error = refuse("smb", {"_serve_dir:=smb://127.0.0.1/memory"});
+  EXPECT_NE(error.find("is a local folder the PC's Samba serves"), std::string::npos) << error;
+  error = refuse("missing", {"_serve_dir:=" + share("missing")});
+  EXPECT_NE(error.find(share("missing") + " is not a folder"), std::string::npos) << error;
+  EXPECT_FALSE(test::exists(share("missing")));
 }
 
 int main(int argc, char** argv)
