@@ -189,10 +189,11 @@ void SimMaster::processInput(const uint8_t* data, size_t size)
 void SimMaster::processFrames(const std::vector<std::vector<uint8_t>>& frames, const WireStreamUnpacker::Stats& before)
 {
   // A corrupted frame makes the unpacker reject several candidates (its own start byte, then any
-  // 0x02 inside it): tell the PC once per burst that a step was lost, so that it need not wait out
-  // its reply timeout.
+  // 0x02 inside it): tell the PC once per burst that its step was lost, so that it need not wait
+  // out its reply timeout. Rejected candidates followed by a good frame were line noise before the
+  // step, not the step: the step is served, and a status 1 would make the PC give up on it.
   const auto& after = unpacker_.stats();
-  if (after.crc_errors != before.crc_errors || after.framing_errors != before.framing_errors)
+  if ((after.crc_errors != before.crc_errors || after.framing_errors != before.framing_errors) && frames.empty())
   {
     ++stats_.bad_frames;
     sendStatus(MasterStatus::kBadFrame);
