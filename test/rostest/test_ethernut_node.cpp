@@ -224,11 +224,6 @@ bool call(const std::string& service, std_srvs::Trigger::Response& res)
   return ok;
 }
 
-bool linkUp(double seconds = 20.0)
-{
-  return watch->waitFor([] { return watch->have_state && watch->state.link == MachineState::LINK_UP; }, seconds);
-}
-
 // Board ready: link up and the session through its handshake (execution READY).
 bool boardReady(double seconds = 20.0)
 {
