@@ -100,6 +100,43 @@ class PtyPair
   int fd_ = -1;
 };
 
+/// The program_requests messages of one dnc_node, in order.
+class EventWatch
+{
+ public:
+  /// Subscribes in \p nh's namespace and waits (up to 20 s) until dnc_node has advertised.
+  explicit EventWatch(ros::NodeHandle nh)
+  {
+    sub_ = nh.subscribe<ProgramRequestEvent>("program_requests", 20,
+                                             [this](const ProgramRequestEvent::ConstPtr& e)
+                                             {
+                                               std::lock_guard<std::mutex> lock(mutex_);
+                                               events_.push_back(*e);
+                                               changed_.notify_all();
+                                             });
+    const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(20);
+    while (sub_.getNumPublishers() == 0 && ros::WallTime::now() < deadline)
+      ros::WallDuration(0.01).sleep();  // a subscriber's connection has no event to wait on
+  }
+  bool connected() const { return sub_.getNumPublishers() > 0; }
+
+  /// The next message not yet taken (within \p seconds).
+  std::optional<ProgramRequestEvent> next(double seconds = 20)
+  {
+    std::unique_lock<std::mutex> lock(mutex_);
+    if (!changed_.wait_for(lock, std::chrono::duration<double>(seconds), [&] { return events_.size() > taken_; }))
+      return std::nullopt;
+    return events_[taken_++];
+  }
+
+ private:
+  ros::Subscriber sub_;
+  std::mutex mutex_;
+  std::condition_variable changed_;
+  std::vector<ProgramRequestEvent> events_;
+  size_t taken_ = 0;
+};
+
 class DncRequestsTest : public ::testing::Test
 {
  protected:
@@ -121,13 +158,6 @@ class DncRequestsTest : public ::testing::Test
     control_ = param("control_link");
     program_dir_ = param("program_dir");
     python_ = param("python_peer");
-    events_sub_ = nh_.subscribe<ProgramRequestEvent>("program_requests", 20,
-                                                     [this](const ProgramRequestEvent::ConstPtr& e)
-                                                     {
-                                                       std::lock_guard<std::mutex> lock(mutex_);
-                                                       events_.push_back(*e);
-                                                       changed_.notify_all();
-                                                     });
     state_sub_ = nh_.subscribe<cnc_bridge::MachineState>("state", 50,
                                                          [this](const cnc_bridge::MachineState::ConstPtr& s)
                                                          {
@@ -135,10 +165,8 @@ class DncRequestsTest : public ::testing::Test
                                                            states_.push_back(*s);
                                                            changed_.notify_all();
                                                          });
-    const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(20);
-    while (events_sub_.getNumPublishers() == 0 && ros::WallTime::now() < deadline)
-      ros::WallDuration(0.01).sleep();  // a subscriber's connection has no event to wait on
-    ASSERT_GT(events_sub_.getNumPublishers(), 0u) << "dnc_node never advertised program_requests";
+    events_ = std::make_unique<EventWatch>(nh_);
+    ASSERT_TRUE(events_->connected()) << "dnc_node never advertised program_requests";
   }
 
   /// The control punches \p program by XModem (python3-xmodem, or lrzsz sx) and exits 0 once done.
@@ -165,24 +193,17 @@ class DncRequestsTest : public ::testing::Test
   }
 
   /// The next program_requests message (within \p seconds).
-  std::optional<ProgramRequestEvent> nextEvent(double seconds = 20)
-  {
-    std::unique_lock<std::mutex> lock(mutex_);
-    if (!changed_.wait_for(lock, std::chrono::duration<double>(seconds), [&] { return events_.size() > taken_; }))
-      return std::nullopt;
-    return events_[taken_++];
-  }
+  std::optional<ProgramRequestEvent> nextEvent(double seconds = 20) { return events_->next(seconds); }
 
   static std::unique_ptr<PtyPair> pair_, text_pair_;
   TempDir dir_{"test_dnc_requests"};
   ros::NodeHandle nh_;
   std::string control_, program_dir_, python_;
-  ros::Subscriber events_sub_, state_sub_;
+  std::unique_ptr<EventWatch> events_;
+  ros::Subscriber state_sub_;
   std::mutex mutex_;
   std::condition_variable changed_;
-  std::vector<ProgramRequestEvent> events_;
   std::vector<cnc_bridge::MachineState> states_;
-  size_t taken_ = 0;
 };
 std::unique_ptr<PtyPair> DncRequestsTest::pair_;
 std::unique_ptr<PtyPair> DncRequestsTest::text_pair_;
@@ -249,7 +270,9 @@ TEST_F(DncRequestsTest, SaveStoresTheNextPunchInProgramDirAndArchiveOnce)
     EXPECT_EQ(history[0].source.direction, "received");
     EXPECT_EQ(readFile(history[0].path), program);
     if (round == 2)
+    {
       EXPECT_NE(event->outcome.find("the archive holds it already"), std::string::npos) << event->outcome;
+    }
   }
 }
 
@@ -299,41 +322,26 @@ TEST_F(DncRequestsTest, RequestDuringATransferIsReportedNotDropped)
 // as text.
 TEST_F(DncRequestsTest, TextPunchIsDripFedTheProgramOrAnsweredAsText)
 {
-  ros::NodeHandle text_nh(param("text_namespace"));
-  std::vector<ProgramRequestEvent> events;
-  std::mutex events_mutex;
-  std::condition_variable arrived;
-  ros::Subscriber sub = text_nh.subscribe<ProgramRequestEvent>("program_requests", 10,
-                                                               [&](const ProgramRequestEvent::ConstPtr& e)
-                                                               {
-                                                                 std::lock_guard<std::mutex> lock(events_mutex);
-                                                                 events.push_back(*e);
-                                                                 arrived.notify_all();
-                                                               });
-  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(20);
-  while (sub.getNumPublishers() == 0 && ros::WallTime::now() < deadline)
-    ros::WallDuration(0.01).sleep();  // a subscriber's connection has no event to wait on
-  auto waitEvents = [&](size_t count)
-  {
-    std::unique_lock<std::mutex> lock(events_mutex);
-    return arrived.wait_for(lock, std::chrono::seconds(20), [&] { return events.size() >= count; });
-  };
+  EventWatch events(ros::NodeHandle(param("text_namespace")));
+  ASSERT_TRUE(events.connected()) << "the text dnc_node never advertised program_requests";
   const std::string program = "%\nO01234 (BRACKET OP2)\nG00 X1. Y2.\nM30\n%\n";
   std::ofstream(param("text_program_dir") + "/O01234.nc") << program;
 
   // This node's words are LOAD and GET (~request_load_words).
   ASSERT_TRUE(text_pair_->write("%\nO00005 (GET O1234)\nM30\n%\n"));
   EXPECT_EQ(text_pair_->readProgram(20), program);
-  ASSERT_TRUE(waitEvents(1));
-  EXPECT_TRUE(events[0].success) << events[0].outcome;
-  EXPECT_EQ(events[0].request, "GET");
-  EXPECT_EQ(events[0].number, 1234u);
+  const auto served = events.next();
+  ASSERT_TRUE(served);
+  EXPECT_TRUE(served->success) << served->outcome;
+  EXPECT_EQ(served->request, "GET");
+  EXPECT_EQ(served->number, 1234u);
 
   ASSERT_TRUE(text_pair_->write("%\r\nO00006 (LOAD O4444)\r\nM30\r\n%\r\n"));
   EXPECT_EQ(text_pair_->readProgram(20), "%\nO00006 (O04444 NOT FOUND IN PROGRAMS)\nM30\n%\n");
-  ASSERT_TRUE(waitEvents(2));
-  EXPECT_FALSE(events[1].success);
-  EXPECT_NE(events[1].outcome.find("answered as text"), std::string::npos) << events[1].outcome;
+  const auto refused = events.next();
+  ASSERT_TRUE(refused);
+  EXPECT_FALSE(refused->success);
+  EXPECT_NE(refused->outcome.find("answered as text"), std::string::npos) << refused->outcome;
 }
 
 int main(int argc, char** argv)

@@ -1,6 +1,6 @@
 // A Transport decorator that damages traffic the way a noisy RS-232 line does: flipped bits,
-// dropped and doubled bytes, whole writes lost (a lost ACK). Reproducible from its random number
-// seed, so a failing transfer can be replayed. Used by the fault-injection tests and by
+// dropped and doubled bytes, whole writes lost (a lost ACK). Reproducible: the same start value of
+// its random generator damages the same bytes, so a failing transfer can be replayed. Used by the fault-injection tests and by
 // sim_haas_serial --faults.
 #pragma once
 
@@ -14,7 +14,7 @@
 
 namespace cnc_bridge
 {
-/// \brief Probabilities of each fault (0..1) and the seed.
+/// \brief Probabilities of each fault (0..1) and the random generator's start value.
 struct FaultSettings
 {
   double flip = 0.0;        ///< per byte: XOR with a random non-zero mask
@@ -22,7 +22,7 @@ struct FaultSettings
   double duplicate = 0.0;   ///< per byte: the byte arrives twice
   double lose_write = 0.0;  ///< per write: everything in it is lost (a lost ACK or a lost packet)
   bool on_read = false;     ///< damage bytes read as well as bytes written
-  uint32_t seed = 1;
+  uint32_t seed = 1;        ///< start value of the random generator (key "seed")
 
   /// \brief Parses "flip=0.001,drop=0.001,dup=0.0005,lose=0.01,read=1,seed=7" (any subset).
   /// \throws ConfigError on an unknown key or a value out of range.
