@@ -1,7 +1,7 @@
 // A Transport decorator that damages traffic the way a noisy RS-232 line does: flipped bits,
 // dropped and doubled bytes, whole writes lost (a lost ACK). Reproducible: the same start value of
-// its random generator damages the same bytes, so a failing transfer can be replayed. Used by the fault-injection tests
-// and by sim_haas_serial --faults.
+// its random generator damages the same bytes, so a failing transfer can be replayed. Used by the
+// fault-injection tests and by sim_haas_serial --faults.
 #pragma once
 
 #include <atomic>
