@@ -1,4 +1,4 @@
-// Atomic file writes and program-directory confinement, on a real temporary directory.
+// Atomic file writes, program-directory confinement, the serial port lock and the job hold.
 #include <gtest/gtest.h>
 
 #include <fcntl.h>
@@ -9,11 +9,14 @@
 #include <chrono>
 #include <cstdlib>
 #include <fstream>
+#include <future>
+#include <optional>
 #include <sstream>
 #include <thread>
 
 #include "cnc_bridge/common/atomic_file.h"
 #include "cnc_bridge/common/error.h"
+#include "cnc_bridge/common/job_hold.h"
 #include "cnc_bridge/common/port_lock.h"
 #include "cnc_bridge/common/program_dir.h"
 
@@ -275,4 +278,130 @@ TEST(PortLock, ACancelledTransferStopsWaiting)
   EXPECT_FALSE(dnc.lockForTransfer(std::chrono::seconds(60), [&] { return ++asked >= 3; }));
   EXPECT_EQ(asked, 3);
   EXPECT_FALSE(poller.wantedElsewhere());  // the wait is withdrawn
+}
+
+// ------------------------------------------------------------------------- JobHold
+namespace
+{
+constexpr auto kPatience = std::chrono::seconds(10);  // a wait that must end ends long before this
+
+// A `cancelled` predicate for a wait on another thread: tells the test when the wait has begun
+// (its first question), and says "cancelled" once the test sets cancel.
+struct CancelProbe
+{
+  std::promise<void> asked;
+  std::atomic<bool> asked_once{false};
+  std::atomic<bool> cancel{false};
+
+  JobHold::Cancelled predicate()
+  {
+    return [this]
+    {
+      if (!asked_once.exchange(true))
+      {
+        asked.set_value();
+      }
+      return cancel.load();
+    };
+  }
+};
+}  // namespace
+
+TEST(JobHold, AResumeWithNothingHeldChangesNothingAndDoesNotEndALaterHold)
+{
+  JobHold hold;
+  EXPECT_FALSE(hold.resume().has_value());
+  EXPECT_EQ(hold.held(), "");
+  hold.hold("program stop M00 at line 4");
+  EXPECT_EQ(hold.held(), "program stop M00 at line 4");
+  // Cancelled at its first question: had the early resume counted, the wait would return true.
+  EXPECT_FALSE(hold.waitForResume([] { return true; }));
+  EXPECT_EQ(hold.held(), "");
+}
+
+TEST(JobHold, AResumeBetweenHoldAndWaitLetsTheWaitReturnAtOnce)
+{
+  JobHold hold(std::chrono::hours(1));  // no poll could end the wait within the test
+  hold.hold("optional stop M01 at line 9");
+  const std::optional<std::string> ended = hold.resume();
+  ASSERT_TRUE(ended.has_value());
+  EXPECT_EQ(*ended, "optional stop M01 at line 9");
+  EXPECT_EQ(hold.held(), "optional stop M01 at line 9");  // until the job's wait takes the resume
+  EXPECT_TRUE(hold.waitForResume([] { return false; }));
+  EXPECT_EQ(hold.held(), "");
+  EXPECT_FALSE(hold.resume().has_value());
+}
+
+TEST(JobHold, AResumeEndsAWaitInProgressWithoutWaitingForAPoll)
+{
+  JobHold hold(std::chrono::hours(1));
+  CancelProbe probe;
+  hold.hold("program stop M00 at line 12");
+  auto waiting = std::async(std::launch::async, [&] { return hold.waitForResume(probe.predicate()); });
+  ASSERT_EQ(probe.asked.get_future().wait_for(kPatience), std::future_status::ready);
+  EXPECT_EQ(hold.held(), "program stop M00 at line 12");
+  EXPECT_EQ(hold.resume().value_or(""), "program stop M00 at line 12");
+  ASSERT_EQ(waiting.wait_for(kPatience), std::future_status::ready);
+  EXPECT_TRUE(waiting.get());
+  EXPECT_EQ(hold.held(), "");
+}
+
+TEST(JobHold, ACancelWhileHeldEndsTheWaitAtTheNextPollAndTheHold)
+{
+  JobHold hold(std::chrono::milliseconds(5));
+  CancelProbe probe;
+  hold.hold("program stop M00 at line 3");
+  auto waiting = std::async(std::launch::async, [&] { return hold.waitForResume(probe.predicate()); });
+  ASSERT_EQ(probe.asked.get_future().wait_for(kPatience), std::future_status::ready);
+  probe.cancel = true;  // no notification: the wait must find it by polling
+  ASSERT_EQ(waiting.wait_for(kPatience), std::future_status::ready);
+  EXPECT_FALSE(waiting.get());
+  EXPECT_EQ(hold.held(), "");
+  EXPECT_FALSE(hold.resume().has_value());  // nothing left to resume
+}
+
+TEST(JobHold, WakeMakesAHeldWaitAskAtOnce)
+{
+  JobHold hold(std::chrono::hours(1));
+  CancelProbe probe;
+  hold.hold("program stop M00 at line 3");
+  auto waiting = std::async(std::launch::async, [&] { return hold.waitForResume(probe.predicate()); });
+  ASSERT_EQ(probe.asked.get_future().wait_for(kPatience), std::future_status::ready);
+  probe.cancel = true;
+  hold.wake();
+  ASSERT_EQ(waiting.wait_for(kPatience), std::future_status::ready);
+  EXPECT_FALSE(waiting.get());
+}
+
+TEST(JobHold, ADwellWaitsItsWholeTime)
+{
+  JobHold hold;
+  const auto start = std::chrono::steady_clock::now();
+  EXPECT_TRUE(hold.waitFor(std::chrono::duration<double>(0.06), [] { return false; }));
+  EXPECT_GE(std::chrono::steady_clock::now() - start, std::chrono::milliseconds(60));
+  EXPECT_TRUE(hold.waitFor(std::chrono::duration<double>(0.0), [] { return true; }));  // nothing to wait
+}
+
+TEST(JobHold, ACancelDuringADwellEndsItEarly)
+{
+  JobHold hold(std::chrono::milliseconds(5));
+  CancelProbe probe;
+  auto waiting = std::async(std::launch::async, [&] { return hold.waitFor(std::chrono::hours(1), probe.predicate()); });
+  ASSERT_EQ(probe.asked.get_future().wait_for(kPatience), std::future_status::ready);
+  probe.cancel = true;
+  ASSERT_EQ(waiting.wait_for(kPatience), std::future_status::ready);
+  EXPECT_FALSE(waiting.get());
+}
+
+TEST(JobHold, AResumeDoesNotShortenADwell)
+{
+  JobHold hold(std::chrono::hours(1));
+  CancelProbe probe;
+  auto waiting = std::async(std::launch::async, [&] { return hold.waitFor(std::chrono::hours(1), probe.predicate()); });
+  ASSERT_EQ(probe.asked.get_future().wait_for(kPatience), std::future_status::ready);
+  EXPECT_FALSE(hold.resume().has_value());  // a dwell is no hold
+  probe.cancel = true;                      // ends the test's dwell
+  hold.wake();
+  ASSERT_EQ(waiting.wait_for(kPatience), std::future_status::ready);
+  EXPECT_FALSE(waiting.get());  // cancelled, not elapsed
 }
