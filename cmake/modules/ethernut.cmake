@@ -3,7 +3,9 @@
 cnc_core_module(cnc_bridge_ethernut
   src/ethernut/protocol.cpp
   src/ethernut/client.cpp
-  src/ethernut/settings.cpp)
+  src/ethernut/settings.cpp
+  src/ethernut/job.cpp)
+target_link_libraries(cnc_bridge_ethernut PUBLIC cnc_bridge_gcode)  # a job's G-code program
 # The simulated board (a peer model, not shipped in the protocol library): sim_ethernut and tests.
 cnc_sim_library(cnc_bridge_ethernut_sim src/sim/ethernut/board.cpp)
 target_link_libraries(cnc_bridge_ethernut_sim PUBLIC cnc_bridge_ethernut)
@@ -12,8 +14,10 @@ target_link_libraries(sim_ethernut cnc_bridge_ethernut_sim)
 cnc_tool(bench_ethernut bench/ethernut/bench_ethernut.cpp)
 target_link_libraries(bench_ethernut cnc_bridge_ethernut)
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
-  cnc_core_gtest(test_ethernut test/unit/test_ethernut_codec.cpp test/unit/test_ethernut_client.cpp)
+  cnc_core_gtest(test_ethernut test/unit/test_ethernut_codec.cpp test/unit/test_ethernut_client.cpp
+                 test/unit/test_ethernut_job.cpp)
   target_link_libraries(test_ethernut cnc_bridge_ethernut_sim)
+  target_compile_definitions(test_ethernut PRIVATE CNC_BRIDGE_FIXTURE_DIR="${PROJECT_SOURCE_DIR}/test/data/gcode")
 endif()
 cnc_fuzz_target(fuzz_ethernut_stream test/fuzz/fuzz_ethernut_stream.cpp)
 if(NOT CNC_BRIDGE_CORE_ONLY)

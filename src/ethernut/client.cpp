@@ -70,6 +70,31 @@ const char* toString(BoardMode mode)
   return "?";
 }
 
+bool parseBoardMode(const std::string& text, BoardMode& mode)
+{
+  for (const BoardMode candidate : {BoardMode::kFile, BoardMode::kGuiControl, BoardMode::kStandalone})
+  {
+    if (text == toString(candidate))
+    {
+      mode = candidate;
+      return true;
+    }
+  }
+  return false;
+}
+
+void addCounters(ClientStats& total, const ClientStats& more)
+{
+  total.coordinates_sent += more.coordinates_sent;
+  total.coordinates_done += more.coordinates_done;
+  total.resends += more.resends;
+  total.keepalive_requests += more.keepalive_requests;
+  total.keepalive_misses += more.keepalive_misses;
+  total.bad_frames += more.bad_frames;
+  total.unexpected_messages += more.unexpected_messages;
+  total.alive_responses += more.alive_responses;
+}
+
 static Opcode modeOpcode(BoardMode mode)
 {
   switch (mode)

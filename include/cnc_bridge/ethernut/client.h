@@ -44,6 +44,9 @@ enum class BoardMode : uint8_t
   kStandalone   ///< (15, 9) the board runs from its own panel and drops TCP clients
 };
 const char* toString(BoardMode mode);
+/// \brief The mode named \p text ("file", "gui-control", "standalone", as toString() writes it).
+/// \returns false for any other text (\p mode unchanged).
+bool parseBoardMode(const std::string& text, BoardMode& mode);
 
 /// One set of coordinates for the board, mm (the board's unit), plus the caller's tag (e.g. the
 /// G-code line it came from), which is not sent.
@@ -108,6 +111,10 @@ struct ClientStats
   double max_link_rtt_ms = 0.0;
   float last_board_error = 0.0f;  ///< last non-zero `error` field from the board
 };
+
+/// \brief Adds the counters of \p more to \p total (not the round-trip times, which are per
+/// connection), e.g. to count across reconnections.
+void addCounters(ClientStats& total, const ClientStats& more);
 
 /// \brief Events from the session, called on the thread that runs Client::run(), without the
 /// client's lock held. Do not call blocking Client commands from them (they would wait for the
