@@ -1,0 +1,174 @@
+// ethernut_node: drives an ethernut board (the qCNC opcode protocol over TCP) from ROS
+// (docs/ethernut_node.md). It keeps the link up (init, mode, keepalive, reconnect), streams jobs
+// from G-code files or point lists through the ~run_job action, carries pause/resume/reset/kill/mode
+// requests, publishes the machine's reported and commanded position as state (the reported one as
+// joint_states/tf), and a preview of each job for rviz before it runs. The protocol and the jobs
+// (coordinates, segments, preview) live in the ROS-free cnc_bridge_ethernut library; the program's
+// stops and dwells wait through JobHold. src/nodes/ethernut_node.cpp: parameters, link, services;
+// src/nodes/ethernut_jobs.cpp: the ~run_job action.
+#pragma once
+
+#include <ros/ros.h>
+#include <std_srvs/Trigger.h>
+
+#include <condition_variable>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+
+#include "cnc_bridge/EthernutSetMode.h"
+#include "cnc_bridge/RunJobAction.h"
+#include "cnc_bridge/common/job_hold.h"
+#include "cnc_bridge/common/program_dir.h"
+#include "cnc_bridge/ethernut/client.h"
+#include "cnc_bridge/ethernut/job.h"
+#include "cnc_bridge/ethernut/settings.h"
+#include "cnc_bridge/gcode/gcode.h"
+#include "cnc_bridge/ros/machine_frame.h"
+#include "cnc_bridge/ros/machine_state_publisher.h"
+#include "cnc_bridge/ros/runtime_switch.h"
+#include "cnc_bridge/ros/single_goal_action_server.h"
+#include "cnc_bridge/transport/backoff.h"
+#include "cnc_bridge/transport/tcp.h"
+
+namespace cnc_bridge
+{
+class EthernutNode : public ethernut::ClientListener
+{
+ public:
+  EthernutNode(ros::NodeHandle nh, ros::NodeHandle pnh);
+  ~EthernutNode() override;
+  EthernutNode(const EthernutNode&) = delete;
+  EthernutNode& operator=(const EthernutNode&) = delete;
+
+ private:
+  struct Session
+  {
+    std::shared_ptr<TcpConnection> link;  // declared first: destroyed after the client
+    std::shared_ptr<ethernut::Client> client;
+  };
+
+  // What the client reported of the segment streaming now (listener thread -> job thread).
+  struct JobProgress
+  {
+    uint64_t done = 0;
+    uint32_t line = 0;
+    uint32_t resends = 0;
+    ethernut::Coordinate last;
+    bool finished = false;
+    ethernut::JobOutcome outcome = ethernut::JobOutcome::kFailed;
+    std::string message;
+  };
+
+  struct Totals
+  {
+    uint64_t done = 0;  // sets acknowledged in the segments before this one
+    uint32_t resends = 0;
+  };
+
+  // Marks the node's one goal as running (a disable then holds it) for the scope of execute().
+  class GoalScope
+  {
+   public:
+    explicit GoalScope(EthernutNode& node);
+    ~GoalScope();
+    GoalScope(const GoalScope&) = delete;
+    GoalScope& operator=(const GoalScope&) = delete;
+
+   private:
+    EthernutNode& node_;
+  };
+
+  // ethernut_node.cpp: parameters, link, client listener, services, diagnostics.
+  void readParameters();
+  void readLinkParameters(const ethernut::Settings& settings);
+  void readJobParameters();
+  void startLink();
+  void connect();
+  void runSession();
+  void disconnect();
+  Session session();
+  std::shared_ptr<ethernut::Client> client(std::string& why);
+
+  void onState(ethernut::SessionState st, ethernut::SessionState previous) override;
+  void onPosition(float x, float y, float z) override;
+  void onCoordinateDone(uint64_t index, const ethernut::Coordinate& c) override;
+  void onResend(uint64_t index, unsigned count) override;
+  void onJobFinished(ethernut::JobOutcome outcome, const std::string& message) override;
+  void onBoardError(float code) override;
+
+  template <typename F>
+  bool command(std_srvs::Trigger::Response& res, const char* what, F f);
+  bool onPause(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
+  bool onResume(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
+  std::string releaseHolds();
+  void onMotionSwitched(bool enabled, const std::string& caller);
+  bool onReset(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
+  bool onKill(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
+  bool onSetMode(EthernutSetMode::Request& req, EthernutSetMode::Response& res);
+  bool leaveStandalone(ethernut::BoardMode mode, EthernutSetMode::Response& res);
+  void protocolDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& status);
+
+  // ethernut_jobs.cpp: the ~run_job action.
+  void execute(const RunJobGoalConstPtr& goal);
+  void abortGoal(RunJobResult& result, const std::string& message);
+  std::shared_ptr<ethernut::Job> loadJob(const RunJobGoal& goal, std::string& program, std::string& refusal);
+  std::shared_ptr<ethernut::Job> loadProgram(const RunJobGoal& goal, std::string& refusal);
+  std::shared_ptr<ethernut::Job> loadPoints(const RunJobGoal& goal, std::string& refusal);
+  void publishPreview(const ethernut::Preview& preview);
+  void runJob(ethernut::Client& c, const std::shared_ptr<ethernut::Job>& job);
+  void finishJob(const JobProgress& p, const std::optional<gcode::ProgramStep>& step, bool cancelled,
+                 const std::string& skipped, RunJobResult& result);
+  bool startSegment(ethernut::Client& c, const std::shared_ptr<ethernut::Job>& job, RunJobFeedback& feedback,
+                    bool& cancelled);
+  void showMotionHold(const std::string& hold, const std::string& ended, bool board_holds, RunJobFeedback& feedback);
+  bool waitForResume(uint64_t resumes, bool& cancelled);
+  JobProgress followSegment(ethernut::Client& c, RunJobFeedback& feedback, uint64_t count, const Totals& totals,
+                            bool& cancelled);
+  void cancelSegment(ethernut::Client& c);
+  bool carryOut(const gcode::ProgramStep& step, RunJobFeedback& feedback, bool& cancelled);
+  bool holdAtStop(const gcode::ProgramStep& step, RunJobFeedback& feedback, bool& cancelled);
+  JobHold::Cancelled goalCancelled(bool& cancelled);
+
+  ros::NodeHandle nh_;
+  ros::NodeHandle pnh_;
+  std::string host_;
+  uint16_t port_ = 6666;
+  Milliseconds connect_timeout_{3000};
+  ethernut::ClientOptions options_;
+  std::string settings_file_;
+  std::unique_ptr<RuntimeSwitch> kill_;
+  std::unique_ptr<RuntimeSwitch> motion_;
+  std::mutex motion_mutex_;  // a segment's start, a disable's pause and ~resume: one at a time
+  std::unique_ptr<ProgramDirectory> program_dir_;
+  std::unique_ptr<ToMachineFrame> to_machine_;
+  gcode::ParserOptions parser_options_;
+  ethernut::G53Policy g53_;
+  int max_preview_points_ = 100000;
+
+  std::unique_ptr<MachineStatePublisher> state_;
+  ros::Publisher path_pub_;
+  ros::Publisher markers_pub_;
+  ros::ServiceServer pause_srv_, resume_srv_, reset_srv_, kill_srv_, mode_srv_;
+  SingleGoalActionServer<RunJobAction> action_;
+
+  std::mutex mutex_;  // session_, standalone_, stopping_, options_.initial_mode
+  std::condition_variable standalone_cv_;
+  Session session_;
+  ethernut::ClientStats earlier_sessions_;  // counters of the connections before session_
+  bool standalone_ = false;                 // the board dropped us in standalone mode: no reconnecting
+  bool stopping_ = false;
+
+  JobHold program_stop_;  // the program's M00/M01/G04 between two segments
+  std::mutex job_mutex_;
+  std::condition_variable job_cv_;
+  JobProgress job_;
+  std::shared_ptr<const ethernut::Job> running_job_;  // execute()'s job, under job_mutex_
+  bool goal_running_ = false;                         // execute() runs a goal, under job_mutex_
+  std::string motion_hold_;                           // "motion disabled by ..." holding the goal, under job_mutex_
+  uint64_t resume_count_ = 0;                         // successful ~resume calls, under job_mutex_
+
+  std::unique_ptr<Reconnector> reconnector_;
+};
+}  // namespace cnc_bridge

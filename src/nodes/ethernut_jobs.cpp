@@ -1,0 +1,551 @@
+// ethernut_node's ~run_job action (include/cnc_bridge/ros/ethernut_node.h): a goal loads an
+// ethernut::Job (refused before anything is sent if it is bad), publishes its preview, then streams
+// it segment by segment, carrying out the program's own steps between two segments
+// (docs/ethernut_node.md).
+#include <nav_msgs/Path.h>
+#include <visualization_msgs/MarkerArray.h>
+
+#include <cmath>
+
+#include "cnc_bridge/ros/ethernut_node.h"
+
+namespace cnc_bridge
+{
+namespace
+{
+// The board's unit is the millimetre (qCNC's coordinates are G-code values; our parser turns
+// inches into mm); messages are in metres.
+constexpr double kMetresPerMm = 0.001;
+
+nav_msgs::Path pathOf(const ethernut::Preview& preview, const std::string& frame)
+{
+  nav_msgs::Path path;
+  path.header.frame_id = frame;
+  path.header.stamp = ros::Time::now();
+  path.poses.reserve(preview.points().size());
+  for (const ethernut::PreviewPoint& point : preview.points())
+  {
+    geometry_msgs::PoseStamped pose;
+    pose.header = path.header;
+    pose.pose.position.x = point.x * kMetresPerMm;
+    pose.pose.position.y = point.y * kMetresPerMm;
+    pose.pose.position.z = point.z * kMetresPerMm;
+    pose.pose.orientation.w = 1.0;
+    path.poses.push_back(pose);
+  }
+  return path;
+}
+
+// The lines of \p path reached by rapid moves (\p rapid) or by feed moves, as one line list.
+visualization_msgs::Marker lineList(const nav_msgs::Path& path, const ethernut::Preview& preview, bool rapid)
+{
+  visualization_msgs::Marker m;
+  m.header = path.header;
+  m.ns = rapid ? "rapid" : "feed";
+  m.id = rapid ? 1 : 0;
+  m.type = visualization_msgs::Marker::LINE_LIST;
+  m.action = visualization_msgs::Marker::ADD;
+  m.pose.orientation.w = 1.0;
+  m.scale.x = rapid ? 0.0003 : 0.0005;  // line width, m
+  // Feeds green, rapids orange: the colours CAM previews use for cutting and positioning.
+  m.color.r = rapid ? 1.0f : 0.1f;
+  m.color.g = rapid ? 0.55f : 0.8f;
+  m.color.b = rapid ? 0.0f : 0.2f;
+  m.color.a = 1.0f;
+  for (size_t i = 1; i < path.poses.size(); ++i)
+  {
+    if (preview.points()[i].rapid == rapid)
+    {
+      m.points.push_back(path.poses[i - 1].pose.position);
+      m.points.push_back(path.poses[i].pose.position);
+    }
+  }
+  return m;
+}
+
+visualization_msgs::MarkerArray markersOf(const nav_msgs::Path& path, const ethernut::Preview& preview)
+{
+  visualization_msgs::MarkerArray array;
+  visualization_msgs::Marker clear;
+  clear.action = visualization_msgs::Marker::DELETEALL;
+  array.markers.push_back(clear);
+  for (const bool rapid : {false, true})
+  {
+    visualization_msgs::Marker lines = lineList(path, preview, rapid);
+    // rviz refuses an empty line list (and shows the display in error); DELETEALL cleared it.
+    if (!lines.points.empty())
+    {
+      array.markers.push_back(lines);
+    }
+  }
+  return array;
+}
+}  // namespace
+
+EthernutNode::GoalScope::GoalScope(EthernutNode& node) : node_(node)
+{
+  std::lock_guard<std::mutex> lock(node_.job_mutex_);
+  node_.goal_running_ = true;
+  node_.motion_hold_.clear();
+}
+
+EthernutNode::GoalScope::~GoalScope()
+{
+  std::lock_guard<std::mutex> lock(node_.job_mutex_);
+  node_.goal_running_ = false;
+  node_.motion_hold_.clear();
+  node_.running_job_.reset();
+}
+
+void EthernutNode::execute(const RunJobGoalConstPtr& goal)
+{
+  RunJobResult result;
+  if (!motion_->enabled())
+  {
+    abortGoal(result, motion_->refusal("job"));  // before anything is loaded or sent
+    return;
+  }
+  std::string why;
+  auto c = client(why);
+  if (!c)
+  {
+    abortGoal(result, why);
+    return;
+  }
+  const GoalScope goal_scope(*this);
+  if (c->state() == ethernut::SessionState::kPaused)
+  {
+    abortGoal(result, "the board is paused (a cancelled job holds its move there): call " + pnh_.resolveName("resume") +
+                          " first");
+    return;
+  }
+  std::string program;
+  const std::shared_ptr<ethernut::Job> job = loadJob(*goal, program, why);
+  if (!job)
+  {
+    abortGoal(result, why);
+    return;
+  }
+  publishPreview(job->preview());
+  state_->update(
+      [&](MachineState& m)
+      {
+        m.program = program;
+        m.block = 0;
+      });
+  ROS_INFO_STREAM("run_job: streaming " << job->coordinateCount() << " coordinates of " << program);
+  {
+    std::lock_guard<std::mutex> lock(job_mutex_);
+    running_job_ = job;
+  }
+  runJob(*c, job);
+}
+
+void EthernutNode::abortGoal(RunJobResult& result, const std::string& message)
+{
+  result.success = false;
+  result.message = message;
+  ROS_WARN_STREAM("run_job: " << message);
+  action_.setAborted(result, message);
+}
+
+// Loads the goal's job (its count and preview before the first set is sent, a bad program refused
+// before it runs); \returns nothing, with \p refusal, if it is refused.
+std::shared_ptr<ethernut::Job> EthernutNode::loadJob(const RunJobGoal& goal, std::string& program, std::string& refusal)
+{
+  program = goal.file.empty() ? "(points)" : goal.file;
+  return goal.file.empty() ? loadPoints(goal, refusal) : loadProgram(goal, refusal);
+}
+
+std::shared_ptr<ethernut::Job> EthernutNode::loadProgram(const RunJobGoal& goal, std::string& refusal)
+{
+  const std::string machine_frame = state_->frame("machine");
+  if (!goal.header.frame_id.empty() && goal.header.frame_id != machine_frame)
+  {
+    // A program's coordinates are its own work coordinates, streamed as they are.
+    refusal = "job refused: a G-code job is streamed in the program's coordinates; header.frame_id (\"" +
+              goal.header.frame_id + "\") applies to points only and must be empty or \"" + machine_frame + "\"";
+    return nullptr;
+  }
+  if (!program_dir_)
+  {
+    refusal = "G-code jobs need ~program_dir (" + pnh_.resolveName("program_dir") + ")";
+    return nullptr;
+  }
+  try
+  {
+    std::shared_ptr<ethernut::Job> job = ethernut::Job::fromProgram(
+        program_dir_->resolveExisting(goal.file), parser_options_, g53_, static_cast<size_t>(max_preview_points_));
+    if (!job->skippedSummary().empty())
+    {
+      ROS_WARN_STREAM("run_job: " << goal.file << ": " << job->skippedSummary() << " (" << g53_.setting << ": skip)");
+    }
+    return job;
+  }
+  catch (const Error& e)
+  {
+    refusal = std::string("job refused: ") + e.what();
+    return nullptr;
+  }
+}
+
+// Points in another frame (the cell's world, a robot's base) into the machine frame, mm.
+std::shared_ptr<ethernut::Job> EthernutNode::loadPoints(const RunJobGoal& goal, std::string& refusal)
+{
+  if (goal.points.empty())
+  {
+    refusal = "job refused: neither a file nor points given";
+    return nullptr;
+  }
+  ToMachineFrame::Transform transform;
+  try
+  {
+    transform = to_machine_->lookup(state_->frame("machine"), goal.header.frame_id, "points");
+  }
+  catch (const Error& e)
+  {
+    refusal = std::string("job refused: ") + e.what();
+    return nullptr;
+  }
+  std::vector<ethernut::Coordinate> points;
+  for (const auto& given : goal.points)
+  {
+    const geometry_msgs::Point p = ToMachineFrame::apply(transform, given);
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+    {
+      refusal = "job refused: point " + std::to_string(points.size()) + " is not finite";
+      return nullptr;
+    }
+    ethernut::Coordinate c;
+    c.x = static_cast<float>(p.x / kMetresPerMm);
+    c.y = static_cast<float>(p.y / kMetresPerMm);
+    c.z = static_cast<float>(p.z / kMetresPerMm);
+    points.push_back(c);
+  }
+  return ethernut::Job::fromPoints(std::move(points), static_cast<size_t>(max_preview_points_));
+}
+
+void EthernutNode::publishPreview(const ethernut::Preview& preview)
+{
+  const nav_msgs::Path path = pathOf(preview, state_->frame("machine"));
+  path_pub_.publish(path);
+  markers_pub_.publish(markersOf(path, preview));
+}
+
+// The job runs as segments: the moves up to the program's next own step (stop, dwell, spindle,
+// coolant, tool change), which the node carries out between two segments, or its end.
+void EthernutNode::runJob(ethernut::Client& c, const std::shared_ptr<ethernut::Job>& job)
+{
+  RunJobResult result;
+  RunJobFeedback feedback;
+  const uint64_t count = job->coordinateCount();
+  feedback.coordinate_count = static_cast<uint32_t>(count);
+  Totals totals;
+  bool cancelled = false;
+  const auto preempted = [&](const std::string& message)
+  {
+    result.coordinates_done = static_cast<uint32_t>(totals.done);
+    result.coordinate_count = static_cast<uint32_t>(count);
+    result.resends = totals.resends;
+    result.message = message;
+    action_.setPreempted(result, result.message);
+  };
+  for (;;)
+  {
+    {
+      std::lock_guard<std::mutex> lock(job_mutex_);
+      job_ = JobProgress();
+    }
+    job->startSegment();
+    try
+    {
+      if (!startSegment(c, job, feedback, cancelled))
+      {
+        preempted("cancelled while held (" + feedback.event + ")");
+        return;
+      }
+    }
+    catch (const Error& e)
+    {
+      abortGoal(result, e.what());
+      return;
+    }
+    const JobProgress p = followSegment(c, feedback, count, totals, cancelled);
+    totals.done += p.done;
+    totals.resends += p.resends;
+    const auto step = p.outcome == ethernut::JobOutcome::kCompleted ? job->stepAtEnd() : std::nullopt;
+    if (!step || step->kind == gcode::ProgramStep::Kind::kEnd)
+    {
+      result.coordinates_done = static_cast<uint32_t>(totals.done);
+      result.coordinate_count = static_cast<uint32_t>(count);
+      result.resends = totals.resends;
+      finishJob(p, step, cancelled, job->skippedSummary(), result);
+      return;
+    }
+    if (!carryOut(*step, feedback, cancelled))
+    {
+      const std::string message = "cancelled at the " + step->describe();
+      state_->update(
+          [&](MachineState& m)
+          {
+            m.execution = MachineState::EXECUTION_STOPPED;
+            m.message = message;
+          });
+      preempted(message);
+      return;
+    }
+  }
+}
+
+// Ends the goal after its last segment: \p step is the program's end (M02/M30) if it has one.
+void EthernutNode::finishJob(const JobProgress& p, const std::optional<gcode::ProgramStep>& step, bool cancelled,
+                             const std::string& skipped, RunJobResult& result)
+{
+  result.message = step ? step->describe() + ": the job ends here; nothing after it was sent" : p.message;
+  if (!skipped.empty())
+  {
+    result.message += "; " + skipped;
+  }
+  result.success = p.outcome == ethernut::JobOutcome::kCompleted;
+  if (step)
+  {
+    state_->update([&](MachineState& m) { m.message = result.message; });
+  }
+  if (cancelled)
+  {
+    action_.setPreempted(result, result.message);
+  }
+  else if (result.success)
+  {
+    action_.setSucceeded(result, result.message);
+  }
+  else
+  {
+    abortGoal(result, result.message);
+  }
+}
+
+// Starts the next segment of moves once motion is allowed: enabled, and no hold left from a
+// disable during this job (~resume, refused while motion is disabled, ends the hold). The check
+// and the start are one step under motion_mutex_, so a disable either comes before (the job is
+// held here) or after (it pauses the board). \returns false if the goal was cancelled while held.
+// \throws Error from Client::startJob.
+bool EthernutNode::startSegment(ethernut::Client& c, const std::shared_ptr<ethernut::Job>& job,
+                                RunJobFeedback& feedback, bool& cancelled)
+{
+  for (;;)
+  {
+    std::string hold;
+    uint64_t resumes = 0;
+    {
+      std::lock_guard<std::mutex> gate(motion_mutex_);
+      {
+        std::lock_guard<std::mutex> lock(job_mutex_);
+        hold = motion_hold_;
+        resumes = resume_count_;
+      }
+      if (motion_->enabled() && hold.empty())
+      {
+        // The source keeps the job alive for as long as the client holds it.
+        c.startJob([job](ethernut::Coordinate& out) { return job->next(out); });
+        return true;
+      }
+    }
+    if (hold.empty())
+    {
+      hold = "motion disabled";  // onMotionSwitched has not run yet; it names the caller
+    }
+    showMotionHold(hold, "", false, feedback);
+    state_->update([&](MachineState& m) { m.execution = MachineState::EXECUTION_PAUSED; });
+    if (!waitForResume(resumes, cancelled))
+    {
+      return false;
+    }
+    showMotionHold("", hold, false, feedback);
+    state_->update([&](MachineState& m) { m.execution = MachineState::EXECUTION_ACTIVE; });
+  }
+}
+
+// Feedback (and state's message) for a motion hold that began (\p hold) or ended (\p hold empty,
+// \p ended the hold that ended).
+void EthernutNode::showMotionHold(const std::string& hold, const std::string& ended, bool board_holds,
+                                  RunJobFeedback& feedback)
+{
+  feedback.paused = !hold.empty();
+  if (hold.empty())
+  {
+    feedback.event = "resumed after the hold (" + ended + ")";
+  }
+  else
+  {
+    feedback.event = hold + ": " +
+                     (board_holds ? "the board holds the move in progress" : "the job holds before its next move") +
+                     "; enable motion with " + pnh_.resolveName("set_motion_enabled") +
+                     " (std_srvs/SetBool, data: true), then call " + pnh_.resolveName("resume");
+  }
+  ROS_INFO_STREAM("run_job: " << feedback.event);
+  state_->update([&](MachineState& m) { m.message = feedback.event; });
+  action_.publishFeedback(feedback);
+}
+
+// Waits until ~resume succeeds after \p resumes resumes; false if the goal is cancelled first.
+bool EthernutNode::waitForResume(uint64_t resumes, bool& cancelled)
+{
+  const JobHold::Cancelled goal_cancelled = goalCancelled(cancelled);
+  std::unique_lock<std::mutex> lock(job_mutex_);
+  while (resume_count_ == resumes)
+  {
+    lock.unlock();
+    if (goal_cancelled())
+    {
+      return false;
+    }
+    lock.lock();
+    // Cancel comes without a notification here: look again at least every 20 ms.
+    job_cv_.wait_for(lock, Milliseconds(20));
+  }
+  return true;
+}
+
+// Streams one segment to its end, with feedback at most every 50 ms (a fast board acknowledges
+// thousands of sets per second); a cancel holds the board, then stops streaming.
+EthernutNode::JobProgress EthernutNode::followSegment(ethernut::Client& c, RunJobFeedback& feedback, uint64_t count,
+                                                      const Totals& totals, bool& cancelled)
+{
+  uint64_t reported = UINT64_MAX;
+  std::string shown_hold;  // the motion hold the last feedback showed
+  for (;;)
+  {
+    std::unique_lock<std::mutex> lock(job_mutex_);
+    job_cv_.wait_for(lock, std::chrono::milliseconds(50), [&] { return job_.finished; });
+    const JobProgress p = job_;
+    const std::string hold = motion_hold_;
+    lock.unlock();
+    if (hold != shown_hold && !p.finished)
+    {
+      showMotionHold(hold, shown_hold, true, feedback);
+      shown_hold = hold;
+    }
+    if (p.done != reported && (p.done > 0 || totals.done == 0))
+    {
+      reported = p.done;
+      const uint64_t done = totals.done + p.done;
+      feedback.line = p.line;
+      feedback.coordinate_index = done > 0 ? static_cast<uint32_t>(done - 1) : 0;
+      feedback.percent = count > 0 ? static_cast<float>(100.0 * done / count) : 100.0f;
+      feedback.resends = totals.resends + p.resends;
+      feedback.commanded.x = p.last.x * kMetresPerMm;
+      feedback.commanded.y = p.last.y * kMetresPerMm;
+      feedback.commanded.z = p.last.z * kMetresPerMm;
+      feedback.paused = !shown_hold.empty();
+      action_.publishFeedback(feedback);
+      state_->update([&](MachineState& m) { m.block = p.line; });
+    }
+    if (p.finished)
+    {
+      return p;
+    }
+    if (!cancelled && (action_.isPreemptRequested() || !ros::ok()))
+    {
+      cancelled = true;
+      cancelSegment(c);
+    }
+  }
+}
+
+// Cancel: hold the board first (it stops the move in progress), then stop streaming.
+void EthernutNode::cancelSegment(ethernut::Client& c)
+{
+  try
+  {
+    c.pause();
+  }
+  catch (const Error& e)
+  {
+    ROS_WARN_STREAM("run_job: pause on cancel failed: " << e.what());
+  }
+  c.cancelJob();
+}
+
+// Carries out one of the program's own steps between two segments (every set before it is
+// acknowledged: the board has moved there). \returns false if the goal was cancelled meanwhile.
+bool EthernutNode::carryOut(const gcode::ProgramStep& step, RunJobFeedback& feedback, bool& cancelled)
+{
+  using Kind = gcode::ProgramStep::Kind;
+  feedback.event = step.describe();
+  feedback.line = step.line;
+  switch (step.kind)
+  {
+    case Kind::kToolChange:
+      state_->update([&](MachineState& m) { m.tool = step.tool; });
+      break;
+    case Kind::kSpindle:
+      state_->update([&](MachineState& m)
+                     { m.spindle_speed = step.spindle == gcode::Spindle::kOff ? 0.0 : step.spindle_rpm; });
+      break;
+    case Kind::kCoolant:
+      state_->update([&](MachineState& m)
+                     { m.coolant = step.coolant ? MachineState::COOLANT_ON : MachineState::COOLANT_OFF; });
+      break;
+    case Kind::kDwell:
+      state_->update([&](MachineState& m) { m.message = step.describe(); });
+      action_.publishFeedback(feedback);
+      return program_stop_.waitFor(std::chrono::duration<double>(step.dwell_s), goalCancelled(cancelled));
+    case Kind::kOptionalStop:
+      // Read at each M01, as an operator flips the control's OPT STOP switch during a job.
+      if (!pnh_.param("optional_stop", true))
+      {
+        feedback.event += " passed (" + pnh_.resolveName("optional_stop") + " false)";
+        action_.publishFeedback(feedback);
+        return true;
+      }
+      return holdAtStop(step, feedback, cancelled);
+    case Kind::kStop:
+      return holdAtStop(step, feedback, cancelled);
+    default:
+      break;
+  }
+  action_.publishFeedback(feedback);
+  return true;
+}
+
+// Holds the job at the program's M00 (or M01) until ~resume; nothing is sent meanwhile.
+bool EthernutNode::holdAtStop(const gcode::ProgramStep& step, RunJobFeedback& feedback, bool& cancelled)
+{
+  feedback.event += ": waiting for " + pnh_.resolveName("resume");
+  feedback.paused = true;
+  program_stop_.hold(step.describe());  // before the feedback: a resume sent in answer finds it
+  state_->update(
+      [&](MachineState& m)
+      {
+        m.execution = MachineState::EXECUTION_PAUSED;
+        m.block = step.line;
+        m.message = feedback.event;
+      });
+  ROS_INFO_STREAM("run_job: " << feedback.event);
+  action_.publishFeedback(feedback);
+  const bool resumed = program_stop_.waitForResume(goalCancelled(cancelled));
+  feedback.paused = false;
+  if (resumed)
+  {
+    state_->update(
+        [&](MachineState& m)
+        {
+          m.execution = MachineState::EXECUTION_ACTIVE;
+          m.message = "resumed after the " + step.describe();
+        });
+  }
+  return resumed;
+}
+
+// The goal's cancel (or ROS shutting down) for a wait; sets \p cancelled when it says so.
+JobHold::Cancelled EthernutNode::goalCancelled(bool& cancelled)
+{
+  return [this, &cancelled]
+  {
+    const bool now = action_.isPreemptRequested() || !ros::ok();
+    cancelled = cancelled || now;
+    return now;
+  };
+}
+}  // namespace cnc_bridge
