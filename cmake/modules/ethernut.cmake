@@ -4,7 +4,8 @@ cnc_core_module(cnc_bridge_ethernut
   src/ethernut/protocol.cpp
   src/ethernut/client.cpp
   src/ethernut/settings.cpp
-  src/ethernut/job.cpp)
+  src/ethernut/job.cpp
+  src/ethernut/motion_hold.cpp)
 target_link_libraries(cnc_bridge_ethernut PUBLIC cnc_bridge_gcode)  # a job's G-code program
 # The simulated board (a peer model, not shipped in the protocol library): sim_ethernut and tests.
 cnc_sim_library(cnc_bridge_ethernut_sim src/sim/ethernut/board.cpp)

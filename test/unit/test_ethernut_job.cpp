@@ -1,12 +1,16 @@
 // Jobs for the ethernut board (job.h): a program's coordinates, segments and steps, the G53
-// policy, the count and the preview's bounded thinning; on the fixtures of test/data/gcode and on
-// short programs written here.
+// policy, the count and the preview's bounded thinning, on the fixtures of test/data/gcode and on
+// short programs written here; and the hold a motion disable puts on a running job (motion_hold.h).
 #include <gtest/gtest.h>
 
+#include <atomic>
+#include <chrono>
+#include <future>
 #include <sstream>
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/ethernut/job.h"
+#include "cnc_bridge/ethernut/motion_hold.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::ethernut;
@@ -232,4 +236,81 @@ TEST(EthernutPreview, AManyPointJobStaysWithinTheLimitAndKeepsAtLeastHalfOfIt)
       EXPECT_LT(preview.points()[i - 1].x, preview.points()[i].x);  // in order
     }
   }
+}
+
+// ------------------------------------------------------------------------- MotionHold
+namespace
+{
+constexpr auto kPatience = std::chrono::seconds(10);  // a wait that must end ends long before this
+
+// A `cancelled` predicate for a wait on another thread: says when the wait has begun (its first
+// question), and "cancelled" once the test sets cancel.
+struct CancelProbe
+{
+  std::promise<void> asked;
+  std::atomic<bool> asked_once{false};
+  std::atomic<bool> cancel{false};
+
+  JobHold::Cancelled predicate()
+  {
+    return [this]
+    {
+      if (!asked_once.exchange(true))
+      {
+        asked.set_value();
+      }
+      return cancel.load();
+    };
+  }
+};
+}  // namespace
+
+TEST(EthernutMotionHold, ADisableHoldsOnlyARunningGoalAndTheFirstDisableNamesIt)
+{
+  MotionHold hold;
+  EXPECT_FALSE(hold.disable("motion disabled by /cell"));  // no goal runs
+  EXPECT_EQ(hold.hold(), "");
+  hold.setGoalRunning(true);
+  EXPECT_TRUE(hold.disable("motion disabled by /operator"));
+  EXPECT_TRUE(hold.disable("motion disabled by /cell"));
+  EXPECT_EQ(hold.hold(), "motion disabled by /operator");
+  EXPECT_EQ(hold.resume(), "motion disabled by /operator");
+  EXPECT_EQ(hold.hold(), "");
+  EXPECT_EQ(hold.resume(), "");  // nothing left, the resume counted all the same
+  EXPECT_EQ(hold.snapshot().resumes, 2u);
+  EXPECT_TRUE(hold.disable("motion disabled by /cell"));
+  hold.setGoalRunning(false);
+  EXPECT_EQ(hold.hold(), "");  // the goal ended: no hold outlives it
+}
+
+TEST(EthernutMotionHold, OnlyAResumeAfterTheSnapshotEndsTheWait)
+{
+  MotionHold hold(std::chrono::hours(1));
+  const MotionHold::Snapshot before = hold.snapshot();
+  hold.resume();
+  EXPECT_TRUE(hold.waitForResume(before.resumes, [] { return false; }));
+  const MotionHold::Snapshot after = hold.snapshot();
+  EXPECT_FALSE(hold.waitForResume(after.resumes, [] { return true; }));  // the earlier resume does not count
+}
+
+TEST(EthernutMotionHold, AResumeWakesAWaitingJobAndACancelEndsTheWait)
+{
+  MotionHold hold(std::chrono::hours(1));  // only the resume's notification can end this wait
+  hold.setGoalRunning(true);
+  hold.disable("motion disabled by /operator");
+  CancelProbe probe;
+  const uint64_t resumes = hold.snapshot().resumes;
+  auto waiting = std::async(std::launch::async, [&] { return hold.waitForResume(resumes, probe.predicate()); });
+  ASSERT_EQ(probe.asked.get_future().wait_for(kPatience), std::future_status::ready);
+  EXPECT_EQ(hold.resume(), "motion disabled by /operator");
+  ASSERT_EQ(waiting.wait_for(kPatience), std::future_status::ready);
+  EXPECT_TRUE(waiting.get());
+
+  MotionHold polled(std::chrono::milliseconds(5));
+  CancelProbe cancel;
+  auto cancelled = std::async(std::launch::async, [&] { return polled.waitForResume(0, cancel.predicate()); });
+  ASSERT_EQ(cancel.asked.get_future().wait_for(kPatience), std::future_status::ready);
+  cancel.cancel = true;  // no notification: the wait finds it by polling
+  ASSERT_EQ(cancelled.wait_for(kPatience), std::future_status::ready);
+  EXPECT_FALSE(cancelled.get());
 }
