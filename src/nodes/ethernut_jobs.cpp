@@ -2,98 +2,21 @@
 // ethernut::Job (refused before anything is sent if it is bad), publishes its preview, then streams
 // it segment by segment, carrying out the program's own steps between two segments
 // (docs/ethernut_node.md).
-#include <nav_msgs/Path.h>
-#include <visualization_msgs/MarkerArray.h>
-
 #include <cmath>
 
 #include "cnc_bridge/ros/ethernut_node.h"
 
 namespace cnc_bridge
 {
-namespace
-{
-// The board's unit is the millimetre (qCNC's coordinates are G-code values; our parser turns
-// inches into mm); messages are in metres.
-constexpr double kMetresPerMm = 0.001;
-
-nav_msgs::Path pathOf(const ethernut::Preview& preview, const std::string& frame)
-{
-  nav_msgs::Path path;
-  path.header.frame_id = frame;
-  path.header.stamp = ros::Time::now();
-  path.poses.reserve(preview.points().size());
-  for (const ethernut::PreviewPoint& point : preview.points())
-  {
-    geometry_msgs::PoseStamped pose;
-    pose.header = path.header;
-    pose.pose.position.x = point.x * kMetresPerMm;
-    pose.pose.position.y = point.y * kMetresPerMm;
-    pose.pose.position.z = point.z * kMetresPerMm;
-    pose.pose.orientation.w = 1.0;
-    path.poses.push_back(pose);
-  }
-  return path;
-}
-
-// The lines of \p path reached by rapid moves (\p rapid) or by feed moves, as one line list.
-visualization_msgs::Marker lineList(const nav_msgs::Path& path, const ethernut::Preview& preview, bool rapid)
-{
-  visualization_msgs::Marker m;
-  m.header = path.header;
-  m.ns = rapid ? "rapid" : "feed";
-  m.id = rapid ? 1 : 0;
-  m.type = visualization_msgs::Marker::LINE_LIST;
-  m.action = visualization_msgs::Marker::ADD;
-  m.pose.orientation.w = 1.0;
-  m.scale.x = rapid ? 0.0003 : 0.0005;  // line width, m
-  // Feeds green, rapids orange: the colours CAM previews use for cutting and positioning.
-  m.color.r = rapid ? 1.0f : 0.1f;
-  m.color.g = rapid ? 0.55f : 0.8f;
-  m.color.b = rapid ? 0.0f : 0.2f;
-  m.color.a = 1.0f;
-  for (size_t i = 1; i < path.poses.size(); ++i)
-  {
-    if (preview.points()[i].rapid == rapid)
-    {
-      m.points.push_back(path.poses[i - 1].pose.position);
-      m.points.push_back(path.poses[i].pose.position);
-    }
-  }
-  return m;
-}
-
-visualization_msgs::MarkerArray markersOf(const nav_msgs::Path& path, const ethernut::Preview& preview)
-{
-  visualization_msgs::MarkerArray array;
-  visualization_msgs::Marker clear;
-  clear.action = visualization_msgs::Marker::DELETEALL;
-  array.markers.push_back(clear);
-  for (const bool rapid : {false, true})
-  {
-    visualization_msgs::Marker lines = lineList(path, preview, rapid);
-    // rviz refuses an empty line list (and shows the display in error); DELETEALL cleared it.
-    if (!lines.points.empty())
-    {
-      array.markers.push_back(lines);
-    }
-  }
-  return array;
-}
-}  // namespace
-
 EthernutNode::GoalScope::GoalScope(EthernutNode& node) : node_(node)
 {
-  std::lock_guard<std::mutex> lock(node_.job_mutex_);
-  node_.goal_running_ = true;
-  node_.motion_hold_.clear();
+  node_.motion_hold_.setGoalRunning(true);
 }
 
 EthernutNode::GoalScope::~GoalScope()
 {
+  node_.motion_hold_.setGoalRunning(false);
   std::lock_guard<std::mutex> lock(node_.job_mutex_);
-  node_.goal_running_ = false;
-  node_.motion_hold_.clear();
   node_.running_job_.reset();
 }
 
@@ -225,13 +148,6 @@ std::shared_ptr<ethernut::Job> EthernutNode::loadPoints(const RunJobGoal& goal, 
   return ethernut::Job::fromPoints(std::move(points), static_cast<size_t>(max_preview_points_));
 }
 
-void EthernutNode::publishPreview(const ethernut::Preview& preview)
-{
-  const nav_msgs::Path path = pathOf(preview, state_->frame("machine"));
-  path_pub_.publish(path);
-  markers_pub_.publish(markersOf(path, preview));
-}
-
 // The job runs as segments: the moves up to the program's next own step (stop, dwell, spindle,
 // coolant, tool change), which the node carries out between two segments, or its end.
 void EthernutNode::runJob(ethernut::Client& c, const std::shared_ptr<ethernut::Job>& job)
@@ -339,11 +255,9 @@ bool EthernutNode::startSegment(ethernut::Client& c, const std::shared_ptr<ether
     uint64_t resumes = 0;
     {
       std::lock_guard<std::mutex> gate(motion_mutex_);
-      {
-        std::lock_guard<std::mutex> lock(job_mutex_);
-        hold = motion_hold_;
-        resumes = resume_count_;
-      }
+      const ethernut::MotionHold::Snapshot now = motion_hold_.snapshot();
+      hold = now.hold;
+      resumes = now.resumes;
       if (motion_->enabled() && hold.empty())
       {
         // The source keeps the job alive for as long as the client holds it.
@@ -357,7 +271,7 @@ bool EthernutNode::startSegment(ethernut::Client& c, const std::shared_ptr<ether
     }
     showMotionHold(hold, "", false, feedback);
     state_->update([&](MachineState& m) { m.execution = MachineState::EXECUTION_PAUSED; });
-    if (!waitForResume(resumes, cancelled))
+    if (!motion_hold_.waitForResume(resumes, goalCancelled(cancelled)))
     {
       return false;
     }
@@ -388,25 +302,6 @@ void EthernutNode::showMotionHold(const std::string& hold, const std::string& en
   action_.publishFeedback(feedback);
 }
 
-// Waits until ~resume succeeds after \p resumes resumes; false if the goal is cancelled first.
-bool EthernutNode::waitForResume(uint64_t resumes, bool& cancelled)
-{
-  const JobHold::Cancelled goal_cancelled = goalCancelled(cancelled);
-  std::unique_lock<std::mutex> lock(job_mutex_);
-  while (resume_count_ == resumes)
-  {
-    lock.unlock();
-    if (goal_cancelled())
-    {
-      return false;
-    }
-    lock.lock();
-    // Cancel comes without a notification here: look again at least every 20 ms.
-    job_cv_.wait_for(lock, Milliseconds(20));
-  }
-  return true;
-}
-
 // Streams one segment to its end, with feedback at most every 50 ms (a fast board acknowledges
 // thousands of sets per second); a cancel holds the board, then stops streaming.
 EthernutNode::JobProgress EthernutNode::followSegment(ethernut::Client& c, RunJobFeedback& feedback, uint64_t count,
@@ -419,8 +314,8 @@ EthernutNode::JobProgress EthernutNode::followSegment(ethernut::Client& c, RunJo
     std::unique_lock<std::mutex> lock(job_mutex_);
     job_cv_.wait_for(lock, std::chrono::milliseconds(50), [&] { return job_.finished; });
     const JobProgress p = job_;
-    const std::string hold = motion_hold_;
     lock.unlock();
+    const std::string hold = motion_hold_.hold();
     if (hold != shown_hold && !p.finished)
     {
       showMotionHold(hold, shown_hold, true, feedback);

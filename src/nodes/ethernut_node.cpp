@@ -1,5 +1,6 @@
 // ethernut_node (include/cnc_bridge/ros/ethernut_node.h): parameters, the link to the board, the
-// client's events as state, the services and diagnostics. The ~run_job action: ethernut_jobs.cpp.
+// job preview as ROS messages and diagnostics. The client's events and the services:
+// ethernut_services.cpp; the ~run_job action: ethernut_jobs.cpp.
 #include "cnc_bridge/ros/ethernut_node.h"
 
 #include <nav_msgs/Path.h>
@@ -15,43 +16,70 @@ namespace cnc_bridge
 {
 namespace
 {
-// The board's unit is the millimetre; messages are in metres.
-constexpr double kMetresPerMm = 0.001;
-
-uint8_t stateMode(ethernut::BoardMode mode)
+nav_msgs::Path pathOf(const ethernut::Preview& preview, const std::string& frame)
 {
-  switch (mode)
+  nav_msgs::Path path;
+  path.header.frame_id = frame;
+  path.header.stamp = ros::Time::now();
+  path.poses.reserve(preview.points().size());
+  for (const ethernut::PreviewPoint& point : preview.points())
   {
-    case ethernut::BoardMode::kFile:
-      return MachineState::MODE_DNC;  // the program is fed over the link while it runs
-    case ethernut::BoardMode::kGuiControl:
-      return MachineState::MODE_MANUAL;  // coordinates come from the host's controls
-    case ethernut::BoardMode::kStandalone:
-      return MachineState::MODE_AUTO;  // the board runs on its own
-    default:
-      return MachineState::MODE_UNKNOWN;
+    geometry_msgs::PoseStamped pose;
+    pose.header = path.header;
+    pose.pose.position.x = point.x * EthernutNode::kMetresPerMm;
+    pose.pose.position.y = point.y * EthernutNode::kMetresPerMm;
+    pose.pose.position.z = point.z * EthernutNode::kMetresPerMm;
+    pose.pose.orientation.w = 1.0;
+    path.poses.push_back(pose);
   }
+  return path;
 }
 
-uint8_t stateExecution(ethernut::SessionState st, bool job_active)
+// The lines of \p path reached by rapid moves (\p rapid) or by feed moves, as one line list.
+visualization_msgs::Marker lineList(const nav_msgs::Path& path, const ethernut::Preview& preview, bool rapid)
 {
-  switch (st)
+  visualization_msgs::Marker m;
+  m.header = path.header;
+  m.ns = rapid ? "rapid" : "feed";
+  m.id = rapid ? 1 : 0;
+  m.type = visualization_msgs::Marker::LINE_LIST;
+  m.action = visualization_msgs::Marker::ADD;
+  m.pose.orientation.w = 1.0;
+  m.scale.x = rapid ? 0.0003 : 0.0005;  // line width, m
+  // Feeds green, rapids orange: the colours CAM previews use for cutting and positioning.
+  m.color.r = rapid ? 1.0f : 0.1f;
+  m.color.g = rapid ? 0.55f : 0.8f;
+  m.color.b = rapid ? 0.0f : 0.2f;
+  m.color.a = 1.0f;
+  for (size_t i = 1; i < path.poses.size(); ++i)
   {
-    case ethernut::SessionState::kSending:
-    case ethernut::SessionState::kWaitingReady:
-      return MachineState::EXECUTION_ACTIVE;
-    case ethernut::SessionState::kReadyToSend:
-      return job_active ? MachineState::EXECUTION_ACTIVE : MachineState::EXECUTION_READY;
-    case ethernut::SessionState::kConnected:
-      return MachineState::EXECUTION_READY;
-    case ethernut::SessionState::kPaused:
-      return MachineState::EXECUTION_PAUSED;
-    case ethernut::SessionState::kKilled:
-      return MachineState::EXECUTION_STOPPED;
-    default:
-      return MachineState::EXECUTION_UNKNOWN;
+    if (preview.points()[i].rapid == rapid)
+    {
+      m.points.push_back(path.poses[i - 1].pose.position);
+      m.points.push_back(path.poses[i].pose.position);
+    }
   }
+  return m;
 }
+
+visualization_msgs::MarkerArray markersOf(const nav_msgs::Path& path, const ethernut::Preview& preview)
+{
+  visualization_msgs::MarkerArray array;
+  visualization_msgs::Marker clear;
+  clear.action = visualization_msgs::Marker::DELETEALL;
+  array.markers.push_back(clear);
+  for (const bool rapid : {false, true})
+  {
+    visualization_msgs::Marker lines = lineList(path, preview, rapid);
+    // rviz refuses an empty line list (and shows the display in error); DELETEALL cleared it.
+    if (!lines.points.empty())
+    {
+      array.markers.push_back(lines);
+    }
+  }
+  return array;
+}
+
 }  // namespace
 
 EthernutNode::EthernutNode(ros::NodeHandle nh, ros::NodeHandle pnh)
@@ -284,284 +312,12 @@ std::shared_ptr<ethernut::Client> EthernutNode::client(std::string& why)
   return s.client;
 }
 
-// ------------------------------------------------------------------------- listener (run() thread)
-void EthernutNode::onState(ethernut::SessionState st, ethernut::SessionState /*previous*/)
+// ------------------------------------------------------------------------- preview, diagnostics
+void EthernutNode::publishPreview(const ethernut::Preview& preview)
 {
-  const Session s = session();
-  const ethernut::BoardMode mode = s.client ? s.client->mode() : ethernut::BoardMode::kUnknown;
-  const bool job_active = s.client && s.client->jobActive();
-  state_->update(
-      [&](MachineState& m)
-      {
-        m.mode = stateMode(mode);
-        m.execution = stateExecution(st, job_active);
-        if (st == ethernut::SessionState::kKilled)
-        {
-          m.message = "killed";
-        }
-        if (st == ethernut::SessionState::kStandalone)
-        {
-          m.mode = MachineState::MODE_AUTO;
-          m.message = "board in standalone mode (call ~set_mode to reconnect)";
-        }
-      });
-}
-
-void EthernutNode::onPosition(float x, float y, float z)
-{
-  // Status-4 messages are the machine's reported position, mm.
-  state_->setPosition(x * kMetresPerMm, y * kMetresPerMm, z * kMetresPerMm);
-}
-
-void EthernutNode::onCoordinateDone(uint64_t index, const ethernut::Coordinate& c)
-{
-  {
-    std::lock_guard<std::mutex> lock(job_mutex_);
-    job_.done = index + 1;
-    job_.line = c.tag;
-    job_.last = c;
-  }
-  // The set the board acknowledged (NEXT) is the commanded position; status-4 reports are where
-  // the machine is.
-  state_->setCommandedPosition(c.x * kMetresPerMm, c.y * kMetresPerMm, c.z * kMetresPerMm);
-}
-
-void EthernutNode::onResend(uint64_t /*index*/, unsigned /*count*/)
-{
-  std::lock_guard<std::mutex> lock(job_mutex_);
-  ++job_.resends;
-}
-
-void EthernutNode::onJobFinished(ethernut::JobOutcome outcome, const std::string& message)
-{
-  bool segment_continues = false;
-  {
-    std::lock_guard<std::mutex> lock(job_mutex_);
-    job_.finished = true;
-    job_.outcome = outcome;
-    job_.message = message;
-    segment_continues = running_job_ && running_job_->segmentContinues();
-  }
-  job_cv_.notify_all();
-  if (outcome == ethernut::JobOutcome::kCompleted && segment_continues)
-  {
-    return;  // the program goes on after one of its own steps: the job runs on
-  }
-  // A job cancelled by ~run_job's cancel leaves the board paused (the held move): say so.
-  const Session s = session();
-  const bool paused = s.client && s.client->state() == ethernut::SessionState::kPaused;
-  state_->update(
-      [&](MachineState& m)
-      {
-        m.execution = paused ? MachineState::EXECUTION_PAUSED
-                             : (outcome == ethernut::JobOutcome::kCompleted ? MachineState::EXECUTION_READY
-                                                                            : MachineState::EXECUTION_STOPPED);
-        m.message = message;
-      });
-}
-
-void EthernutNode::onBoardError(float code)
-{
-  state_->update([&](MachineState& m) { m.message = "board error code " + std::to_string(static_cast<int>(code)); });
-}
-
-// ------------------------------------------------------------------------- services
-template <typename F>
-bool EthernutNode::command(std_srvs::Trigger::Response& res, const char* what, F f)
-{
-  std::string why;
-  auto c = client(why);
-  if (!c)
-  {
-    res.success = false;
-    res.message = why;
-    return true;
-  }
-  try
-  {
-    f(*c);
-    res.success = true;
-    res.message = what;
-  }
-  catch (const Error& e)
-  {
-    res.success = false;
-    res.message = e.what();
-  }
-  return true;
-}
-
-bool EthernutNode::onPause(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigger::Response& res)
-{
-  return command(res, "paused", [](ethernut::Client& c) { c.pause(); });
-}
-
-// ~resume: lets a held move go on (the board paused by ~pause, a cancel or a disable), a job on
-// after the program's M00/M01 or after a disable; refused while motion is disabled.
-bool EthernutNode::onResume(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigger::Response& res)
-{
-  std::lock_guard<std::mutex> gate(motion_mutex_);
-  if (!motion_->enabled())
-  {
-    res.success = false;
-    res.message = motion_->refusal("resume");
-    return true;
-  }
-  const std::string held = releaseHolds();
-  std::string why;
-  const auto c = client(why);
-  if (held.empty() || (c && c->state() == ethernut::SessionState::kPaused))
-  {
-    command(res, "resumed", [](ethernut::Client& board) { board.resume(); });
-    if (!res.success)
-    {
-      return true;
-    }
-  }
-  if (!held.empty())
-  {
-    res.success = true;
-    res.message = "resumed after " + held;
-  }
-  return true;
-}
-
-// Ends the job's holds (the program's stop, a disable's hold); \returns what they were, "" for none.
-std::string EthernutNode::releaseHolds()
-{
-  std::string held;
-  if (const std::optional<std::string> stop = program_stop_.resume())
-  {
-    held = "the " + *stop;  // the board itself was never paused at a program stop
-  }
-  {
-    std::lock_guard<std::mutex> lock(job_mutex_);
-    if (!motion_hold_.empty())
-    {
-      held += (held.empty() ? "the hold (" : " and the hold (") + motion_hold_ + ")";
-      motion_hold_.clear();
-    }
-    ++resume_count_;
-  }
-  job_cv_.notify_all();
-  return held;
-}
-
-// ~set_motion_enabled: disabling pauses a running job (the board holds the move in progress,
-// as for a cancel) and holds the goal until motion is enabled again and ~resume is called.
-void EthernutNode::onMotionSwitched(bool enabled, const std::string& caller)
-{
-  std::string what = std::string("motion ") + (enabled ? "enabled" : "disabled") + " by " + caller;
-  std::lock_guard<std::mutex> gate(motion_mutex_);
-  bool running = false;
-  {
-    std::lock_guard<std::mutex> lock(job_mutex_);
-    running = goal_running_;
-    if (!enabled && running && motion_hold_.empty())
-    {
-      motion_hold_ = what;
-    }
-    if (enabled && !motion_hold_.empty())
-    {
-      what += "; the job stays held until " + pnh_.resolveName("resume");  // enabling alone moves nothing
-    }
-  }
-  job_cv_.notify_all();
-  state_->update([&](MachineState& m) { m.message = what; });
-  if (enabled || !running)
-  {
-    return;
-  }
-  std::string why;
-  const auto c = client(why);
-  if (!c || !c->jobActive())
-  {
-    return;  // between two segments of the job, or not connected: nothing streams
-  }
-  try
-  {
-    c->pause();
-  }
-  catch (const Error& e)
-  {
-    // The board did not confirm the pause: stop streaming at least (the job then ends).
-    ROS_ERROR_STREAM("run_job: pause on disable failed (" << e.what() << "): streaming stopped");
-    c->cancelJob();
-  }
-}
-
-bool EthernutNode::onReset(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigger::Response& res)
-{
-  return command(res, "reset: job cancelled, board cleared to 0/0/0", [](ethernut::Client& c) { c.reset(); });
-}
-
-bool EthernutNode::onKill(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigger::Response& res)
-{
-  if (!kill_->enabled())
-  {
-    res.success = false;
-    res.message = kill_->refusal("kill") + " (or PROG_CNCkill|1 in ~settings_file)";
-    return true;
-  }
-  return command(res, "killed: the board stopped and dropped the link", [](ethernut::Client& c) { c.kill(); });
-}
-
-bool EthernutNode::onSetMode(EthernutSetMode::Request& req, EthernutSetMode::Response& res)
-{
-  ethernut::BoardMode mode = ethernut::BoardMode::kUnknown;
-  if (!ethernut::parseBoardMode(req.mode, mode))
-  {
-    res.success = false;
-    res.message = "unknown mode '" + req.mode + "' (file, gui-control or standalone)";
-    return true;
-  }
-  if (leaveStandalone(mode, res))
-  {
-    return true;
-  }
-  std::string why;
-  auto c = client(why);
-  if (!c)
-  {
-    res.success = false;
-    res.message = why;
-    return true;
-  }
-  try
-  {
-    c->setMode(mode);
-    res.success = true;
-    res.message = std::string("mode ") + ethernut::toString(mode);
-    state_->update([&](MachineState& m) { m.mode = stateMode(mode); });
-  }
-  catch (const Error& e)
-  {
-    res.success = false;
-    res.message = e.what();
-  }
-  return true;
-}
-
-// Makes \p mode the mode of the next connection; while the board is in standalone mode (and the
-// node not connected), lets the node reconnect in it. \returns true if that answered the request.
-bool EthernutNode::leaveStandalone(ethernut::BoardMode mode, EthernutSetMode::Response& res)
-{
-  std::lock_guard<std::mutex> lock(mutex_);
-  options_.initial_mode = mode;  // also the mode after the next reconnection
-  if (!standalone_)
-  {
-    return false;
-  }
-  res.success = true;
-  if (mode == ethernut::BoardMode::kStandalone)
-  {
-    res.message = "already in standalone mode";
-    return true;
-  }
-  standalone_ = false;
-  standalone_cv_.notify_all();
-  res.message = std::string("reconnecting in ") + ethernut::toString(mode) + " mode";
-  return true;
+  const nav_msgs::Path path = pathOf(preview, state_->frame("machine"));
+  path_pub_.publish(path);
+  markers_pub_.publish(markersOf(path, preview));
 }
 
 void EthernutNode::protocolDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& status)

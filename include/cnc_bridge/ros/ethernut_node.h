@@ -4,7 +4,8 @@
 // requests, publishes the machine's reported and commanded position as state (the reported one as
 // joint_states/tf), and a preview of each job for rviz before it runs. The protocol and the jobs
 // (coordinates, segments, preview) live in the ROS-free cnc_bridge_ethernut library; the program's
-// stops and dwells wait through JobHold. src/nodes/ethernut_node.cpp: parameters, link, services;
+// stops and dwells wait through JobHold. src/nodes/ethernut_node.cpp: parameters, link, preview,
+// diagnostics; src/nodes/ethernut_services.cpp: the client's events and the services;
 // src/nodes/ethernut_jobs.cpp: the ~run_job action.
 #pragma once
 
@@ -23,6 +24,7 @@
 #include "cnc_bridge/common/program_dir.h"
 #include "cnc_bridge/ethernut/client.h"
 #include "cnc_bridge/ethernut/job.h"
+#include "cnc_bridge/ethernut/motion_hold.h"
 #include "cnc_bridge/ethernut/settings.h"
 #include "cnc_bridge/gcode/gcode.h"
 #include "cnc_bridge/ros/machine_frame.h"
@@ -37,6 +39,10 @@ namespace cnc_bridge
 class EthernutNode : public ethernut::ClientListener
 {
  public:
+  // The board's unit is the millimetre (qCNC's coordinates are G-code values; our parser turns
+  // inches into mm); messages are in metres.
+  static constexpr double kMetresPerMm = 0.001;
+
   EthernutNode(ros::NodeHandle nh, ros::NodeHandle pnh);
   ~EthernutNode() override;
   EthernutNode(const EthernutNode&) = delete;
@@ -80,7 +86,7 @@ class EthernutNode : public ethernut::ClientListener
     EthernutNode& node_;
   };
 
-  // ethernut_node.cpp: parameters, link, client listener, services, diagnostics.
+  // ethernut_node.cpp: parameters, link, preview, diagnostics.
   void readParameters();
   void readLinkParameters(const ethernut::Settings& settings);
   void readJobParameters();
@@ -91,6 +97,10 @@ class EthernutNode : public ethernut::ClientListener
   Session session();
   std::shared_ptr<ethernut::Client> client(std::string& why);
 
+  void publishPreview(const ethernut::Preview& preview);
+  void protocolDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& status);
+
+  // ethernut_services.cpp: the client's events (its run() thread) and the services.
   void onState(ethernut::SessionState st, ethernut::SessionState previous) override;
   void onPosition(float x, float y, float z) override;
   void onCoordinateDone(uint64_t index, const ethernut::Coordinate& c) override;
@@ -108,7 +118,6 @@ class EthernutNode : public ethernut::ClientListener
   bool onKill(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   bool onSetMode(EthernutSetMode::Request& req, EthernutSetMode::Response& res);
   bool leaveStandalone(ethernut::BoardMode mode, EthernutSetMode::Response& res);
-  void protocolDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& status);
 
   // ethernut_jobs.cpp: the ~run_job action.
   void execute(const RunJobGoalConstPtr& goal);
@@ -116,14 +125,12 @@ class EthernutNode : public ethernut::ClientListener
   std::shared_ptr<ethernut::Job> loadJob(const RunJobGoal& goal, std::string& program, std::string& refusal);
   std::shared_ptr<ethernut::Job> loadProgram(const RunJobGoal& goal, std::string& refusal);
   std::shared_ptr<ethernut::Job> loadPoints(const RunJobGoal& goal, std::string& refusal);
-  void publishPreview(const ethernut::Preview& preview);
   void runJob(ethernut::Client& c, const std::shared_ptr<ethernut::Job>& job);
   void finishJob(const JobProgress& p, const std::optional<gcode::ProgramStep>& step, bool cancelled,
                  const std::string& skipped, RunJobResult& result);
   bool startSegment(ethernut::Client& c, const std::shared_ptr<ethernut::Job>& job, RunJobFeedback& feedback,
                     bool& cancelled);
   void showMotionHold(const std::string& hold, const std::string& ended, bool board_holds, RunJobFeedback& feedback);
-  bool waitForResume(uint64_t resumes, bool& cancelled);
   JobProgress followSegment(ethernut::Client& c, RunJobFeedback& feedback, uint64_t count, const Totals& totals,
                             bool& cancelled);
   void cancelSegment(ethernut::Client& c);
@@ -165,9 +172,7 @@ class EthernutNode : public ethernut::ClientListener
   std::condition_variable job_cv_;
   JobProgress job_;
   std::shared_ptr<const ethernut::Job> running_job_;  // execute()'s job, under job_mutex_
-  bool goal_running_ = false;                         // execute() runs a goal, under job_mutex_
-  std::string motion_hold_;                           // "motion disabled by ..." holding the goal, under job_mutex_
-  uint64_t resume_count_ = 0;                         // successful ~resume calls, under job_mutex_
+  ethernut::MotionHold motion_hold_;                  // a disable holding the running goal until ~resume
 
   std::unique_ptr<Reconnector> reconnector_;
 };
