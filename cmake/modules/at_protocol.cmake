@@ -1,14 +1,16 @@
 # at_protocol: the '@'-terminated controller protocol with 1 ms setpoint streaming
 # (docs/protocols/at_protocol.md).
-# Core library (codec, sequencing rules, trajectory planner, sender thread), its unit tests, the
-# controller simulator, the streaming benchmark tool, the fuzz target, and at_controller_node.
+# Core library (codec, sequencing rules, trajectory planner, sender thread, the controller session),
+# its unit tests, the controller simulator, the streaming benchmark tool, the fuzz target, and
+# at_controller_node.
 cnc_core_module(cnc_bridge_at_protocol
   src/at_protocol/codec.cpp
   src/at_protocol/sequencer.cpp
   src/at_protocol/planner.cpp
   src/at_protocol/program_path.cpp
   src/at_protocol/sender.cpp
-  src/at_protocol/deadman.cpp)
+  src/at_protocol/deadman.cpp
+  src/at_protocol/controller_session.cpp)
 target_link_libraries(cnc_bridge_at_protocol PUBLIC cnc_bridge_gcode)
 
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
@@ -19,7 +21,8 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
     test/unit/test_at_program_path.cpp
     test/unit/test_at_sender_realtime.cpp
     test/unit/test_at_sender.cpp
-    test/unit/test_at_deadman.cpp)
+    test/unit/test_at_deadman.cpp
+    test/unit/test_at_controller_session.cpp)
   target_link_libraries(test_at_protocol cnc_bridge_at_protocol)
 endif()
 
