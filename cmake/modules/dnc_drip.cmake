@@ -1,6 +1,6 @@
 # DNC drip-feed and program backup (docs/protocols/drip_feed.md): the streaming sender, the backup receiver, the
 # simulated control (sim_haas_serial drip / punch), their tests, and their part of dnc_node and
-# cnc_dnc. Included after dnc.cmake (XModem), whose targets it extends when they exist.
+# cnc_dnc. Included after xmodem.cmake, whose targets it extends when they exist.
 cnc_core_module(cnc_bridge_drip
   src/dnc/dnc_codes.cpp
   src/dnc/nc_program.cpp
@@ -36,7 +36,7 @@ cnc_fuzz_target(fuzz_dnc_program test/fuzz/fuzz_dnc_program.cpp)
 cnc_tool(dnc_drip_bench bench/dnc/drip_bench.cpp)
 target_link_libraries(dnc_drip_bench cnc_bridge_dnc_sim)
 
-# dnc_node's drip and backup protocols (dnc.cmake declares the node).
+# dnc_node's drip and backup protocols (xmodem.cmake declares the node).
 if(NOT CNC_BRIDGE_CORE_ONLY AND TARGET dnc_node)
   target_sources(dnc_node PRIVATE src/nodes/dnc_drip_handlers.cpp)
   target_link_libraries(dnc_node cnc_bridge_drip)
@@ -49,7 +49,7 @@ if(NOT CNC_BRIDGE_CORE_ONLY AND CATKIN_ENABLE_TESTING AND TARGET dnc_node)
   add_dependencies(test_dnc_drip dnc_node sim_haas_serial ${PROJECT_NAME}_generate_messages_cpp)
 endif()
 
-# cnc_dnc drip / backup subcommands (dnc.cmake declares the tool).
+# cnc_dnc drip / backup subcommands (xmodem.cmake declares the tool).
 if(TARGET cnc_dnc)
   target_sources(cnc_dnc PRIVATE src/cli/cnc_dnc_drip.cpp)
   target_link_libraries(cnc_dnc cnc_bridge_drip)

@@ -1,4 +1,4 @@
-# dnc module: XModem program transfer (core library cnc_bridge_xmodem, the cnc_dnc tool, the
+# xmodem module: XModem program transfer (core library cnc_bridge_xmodem, the cnc_dnc tool, the
 # sim_haas_serial xmodem mode, dnc_node) and the fault-injection transport its tests use.
 cnc_core_module(cnc_bridge_xmodem
   src/xmodem/packet.cpp
