@@ -1,14 +1,5 @@
-# share module: programs over Ethernet. cnc_bridge_programs (no SMB: program names and numbers,
-# the protected range, the ProgramStore interface and the local store), used by every wire;
-# cnc_bridge_share (the SMB store on Samba's libsmbclient); their tests and fuzz target.
-cnc_core_module(cnc_bridge_programs
-  src/programs/program_name.cpp
-  src/programs/program_store.cpp
-  src/programs/archive.cpp
-  src/programs/program_request.cpp
-  src/programs/fan_out.cpp
-  src/programs/daily_time.cpp)
-
+# share module: programs over Ethernet. cnc_bridge_share (the SMB store on Samba's libsmbclient,
+# on cnc_bridge_programs of programs.cmake), its tests, its part of cnc_dnc, and share_node.
 find_path(SMBCLIENT_INCLUDE_DIR libsmbclient.h PATH_SUFFIXES samba-4.0)
 find_library(SMBCLIENT_LIBRARY smbclient)
 if(NOT SMBCLIENT_INCLUDE_DIR OR NOT SMBCLIENT_LIBRARY)
@@ -19,19 +10,11 @@ target_include_directories(cnc_bridge_share PRIVATE ${SMBCLIENT_INCLUDE_DIR})
 target_link_libraries(cnc_bridge_share PUBLIC cnc_bridge_programs ${SMBCLIENT_LIBRARY})
 
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
-  cnc_core_gtest(test_program_name test/unit/test_program_name.cpp test/unit/test_program_archive.cpp
-  test/unit/test_program_request.cpp test/unit/test_fan_out.cpp test/unit/test_daily_time.cpp)
-  target_link_libraries(test_program_name cnc_bridge_programs)
   # Against a real Samba server (smbd started by the test on a free loopback port).
   cnc_core_gtest(test_smb_store test/unit/test_smb_store.cpp)
   target_link_libraries(test_smb_store cnc_bridge_share)
   target_compile_definitions(test_smb_store PRIVATE
                              SERVED_SHARE_CONF="${PROJECT_SOURCE_DIR}/config/share/served_share.smb.conf")
-endif()
-
-cnc_fuzz_target(fuzz_program_name test/fuzz/fuzz_program_name.cpp)
-if(CNC_BRIDGE_FUZZ)
-  target_link_libraries(fuzz_program_name cnc_bridge_programs)
 endif()
 
 # cnc_dnc send/receive --share and cnc_dnc list, and their test against smbd.
@@ -64,9 +47,4 @@ if(NOT CNC_BRIDGE_CORE_ONLY)
     target_compile_definitions(test_share_fan_out PRIVATE SHARE_NODE="$<TARGET_FILE:share_node>")
     add_dependencies(test_share_fan_out share_node ${PROJECT_NAME}_generate_messages_cpp)
   endif()
-endif()
-
-cnc_fuzz_target(fuzz_program_request test/fuzz/fuzz_program_request.cpp)
-if(CNC_BRIDGE_FUZZ)
-  target_link_libraries(fuzz_program_request cnc_bridge_programs)
 endif()
