@@ -10,6 +10,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <condition_variable>
 #include <cstdlib>
 #include <fstream>
@@ -587,4 +588,53 @@ TEST(DripEndToEndCancel, CancelMidStreamReportsWhereAndTheLinkIsReusable)
   std::lock_guard<std::mutex> lock(received_mutex);
   EXPECT_NE(received.find("%\n(RESTART AT LINE 392)\n"), std::string::npos);
   EXPECT_EQ("N400 M30\n%\n", received.substr(received.size() - 11));
+}
+
+// A program whose end leaves the control's buffer above its high mark: the control answers its
+// own XOFF once it has executed down to the low mark, before it takes the next program. Left at
+// DC3, the next feed (drip_wait_for_dc1 off) would start held and wait for good.
+TEST(DripControl, AnXoffStandingAtTheEndOfAProgramIsAnsweredBeforeTheNextOne)
+{
+  sim::SimulatedLine line(1e6);  // the whole program reaches the control in one read
+  StopSignal stop;
+  sim::DripControlOptions control;
+  control.buffer_size = 256;
+  control.high_mark = 192;
+  control.low_mark = 64;
+  control.execution_cps = 400;  // the last 150 characters take about 0.4 s
+  control.line_cps = 0;         // the line itself carries characters at its rate
+  std::string program = "%\n";
+  for (int n = 1; program.size() < 220; ++n)
+  {
+    program += "N" + std::to_string(n) + " G1 X1.\n";
+  }
+  program += "%\n";
+  ASSERT_LT(program.size(), control.buffer_size);
+  std::atomic<bool> returned{false};
+  sim::DripControlStats stats;
+  std::thread control_thread(
+      [&]
+      {
+        stats = sim::runDripControl(line.control(), control, stop, nullptr);
+        returned = true;
+      });
+  line.host().write(reinterpret_cast<const uint8_t*>(program.data()), program.size());
+  std::string from_control;
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (!returned && std::chrono::steady_clock::now() < deadline)
+  {
+    uint8_t buffer[16];
+    const size_t n = line.host().read(buffer, sizeof(buffer), Milliseconds(20));
+    from_control.append(reinterpret_cast<const char*>(buffer), n);
+  }
+  stop.stop();
+  control_thread.join();
+  uint8_t rest[16];
+  const size_t n = line.host().read(rest, sizeof(rest), Milliseconds(0));
+  from_control.append(reinterpret_cast<const char*>(rest), n);
+
+  ASSERT_TRUE(returned) << "the control did not end the program within 10 s";
+  EXPECT_TRUE(stats.program_complete);
+  EXPECT_EQ(1u, stats.xoff_events);
+  EXPECT_EQ(std::string({static_cast<char>(kDc3), static_cast<char>(kDc1)}), from_control);
 }

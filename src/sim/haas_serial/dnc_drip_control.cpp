@@ -149,8 +149,11 @@ DripControlStats runDripControl(Transport& link, const DripControlOptions& optio
       link.writeByte(code(dnc::kDc1));
     }
     // The program ends with the end of block after its closing '%' (LF, or CR alone: then the
-    // line falls quiet): take that too, so the next program starts clean.
-    if (stats.program_complete && options.stop_at_end &&
+    // line falls quiet): take that too, so the next program starts clean. An XOFF still standing
+    // is answered first, once the buffer has drained to the low mark: a host that kept the DC3 as
+    // the last word from the control would start its next program held, waiting for a DC1 that
+    // a control with an empty buffer never has reason to send.
+    if (stats.program_complete && options.stop_at_end && !xoff &&
         (last_char == '\n' || now - completed_at > std::chrono::milliseconds(50)))
     {
       break;

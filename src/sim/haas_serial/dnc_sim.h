@@ -42,7 +42,7 @@ struct DripControlOptions
   double line_cps = 0;
   size_t allowance = 10;           ///< characters the control takes after its XOFF without alarm
   bool seven_e1 = false;           ///< send DC1/DC3 with the even-parity bit set, mask it on input
-  bool stop_at_end = true;         ///< return after the second '%'
+  bool stop_at_end = true;         ///< return after the second '%' and its EOB, any XOFF answered
   bool send_dc1_at_start = false;  ///< send DC1 ("reader start") once ready, as a Fanuc in DNC mode does
   /// Run the receiving thread at real-time priority (SCHED_FIFO) when the system allows it, so the
   /// modelled UART keeps up with the line on a loaded machine. Ignored (the normal priority kept)
