@@ -4,6 +4,7 @@
 
 #include <array>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "cnc_bridge/gcode/gcode.h"
@@ -139,6 +140,9 @@ struct Arc
 };
 double sweepBetween(double a0, double a1, bool cw, bool closed);
 
+// "G92.1" for 921: G codes are kept in tenths.
+std::string gName(int tenths);
+
 // Cutter compensation between blocks: the last compensated move is held back until the next
 // one shows which way the path turns (an outside corner gets an arc of the tool radius round the
 // programmed corner, an inside one moves the end to where the two offset paths cross).
@@ -160,6 +164,20 @@ struct Parser::Comp
   std::vector<Move> queued;   // Z-only moves after the held one
 };
 
+// The modal groups of the G codes this parser reads: one code of each per block (LinuxCNC's G-code
+// reference, "Modal Groups"; the G92 family counts as one group here).
+enum class ModalGroup : uint8_t
+{
+  kMotion,      // G00 G01 G02 G03 G80 and the canned cycles
+  kPlane,       // G17 G18 G19
+  kUnits,       // G20 G21
+  kDistance,    // G90 G91
+  kRetract,     // G98 G99
+  kCutterComp,  // G40 G41 G42
+  kPathMode,    // G61 G64 G187
+  kG92,         // G92 G92.1 G92.2 G92.3
+};
+
 // The working state of one block while it is applied; committed when the block is done.
 struct Parser::Step
 {
@@ -175,6 +193,10 @@ struct Parser::Step
   uint32_t non_modal_column = 0;
   bool comp_changed = false;  // G40/G41/G42 in this block
   bool q_used = false;        // Q taken by this block's G64 (LinuxCNC naive CAM tolerance)
+  bool l_used = false;        // L taken by this block's canned cycle or subprogram call
+  uint8_t groups_seen = 0;    // bit per ModalGroup
+  int comp_code = 0;          // tenths: 400, 410, 420 when G40/G41/G42 is in this block
+  uint32_t comp_column = 0;
 
   double scale() const { return next.units == Units::kInches ? kMmPerInch : 1.0; }
 };

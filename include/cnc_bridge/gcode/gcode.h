@@ -369,8 +369,12 @@ class Parser
   struct Comp;
 
  private:
+  // Applying a block's words (gcode_words.cpp).
   void applyWords(const Scan& scan, Step& step);
-  void finishBlock(const Scan& scan, Step& step, bool l_used);
+  void applyDwell(const Scan& scan, Step& step) const;
+  void applyMotion(const Scan& scan, Step& step);
+  void moveToAxisWords(const Scan& scan, Step& step);
+  void finishBlock(const Scan& scan, Step& step);
   static Move proto(const Step& step, Motion motion);
   static void emitRaw(Step& step, const Move& move);
   void moveStraight(const Scan& scan, Step& step, const Vec3& target);
