@@ -1,5 +1,6 @@
 # Haas Machine Data Collection (docs/protocols/haas_mdc.md): core library, haas_mdc_node, sim_haas_mdc, tests.
-cnc_core_module(cnc_bridge_mdc src/mdc/mdc_protocol.cpp src/mdc/mdc_client.cpp src/mdc/mdc_monitor.cpp)
+cnc_core_module(cnc_bridge_mdc src/mdc/mdc_protocol.cpp src/mdc/mdc_client.cpp src/mdc/mdc_monitor.cpp
+                src/mdc/mdc_readings.cpp)
 # The simulated machine (a peer model, not shipped in the protocol library): sim_haas_mdc and tests.
 cnc_sim_library(cnc_bridge_mdc_sim src/sim/mdc/sim_machine.cpp)
 target_link_libraries(cnc_bridge_mdc_sim PUBLIC cnc_bridge_mdc)
@@ -9,7 +10,7 @@ cnc_tool(bench_mdc_poll bench/mdc/bench_mdc_poll.cpp)
 cnc_fuzz_target(fuzz_mdc_reply test/fuzz/fuzz_mdc_reply.cpp)
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   cnc_core_gtest(test_mdc test/unit/test_mdc_protocol.cpp test/unit/test_mdc_client.cpp test/unit/test_mdc_sim.cpp
-    test/unit/test_mdc_fixtures.cpp)
+    test/unit/test_mdc_fixtures.cpp test/unit/test_mdc_readings.cpp)
   target_link_libraries(test_mdc cnc_bridge_mdc_sim)
   target_compile_definitions(test_mdc PRIVATE MDC_TEST_DATA="${PROJECT_SOURCE_DIR}/test/data/mdc")
 endif()

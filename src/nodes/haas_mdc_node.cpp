@@ -19,6 +19,7 @@
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/port_lock.h"
 #include "cnc_bridge/mdc/mdc_monitor.h"
+#include "cnc_bridge/mdc/mdc_readings.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/ros/params.h"
@@ -31,9 +32,6 @@ namespace cnc_bridge
 {
 namespace
 {
-constexpr double kMetresPerInch = 0.0254;
-constexpr double kMetresPerMillimetre = 0.001;
-
 std::vector<int> intList(const ros::NodeHandle& pnh, const std::string& name, const std::vector<int>& fallback)
 {
   std::vector<int> values = fallback;
@@ -65,30 +63,27 @@ std::vector<std::pair<mdc::Query, Milliseconds>> queryPeriods(const ros::NodeHan
     throw ConfigError(name + " must be a dictionary of query: seconds, e.g. {Q500: 0.25, \"Q600 5021\": 0.1}");
   for (auto& [key, value] : table)
   {
-    double seconds = 0;
     if (value.getType() == XmlRpc::XmlRpcValue::TypeDouble)
-      seconds = static_cast<double>(value);
+      periods.push_back(mdc::queryPeriod(name, key, static_cast<double>(value)));
     else if (value.getType() == XmlRpc::XmlRpcValue::TypeInt)
-      seconds = static_cast<int>(value);
+      periods.push_back(mdc::queryPeriod(name, key, static_cast<int>(value)));
     else
       throw ConfigError(name + "/" + key + " must be a number of seconds");
-    if (!std::isfinite(seconds) || seconds < 0)
-      throw ConfigError(name + "/" + key + " must be 0 (not polled) or a positive number of seconds");
-    mdc::Query query;
-    try
-    {
-      query = mdc::parseQueryKey(key);
-    }
-    catch (const ConfigError& e)
-    {
-      throw ConfigError(name + ": " + e.what());
-    }
-    const auto period = seconds == 0
-                            ? Milliseconds(0)
-                            : std::max(Milliseconds(static_cast<int64_t>(seconds * 1000 + 0.5)), Milliseconds(1));
-    periods.emplace_back(query, period);
   }
   return periods;
+}
+
+uint8_t estopState(mdc::Estop estop)
+{
+  switch (estop)
+  {
+    case mdc::Estop::kOn:
+      return MachineState::ESTOP_ON;
+    case mdc::Estop::kOff:
+      return MachineState::ESTOP_OFF;
+    default:
+      return MachineState::ESTOP_UNKNOWN;
+  }
 }
 }  // namespace
 
@@ -133,49 +128,25 @@ class HaasMdcNode
     pnh.param("max_unanswered", max_unanswered, max_unanswered);
     plan.max_unanswered = static_cast<unsigned>(std::max(0, max_unanswered));
     // ~position_variables: machine position X Y Z (Haas #5021-#5023); [] to not poll positions.
-    position_vars_ = intList(pnh, "position_variables", {5021, 5022, 5023});
+    vars_.position = intList(pnh, "position_variables", {5021, 5022, 5023});
     // ~work_position_variables: work position X Y Z (#5041-#5043) giving the work offset; [] for none.
-    work_vars_ = intList(pnh, "work_position_variables", {5041, 5042, 5043});
+    vars_.work = intList(pnh, "work_position_variables", {5041, 5042, 5043});
     // ~spindle_variable: spindle speed in rpm (#3027); 0 to not poll it.
-    pnh.param("spindle_variable", spindle_var_, 3027);
+    pnh.param("spindle_variable", vars_.spindle, 3027);
     // ~variables: more macro variables polled via Q600 and shown in diagnostics (#100s, counters).
-    extra_vars_ = intList(pnh, "variables", {});
+    vars_.extra = intList(pnh, "variables", {});
     // ~watch_variables: macro variables polled like those and published on `variables` when one
     // changes (a robot's orchestration waits on them: the program sets #500 = 1, the part is ready).
-    watch_ = std::make_unique<mdc::VariableWatch>(intList(pnh, "watch_variables", {}));
+    vars_.watched = intList(pnh, "watch_variables", {});
+    watch_ = std::make_unique<mdc::VariableWatch>(vars_.watched);
     // ~units: linear unit of positions: auto (from G20/G21, #4006), inch or mm.
-    pnh.param<std::string>("units", units_, "auto");
-    if (units_ != "auto" && units_ != "inch" && units_ != "mm")
-    {
-      throw ConfigError(pnh.resolveName("units") + " must be auto, inch or mm, not " + units_);
-    }
+    vars_.units = mdc::parseUnitSetting(pnh.param<std::string>("units", "auto"), pnh.resolveName("units"));
     // ~writable_variables: macro variables ~write_variable may set with the E command; empty
     // (the default) disables writes.
     policy_ = std::make_unique<mdc::WritePolicy>(intList(pnh, "writable_variables", {}),
                                                  pnh.resolveName("writable_variables"));
-    if ((position_vars_.size() != 0 && position_vars_.size() != 3) ||
-        (work_vars_.size() != 0 && work_vars_.size() != 3))
-    {
-      throw ConfigError(pnh.resolveName("position_variables") + " and work_position_variables need 3 entries or none");
-    }
-    const std::vector<const std::vector<int>*> lists{&position_vars_, &work_vars_, &extra_vars_, &watch_->numbers()};
-    for (const auto* list : lists)
-    {
-      for (int variable : *list)
-      {
-        // Each variable once per poll cycle, however many lists name it.
-        if (std::find(plan.variables.begin(), plan.variables.end(), variable) == plan.variables.end())
-          plan.variables.push_back(variable);
-      }
-    }
-    if (spindle_var_ > 0)
-    {
-      plan.variables.push_back(spindle_var_);
-    }
-    if (units_ == "auto" && !position_vars_.empty())
-    {
-      plan.slow_variables.push_back(4006);
-    }
+    vars_.check(pnh.resolveName("position_variables"));
+    vars_.addTo(plan);
     // ~query_periods: per-query periods in s overriding the three above, keyed by the query
     // ("Q500", "Q600 5021"); a query not otherwise polled is added, 0 stops polling one.
     plan.query_periods = queryPeriods(pnh);
@@ -188,11 +159,8 @@ class HaasMdcNode
           if (auto* serial = dynamic_cast<SerialPort*>(&link))
             serial->applySettings();
         });
-    if (!position_vars_.empty() && !work_vars_.empty())
-    {
-      poller_->setWorkOffsetAxes(
-          {{position_vars_[0], work_vars_[0]}, {position_vars_[1], work_vars_[1]}, {position_vars_[2], work_vars_[2]}});
-    }
+    if (const auto axes = vars_.workOffsetAxes(); !axes.empty())
+      poller_->setWorkOffsetAxes(axes);
 
     state_ = std::make_unique<MachineStatePublisher>(nh, pnh, hardware_id_);
     state_->diagnostics().add("mdc", this, &HaasMdcNode::diagnose);
@@ -248,29 +216,11 @@ class HaasMdcNode
     return TcpConnection::connect(host_, tcp_port_, connect_timeout_);
   }
 
-  // The emergency stop as far as Q500 tells it: a status naming it is ON; a status that is no alarm
-  // (idle, running, feed hold, stopped) is OFF, since a Haas in e-stop reports ALARM; an alarm that
-  // does not name it, or a status we do not know, leaves it UNKNOWN.
-  static uint8_t estopFrom(const mdc::MachineStatus& s)
-  {
-    std::string text = s.status_text;
-    std::transform(text.begin(), text.end(), text.begin(), [](unsigned char c) { return std::toupper(c); });
-    if (text.find("ESTOP") != std::string::npos || text.find("E-STOP") != std::string::npos ||
-        text.find("EMERGENCY") != std::string::npos)
-    {
-      return MachineState::ESTOP_ON;
-    }
-    if (s.execution == mdc::Execution::kAlarm || s.execution == mdc::Execution::kUnknown)
-    {
-      return MachineState::ESTOP_UNKNOWN;
-    }
-    return MachineState::ESTOP_OFF;
-  }
-
   // Called by the poller after each reply, under its lock.
   void onStatus(const mdc::MachineStatus& s, const std::vector<mdc::CycleEventData>& events)
   {
     const ros::Time now = ros::Time::now();
+    const mdc::Readings readings = mdc::readingsFrom(s, vars_);
     state_->update(
         [&](MachineState& m)
         {
@@ -282,29 +232,23 @@ class HaasMdcNode
           m.part_count = s.parts.value_or(-1);
           m.tool = s.tool ? static_cast<int32_t>(*s.tool) : -1;
           m.message = s.execution == mdc::Execution::kAlarm ? "Haas status " + s.status_text : "";
-          m.estop = estopFrom(s);
-          if (spindle_var_ > 0 && s.variables.count(spindle_var_))
+          m.estop = estopState(mdc::estopFrom(s));
+          if (readings.spindle_rpm)
+            m.spindle_speed = *readings.spindle_rpm;  // rev/min, the unit of MachineState.spindle_speed
+          // Positions arrive in the control's unit (inch under G20, mm under G21), here in metres.
+          m.position_valid = readings.position_valid;
+          if (readings.position_valid)
           {
-            // #3027 is in rev/min, the unit of MachineState.spindle_speed.
-            m.spindle_speed = s.variables.at(spindle_var_);
+            m.position.x = readings.position[0];
+            m.position.y = readings.position[1];
+            m.position.z = readings.position[2];
           }
-          const double scale = metresPerUnit(s);
-          m.position_valid = false;
-          if (scale > 0 && !position_vars_.empty() && haveAll(s, position_vars_))
+          if (readings.work_offset_valid)
           {
-            // Positions arrive in the control's unit (inch under G20, mm under G21): to metres.
-            m.position_valid = true;
-            m.position.x = s.variables.at(position_vars_[0]) * scale;
-            m.position.y = s.variables.at(position_vars_[1]) * scale;
-            m.position.z = s.variables.at(position_vars_[2]) * scale;
-            if (s.work_offset[0] && s.work_offset[1] && s.work_offset[2])
-            {
-              // Work zero in machine coordinates, taken while the axes stood still (MdcMonitor).
-              m.work_offset_valid = true;
-              m.work_offset.x = *s.work_offset[0] * scale;
-              m.work_offset.y = *s.work_offset[1] * scale;
-              m.work_offset.z = *s.work_offset[2] * scale;
-            }
+            m.work_offset_valid = true;
+            m.work_offset.x = readings.work_offset[0];
+            m.work_offset.y = readings.work_offset[1];
+            m.work_offset.z = readings.work_offset[2];
           }
         });
     {
@@ -342,31 +286,6 @@ class HaasMdcNode
     msg.numbers.assign(watch_->numbers().begin(), watch_->numbers().end());
     msg.values = *values;
     variables_pub_.publish(msg);
-  }
-
-  double metresPerUnit(const mdc::MachineStatus& s) const
-  {
-    if (units_ == "inch")
-      return kMetresPerInch;
-    if (units_ == "mm")
-      return kMetresPerMillimetre;
-    switch (s.units)
-    {
-      case mdc::Units::kInch:
-        return kMetresPerInch;
-      case mdc::Units::kMillimetre:
-        return kMetresPerMillimetre;
-      default:
-        return 0;  // not known yet: no position rather than a wrong one
-    }
-  }
-
-  static bool haveAll(const mdc::MachineStatus& s, const std::vector<int>& vars)
-  {
-    for (int v : vars)
-      if (!s.variables.count(v))
-        return false;
-    return true;
   }
 
   bool readVariable(MdcReadVariable::Request& req, MdcReadVariable::Response& res)
@@ -478,9 +397,7 @@ class HaasMdcNode
   uint16_t tcp_port_ = 0;
   std::string hardware_id_;
   Milliseconds connect_timeout_{3000}, reply_timeout_{1000};
-  std::vector<int> position_vars_, work_vars_, extra_vars_;
-  int spindle_var_ = 3027;
-  std::string units_;
+  mdc::PollVariables vars_;
   std::unique_ptr<mdc::WritePolicy> policy_;
   std::unique_ptr<mdc::VariableWatch> watch_;  // update() and linkLost() under watch_mutex_
   std::mutex watch_mutex_;
