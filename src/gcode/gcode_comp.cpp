@@ -215,11 +215,14 @@ void Parser::joinHeld(Step& st, Comp& comp, bool next_arc, double ncu, double nc
     return;
   }
   // Inside corner: where the offset paths cross, the crossing nearest the corner's offset points.
+  // A held line's offset path is the programmed line moved by the radius: through its offset end
+  // along the programmed direction. For the entry move that is not the way the tool goes (from the
+  // uncompensated start), and rs274 intersects the offset line all the same.
   const Point mid{(comp.end.x + next_start.x) / 2, (comp.end.y + next_start.y) / 2};
   Point candidates[2];
   int n = 0;
-  const Point a0{comp.start.x, comp.start.y};
-  const Point ad{comp.end.x - comp.start.x, comp.end.y - comp.start.y};
+  const Point a0{comp.end.x, comp.end.y};
+  const Point ad{comp.tx, comp.ty};
   const Point b0{next_start.x, next_start.y};
   const Point bd{ntx, nty};
   if (!comp.held_arc && !next_arc)
@@ -253,11 +256,13 @@ void Parser::joinHeld(Step& st, Comp& comp, bool next_arc, double ncu, double nc
       best = candidates[k];
     }
   }
-  // The crossing must lie on the held offset line, not behind its start (a gouge).
+  // The held move, shortened to the crossing, must still go the way it went, not back behind its
+  // start (a gouge; rs274 checks the same, interp_queue.cc).
   if (!comp.held_arc)
   {
-    const double len2 = ad.x * ad.x + ad.y * ad.y;
-    const double t = len2 > 0 ? ((best.x - a0.x) * ad.x + (best.y - a0.y) * ad.y) / len2 : 0.0;
+    const double gx = comp.end.x - comp.start.x, gy = comp.end.y - comp.start.y;
+    const double len2 = gx * gx + gy * gy;
+    const double t = len2 > 0 ? ((best.x - comp.start.x) * gx + (best.y - comp.start.y) * gy) / len2 : 0.0;
     if (t < -1e-9)
     {
       throw ParseError(st.line, 1,

@@ -4,6 +4,7 @@
 // motion (a reference return, a canned cycle, a straight move or an arc). Each step reads the words
 // and the state the earlier steps left; a ParseError anywhere leaves the parser's state as it was
 // (parseLine applies the words on a copy).
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -260,10 +261,19 @@ bool acceptedWithoutEffect(int code)
 
 void applyGCodes(const Scan& scan, Step& st, Dialect dialect)
 {
+  // Beside G00-G03 ("G00 G17 G40 G49 G80 G90", the safe-start line of Fanuc-style posts) G80 adds
+  // nothing: LinuxCNC ignores it (interp_read.cc, read_g), Fanuc and Haas keep it in a group of its
+  // own, and either way the block moves in that mode with no cycle.
+  const bool skip_g80 = std::any_of(scan.g.begin(), scan.g.begin() + scan.g_count,
+                                    [](int g) { return g == 0 || g == 10 || g == 20 || g == 30; });
   for (uint8_t k = 0; k < scan.g_count; ++k)
   {
     const uint32_t column = scan.g_column[k];
     const int code = scan.g[k];
+    if (code == 800 && skip_g80)
+    {
+      continue;
+    }
     const bool known = applyMotionCode(st, code, column, dialect) || applyNonModalCode(st, code, column) ||
                        applyModeCode(st, code, column) || applyCutterCompCode(st, code, column) ||
                        applyPathModeCode(scan, st, code, column) || acceptedWithoutEffect(code);

@@ -606,6 +606,27 @@ TEST(GcodeCam, CycleRefusalsKeepLineColumnAndState)
   EXPECT_NE(e.reason().find("more than"), std::string::npos) << e.reason();
 }
 
+TEST(GcodeCam, G80BesideAMotionCodeIsIgnoredAsLinuxCncDoes)
+{
+  // The safe-start line of Fanuc-style posts: G00 and G80 in one block (one modal group for
+  // LinuxCNC, which ignores the G80; two for Fanuc and Haas). The block rapids, the cycle is over.
+  for (Dialect d : {Dialect::kLinuxCnc, Dialect::kHaas, Dialect::kFanuc})
+  {
+    Parser p(dialect(d));
+    p.parseLine("G0 X0 Y0 Z5");
+    p.parseLine("G81 X1 Y1 R2 Z-1 F100");
+    const Block& b = p.parseLine("N1 G00 G17 G21 G40 G49 G80 G90 X5 Y5");
+    ASSERT_EQ(b.moves.size(), 1u);
+    EXPECT_EQ(b.moves[0].motion, Motion::kRapid);
+    EXPECT_EQ(b.moves[0].cycle, 0);
+    expectNear(b.moves[0].end, {5, 5, 5});
+    EXPECT_EQ(p.state().canned_cycle, 0);
+    EXPECT_EQ(p.parseLine("G80 G01 X6 F100").moves.at(0).motion, Motion::kLinear);
+  }
+  // G80 beside a cycle stays refused: LinuxCNC would drill, Fanuc (one group) would take the last.
+  EXPECT_NE(parseError("G0 Z5\nG80 G81 X1 R2 Z-1 F100\n").reason().find("same modal group"), std::string::npos);
+}
+
 TEST(GcodeCam, SubprogramsM98AndM97WithRepeatsAndADepthLimit)
 {
   const std::string main_part = "G21 G90 G0 X0 Y0 Z5\n";
@@ -748,6 +769,26 @@ TEST(GcodeCam, CutterCompensationOffsetsTheContourWithTheToolTable)
                 .reason()
                 .find("larger than this arc"),
             std::string::npos);
+}
+
+TEST(GcodeCam, CutterCompensationEntryIntoAnInsideCornerEndsOnTheOffsetLine)
+{
+  ParserOptions options;
+  options.tool_table = std::make_shared<ToolTable>(ToolTable::parseYaml("tools:\n  1: {radius: 1}\n", "t.yaml"));
+  // Entry along -X (G41: the tool 1 mm on the -Y side), then a counter-clockwise lead-in arc that
+  // turns left, into the tool's side: the entry ends where the entry line moved by the radius
+  // (Y = 9) meets the arc moved by it (radius 4 about (-5, 10)), as rs274 ends it (-8.8730, 9.0000);
+  // not where the path from the uncompensated start would meet it.
+  const auto moves =
+      parseAll("G0 X0 Y10 Z1\nG1 Z-1 F100\nG41 D1 X-10 Y10\nG3 X-5 Y5 I5 J0\nG1 X20\nG40 X25 Y0\n", options);
+  ASSERT_GE(moves.size(), 3u);
+  expectNear(moves[2].end, {-5 - std::sqrt(15.0), 9, -1}, 1e-9);
+  EXPECT_EQ(moves[2].line, 3u);
+  // With a tool too big for that, the offset line misses the offset arc: refused at the arc.
+  options.tool_table = std::make_shared<ToolTable>(ToolTable::parseYaml("tools:\n  1: {radius: 3}\n", "t.yaml"));
+  const ParseError e = parseErrorWith("G0 X0 Y10 Z1\nG1 Z-1 F100\nG41 D1 X-10 Y10\nG3 X-5 Y5 I5 J0\nG1 X20\n", options);
+  EXPECT_EQ(e.line(), 4u);
+  EXPECT_NE(e.reason().find("do not meet"), std::string::npos) << e.reason();
 }
 
 TEST(GcodeCam, ToolTablesInLinuxCncAndYamlForm)
