@@ -228,13 +228,23 @@ uint64_t putProgram(ProgramStore& store, const std::string& local_path, std::str
   return data.size();
 }
 
+void ProgramStore::readTo(const std::string& name, const StoreSink& sink, const StoreProgress& progress,
+                          const std::atomic<bool>* cancel)
+{
+  const std::string data = read(name, progress, cancel);
+  sink(data.data(), data.size());
+}
+
 uint64_t getProgram(ProgramStore& store, const std::string& name, const std::string& local_path,
                     const StoreProgress& progress, const std::atomic<bool>* cancel)
 {
   AtomicFileWriter writer(local_path);
-  const std::string data = store.read(name, progress, cancel);
-  writer.write(data);
+  // Each chunk goes to the temporary file as it arrives; the writer starts its writeback at once,
+  // so commit()'s fsync has little left to wait for (docs/share_node.md, "cnc_dnc").
+  store.readTo(
+      name, [&](const char* data, size_t size) { writer.write(reinterpret_cast<const uint8_t*>(data), size); },
+      progress, cancel);
   writer.commit();
-  return data.size();
+  return writer.bytesWritten();
 }
 }  // namespace cnc_bridge::programs

@@ -389,15 +389,23 @@ ProgramEntry SmbProgramStore::stat(const std::string& name)
 std::string SmbProgramStore::read(const std::string& name, const programs::StoreProgress& progress,
                                   const std::atomic<bool>* cancel)
 {
+  std::string data;
+  readTo(
+      name, [&data](const char* chunk, size_t size) { data.append(chunk, size); }, progress, cancel);
+  return data;
+}
+
+void SmbProgramStore::readTo(const std::string& name, const programs::StoreSink& sink,
+                             const programs::StoreProgress& progress, const std::atomic<bool>* cancel)
+{
   std::lock_guard<std::recursive_mutex> lock(libraryMutex());
   const uint64_t total = statLocked(name).size;
   SMBCCTX* ctx = context();
   SMBCFILE* file = smbc_getFunctionOpen(ctx)(ctx, url_.pathOf(name).c_str(), O_RDONLY, 0);
   if (file == nullptr)
     fail("opening", name, errno);
-  std::string data;
-  data.reserve(total);
   std::string chunk(kChunk, '\0');
+  uint64_t done = 0;
   try
   {
     for (;;)
@@ -408,9 +416,10 @@ std::string SmbProgramStore::read(const std::string& name, const programs::Store
         fail("reading", name, errno);
       if (n == 0)
         break;
-      data.append(chunk.data(), static_cast<size_t>(n));
+      sink(chunk.data(), static_cast<size_t>(n));
+      done += static_cast<uint64_t>(n);
       if (progress)
-        progress(data.size(), total);
+        progress(done, total);
     }
   }
   catch (...)
@@ -420,9 +429,8 @@ std::string SmbProgramStore::read(const std::string& name, const programs::Store
     throw;
   }
   smbc_getFunctionClose(ctx)(ctx, file);
-  if (data.empty() && progress)
+  if (done == 0 && progress)
     progress(0, 0);
-  return data;
 }
 
 std::string SmbProgramStore::readHead(const std::string& name, size_t bytes)

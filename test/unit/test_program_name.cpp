@@ -1,5 +1,10 @@
-// Program names and numbers, program heads, the protected range and the local program store.
+// Program names and numbers, program heads, the protected range, the local program store, and
+// getProgram()'s download written chunk by chunk.
 #include <gtest/gtest.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <string>
 
 #include "cnc_bridge/programs/program_name.h"
 #include "cnc_bridge/programs/program_store.h"
@@ -104,4 +109,52 @@ TEST(LocalProgramStore, WritesAtomicallyAndLists)
   store.remove("O00001.nc");
   EXPECT_EQ(store.list().size(), 0u);
   EXPECT_THROW(store.write("../escape.nc", "x"), ConfigError);
+}
+
+namespace
+{
+/// A store that hands a download over in chunks (as the SMB store does) and fails after \p chunks.
+class ChunkedStore : public LocalProgramStore
+{
+ public:
+  ChunkedStore(const std::string& root, int chunks) : LocalProgramStore(root), fail_after_(chunks) {}
+  void readTo(const std::string& name, const StoreSink& sink, const StoreProgress& progress,
+              const std::atomic<bool>* cancel) override
+  {
+    const std::string data = read(name, progress, cancel);
+    const size_t chunk = 1024 * 1024;
+    for (size_t at = 0, n = 0; at < data.size(); at += chunk, ++n)
+    {
+      if (static_cast<int>(n) == fail_after_)
+        throw LinkError("the share vanished");
+      sink(data.data() + at, std::min(chunk, data.size() - at));
+    }
+  }
+
+ private:
+  int fail_after_;
+};
+}  // namespace
+
+TEST(GetProgram, WritesEachChunkAsItComesAndLeavesNothingWhenTheDownloadFails)
+{
+  test::TempDir dir;
+  std::filesystem::create_directories(dir.file("share"));
+  std::string program;
+  for (int i = 0; program.size() < 3 * 1024 * 1024 + 5; ++i)
+    program += "N" + std::to_string(i) + " G1 X1.\n";
+  test::writeFile(dir.file("share/O00001.nc"), program);
+  test::writeFile(dir.file("O00001.nc"), "old");
+
+  ChunkedStore failing(dir.file("share"), 2);  // two chunks written, then the link goes
+  EXPECT_THROW(getProgram(failing, "O00001.nc", dir.file("O00001.nc")), LinkError);
+  EXPECT_EQ(test::readFile(dir.file("O00001.nc")), "old");  // the previous version stays...
+  size_t files = 0;
+  for ([[maybe_unused]] const auto& entry : std::filesystem::directory_iterator(dir.path))
+    ++files;
+  EXPECT_EQ(files, 2u);  // ...and no temporary file is left: share/ and O00001.nc
+
+  ChunkedStore whole(dir.file("share"), -1);
+  EXPECT_EQ(getProgram(whole, "O00001.nc", dir.file("O00001.nc")), program.size());
+  EXPECT_EQ(test::readFile(dir.file("O00001.nc")), program);
 }

@@ -21,7 +21,9 @@ class AtomicFileWriter
   AtomicFileWriter(const AtomicFileWriter&) = delete;
   AtomicFileWriter& operator=(const AtomicFileWriter&) = delete;
 
-  /// \brief Appends bytes to the temporary file. \throws Error on a write failure (disk full).
+  /// \brief Appends bytes to the temporary file, and starts the disk writing each further 1 MB
+  /// without waiting for it, so that commit()'s fsync mostly finds it done (a download written as it
+  /// arrives). \throws Error on a write failure (disk full).
   void write(const uint8_t* data, size_t size);
   void write(const std::string& text) { write(reinterpret_cast<const uint8_t*>(text.data()), text.size()); }
 
@@ -34,10 +36,15 @@ class AtomicFileWriter
   const std::string& path() const { return path_; }
 
  private:
+  /// Bytes written before the disk is asked to start writing them (startWriteback()).
+  static constexpr size_t kWritebackStep = size_t{1024} * 1024;
+  void startWriteback();
+
   std::string path_;
   std::string temp_path_;
   int fd_ = -1;
   size_t bytes_written_ = 0;
+  size_t writeback_from_ = 0;  ///< the first byte whose writeback has not been started
   bool committed_ = false;
 };
 }  // namespace cnc_bridge

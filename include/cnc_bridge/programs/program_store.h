@@ -38,6 +38,8 @@ class NotFoundError : public Error
 
 /// \brief Bytes moved so far and the total (0 when unknown). Called after each chunk.
 using StoreProgress = std::function<void(uint64_t done, uint64_t total)>;
+/// \brief Takes the bytes of a file in order, one chunk at a time (readTo()).
+using StoreSink = std::function<void(const char* data, size_t size)>;
 
 /// \brief A folder of programs. Names are relative to the folder: '/'-separated, no empty, '.' or
 /// '..' component (checkName()). Implementations are thread-safe (calls are serialised).
@@ -56,6 +58,11 @@ class ProgramStore
   /// \brief The whole file. \throws NotFoundError, Error, CancelledError (when \p cancel is set).
   virtual std::string read(const std::string& name, const StoreProgress& progress = nullptr,
                            const std::atomic<bool>* cancel = nullptr) = 0;
+  /// \brief The whole file handed to \p sink chunk by chunk as it arrives, so that a download is
+  /// written out while the next chunk is fetched (getProgram()). This default reads the whole file
+  /// first. \throws as read(), and what \p sink throws.
+  virtual void readTo(const std::string& name, const StoreSink& sink, const StoreProgress& progress = nullptr,
+                      const std::atomic<bool>* cancel = nullptr);
   /// \brief At most the first \p bytes of the file (for listings). \throws as read().
   virtual std::string readHead(const std::string& name, size_t bytes) = 0;
   /// \brief Replaces (or creates) \p name with \p data atomically (see the file comment).

@@ -80,6 +80,8 @@ class SmbProgramStore : public programs::ProgramStore
   programs::ProgramEntry stat(const std::string& name) override;
   std::string read(const std::string& name, const programs::StoreProgress& progress = nullptr,
                    const std::atomic<bool>* cancel = nullptr) override;
+  void readTo(const std::string& name, const programs::StoreSink& sink,
+              const programs::StoreProgress& progress = nullptr, const std::atomic<bool>* cancel = nullptr) override;
   std::string readHead(const std::string& name, size_t bytes) override;
   void write(const std::string& name, const std::string& data, const programs::StoreProgress& progress = nullptr,
              const std::atomic<bool>* cancel = nullptr) override;
