@@ -34,9 +34,10 @@
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/program_dir.h"
 #include "cnc_bridge/programs/archive.h"
-#include "cnc_bridge/programs/daily_time.h"
+#include "cnc_bridge/programs/daily_timer.h"
 #include "cnc_bridge/programs/fan_out.h"
-#include "cnc_bridge/programs/program_request.h"
+#include "cnc_bridge/programs/request_server.h"
+#include "cnc_bridge/programs/withdrawal.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/ros/params.h"
@@ -85,37 +86,26 @@ class ShareNode
   bool onRemove(RemoveProgram::Request& request, RemoveProgram::Response& response);
   bool onHistory(ProgramHistory::Request& request, ProgramHistory::Response& response);
   bool onWithdraw(WithdrawProgram::Request& request, WithdrawProgram::Response& response);
-  /// Keeps \p file in the archive, then removes it from the share; throws what stopped it.
-  WithdrawProgram::Response withdraw(const std::string& file);
-  /// Withdraws every program in the share, each outcome logged and published on withdrawals;
-  /// \returns a summary. The path of both ~withdraw_at and ~withdraw_all.
-  std::pair<bool, std::string> withdrawAll(const std::string& source);
+  /// Withdraws every program in the share, each outcome published on withdrawals; \returns the
+  /// summary. The path of both ~withdraw_at and ~withdraw_all.
+  programs::WithdrawalSummary withdrawAll(const std::string& source);
   bool onWithdrawAll(std_srvs::Trigger::Request& request, std_srvs::Trigger::Response& response);
-  /// Arms the timer for the next ~withdraw_at (not today's again when \p done_today).
-  void scheduleWithdrawal(bool done_today);
-  void onWithdrawTime(const ros::WallTimerEvent& event);
-  void armWithdrawalTimer(std::time_t seconds);
+  /// Logs the next ~withdraw_at and keeps it for the diagnostics.
+  void onWithdrawalScheduled(std::time_t next);
   bool onCompare(ComparePrograms::Request& request, ComparePrograms::Response& response);
   bool onPublishToMachines(FanOutProgram::Request& request, FanOutProgram::Response& response);
   /// Calls \p machine's ~send_program with \p file; \returns its message, throws its failure.
   std::string sendThrough(const std::string& machine, const std::string& file);
   void archive(const std::string& name, const std::string& path, const std::string& direction);
-  /// Serves the request files in the share's requests folder (each removed once read).
-  void serveRequestFiles();
-  void onDprntLine(const DprntLine::ConstPtr& line);
-  /// Serves one request: LOAD/SEND publishes the program into the share, SAVE fetches it.
-  void serveRequest(const std::optional<programs::ProgramRequest>& request, const std::string& source);
+  /// A request's transfer: LOAD/SEND publishes the program into the share, SAVE fetches it.
+  programs::RequestTransfer requestTransfer(programs::RequestDecision::Action action, const std::string& program);
+  void publishRequest(const programs::RequestOutcome& outcome);
   void checkShare(const ros::WallTimerEvent& event);
   void linkResult(const std::string& error);
   void diagnostics(diagnostic_updater::DiagnosticStatusWrapper& status);
 
   std::unique_ptr<programs::ProgramStore> store_;
-  std::unique_ptr<programs::ProgramStore> requests_;  ///< the share's requests folder, if any
-  std::string requests_folder_;
-  programs::RequestWords request_words_;
-  std::string credentials_file_;
-  Milliseconds timeout_{10000};
-  std::string url_;
+  std::unique_ptr<programs::RequestServer> requests_;
   std::unique_ptr<ProgramDirectory> programs_;
   std::unique_ptr<programs::NamePattern> pattern_;
   std::unique_ptr<programs::ProtectedRange> protected_;
@@ -126,10 +116,7 @@ class ShareNode
   std::unique_ptr<MachineStatePublisher> state_;
   ros::NodeHandle nh_;
   ros::WallDuration publish_timeout_;
-  std::optional<programs::DailyTime> withdraw_at_;
   std::atomic<std::time_t> next_withdrawal_{0};
-  /// Armed once per time; a one-shot timer is re-armed from its own callback by setPeriod/start.
-  ros::WallTimer withdraw_timer_;
   ros::Publisher withdrawals_pub_;
   ros::ServiceServer withdraw_all_srv_;
 
@@ -151,15 +138,16 @@ class ShareNode
   ros::WallTimer check_timer_;
   ros::Publisher requests_pub_;
   ros::Subscriber dprnt_sub_;
+  /// ~withdraw_at; last, so that its thread stops before what it uses goes.
+  std::unique_ptr<programs::DailyTimer> withdraw_timer_;
 };
 
 ShareNode::ShareNode(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh)
 {
-  url_ = shareAddress(pnh);
+  const std::string url = shareAddress(pnh);
   // ~credentials_file (string, default "": guest): smbclient authentication file, mode 0600.
   // ~timeout (s, default 10): limit of every SMB request.
-  store_ =
-      share::openStore(url_, pnh.param<std::string>("credentials_file", ""), params::seconds(pnh, "timeout", 10.0));
+  store_ = share::openStore(url, pnh.param<std::string>("credentials_file", ""), params::seconds(pnh, "timeout", 10.0));
   // ~program_dir (string, required): the local folder programs are sent from and received into;
   // created if missing.
   const std::string program_dir = params::required<std::string>(pnh, "program_dir");
@@ -180,23 +168,33 @@ ShareNode::ShareNode(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh)
       std::make_unique<programs::ProgramArchive>(pnh.param<std::string>("archive_dir", root + ".archive"),
                                                  static_cast<unsigned>(std::max(1, pnh.param("archive_keep", 20))));
   machine_ = pnh.param<std::string>("machine", ros::this_node::getName());
-  // ~requests_folder (string, default "requests"; "" for none): a folder of the share where the
-  // control drops request files ((LOAD O1234), (SEND O1234), (SAVE O1234)), served at each check.
-  requests_folder_ = pnh.param<std::string>("requests_folder", "requests");
   // ~request_load_words (string, default "LOAD SEND"), ~request_save_words (string, default
   // "SAVE"): the words that make a comment or DPRNT line a request, as dnc_node's.
-  request_words_ = programs::RequestWords::parse(
-      pnh.param<std::string>("request_load_words", "LOAD SEND"), pnh.param<std::string>("request_save_words", "SAVE"),
-      pnh.resolveName("request_load_words"), pnh.resolveName("request_save_words"));
-  if (!requests_folder_.empty())
-    programs::checkName(requests_folder_);
-  credentials_file_ = pnh.param<std::string>("credentials_file", "");
-  timeout_ = params::seconds(pnh, "timeout", 10.0);
+  requests_ = std::make_unique<programs::RequestServer>(
+      programs::RequestWords::parse(pnh.param<std::string>("request_load_words", "LOAD SEND"),
+                                    pnh.param<std::string>("request_save_words", "SAVE"),
+                                    pnh.resolveName("request_load_words"), pnh.resolveName("request_save_words")),
+      *pattern_, *protected_, programs_->root(),
+      [this](programs::RequestDecision::Action action, const std::string& program)
+      { return requestTransfer(action, program); },
+      [this](const programs::RequestOutcome& outcome) { publishRequest(outcome); });
+  // ~requests_folder (string, default "requests"; "" for none): a folder of the share where the
+  // control drops request files ((LOAD O1234), (SEND O1234), (SAVE O1234)), served at each check.
+  const std::string requests_folder = pnh.param<std::string>("requests_folder", "requests");
+  if (!requests_folder.empty())
+  {
+    programs::checkName(requests_folder);
+    requests_->setRequestFolder(requests_folder,
+                                [url, requests_folder, credentials = pnh.param<std::string>("credentials_file", ""),
+                                 timeout = params::seconds(pnh, "timeout", 10.0)]
+                                { return share::openStore(url + "/" + requests_folder, credentials, timeout); });
+  }
   requests_pub_ = nh.advertise<ProgramRequestEvent>("program_requests", 20);
   // ~dprnt_requests (bool, default true): a DPRNT line `LOAD O1234` on dprnt/raw (dprnt_node in
   // the same machine namespace) is a request too.
   if (pnh.param("dprnt_requests", true))
-    dprnt_sub_ = nh.subscribe("dprnt/raw", 20, &ShareNode::onDprntLine, this);
+    dprnt_sub_ = nh.subscribe<DprntLine>(
+        "dprnt/raw", 20, [this](const DprntLine::ConstPtr& line) { requests_->serveDprntLine(line->text); });
   // ~enable_remove (bool, default false): ~remove_program deletes from the share only when set.
   pnh.param("enable_remove", enable_remove_, false);
   // ~feedback_rate (Hz, default 20): action feedback at most this often.
@@ -237,9 +235,11 @@ ShareNode::ShareNode(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh)
   if (pnh.getParam("withdraw_at", withdraw_at) && withdraw_at.getType() != XmlRpc::XmlRpcValue::TypeString)
     throw ConfigError(pnh.resolveName("withdraw_at") + " must be a string \"HH:MM\": quote it in YAML ('18:00'), " +
                       "which otherwise reads 18:00 as a number");
-  withdraw_at_ = programs::DailyTime::parse(pnh.param<std::string>("withdraw_at", ""), pnh.resolveName("withdraw_at"));
-  if (withdraw_at_)
-    scheduleWithdrawal(false);
+  if (const auto at =
+          programs::DailyTime::parse(pnh.param<std::string>("withdraw_at", ""), pnh.resolveName("withdraw_at")))
+    withdraw_timer_ = std::make_unique<programs::DailyTimer>(
+        *at, [this, source = "~withdraw_at " + at->str()] { withdrawAll(source); },
+        [this](std::time_t next) { onWithdrawalScheduled(next); });
   // ~check_period (s, default 5): how often the share is listed to keep the link state.
   check_timer_ =
       nh.createWallTimer(ros::WallDuration(params::positive(pnh, "check_period", 5.0)), &ShareNode::checkShare, this);
@@ -288,86 +288,31 @@ void ShareNode::checkShare(const ros::WallTimerEvent&)
   }
   linkResult(error);  // not under stats_mutex_: a link change runs the diagnostics at once
   if (error.empty())
-    serveRequestFiles();
+    requests_->serveRequestFiles();
 }
 
-void ShareNode::serveRequestFiles()
+programs::RequestTransfer ShareNode::requestTransfer(programs::RequestDecision::Action action,
+                                                     const std::string& program)
 {
-  if (requests_folder_.empty())
-    return;
-  std::vector<programs::ProgramEntry> files;
-  try
-  {
-    if (!requests_)  // opened once it exists (a local folder must exist to be opened)
-      requests_ = share::openStore(url_ + "/" + requests_folder_, credentials_file_, timeout_);
-    files = requests_->list();
-  }
-  catch (const Error& e)
-  {
-    ROS_WARN_THROTTLE(60, "requests folder: %s", e.what());  // a share without one is no error
-    return;
-  }
-  for (const programs::ProgramEntry& file : files)
-  {
-    std::string text;
-    try
-    {
-      text = requests_->read(file.name);
-      requests_->remove(file.name);  // served once, whatever it held
-    }
-    catch (const Error& e)
-    {
-      ROS_WARN("request file %s: %s", file.name.c_str(), e.what());
-      continue;
-    }
-    serveRequest(programs::recogniseRequest(text, false, request_words_),
-                 "share " + requests_folder_ + "/" + file.name);
-  }
+  TransferGoal goal;
+  goal.file = program;
+  goal.direction = action == programs::RequestDecision::Action::kSend ? TransferGoal::DIRECTION_SEND
+                                                                      : TransferGoal::DIRECTION_RECEIVE;
+  const TransferResult result = run(goal, nullptr);
+  return {static_cast<bool>(result.success), result.message};
 }
 
-void ShareNode::onDprntLine(const DprntLine::ConstPtr& line)
-{
-  if (const auto request = programs::recogniseRequest(line->text, true, request_words_))
-    serveRequest(request, "dprnt");
-}
-
-void ShareNode::serveRequest(const std::optional<programs::ProgramRequest>& request, const std::string& source)
+void ShareNode::publishRequest(const programs::RequestOutcome& outcome)
 {
   ProgramRequestEvent event;
-  event.machine = machine_;
-  event.source = source;
-  if (!request)
-  {
-    event.outcome = programs::noRequestOutcome(request_words_);
-  }
-  else
-  {
-    // The same decision as a request punched on RS-232 (dnc_node): what is sent, taken or refused.
-    const programs::RequestDecision decision =
-        programs::decideRequest(*request, *pattern_, *protected_, programs_->root());
-    event.request = request->word;
-    event.number = request->number;
-    event.program = decision.program;
-    if (decision.action == programs::RequestDecision::Action::kRefuse)
-    {
-      event.outcome = decision.outcome;
-    }
-    else
-    {
-      TransferGoal goal;
-      goal.file = decision.program;
-      goal.direction = decision.action == programs::RequestDecision::Action::kSend ? TransferGoal::DIRECTION_SEND
-                                                                                   : TransferGoal::DIRECTION_RECEIVE;
-      const TransferResult result = run(goal, nullptr);
-      event.success = result.success;
-      event.outcome = result.message;
-    }
-  }
   event.header.stamp = ros::Time::now();
-  if (event.success)
-    ROS_INFO_STREAM("request from " << source << ": " << event.outcome);
-  else
-    ROS_WARN_STREAM("request from " << source << " not served: " << event.outcome);
+  event.machine = machine_;
+  event.source = outcome.source;
+  event.request = outcome.word;
+  event.number = outcome.number;
+  event.program = outcome.program;
+  event.success = outcome.success;
+  event.outcome = outcome.outcome;
   requests_pub_.publish(event);
 }
 
@@ -594,37 +539,15 @@ void ShareNode::archive(const std::string& name, const std::string& path, const 
   }
 }
 
-WithdrawProgram::Response ShareNode::withdraw(const std::string& file)
-{
-  WithdrawProgram::Response response;
-  const std::string content = store_->read(file);
-  // Kept first: a program is never gone from both the share and the archive.
-  const auto kept = archive_->add(file, content, {"share_node", machine_, "withdrawn"});
-  if (kept)
-  {
-    response.version = kept->number;
-  }
-  else
-  {
-    for (const programs::ArchiveVersion& v : archive_->history(file))
-    {
-      if (v.crc32 == programs::crc32Hex(content) && v.size == content.size())
-        response.version = v.number;
-    }
-  }
-  store_->remove(file);
-  response.success = true;
-  response.message = "withdrew " + file + " from " + store_->describe() + " (archive version " +
-                     std::to_string(response.version) + ")";
-  ROS_INFO("%s", response.message.c_str());
-  return response;
-}
-
 bool ShareNode::onWithdraw(WithdrawProgram::Request& request, WithdrawProgram::Response& response)
 {
   try
   {
-    response = withdraw(request.file);
+    const programs::Withdrawal done =
+        programs::withdrawProgram(*store_, *archive_, request.file, {"share_node", machine_, "withdrawn"});
+    response.success = done.success;
+    response.message = done.message;
+    response.version = done.version;
   }
   catch (const Error& e)
   {
@@ -633,91 +556,39 @@ bool ShareNode::onWithdraw(WithdrawProgram::Request& request, WithdrawProgram::R
   return true;
 }
 
-std::pair<bool, std::string> ShareNode::withdrawAll(const std::string& source)
+programs::WithdrawalSummary ShareNode::withdrawAll(const std::string& source)
 {
-  std::vector<programs::ProgramEntry> files;
-  try
-  {
-    files = store_->list();
-  }
-  catch (const Error& e)
-  {
-    const std::string message = std::string("withdrawal of every program not done: ") + e.what();
-    ROS_ERROR("%s", message.c_str());
-    return {false, message};
-  }
-  size_t withdrawn = 0;
-  std::string failures;
-  for (const programs::ProgramEntry& file : files)
-  {
-    ProgramRequestEvent event;
-    event.machine = machine_;
-    event.source = source;
-    event.request = "WITHDRAW";
-    event.program = file.name;
-    try
-    {
-      event.outcome = withdraw(file.name).message;
-      event.success = true;
-      ++withdrawn;
-    }
-    catch (const Error& e)
-    {
-      event.outcome = e.what();
-      failures += (failures.empty() ? "; failed: " : ", ") + file.name + " (" + e.what() + ")";
-      ROS_ERROR("withdrawal of %s: %s", file.name.c_str(), e.what());
-    }
-    event.header.stamp = ros::Time::now();
-    withdrawals_pub_.publish(event);
-  }
-  const std::string summary = "withdrew " + std::to_string(withdrawn) + " of " + std::to_string(files.size()) +
-                              " programs from " + store_->describe() + " into " + archive_->root() + failures;
-  ROS_INFO("%s: %s", source.c_str(), summary.c_str());
-  return {withdrawn == files.size(), summary};
+  return programs::withdrawAllPrograms(*store_, *archive_, {"share_node", machine_, "withdrawn"}, source,
+                                       [&](const programs::Withdrawal& outcome)
+                                       {
+                                         ProgramRequestEvent event;
+                                         event.header.stamp = ros::Time::now();
+                                         event.machine = machine_;
+                                         event.source = source;
+                                         event.request = "WITHDRAW";
+                                         event.program = outcome.program;
+                                         event.success = outcome.success;
+                                         event.outcome = outcome.message;
+                                         withdrawals_pub_.publish(event);
+                                       });
 }
 
 bool ShareNode::onWithdrawAll(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response)
 {
-  std::tie(response.success, response.message) = withdrawAll("~withdraw_all");
+  const programs::WithdrawalSummary summary = withdrawAll("~withdraw_all");
+  response.success = summary.success;
+  response.message = summary.message;
   return true;
 }
 
-void ShareNode::scheduleWithdrawal(bool done_today)
+void ShareNode::onWithdrawalScheduled(std::time_t next)
 {
-  const std::time_t now = std::time(nullptr);
-  const std::time_t next = programs::nextDailyTime(*withdraw_at_, now, done_today);
   next_withdrawal_ = next;
-  armWithdrawalTimer(next - now);
   char when[32];
   std::tm local{};
   ::localtime_r(&next, &local);
   std::strftime(when, sizeof when, "%Y-%m-%d %H:%M %Z", &local);
   ROS_INFO("next withdrawal of every program from %s: %s", store_->describe().c_str(), when);
-}
-
-void ShareNode::armWithdrawalTimer(std::time_t seconds)
-{
-  const ros::WallDuration delay(static_cast<double>(seconds));
-  if (!withdraw_timer_.isValid())
-  {
-    withdraw_timer_ = nh_.createWallTimer(delay, &ShareNode::onWithdrawTime, this, true);
-    return;
-  }
-  withdraw_timer_.stop();
-  withdraw_timer_.setPeriod(delay);
-  withdraw_timer_.start();
-}
-
-void ShareNode::onWithdrawTime(const ros::WallTimerEvent&)
-{
-  // The wall clock may have been set back since the timer was armed: wait for the time itself.
-  if (std::time(nullptr) < next_withdrawal_)
-  {
-    armWithdrawalTimer(next_withdrawal_ - std::time(nullptr));
-    return;
-  }
-  withdrawAll("~withdraw_at " + withdraw_at_->str());
-  scheduleWithdrawal(true);
 }
 
 bool ShareNode::onHistory(ProgramHistory::Request& request, ProgramHistory::Response& response)
@@ -854,7 +725,7 @@ void ShareNode::diagnostics(diagnostic_updater::DiagnosticStatusWrapper& status)
   status.add("check failures", counters_.check_failures);
   status.add("round trip (s)", counters_.round_trip);
   status.add("last error", counters_.last_error);
-  if (withdraw_at_)
+  if (withdraw_timer_)
     status.add("next withdrawal (unix time)", static_cast<int64_t>(next_withdrawal_.load()));
 }
 }  // namespace cnc_bridge

@@ -3,7 +3,9 @@
 // byte) and to a machine that does not exist, which is reported in its own entry without stopping
 // the others. ~withdraw_all (the path ~withdraw_at takes at its time of day): every program of the
 // share kept in the archive, then removed, each outcome on withdrawals; a bad ~withdraw_at stops
-// the node with the reason. ~serve_dir: the second node's folder is one the PC serves.
+// the node with the reason. ~withdraw_at: a node whose clock reaches the time of day a few seconds
+// after its start empties its share then, not before. ~serve_dir: the second node's folder is one
+// the PC serves.
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <ros/ros.h>
@@ -15,6 +17,8 @@
 #include <std_srvs/Trigger.h>
 
 #include <condition_variable>
+#include <cstdio>
+#include <ctime>
 #include <filesystem>
 #include <mutex>
 #include <random>
@@ -59,8 +63,9 @@ class ShareFanOutTest : public ::testing::Test
   std::string share(const std::string& machine) const { return dir_.file("share_" + machine); }
 
   /// Starts a share_node as /cell/<machine>/share_node with \p params (_name:=value); its
-  /// stderr into \p errors if given.
-  pid_t start(const std::string& machine, std::vector<std::string> params, const std::string& errors = "")
+  /// stderr into \p errors if given, its time zone \p tz (TZ) if given.
+  pid_t start(const std::string& machine, std::vector<std::string> params, const std::string& errors = "",
+              const std::string& tz = "")
   {
     params.push_back("_program_dir:=" + programs_);
     params.push_back("_machine:=" + machine);
@@ -72,6 +77,8 @@ class ShareFanOutTest : public ::testing::Test
       ::prctl(PR_SET_PDEATHSIG, SIGKILL);  // a killed test leaves no node behind
       if (!errors.empty())
         ::dup2(::open(errors.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644), STDERR_FILENO);
+      if (!tz.empty())
+        ::setenv("TZ", tz.c_str(), 1);
       std::vector<char*> argv{const_cast<char*>(SHARE_NODE)};
       for (std::string& param : params)
         argv.push_back(param.data());
@@ -205,6 +212,59 @@ TEST_F(ShareFanOutTest, WithdrawAllKeepsEveryProgramInTheArchiveAndEmptiesTheSha
   ASSERT_TRUE(ros::service::call("/cell/vf2/share_node/withdraw_all", call));
   EXPECT_TRUE(call.response.success) << call.response.message;
   EXPECT_NE(call.response.message.find("withdrew 0 of 0 programs"), std::string::npos) << call.response.message;
+}
+
+TEST_F(ShareFanOutTest, WithdrawAtItsTimeOfDayEmptiesTheShareThenNotBefore)
+{
+  // ~withdraw_at is a whole minute of the local clock. The node runs in a time zone whose UTC
+  // offset has seconds (POSIX TZ, tzset(3): "std offset", offset hh[:mm[:ss]], positive west of
+  // Greenwich), chosen so that its local clock reads a whole minute a few seconds from now.
+  const std::time_t at = std::time(nullptr) + 8;
+  const int offset = static_cast<int>(at % 60);
+  const std::time_t local = at - offset;  // local time = UTC - offset: a whole minute at `at`
+  std::tm fields{};
+  ::gmtime_r(&local, &fields);
+  char tz[32];
+  char time_of_day[8];
+  std::snprintf(tz, sizeof tz, "TST+0:00:%02d", offset);
+  std::strftime(time_of_day, sizeof time_of_day, "%H:%M", &fields);
+
+  std::mutex mutex;
+  std::condition_variable arrived;
+  std::vector<ProgramRequestEvent> events;
+  std::time_t first_event = 0;
+  ros::NodeHandle nh;
+  ros::Subscriber sub = nh.subscribe<ProgramRequestEvent>("/cell/hmc/withdrawals", 10,
+                                                          [&](const ProgramRequestEvent::ConstPtr& event)
+                                                          {
+                                                            std::lock_guard<std::mutex> lock(mutex);
+                                                            if (events.empty())
+                                                              first_event = std::time(nullptr);
+                                                            events.push_back(*event);
+                                                            arrived.notify_all();
+                                                          });
+  std::filesystem::create_directories(share("hmc"));
+  const std::string first = "%\nO01000 (OP1)\nG0 X1.\nM30\n%\n";
+  const std::string second = program(3000);
+  writeFile(share("hmc") + "/O01000.nc", first);
+  writeFile(share("hmc") + "/O01001.nc", second);
+  start("hmc", {"_url:=" + share("hmc"), std::string("_withdraw_at:=") + time_of_day}, "", tz);
+  {
+    std::unique_lock<std::mutex> lock(mutex);
+    ASSERT_TRUE(arrived.wait_for(lock, std::chrono::seconds(40), [&] { return events.size() >= 2; }))
+        << "no withdrawal at " << time_of_day << " " << tz;
+    EXPECT_GE(first_event, at);  // at the time, not before it
+    for (const ProgramRequestEvent& event : events)
+    {
+      EXPECT_TRUE(event.success) << event.outcome;
+      EXPECT_EQ(event.request, "WITHDRAW");
+      EXPECT_EQ(event.source, std::string("~withdraw_at ") + time_of_day);
+    }
+  }
+  EXPECT_FALSE(test::exists(share("hmc") + "/O01000.nc"));
+  EXPECT_FALSE(test::exists(share("hmc") + "/O01001.nc"));
+  EXPECT_EQ(readFile(programs_ + ".archive/O01000.nc/v0001.nc"), first);
+  EXPECT_EQ(readFile(programs_ + ".archive/O01001.nc/v0001.nc"), second);
 }
 
 TEST_F(ShareFanOutTest, AWithdrawalTimeThatIsNoTimeOfDayStopsTheNode)
