@@ -1,7 +1,7 @@
 # programs: what every wire shares about programs, without SMB. cnc_bridge_programs (program names
 # and numbers, the protected range, the ProgramStore interface and the local store, archive,
-# program requests, fan-out, daily times and the daily timer, withdrawals, the request server),
-# its unit tests and fuzz targets.
+# program requests and their server, fan-out, daily times and the daily timer, withdrawals,
+# transfers), its unit tests and fuzz targets.
 cnc_core_module(cnc_bridge_programs
   src/programs/program_name.cpp
   src/programs/program_store.cpp
@@ -11,12 +11,14 @@ cnc_core_module(cnc_bridge_programs
   src/programs/daily_time.cpp
   src/programs/daily_timer.cpp
   src/programs/withdrawal.cpp
-  src/programs/request_server.cpp)
+  src/programs/request_server.cpp
+  src/programs/program_transfers.cpp)
 
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   cnc_core_gtest(test_program_name test/unit/test_program_name.cpp test/unit/test_program_archive.cpp
   test/unit/test_program_request.cpp test/unit/test_fan_out.cpp test/unit/test_daily_time.cpp
-  test/unit/test_daily_timer.cpp test/unit/test_withdrawal.cpp test/unit/test_request_server.cpp)
+  test/unit/test_daily_timer.cpp test/unit/test_withdrawal.cpp test/unit/test_request_server.cpp
+  test/unit/test_program_transfers.cpp)
   target_link_libraries(test_program_name cnc_bridge_programs)
 endif()
 

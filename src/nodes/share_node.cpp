@@ -1,9 +1,11 @@
 // share_node: NC programs between ~program_dir and a machine's SMB share (a Haas NGC's Net Share,
 // a file server the control mounts), with the same ~send_program, ~receive_program and ~transfer
 // interface as dnc_node, so orchestration code does not care which wire a machine uses
-// (docs/share_node.md). The share is the core's SmbProgramStore; this file maps parameters,
-// services, the action, state and diagnostics onto it. One transfer at a time; a periodic check
-// of the share keeps the link state (UP while the share answers, DOWN with the reason).
+// (docs/share_node.md). The work is the core's: the share (SmbProgramStore), the transfers
+// (ProgramTransfers, one at a time), withdrawals and their daily timer (withdrawal.h, DailyTimer)
+// and program requests (RequestServer); this file maps parameters, services, the action, topics,
+// state and diagnostics onto them. A periodic check of the share keeps the link state (UP while
+// the share answers, DOWN with the reason) and serves the request files.
 #include <ros/ros.h>
 #include <std_srvs/Trigger.h>
 
@@ -12,13 +14,9 @@
 #include <cstdio>
 #include <ctime>
 #include <filesystem>
-#include <fstream>
 #include <future>
-#include <iterator>
 #include <memory>
-#include <mutex>
 #include <thread>
-#include <tuple>
 
 #include "cnc_bridge/ComparePrograms.h"
 #include "cnc_bridge/DprntLine.h"
@@ -36,6 +34,7 @@
 #include "cnc_bridge/programs/archive.h"
 #include "cnc_bridge/programs/daily_timer.h"
 #include "cnc_bridge/programs/fan_out.h"
+#include "cnc_bridge/programs/program_transfers.h"
 #include "cnc_bridge/programs/request_server.h"
 #include "cnc_bridge/programs/withdrawal.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
@@ -78,7 +77,6 @@ class ShareNode
 
  private:
   TransferResult run(const TransferGoal& goal, const programs::StoreProgress& progress);
-  TransferResult transfer(const TransferGoal& goal, const programs::StoreProgress& progress);
   void execute(const TransferGoalConstPtr& goal);
   bool onSend(SendProgram::Request& request, SendProgram::Response& response);
   bool onReceive(ReceiveProgram::Request& request, ReceiveProgram::Response& response);
@@ -96,7 +94,6 @@ class ShareNode
   bool onPublishToMachines(FanOutProgram::Request& request, FanOutProgram::Response& response);
   /// Calls \p machine's ~send_program with \p file; \returns its message, throws its failure.
   std::string sendThrough(const std::string& machine, const std::string& file);
-  void archive(const std::string& name, const std::string& path, const std::string& direction);
   /// A request's transfer: LOAD/SEND publishes the program into the share, SAVE fetches it.
   programs::RequestTransfer requestTransfer(programs::RequestDecision::Action action, const std::string& program);
   void publishRequest(const programs::RequestOutcome& outcome);
@@ -110,6 +107,7 @@ class ShareNode
   std::unique_ptr<programs::NamePattern> pattern_;
   std::unique_ptr<programs::ProtectedRange> protected_;
   std::unique_ptr<programs::ProgramArchive> archive_;
+  std::unique_ptr<programs::ProgramTransfers> transfers_;
   std::string machine_;
   bool enable_remove_ = false;
   ros::Duration feedback_period_;
@@ -119,18 +117,6 @@ class ShareNode
   std::atomic<std::time_t> next_withdrawal_{0};
   ros::Publisher withdrawals_pub_;
   ros::ServiceServer withdraw_all_srv_;
-
-  std::mutex busy_mutex_;
-  bool busy_ = false;
-  std::atomic<bool> cancel_{false};
-
-  std::mutex stats_mutex_;
-  struct Counters
-  {
-    uint64_t transfers = 0, completed = 0, failed = 0, refused = 0, bytes = 0, checks = 0, check_failures = 0;
-    double round_trip = 0;  // s, the last check's
-    std::string last_error, last_result;
-  } counters_;
 
   std::unique_ptr<SingleGoalActionServer<TransferAction>> action_;
   ros::ServiceServer send_srv_, receive_srv_, list_srv_, remove_srv_, history_srv_, compare_srv_, withdraw_srv_,
@@ -168,6 +154,8 @@ ShareNode::ShareNode(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh)
       std::make_unique<programs::ProgramArchive>(pnh.param<std::string>("archive_dir", root + ".archive"),
                                                  static_cast<unsigned>(std::max(1, pnh.param("archive_keep", 20))));
   machine_ = pnh.param<std::string>("machine", ros::this_node::getName());
+  transfers_ = std::make_unique<programs::ProgramTransfers>(*store_, *programs_, *protected_, *pattern_, *archive_,
+                                                            programs::VersionSource{"share_node", machine_, ""});
   // ~request_load_words (string, default "LOAD SEND"), ~request_save_words (string, default
   // "SAVE"): the words that make a comment or DPRNT line a request, as dnc_node's.
   requests_ = std::make_unique<programs::RequestServer>(
@@ -213,7 +201,7 @@ ShareNode::ShareNode(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh)
   action_ = std::make_unique<SingleGoalActionServer<TransferAction>>(
       pnh, "transfer", [this](const TransferGoalConstPtr& goal) { execute(goal); },
       [](const TransferGoal& goal) { return goal.direction + " " + goal.file; });
-  action_->setCancelCallback([this] { cancel_ = true; });
+  action_->setCancelCallback([this] { transfers_->cancel(); });
   action_->start();
   send_srv_ = pnh.advertiseService("send_program", &ShareNode::onSend, this);
   receive_srv_ = pnh.advertiseService("receive_program", &ShareNode::onReceive, this);
@@ -259,11 +247,8 @@ void ShareNode::linkResult(const std::string& error)
 
 void ShareNode::checkShare(const ros::WallTimerEvent&)
 {
-  {
-    std::lock_guard<std::mutex> lock(busy_mutex_);
-    if (busy_)
-      return;  // a running transfer says whether the share answers
-  }
+  if (transfers_->busy())
+    return;  // a running transfer says whether the share answers
   const auto start = std::chrono::steady_clock::now();
   std::string error;
   try
@@ -274,19 +259,9 @@ void ShareNode::checkShare(const ros::WallTimerEvent&)
   {
     error = e.what();
   }
-  {
-    std::lock_guard<std::mutex> lock(stats_mutex_);
-    ++counters_.checks;
-    counters_.round_trip = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    if (!error.empty())
-    {
-      ++counters_.check_failures;
-      if (error != counters_.last_error)
-        ROS_ERROR("%s", error.c_str());
-      counters_.last_error = error;
-    }
-  }
-  linkResult(error);  // not under stats_mutex_: a link change runs the diagnostics at once
+  if (transfers_->countCheck(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), error))
+    ROS_ERROR("%s", error.c_str());
+  linkResult(error);
   if (error.empty())
     requests_->serveRequestFiles();
 }
@@ -319,27 +294,6 @@ void ShareNode::publishRequest(const programs::RequestOutcome& outcome)
 TransferResult ShareNode::run(const TransferGoal& goal, const programs::StoreProgress& progress)
 {
   TransferResult result;
-  {
-    std::lock_guard<std::mutex> lock(busy_mutex_);
-    if (busy_)
-    {
-      result.message = "refused: another transfer is running on " + store_->describe() + " (one at a time)";
-      std::lock_guard<std::mutex> stats(stats_mutex_);
-      ++counters_.refused;
-      return result;
-    }
-    busy_ = true;
-    cancel_ = false;
-  }
-  result = transfer(goal, progress);
-  std::lock_guard<std::mutex> lock(busy_mutex_);
-  busy_ = false;
-  return result;
-}
-
-TransferResult ShareNode::transfer(const TransferGoal& goal, const programs::StoreProgress& progress)
-{
-  TransferResult result;
   const bool send = goal.direction == TransferGoal::DIRECTION_SEND;
   if (!send && goal.direction != TransferGoal::DIRECTION_RECEIVE)
   {
@@ -352,76 +306,34 @@ TransferResult ShareNode::transfer(const TransferGoal& goal, const programs::Sto
         "refused: share_node moves whole files over SMB (protocol '' or 'smb'), not '" + goal.protocol + "'";
     return result;
   }
-  const std::string name = goal.file.substr(goal.file.find_last_of('/') + 1);  // the name on the share
-  {
-    std::lock_guard<std::mutex> lock(stats_mutex_);
-    ++counters_.transfers;
-  }
-  state_->update(
-      [&](MachineState& s)
+  bool started = false;
+  const programs::TransferOutcome outcome = transfers_->run(
+      send ? programs::ProgramTransfers::Direction::kSend : programs::ProgramTransfers::Direction::kReceive, goal.file,
+      progress,
+      [&]
       {
-        s.execution = MachineState::EXECUTION_ACTIVE;
-        s.program = goal.file;
-        s.message = (send ? "sending " : "receiving ") + goal.file;
+        started = true;
+        state_->update(
+            [&](MachineState& s)
+            {
+              s.execution = MachineState::EXECUTION_ACTIVE;
+              s.program = goal.file;
+              s.message = (send ? "sending " : "receiving ") + goal.file;
+            });
       });
-  bool refused = false;
-  try
-  {
-    if (send)
-    {
-      const std::string path = programs_->resolveExisting(goal.file);
-      result.bytes = programs::putProgram(*store_, path, name, *protected_, *pattern_, progress, &cancel_);
-      result.message = "sent " + goal.file + " to " + store_->describe() + "/" + name;
-      archive(name, path, "sent");
-    }
-    else
-    {
-      const std::string path = programs_->resolveForWrite(goal.file);
-      result.bytes = programs::getProgram(*store_, name, path, progress, &cancel_);
-      result.message = "received " + store_->describe() + "/" + name + " as " + path;
-      archive(name, path, "received");
-    }
-    result.success = true;
-    result.message += " (" + std::to_string(result.bytes) + " bytes)";
-    linkResult("");
-  }
-  catch (const ConfigError& e)
-  {
-    refused = true;
-    result.message = std::string("refused: ") + e.what();
-  }
-  catch (const DisabledError& e)
-  {
-    refused = true;
-    result.message = e.what();
-  }
-  catch (const LinkError& e)
-  {
-    result.message = e.what();
-    linkResult(e.what());
-  }
-  catch (const Error& e)
-  {
-    result.message = e.what();
-  }
-  {
-    std::lock_guard<std::mutex> lock(stats_mutex_);
-    (result.success ? counters_.completed : refused ? counters_.refused : counters_.failed)++;
-    counters_.bytes += result.bytes;
-    counters_.last_result = result.message;
-    if (!result.success && !refused)
-      counters_.last_error = result.message;
-  }
+  result.success = outcome.success;
+  result.message = outcome.message;
+  result.bytes = outcome.bytes;
+  if (!started)
+    return result;  // refused: another transfer runs, and the state is its
+  if (outcome.success || outcome.link_lost)
+    linkResult(outcome.success ? "" : outcome.message);
   state_->update(
       [&](MachineState& s)
       {
         s.execution = result.success ? MachineState::EXECUTION_READY : MachineState::EXECUTION_STOPPED;
         s.message = result.message;
       });
-  if (result.success)
-    ROS_INFO("%s", result.message.c_str());
-  else
-    ROS_ERROR("%s", result.message.c_str());
   return result;
 }
 
@@ -443,7 +355,7 @@ void ShareNode::execute(const TransferGoalConstPtr& goal)
                                     });
   if (result.success)
     action_->setSucceeded(result, result.message);
-  else if (cancel_)
+  else if (transfers_->cancelled())
     action_->setPreempted(result, result.message);
   else
     action_->setAborted(result, result.message);
@@ -521,22 +433,6 @@ bool ShareNode::onRemove(RemoveProgram::Request& request, RemoveProgram::Respons
     response.message = e.what();
   }
   return true;
-}
-
-void ShareNode::archive(const std::string& name, const std::string& path, const std::string& direction)
-{
-  try
-  {
-    std::ifstream in(path, std::ios::binary);
-    const std::string content((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    if (const auto kept = archive_->add(name, content, {"share_node", machine_, direction}))
-      ROS_INFO("kept %s as version %u in %s", name.c_str(), kept->number, archive_->root().c_str());
-  }
-  catch (const Error& e)
-  {
-    // The transfer itself succeeded: a full archive disk is reported, not turned into a failure.
-    ROS_ERROR("%s was %s but not archived: %s", name.c_str(), direction.c_str(), e.what());
-  }
 }
 
 bool ShareNode::onWithdraw(WithdrawProgram::Request& request, WithdrawProgram::Response& response)
@@ -708,23 +604,23 @@ bool ShareNode::onPublishToMachines(FanOutProgram::Request& request, FanOutProgr
 
 void ShareNode::diagnostics(diagnostic_updater::DiagnosticStatusWrapper& status)
 {
-  std::lock_guard<std::mutex> lock(stats_mutex_);
-  if (counters_.failed > 0 && counters_.last_result == counters_.last_error)
-    status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "last transfer failed: " + counters_.last_error);
+  const programs::TransferCounts counts = transfers_->counts();
+  if (counts.failed > 0 && counts.last_result == counts.last_error)
+    status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "last transfer failed: " + counts.last_error);
   else
     status.summary(diagnostic_msgs::DiagnosticStatus::OK,
-                   counters_.last_result.empty() ? "no transfer yet" : counters_.last_result);
+                   counts.last_result.empty() ? "no transfer yet" : counts.last_result);
   status.add("share", store_->describe());
   status.add("program_dir", programs_->root());
-  status.add("transfers", counters_.transfers);
-  status.add("completed", counters_.completed);
-  status.add("failed", counters_.failed);
-  status.add("refused", counters_.refused);
-  status.add("bytes", counters_.bytes);
-  status.add("checks", counters_.checks);
-  status.add("check failures", counters_.check_failures);
-  status.add("round trip (s)", counters_.round_trip);
-  status.add("last error", counters_.last_error);
+  status.add("transfers", counts.transfers);
+  status.add("completed", counts.completed);
+  status.add("failed", counts.failed);
+  status.add("refused", counts.refused);
+  status.add("bytes", counts.bytes);
+  status.add("checks", counts.checks);
+  status.add("check failures", counts.check_failures);
+  status.add("round trip (s)", counts.round_trip);
+  status.add("last error", counts.last_error);
   if (withdraw_timer_)
     status.add("next withdrawal (unix time)", static_cast<int64_t>(next_withdrawal_.load()));
 }
