@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Programs to and from an SMB share: cnc_dnc send/receive --share against Samba's own smbclient
-# put/get, to the same smbd in the same run, as a user times them (from starting the program to its
-# exit). smbd runs on 127.0.0.1 on a free port with everything in a scratch folder (as the tests'
-# samba_server.h does); both clients log in with the same user and credentials file.
+# put/get, to the same smbd in the same run, round by round, as a user times them (from starting
+# the program to its exit). smbd runs on 127.0.0.1 on a free port with everything in a scratch
+# folder (as the tests' samba_server.h does); both clients log in with the same user and
+# credentials file.
 #   bench/share/run.sh [ROUNDS]      (as root: smbd must be able to become the user it serves)
 # Prints one line per size and direction: medians of ROUNDS, MB/s, and the throughput ratio
 # cnc_dnc / smbclient (>= 0.9 is the goal); and the fixed per-transfer cost (a 1-byte program:
@@ -76,26 +77,33 @@ for size in 1 1048576 20971520; do
   head -c "$size" /dev/urandom >"$dir/local.nc"
   declare -A t=()
   for direction in up down; do
-    for tool in cnc_dnc smbclient; do
-      runs=()
-      for _ in $(seq "$rounds"); do
+    declare -A runs=([cnc_dnc]="" [smbclient]="")
+    # Round by round, the two tools one after the other (which goes first alternates), so that a
+    # change of the machine's load falls on both alike.
+    for round in $(seq "$rounds"); do
+      order=(cnc_dnc smbclient)
+      (( round % 2 == 0 )) && order=(smbclient cnc_dnc)
+      for tool in "${order[@]}"; do
         if [[ $direction == up && $tool == cnc_dnc ]]; then
-          runs+=("$(timed "$cnc_dnc" send --share "$url" --credentials "$dir/auth" --name "by_cnc_dnc.nc" "$dir/local.nc")")
+          runs[$tool]+=" $(timed "$cnc_dnc" send --share "$url" --credentials "$dir/auth" --name "by_cnc_dnc.nc" "$dir/local.nc")"
           cmp -s "$dir/local.nc" "$dir/share/by_cnc_dnc.nc" || { echo "bench/share: cnc_dnc upload differs"; exit 1; }
         elif [[ $direction == up ]]; then
-          runs+=("$(timed smbclient //127.0.0.1/bench -p "$port" -A "$dir/auth" -c "put $dir/local.nc by_smbclient.nc")")
+          runs[$tool]+=" $(timed smbclient //127.0.0.1/bench -p "$port" -A "$dir/auth" -c "put $dir/local.nc by_smbclient.nc")"
           cmp -s "$dir/local.nc" "$dir/share/by_smbclient.nc" || { echo "bench/share: smbclient upload differs"; exit 1; }
         elif [[ $tool == cnc_dnc ]]; then
           rm -f "$dir/back.nc"
-          runs+=("$(timed "$cnc_dnc" receive --share "$url" --credentials "$dir/auth" by_smbclient.nc "$dir/back.nc")")
+          runs[$tool]+=" $(timed "$cnc_dnc" receive --share "$url" --credentials "$dir/auth" by_smbclient.nc "$dir/back.nc")"
           cmp -s "$dir/local.nc" "$dir/back.nc" || { echo "bench/share: cnc_dnc download differs"; exit 1; }
         else
           rm -f "$dir/back.nc"
-          runs+=("$(timed smbclient //127.0.0.1/bench -p "$port" -A "$dir/auth" -c "get by_cnc_dnc.nc $dir/back.nc")")
+          runs[$tool]+=" $(timed smbclient //127.0.0.1/bench -p "$port" -A "$dir/auth" -c "get by_cnc_dnc.nc $dir/back.nc")"
           cmp -s "$dir/local.nc" "$dir/back.nc" || { echo "bench/share: smbclient download differs"; exit 1; }
         fi
       done
-      t[$direction.$tool]=$(median "${runs[@]}")
+    done
+    for tool in cnc_dnc smbclient; do
+      # shellcheck disable=SC2086  # the runs are words of the one string
+      t[$direction.$tool]=$(median ${runs[$tool]})
     done
     python3 - "$size" "$direction" "${t[$direction.cnc_dnc]}" "${t[$direction.smbclient]}" <<'PY'
 import sys
