@@ -10,7 +10,8 @@ cnc_core_module(cnc_bridge_at_protocol
   src/at_protocol/program_path.cpp
   src/at_protocol/sender.cpp
   src/at_protocol/deadman.cpp
-  src/at_protocol/controller_session.cpp)
+  src/at_protocol/controller_session.cpp
+  src/at_protocol/goal_runner.cpp)
 target_link_libraries(cnc_bridge_at_protocol PUBLIC cnc_bridge_gcode)
 
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)

@@ -9,15 +9,14 @@
 #include <std_srvs/Trigger.h>
 
 #include <cmath>
-#include <condition_variable>
 #include <memory>
-#include <sstream>
 
 #include "cnc_bridge/AtFollowPathAction.h"
 #include "cnc_bridge/AtJog.h"
 #include "cnc_bridge/AtSpindle.h"
 #include "cnc_bridge/AtToolChange.h"
 #include "cnc_bridge/at_protocol/controller_session.h"
+#include "cnc_bridge/at_protocol/goal_runner.h"
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/gcode/program_steps.h"
 #include "cnc_bridge/ros/gcode_params.h"
@@ -196,6 +195,9 @@ class AtControllerNode : public ap::ControllerListener
     }
     session_ = std::make_unique<ap::ControllerSession>(std::move(links), options, this);
     session_->start();
+    goal_runner_ = std::make_unique<ap::GoalRunner>(
+        *session_, ap::GoalRunner::Names{pnh.resolveName("resume"), pnh.resolveName("set_motion_enabled"),
+                                         pnh.resolveName("optional_stop")});
 
     set_auto_srv_ = pnh.advertiseService("set_auto", &AtControllerNode::setAuto, this);
     jog_srv_ = pnh.advertiseService("jog", &AtControllerNode::jog, this);
@@ -214,7 +216,7 @@ class AtControllerNode : public ap::ControllerListener
     // A goal in progress is cancelled (decelerates to a stop) and its thread joined while the
     // session it uses still runs.
     follow_path_.shutdown();
-    hold_cv_.notify_all();
+    goal_runner_->wake();
     session_->stop();
   }
 
@@ -409,208 +411,135 @@ class AtControllerNode : public ap::ControllerListener
     path_pub_.publish(path);
   }
 
-  void followPath(const AtFollowPathGoalConstPtr& goal)
+  /// The goal's operations run by the goal runner: a refusal, a plan that fails or its outcome.
+  ap::GoalOutcome runGoal(const AtFollowPathGoal& goal)
   {
-    AtFollowPathResult result;
-    const auto abort = [&](const std::string& why)
+    ap::GoalOutcome refused;
+    refused.end = ap::GoalOutcome::End::kAborted;
+    refused.message = session_->motionRefusal("follow_path");
+    if (!refused.message.empty())
     {
-      result.success = false;
-      result.message = why;
-      ROS_WARN_STREAM("at_controller_node: follow_path: " << why);
-      follow_path_.setAborted(result, why);
-    };
-    std::string refusal = session_->motionRefusal("follow_path");
-    if (!refusal.empty())
-    {
-      return abort(refusal);
+      return refused;
     }
     const ap::ControllerSnapshot now = session_->snapshot();
     if (!now.position_valid)
     {
-      return abort("the controller has not reported its position yet (is the report link up?)");
+      refused.message = "the controller has not reported its position yet (is the report link up?)";
+      return refused;
     }
     try
     {
       // ~program_commands is read at each goal.
-      const std::vector<Plan> plans =
-          session_->planGoal(goalRequest(*goal), now.position, pnh_.param("program_commands", false),
-                             pnh_.resolveName("program_commands"));
+      const std::vector<Plan> plans = session_->planGoal(
+          goalRequest(goal), now.position, pnh_.param("program_commands", false), pnh_.resolveName("program_commands"));
       publishPlannedPath(plans);  // before motion: the path is known once the goal is accepted
-      AtFollowPathFeedback feedback;
-      std::string end_note;
-      for (const Plan& plan : plans)
-      {
-        if (plan.moves() && !runPlan(*goal, plan, result, feedback))
-        {
-          return;  // cancelled or failed: the goal has ended
-        }
-        if (plan.after)
-        {
-          if (plan.after->kind == gcode::ProgramStep::Kind::kEnd)
-          {
-            end_note = plan.after->describe() + ": the program ends here; nothing after it was sent";
-            break;
-          }
-          if (!carryOut(*plan.after, feedback))
-          {
-            return endCancelled(result, "cancelled at the " + plan.after->describe());
-          }
-        }
-      }
-      result.success = true;
-      if (!end_note.empty())
-      {
-        result.message = end_note;
-        state_->update([&](MachineState& s) { s.message = "follow_path: " + end_note; });
-      }
-      follow_path_.setSucceeded(result, result.message);
+      GoalView view(*this, goal);
+      return goal_runner_->run(plans, goal.tool, goal.tool_length, view);
     }
     catch (const std::exception& e)
     {
-      abort(e.what());
+      refused.message = e.what();
+      return refused;
     }
   }
 
-  /// Ends the goal PREEMPTED (a cancel while nothing moves: nothing more is sent).
-  void endCancelled(AtFollowPathResult& result, const std::string& message)
+  void followPath(const AtFollowPathGoalConstPtr& goal)
   {
-    result.message = message;
-    state_->update(
-        [&](MachineState& s)
-        {
-          s.execution = MachineState::EXECUTION_STOPPED;
-          s.message = result.message;
-        });
-    follow_path_.setPreempted(result, result.message);
-  }
-
-  /// Runs one operation of a goal. Motion disabled before or during it pauses the goal (the path
-  /// decelerates to a stop and holds, the goal stays active) until motion is enabled and ~resume
-  /// is called; the rest of the path is then planned from the stop point, from rest, to its end.
-  /// \returns true if the operation reached its end (the goal goes on); otherwise the goal has
-  /// ended (cancelled, e-stop, link failure).
-  bool runPlan(const AtFollowPathGoal& goal, const Plan& plan, AtFollowPathResult& result,
-               AtFollowPathFeedback& feedback)
-  {
-    Plan rest = plan;
-    for (;;)
+    const ap::GoalOutcome outcome = runGoal(*goal);
+    AtFollowPathResult result;
+    result.success = outcome.end == ap::GoalOutcome::End::kSucceeded;
+    result.message = outcome.message;
+    result.setpoints = outcome.setpoints;
+    result.underruns = static_cast<uint32_t>(outcome.underruns);
+    if (outcome.final_position)
     {
-      while (!session_->motionEnabled())
-      {
-        // Disabled between operations (during a dwell or a program stop): nothing is moving.
-        const std::string by = session_->motionDisabledBy();
-        const std::string event =
-            "motion disabled by " + by + " (" + pnh_.resolveName("set_motion_enabled") + ") before the next operation";
-        if (!holdUntilResume("stop when motion was disabled by " + by, event, feedback))
+      result.final_position = toPoint(*outcome.final_position);
+    }
+    switch (outcome.end)
+    {
+      case ap::GoalOutcome::End::kSucceeded:
+        if (outcome.program_end)
         {
-          endCancelled(result, "cancelled while held: " + event);
-          return false;
+          state_->update([&](MachineState& s) { s.message = "follow_path: " + outcome.message; });
         }
-      }
-      const std::string refusal = session_->motionRefusal("follow_path");
-      if (!refusal.empty())
-      {
-        // The e-stop (E1 or unknown) between operations: the goal cannot go on.
-        result.message =
-            refusal + (feedback.event.empty() ? "" : " (before the operation after " + feedback.event + ")");
+        return follow_path_.setSucceeded(result, result.message);
+      case ap::GoalOutcome::End::kCancelled:
+        if (outcome.held_when_cancelled)
+        {
+          // Cancelled while nothing moved: nothing more was sent.
+          state_->update(
+              [&](MachineState& s)
+              {
+                s.execution = MachineState::EXECUTION_STOPPED;
+                s.message = result.message;
+              });
+        }
+        return follow_path_.setPreempted(result, result.message);
+      case ap::GoalOutcome::End::kAborted:
         ROS_WARN_STREAM("at_controller_node: follow_path: " << result.message);
-        follow_path_.setAborted(result, result.message);
-        return false;
-      }
-      std::optional<ap::DisabledStop> stop;
-      if (runOperation(goal, rest, result, feedback, stop))
-      {
-        return true;
-      }
-      if (!stop)
-      {
-        return false;  // cancelled, e-stop or link failure: the goal has ended
-      }
-      std::ostringstream event;
-      event << "motion disabled by " << stop->by << " (" << pnh_.resolveName("set_motion_enabled")
-            << "): decelerated to a stop along the path at X" << stop->position[0] / ap::kPulsesPerMm << " Y"
-            << stop->position[1] / ap::kPulsesPerMm << " Z" << stop->position[2] / ap::kPulsesPerMm << " mm after "
-            << stop->sent << " of " << stop->planned << " planned setpoints";
-      ROS_WARN_STREAM("at_controller_node: follow_path: " << event.str() << "; holding");
-      if (!holdUntilResume("stop when motion was disabled by " + stop->by, event.str(), feedback))
-      {
-        endCancelled(result, "cancelled while held: " + event.str());
-        return false;
-      }
-      const ap::PathRest left = ap::restOfPath(rest.points, rest.feeds, stop->distance, stop->position);
-      if (left.empty())
-      {
-        return true;  // it came to rest on the end point
-      }
-      rest.points = left.points;
-      rest.feeds = left.feeds;
-      rest.tool = -1;  // the tool was changed before the stop
+        return follow_path_.setAborted(result, result.message);
     }
   }
 
-  /// Runs one operation to its end. \returns true if it succeeded (the goal goes on). Otherwise
-  /// either \p stop says where motion was disabled (the operation decelerated to a stop and ended
-  /// with #@ M0@; the goal goes on, paused) or the goal has been ended (cancelled, e-stop, link
-  /// failure).
-  bool runOperation(const AtFollowPathGoal& goal, const Plan& plan, AtFollowPathResult& result,
-                    AtFollowPathFeedback& feedback, std::optional<ap::DisabledStop>& stop)
+  /// One goal as the goal runner reports it: its feedback, and the machine's state.
+  class GoalView : public ap::GoalListener
   {
-    const ap::Operation operation = session_->operationFor(plan, goal.tool, goal.tool_length);
-    // The S-curve streams the trapezoid's steps plus its average's window less one.
-    const size_t setpoints = ap::TrajectoryStream(*operation.trajectory).total();
-    const double period = session_->options().limits.period;
-    ROS_INFO_STREAM("at_controller_node: follow_path: "
-                    << plan.points.size() - 1 << " segments, " << operation.trajectory->length() / ap::kPulsesPerMm
-                    << " mm in " << setpoints * period << " s (" << setpoints << " setpoints)");
-    ap::ControllerSession::OperationWatch watch;
-    watch.started = [&](const ap::Job&) { showStarted(goal, operation); };
-    watch.cancel_requested = [this] { return follow_path_.isPreemptRequested() || !ros::ok() || stopping_; };
-    watch.progress = [&](const ap::Job& job, bool stopping) { publishFeedback(job, stopping, feedback); };
-    feedback.paused = false;
-    const ap::OperationResult run = session_->runOperation(plan, operation, watch);
-    const ap::Job& job = *run.job;
-    result.setpoints += job.sent();
-    result.underruns += static_cast<uint32_t>(run.underruns);
-    const ap::ControllerSnapshot now = session_->snapshot();
-    result.final_position = toPoint(now.position);
-    result.message = job.message();
-    state_->update(
-        [&](MachineState& s)
-        {
-          s.execution = now.estop == ap::EStop::kOn                 ? MachineState::EXECUTION_ALARM
-                        : job.state() == ap::Job::State::kSucceeded ? MachineState::EXECUTION_READY
-                                                                    : MachineState::EXECUTION_STOPPED;
-          s.mode = now.jog_axis >= 0 ? MachineState::MODE_MANUAL : MachineState::MODE_AUTO;
-          s.coolant = MachineState::COOLANT_OFF;  // #@ ends the operation's coolant
-          s.spindle_speed = 0.0;                  // M0@ stops the spindle (step 18)
-          s.message = "follow_path " + std::string(ap::Job::toString(job.state())) + ": " + job.message();
-        });
-    stop = run.disabled;
-    if (stop)
+   public:
+    GoalView(AtControllerNode& node, const AtFollowPathGoal& goal) : node_(node), goal_(goal) {}
+
+    bool cancelRequested() override { return node_.follow_path_.isPreemptRequested() || !ros::ok() || node_.stopping_; }
+    // Read at each M01, as an operator flips the control's OPT STOP switch during a job.
+    bool optionalStop() override { return node_.pnh_.param("optional_stop", true); }
+    void operationStarted(const ap::Operation& operation) override { node_.showStarted(goal_, operation); }
+    void operationProgress(const ap::Job& job, bool stopping, const ap::GoalFeedback& feedback) override
     {
-      return false;
+      feedback_.setpoint = job.sent();
+      feedback_.setpoints_total = job.total();
+      feedback_.progress = job.total() > 0 ? static_cast<float>(job.sent()) / job.total() : 0.0f;
+      feedback_.commanded = toPoint(job.current().position);
+      feedback_.reported = toPoint(node_.session_->snapshot().position);
+      feedback_.following_error.x = feedback_.commanded.x - feedback_.reported.x;
+      feedback_.following_error.y = feedback_.commanded.y - feedback_.reported.y;
+      feedback_.following_error.z = feedback_.commanded.z - feedback_.reported.z;
+      feedback_.stopping = stopping;
+      if (feedback_.setpoint > 0)
+      {
+        publish(feedback);
+      }
     }
-    switch (job.state())
+    void operationEnded(const ap::OperationResult& result) override { node_.showEnded(*result.job); }
+    void dwelling(const ap::GoalFeedback& feedback) override
     {
-      case ap::Job::State::kSucceeded:
-        return true;
-      case ap::Job::State::kCancelled:
-        follow_path_.setPreempted(result, result.message);
-        return false;
-      case ap::Job::State::kFailed:
-        // The protocol has no host watchdog: the controller holds the last setpoint it received.
-        result.message = "command link lost after " + std::to_string(job.sent()) + " setpoints: " + job.message() +
-                         "; the controller holds the last setpoint it received, the node reconnects (send the "
-                         "rest as a new goal)";
-        ROS_WARN_STREAM("at_controller_node: follow_path: " << result.message);
-        follow_path_.setAborted(result, result.message);
-        return false;
-      default:
-        ROS_WARN_STREAM("at_controller_node: follow_path: " << result.message);
-        follow_path_.setAborted(result, result.message);
-        return false;
+      node_.state_->update([&](MachineState& s) { s.message = feedback.event; });
+      publish(feedback);
     }
-  }
+    void optionalStopPassed(const ap::GoalFeedback& feedback) override { publish(feedback); }
+    void holding(const ap::GoalFeedback& feedback, uint32_t line) override
+    {
+      node_.state_->update(
+          [&](MachineState& s)
+          {
+            s.block = line > 0 ? line : s.block;  // a program stop's line
+            s.execution = MachineState::EXECUTION_PAUSED;
+            s.message = feedback.event;
+          });
+      ROS_INFO_STREAM("at_controller_node: follow_path: " << feedback.event);
+      feedback_.stopping = false;
+      publish(feedback);
+    }
+
+   private:
+    void publish(const ap::GoalFeedback& feedback)
+    {
+      feedback_.event = feedback.event;
+      feedback_.paused = feedback.paused;
+      node_.follow_path_.publishFeedback(feedback_);
+    }
+
+    AtControllerNode& node_;
+    const AtFollowPathGoal& goal_;
+    AtFollowPathFeedback feedback_;
+  };
 
   /// state while an operation streams: DNC, its program, coolant, tool and spindle.
   void showStarted(const AtFollowPathGoal& goal, const ap::Operation& operation)
@@ -633,127 +562,28 @@ class AtControllerNode : public ap::ControllerListener
         });
   }
 
-  /// Carries out the program's stop, optional stop or dwell between two operations.
-  /// \returns false if the goal was cancelled meanwhile.
-  bool carryOut(const gcode::ProgramStep& step, AtFollowPathFeedback& feedback)
+  /// state after an operation: READY, STOPPED (cancel, disable, failure) or ALARM (e-stop).
+  void showEnded(const ap::Job& job)
   {
-    using Kind = gcode::ProgramStep::Kind;
-    feedback.event = step.describe();
-    feedback.paused = false;
-    if (step.kind == Kind::kDwell)
-    {
-      state_->update([&](MachineState& s) { s.message = step.describe(); });
-      follow_path_.publishFeedback(feedback);
-      return waitWhileRunning(std::chrono::duration<double>(step.dwell_s), false);
-    }
-    // Read at each M01, as an operator flips the control's OPT STOP switch during a job.
-    if (step.kind == Kind::kOptionalStop && !pnh_.param("optional_stop", true))
-    {
-      feedback.event += " passed (" + pnh_.resolveName("optional_stop") + " false)";
-      follow_path_.publishFeedback(feedback);
-      return true;
-    }
-    state_->update([&](MachineState& s) { s.block = step.line; });
-    return holdUntilResume(step.describe(), step.describe(), feedback);
-  }
-
-  /// Holds the goal (nothing is sent) until ~resume: state PAUSED, feedback paused with
-  /// "<event>: waiting for ~resume". \p hold completes "resumed after ..." in resume's answer.
-  /// \returns false if the goal was cancelled meanwhile.
-  bool holdUntilResume(const std::string& hold, const std::string& event, AtFollowPathFeedback& feedback)
-  {
-    feedback.event = event + ": waiting for " + pnh_.resolveName("resume");
-    feedback.paused = true;
-    feedback.stopping = false;
-    {
-      std::lock_guard<std::mutex> lock(hold_mutex_);
-      hold_ = hold;
-      resume_requested_ = false;
-    }
+    const ap::ControllerSnapshot now = session_->snapshot();
     state_->update(
         [&](MachineState& s)
         {
-          s.execution = MachineState::EXECUTION_PAUSED;
-          s.message = feedback.event;
+          s.execution = now.estop == ap::EStop::kOn                 ? MachineState::EXECUTION_ALARM
+                        : job.state() == ap::Job::State::kSucceeded ? MachineState::EXECUTION_READY
+                                                                    : MachineState::EXECUTION_STOPPED;
+          s.mode = now.jog_axis >= 0 ? MachineState::MODE_MANUAL : MachineState::MODE_AUTO;
+          s.coolant = MachineState::COOLANT_OFF;  // #@ ends the operation's coolant
+          s.spindle_speed = 0.0;                  // M0@ stops the spindle (step 18)
+          s.message = "follow_path " + std::string(ap::Job::toString(job.state())) + ": " + job.message();
         });
-    ROS_INFO_STREAM("at_controller_node: follow_path: " << feedback.event);
-    follow_path_.publishFeedback(feedback);
-    const bool resumed = waitWhileRunning(std::chrono::hours(24 * 365), true);
-    {
-      std::lock_guard<std::mutex> lock(hold_mutex_);
-      hold_.clear();
-    }
-    feedback.paused = false;
-    return resumed;
-  }
-
-  /// Waits for \p time, or (\p until_resume) for ~resume; false if the goal is cancelled first.
-  bool waitWhileRunning(std::chrono::duration<double> time, bool until_resume)
-  {
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration_cast<Milliseconds>(time);
-    std::unique_lock<std::mutex> lock(hold_mutex_);
-    for (;;)
-    {
-      if (until_resume && resume_requested_)
-      {
-        return true;
-      }
-      if (std::chrono::steady_clock::now() >= deadline)
-      {
-        return !until_resume;
-      }
-      lock.unlock();
-      if (follow_path_.isPreemptRequested() || !ros::ok() || stopping_)
-      {
-        return false;
-      }
-      lock.lock();
-      // A cancel comes without a notification here: look again at least every 20 ms.
-      hold_cv_.wait_until(lock, std::min(deadline, std::chrono::steady_clock::now() + Milliseconds(20)));
-    }
   }
 
   /// ~resume: a goal held at the program's M00/M01, or paused because motion was disabled, goes
   /// on, if motion may start (enabled, e-stop released).
   bool resume(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res)
   {
-    std::lock_guard<std::mutex> lock(hold_mutex_);
-    if (hold_.empty())
-    {
-      res.success = false;
-      res.message =
-          "nothing to resume: no follow_path goal is held (at a program stop M00/M01, or paused by "
-          "motion disabled)";
-      return true;
-    }
-    res.message = session_->motionRefusal("resume");
-    if (!res.message.empty())
-    {
-      return true;
-    }
-    resume_requested_ = true;
-    res.success = true;
-    res.message = "resumed after the " + hold_;
-    hold_cv_.notify_all();
-    return true;
-  }
-
-  void publishFeedback(const ap::Job& job, bool stopping, AtFollowPathFeedback& feedback)
-  {
-    feedback.setpoint = job.sent();
-    feedback.setpoints_total = job.total();
-    feedback.progress =
-        feedback.setpoints_total > 0 ? static_cast<float>(feedback.setpoint) / feedback.setpoints_total : 0.0f;
-    feedback.commanded = toPoint(job.current().position);
-    feedback.reported = toPoint(session_->snapshot().position);
-    feedback.following_error.x = feedback.commanded.x - feedback.reported.x;
-    feedback.following_error.y = feedback.commanded.y - feedback.reported.y;
-    feedback.following_error.z = feedback.commanded.z - feedback.reported.z;
-    feedback.stopping = stopping;
-    if (feedback.setpoint > 0)
-    {
-      follow_path_.publishFeedback(feedback);
-    }
+    return answer(goal_runner_->resume(), res);
   }
 
   // ---- diagnostics --------------------------------------------------------------------------------
@@ -809,10 +639,6 @@ class AtControllerNode : public ap::ControllerListener
   std::unique_ptr<RuntimeSwitch> motion_;
   std::unique_ptr<ToMachineFrame> to_machine_;  // path goals in other frames
   std::atomic<bool> stopping_{false};
-  std::mutex hold_mutex_;            // guards hold_, resume_requested_
-  std::condition_variable hold_cv_;  // ~resume
-  std::string hold_;                 // what a held goal waits after, for ~resume's answer ("" when none)
-  bool resume_requested_ = false;
   uint64_t underruns_seen_ = 0;
   ros::SteadyTimer jog_timer_;  // one-shot, fires when the jog deadman may expire
   std::mutex jog_stop_mutex_;   // guards last_jog_stop_
@@ -820,6 +646,7 @@ class AtControllerNode : public ap::ControllerListener
 
   std::unique_ptr<MachineStatePublisher> state_;
   std::unique_ptr<ap::ControllerSession> session_;
+  std::unique_ptr<ap::GoalRunner> goal_runner_;
   SingleGoalActionServer<AtFollowPathAction> follow_path_;
   ros::ServiceServer set_auto_srv_, jog_srv_, spindle_srv_, coolant_srv_, tool_srv_, home_srv_, resume_srv_;
   ros::Publisher path_pub_;

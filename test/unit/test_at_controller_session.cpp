@@ -1,15 +1,19 @@
 // The controller session (controller_session.h) against fake links: reports folded into the
 // snapshot, link loss reported (and the e-stop then unknown), the motion gate refusing with
-// nothing sent, a disable during an operation, and a goal's plan. The tests wait on the events
-// of the listener or on the bytes the fake controller receives, never on sleeps.
+// nothing sent, a disable during an operation, and a goal's plan; the goal runner
+// (goal_runner.h): program stops held until resume, cancel while held, M01 and M30, a pause by a
+// disable resumed to the path's end. The tests wait on the events of the listeners or on the bytes
+// the fake controller receives, never on sleeps.
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <condition_variable>
 #include <future>
 #include <mutex>
 #include <thread>
 
 #include "cnc_bridge/at_protocol/controller_session.h"
+#include "cnc_bridge/at_protocol/goal_runner.h"
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/transport/fake_transport.h"
 #include "cnc_bridge/transport/forwarding_transport.h"
@@ -322,4 +326,175 @@ TEST_F(AtControllerSession, AGoalIsPlannedFromTheReportedPositionInWholePulses)
   {
     EXPECT_EQ(std::string(e.what()), "G-code goals need the parameter program_dir");
   }
+}
+
+namespace
+{
+/// A goal's listener that records the holds and can cancel.
+struct GoalRecorder : GoalListener
+{
+  std::atomic<bool> cancel{false};
+  bool optional_stop = true;
+  std::mutex mutex;
+  std::condition_variable changed;
+  std::vector<std::pair<std::string, uint32_t>> holds;  // feedback event, program line
+  std::vector<std::string> passed;
+  int operations = 0;
+
+  bool cancelRequested() override { return cancel; }
+  bool optionalStop() override { return optional_stop; }
+  void operationEnded(const OperationResult&) override
+  {
+    std::lock_guard<std::mutex> lock(mutex);
+    ++operations;
+  }
+  void optionalStopPassed(const GoalFeedback& feedback) override { passed.push_back(feedback.event); }
+  void holding(const GoalFeedback& feedback, uint32_t line) override
+  {
+    EXPECT_TRUE(feedback.paused);
+    {
+      std::lock_guard<std::mutex> lock(mutex);
+      holds.emplace_back(feedback.event, line);
+    }
+    changed.notify_all();
+  }
+  bool waitForHolds(size_t count)
+  {
+    std::unique_lock<std::mutex> lock(mutex);
+    return changed.wait_for(lock, kWait, [&] { return holds.size() >= count; });
+  }
+};
+
+gcode::ProgramStep programStep(gcode::ProgramStep::Kind kind, uint32_t line, uint16_t m_code)
+{
+  gcode::ProgramStep step;
+  step.kind = kind;
+  step.line = line;
+  step.m_code = m_code;
+  return step;
+}
+
+/// Two short operations along X (1 mm each, from 0), the first followed by \p after.
+std::vector<OperationPlan> twoOperations(const gcode::ProgramStep& after)
+{
+  std::vector<OperationPlan> plans(2);
+  plans[0].points = {{0, 0, 0}, {1000, 0, 0}};
+  plans[0].feeds = {20.0};
+  plans[0].after = after;
+  plans[1].points = {{1000, 0, 0}, {2000, 0, 0}};
+  plans[1].feeds = {20.0};
+  return plans;
+}
+}  // namespace
+
+TEST_F(AtControllerSession, AProgramStopHoldsTheGoalUntilResumeWhichIsRefusedWhileMotionIsDisabled)
+{
+  start(options(true));
+  report("E0\n0 0 0\n", 2);
+  GoalRunner runner(*session, GoalRunner::Names{"/m/resume", "/m/set_motion_enabled", "/m/optional_stop"});
+  EXPECT_EQ(runner.resume().message,
+            "nothing to resume: no follow_path goal is held (at a program stop M00/M01, or paused by motion "
+            "disabled)");
+  GoalRecorder goal;
+  const auto plans = twoOperations(programStep(gcode::ProgramStep::Kind::kStop, 7, 0));
+  auto run = std::async(std::launch::async, [&] { return runner.run(plans, -1, 0.0, goal); });
+  ASSERT_TRUE(goal.waitForHolds(1));
+  const std::string stop = plans[0].after->describe();
+  EXPECT_EQ(goal.holds[0], std::make_pair(stop + ": waiting for /m/resume", 7u));
+  const size_t sent_at_stop = received().size();
+  EXPECT_EQ(received().compare(sent_at_stop - 5, 5, "#@M0@"), 0);
+  // Disabled, resume is refused and the goal stays held; enabled, it goes on.
+  session->setMotionEnabled(false, "/cell_manager");
+  EXPECT_EQ(runner.resume().message, "resume refused: motion is disabled (test)");
+  EXPECT_EQ(run.wait_for(Milliseconds(50)), std::future_status::timeout);
+  session->setMotionEnabled(true, "/cell_manager");
+  const Answer resumed = runner.resume();
+  EXPECT_TRUE(resumed.success);
+  EXPECT_EQ(resumed.message, "resumed after the " + stop);
+  ASSERT_EQ(run.wait_for(kWait), std::future_status::ready);
+  const GoalOutcome outcome = run.get();
+  EXPECT_EQ(outcome.end, GoalOutcome::End::kSucceeded) << outcome.message;
+  EXPECT_EQ(goal.operations, 2);
+  EXPECT_GT(received().size(), sent_at_stop);
+  ASSERT_TRUE(outcome.final_position.has_value());
+}
+
+TEST_F(AtControllerSession, ACancelWhileHeldEndsTheGoalWithNothingMoreSent)
+{
+  start(options(true));
+  report("E0\n0 0 0\n", 2);
+  GoalRunner runner(*session, GoalRunner::Names{});
+  GoalRecorder goal;
+  const auto plans = twoOperations(programStep(gcode::ProgramStep::Kind::kOptionalStop, 3, 1));
+  auto run = std::async(std::launch::async, [&] { return runner.run(plans, -1, 0.0, goal); });
+  ASSERT_TRUE(goal.waitForHolds(1));
+  const std::string sent_at_stop = received();
+  goal.cancel = true;
+  ASSERT_EQ(run.wait_for(kWait), std::future_status::ready);
+  const GoalOutcome outcome = run.get();
+  EXPECT_EQ(outcome.end, GoalOutcome::End::kCancelled);
+  EXPECT_TRUE(outcome.held_when_cancelled);
+  EXPECT_EQ(outcome.message, "cancelled at the " + plans[0].after->describe());
+  EXPECT_EQ(goal.operations, 1);
+  EXPECT_EQ(received(), sent_at_stop);
+}
+
+TEST_F(AtControllerSession, AnOptionalStopPassesWhenTheSwitchIsOffAndTheProgramEndEndsTheGoal)
+{
+  start(options(true));
+  report("E0\n0 0 0\n", 2);
+  GoalRunner runner(*session, GoalRunner::Names{"resume", "set_motion_enabled", "/m/optional_stop"});
+  GoalRecorder goal;
+  goal.optional_stop = false;
+  auto plans = twoOperations(programStep(gcode::ProgramStep::Kind::kOptionalStop, 3, 1));
+  plans[1].after = programStep(gcode::ProgramStep::Kind::kEnd, 9, 30);
+  const GoalOutcome outcome = runner.run(plans, -1, 0.0, goal);
+  EXPECT_EQ(outcome.end, GoalOutcome::End::kSucceeded) << outcome.message;
+  EXPECT_TRUE(outcome.program_end);
+  EXPECT_EQ(outcome.message, plans[1].after->describe() + ": the program ends here; nothing after it was sent");
+  EXPECT_TRUE(goal.holds.empty());
+  ASSERT_EQ(goal.passed.size(), 1u);
+  EXPECT_EQ(goal.passed[0], plans[0].after->describe() + " passed (/m/optional_stop false)");
+  EXPECT_EQ(goal.operations, 2);
+}
+
+TEST_F(AtControllerSession, ADisableMidOperationPausesTheGoalAndResumeFinishesThePathToItsEnd)
+{
+  start(options(true));
+  report("E0\n0 0 0\n", 2);
+  GoalRunner runner(*session, GoalRunner::Names{"resume", "/m/set_motion_enabled", "optional_stop"});
+  GoalRecorder goal;
+  std::vector<OperationPlan> plans(1);
+  plans[0].points = {{0, 0, 0}, {200000, 0, 0}};
+  plans[0].feeds = {40.0};
+  auto run = std::async(std::launch::async, [&] { return runner.run(plans, -1, 0.0, goal); });
+  ASSERT_TRUE(recorder.lastCommandLink()->waitForWritten(2000, kWait));  // streaming
+  session->setMotionEnabled(false, "/cell_manager");
+  ASSERT_TRUE(goal.waitForHolds(1));
+  EXPECT_EQ(goal.holds[0].first.rfind("motion disabled by /cell_manager (/m/set_motion_enabled): decelerated to a "
+                                      "stop along the path at X",
+                                      0),
+            0u)
+      << goal.holds[0].first;
+  EXPECT_EQ(goal.holds[0].second, 0u);
+  session->setMotionEnabled(true, "/cell_manager");
+  EXPECT_EQ(runner.resume().message, "resumed after the stop when motion was disabled by /cell_manager");
+  ASSERT_EQ(run.wait_for(kWait), std::future_status::ready);
+  const GoalOutcome outcome = run.get();
+  EXPECT_EQ(outcome.end, GoalOutcome::End::kSucceeded) << outcome.message;
+  EXPECT_EQ(goal.operations, 2);
+  // The last setpoint of the rest is the path's end point exactly.
+  CommandReassembler commands;
+  const auto sent = recorder.lastCommandLink()->written();
+  const auto messages = commands.feed(sent.data(), sent.size()).messages;
+  Setpoint last{};
+  for (const auto& message : messages)
+  {
+    const Command command = decodeCommand(message);
+    if (const auto* setpoint = std::get_if<Setpoint>(&command))
+    {
+      last = *setpoint;
+    }
+  }
+  EXPECT_EQ(last.position, (std::array<int32_t, 3>{200000, 0, 0}));
 }

@@ -1,0 +1,236 @@
+// A follow_path goal on the controller (goal_runner.h).
+#include "cnc_bridge/at_protocol/goal_runner.h"
+
+#include <sstream>
+
+#include "cnc_bridge/common/error.h"
+#include "cnc_bridge/common/log.h"
+
+namespace cnc_bridge
+{
+namespace at_protocol
+{
+/// One goal's state while it runs.
+struct GoalRunner::Run
+{
+  int32_t goal_tool;
+  double goal_tool_length;
+  GoalListener& listener;
+  JobHold::Cancelled cancelled;
+  GoalFeedback feedback;
+  GoalOutcome outcome;
+};
+
+namespace
+{
+/// The goal ends PREEMPTED while nothing moves: nothing more is sent.
+bool cancelledWhileHeld(GoalOutcome& outcome, const std::string& message)
+{
+  outcome.end = GoalOutcome::End::kCancelled;
+  outcome.held_when_cancelled = true;
+  outcome.message = message;
+  return false;
+}
+}  // namespace
+
+GoalRunner::GoalRunner(ControllerSession& session, Names names) : session_(session), names_(std::move(names)) {}
+
+GoalOutcome GoalRunner::run(const std::vector<OperationPlan>& plans, int32_t goal_tool, double goal_tool_length,
+                            GoalListener& listener)
+{
+  Run run{goal_tool, goal_tool_length, listener, [&listener] { return listener.cancelRequested(); }, {}, {}};
+  try
+  {
+    for (const OperationPlan& plan : plans)
+    {
+      if (plan.moves() && !runPlan(run, plan))
+      {
+        return run.outcome;  // cancelled or failed: the goal has ended
+      }
+      if (!plan.after)
+      {
+        continue;
+      }
+      if (plan.after->kind == gcode::ProgramStep::Kind::kEnd)
+      {
+        run.outcome.message = plan.after->describe() + ": the program ends here; nothing after it was sent";
+        run.outcome.program_end = true;
+        break;
+      }
+      if (!carryOut(run, *plan.after))
+      {
+        cancelledWhileHeld(run.outcome, "cancelled at the " + plan.after->describe());
+        return run.outcome;
+      }
+    }
+    run.outcome.end = GoalOutcome::End::kSucceeded;
+  }
+  catch (const std::exception& e)
+  {
+    run.outcome.end = GoalOutcome::End::kAborted;
+    run.outcome.message = e.what();
+  }
+  return run.outcome;
+}
+
+/// Runs one operation of a goal. Motion disabled before or during it pauses the goal (the path
+/// decelerates to a stop and holds, the goal stays active) until motion is enabled and resume is
+/// called; the rest of the path is then planned from the stop point, from rest, to its end.
+/// \returns true if the operation reached its end (the goal goes on); otherwise the goal has
+/// ended (cancelled, e-stop, link failure).
+bool GoalRunner::runPlan(Run& run, const OperationPlan& plan)
+{
+  OperationPlan rest = plan;
+  for (;;)
+  {
+    while (!session_.motionEnabled())
+    {
+      // Disabled between operations (during a dwell or a program stop): nothing is moving.
+      const std::string by = session_.motionDisabledBy();
+      const std::string event =
+          "motion disabled by " + by + " (" + names_.set_motion_enabled + ") before the next operation";
+      if (!holdUntilResume(run, "stop when motion was disabled by " + by, event, 0))
+      {
+        return cancelledWhileHeld(run.outcome, "cancelled while held: " + event);
+      }
+    }
+    const std::string refusal = session_.motionRefusal("follow_path");
+    if (!refusal.empty())
+    {
+      // The e-stop (E1 or unknown) between operations: the goal cannot go on.
+      run.outcome.end = GoalOutcome::End::kAborted;
+      run.outcome.message =
+          refusal + (run.feedback.event.empty() ? "" : " (before the operation after " + run.feedback.event + ")");
+      return false;
+    }
+    std::optional<DisabledStop> stop;
+    if (runOperation(run, rest, stop))
+    {
+      return true;
+    }
+    if (!stop)
+    {
+      return false;  // cancelled, e-stop or link failure: the goal has ended
+    }
+    std::ostringstream event;
+    event << "motion disabled by " << stop->by << " (" << names_.set_motion_enabled
+          << "): decelerated to a stop along the path at X" << stop->position[0] / kPulsesPerMm << " Y"
+          << stop->position[1] / kPulsesPerMm << " Z" << stop->position[2] / kPulsesPerMm << " mm after " << stop->sent
+          << " of " << stop->planned << " planned setpoints";
+    CNC_LOG_WARN("at_controller: follow_path: " << event.str() << "; holding");
+    if (!holdUntilResume(run, "stop when motion was disabled by " + stop->by, event.str(), 0))
+    {
+      return cancelledWhileHeld(run.outcome, "cancelled while held: " + event.str());
+    }
+    const PathRest left = restOfPath(rest.points, rest.feeds, stop->distance, stop->position);
+    if (left.empty())
+    {
+      return true;  // it came to rest on the end point
+    }
+    rest.points = left.points;
+    rest.feeds = left.feeds;
+    rest.tool = -1;  // the tool was changed before the stop
+  }
+}
+
+/// Runs one operation to its end. \returns true if it succeeded (the goal goes on). Otherwise
+/// either \p stop says where motion was disabled (the operation decelerated to a stop and ended
+/// with #@ M0@; the goal goes on, paused) or the goal has ended (cancelled, e-stop, link failure).
+bool GoalRunner::runOperation(Run& run, const OperationPlan& plan, std::optional<DisabledStop>& stop)
+{
+  const Operation operation = session_.operationFor(plan, run.goal_tool, run.goal_tool_length);
+  // The S-curve streams the trapezoid's steps plus its average's window less one.
+  const size_t setpoints = TrajectoryStream(*operation.trajectory).total();
+  CNC_LOG_INFO("at_controller: follow_path: "
+               << plan.points.size() - 1 << " segments, " << operation.trajectory->length() / kPulsesPerMm << " mm in "
+               << setpoints * session_.options().limits.period << " s (" << setpoints << " setpoints)");
+  ControllerSession::OperationWatch watch;
+  watch.started = [&](const Job&) { run.listener.operationStarted(operation); };
+  watch.cancel_requested = run.cancelled;
+  watch.progress = [&](const Job& job, bool stopping) { run.listener.operationProgress(job, stopping, run.feedback); };
+  run.feedback.paused = false;
+  const OperationResult result = session_.runOperation(plan, operation, watch);
+  const Job& job = *result.job;
+  run.outcome.setpoints += job.sent();
+  run.outcome.underruns += result.underruns;
+  run.outcome.final_position = session_.snapshot().position;
+  run.outcome.message = job.message();
+  run.listener.operationEnded(result);
+  stop = result.disabled;
+  if (stop)
+  {
+    return false;
+  }
+  switch (job.state())
+  {
+    case Job::State::kSucceeded:
+      return true;
+    case Job::State::kCancelled:
+      run.outcome.end = GoalOutcome::End::kCancelled;
+      return false;
+    case Job::State::kFailed:
+      // The protocol has no host watchdog: the controller holds the last setpoint it received.
+      run.outcome.end = GoalOutcome::End::kAborted;
+      run.outcome.message = "command link lost after " + std::to_string(job.sent()) + " setpoints: " + job.message() +
+                            "; the controller holds the last setpoint it received, the node reconnects (send the "
+                            "rest as a new goal)";
+      return false;
+    default:
+      run.outcome.end = GoalOutcome::End::kAborted;
+      return false;
+  }
+}
+
+/// Carries out the program's stop, optional stop or dwell between two operations.
+/// \returns false if the goal was cancelled meanwhile.
+bool GoalRunner::carryOut(Run& run, const gcode::ProgramStep& step)
+{
+  using Kind = gcode::ProgramStep::Kind;
+  run.feedback.event = step.describe();
+  run.feedback.paused = false;
+  if (step.kind == Kind::kDwell)
+  {
+    run.listener.dwelling(run.feedback);
+    return hold_.waitFor(std::chrono::duration<double>(step.dwell_s), run.cancelled);
+  }
+  // Asked at each M01, as an operator flips the control's OPT STOP switch during a job.
+  if (step.kind == Kind::kOptionalStop && !run.listener.optionalStop())
+  {
+    run.feedback.event += " passed (" + names_.optional_stop + " false)";
+    run.listener.optionalStopPassed(run.feedback);
+    return true;
+  }
+  return holdUntilResume(run, step.describe(), step.describe(), step.line);
+}
+
+/// Holds the goal (nothing is sent) until resume: paused, "<event>: waiting for <resume>". \p what
+/// completes "resumed after the ..." in resume's answer. \returns false if cancelled meanwhile.
+bool GoalRunner::holdUntilResume(Run& run, const std::string& what, const std::string& event, uint32_t line)
+{
+  run.feedback.event = event + ": waiting for " + names_.resume;
+  run.feedback.paused = true;
+  hold_.hold(what);  // before anyone hears of the hold, so that a resume in answer finds it
+  run.listener.holding(run.feedback, line);
+  const bool resumed = hold_.waitForResume(run.cancelled);
+  run.feedback.paused = false;
+  return resumed;
+}
+
+Answer GoalRunner::resume()
+{
+  const std::string nothing =
+      "nothing to resume: no follow_path goal is held (at a program stop M00/M01, or paused by motion disabled)";
+  if (hold_.held().empty())
+  {
+    return Answer{false, nothing};
+  }
+  const std::string refusal = session_.motionRefusal("resume");
+  if (!refusal.empty())
+  {
+    return Answer{false, refusal};
+  }
+  const std::optional<std::string> what = hold_.resume();
+  return what ? Answer{true, "resumed after the " + *what} : Answer{false, nothing};
+}
+}  // namespace at_protocol
+}  // namespace cnc_bridge
