@@ -56,12 +56,14 @@ if(TARGET cnc_dnc)
 endif()
 
 # Program requests punched by the control (docs/dnc_node.md, "Program requests from the control"):
-# the idle listener reads a punch with the XModem receiver or the backup parser and answers.
-cnc_core_module(cnc_bridge_requests src/dnc/program_requests.cpp)
+# the idle listener reads a punch with the XModem receiver or the backup parser and answers; and
+# dnc_node's ROS-free transfer rules (one transfer at a time, the files a transfer may touch, the
+# archive, the counters).
+cnc_core_module(cnc_bridge_requests src/dnc/program_requests.cpp src/dnc/transfer_gate.cpp src/dnc/transfer_rules.cpp)
 target_link_libraries(cnc_bridge_requests PUBLIC cnc_bridge_xmodem cnc_bridge_drip cnc_bridge_programs)
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   # A control played by lrzsz sx/rx (XModem) and by the test (text) on a pty pair.
-  cnc_core_gtest(test_program_requests test/unit/test_program_requests.cpp)
+  cnc_core_gtest(test_program_requests test/unit/test_program_requests.cpp test/unit/test_transfer_rules.cpp)
   if(TARGET test_program_requests)
     target_link_libraries(test_program_requests cnc_bridge_requests yaml-cpp)
     target_compile_definitions(test_program_requests PRIVATE XMODEM_TEST_DATA="${PROJECT_SOURCE_DIR}/test/data/xmodem"

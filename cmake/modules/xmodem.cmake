@@ -42,7 +42,7 @@ target_sources(sim_haas_serial PRIVATE src/sim/haas_serial/xmodem_mode.cpp)
 target_link_libraries(sim_haas_serial cnc_bridge_xmodem)
 
 if(NOT CNC_BRIDGE_CORE_ONLY)
-  cnc_node(dnc_node src/nodes/dnc_node.cpp)
+  cnc_node(dnc_node src/nodes/dnc_node.cpp src/nodes/dnc_transfer_action.cpp)
   target_link_libraries(dnc_node cnc_bridge_xmodem cnc_bridge_programs)
   if(CATKIN_ENABLE_TESTING)
     find_package(rostest REQUIRED)

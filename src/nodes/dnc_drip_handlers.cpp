@@ -1,7 +1,7 @@
 // The drip and backup protocol handlers of dnc_node: ROS parameters to core options, core
 // progress to action feedback, state and dnc/current_line. One transfer at a time (dnc_node
 // serialises them), so the handlers hold no lock of their own.
-#include "cnc_bridge/ros/dnc_drip_handlers.h"
+#include "dnc_drip_handlers.h"
 
 #include <std_srvs/Trigger.h>
 #include <termios.h>

@@ -1,21 +1,58 @@
 // dnc_node: NC program transfer between ~program_dir and a control's RS-232 port (see dnc_node.h
-// and docs/dnc_node.md). This file holds the ROS plumbing (parameters, services, action, state,
-// diagnostics, the serial link) and the XModem protocol handler; the protocol itself is the core
-// library cnc_bridge_xmodem.
-#include "cnc_bridge/ros/dnc_node.h"
+// and docs/dnc_node.md). This file holds the parameters, the serial link, state and diagnostics,
+// the run of one transfer, and the XModem protocol handler; the action and services are in
+// dnc_transfer_action.cpp. The rules a transfer follows (one at a time, the files it may touch,
+// the archive, the counters) are the core's (cnc_bridge/dnc/transfer_rules.h, transfer_gate.h),
+// the protocol itself the core library cnc_bridge_xmodem.
+#include "dnc_node.h"
 
 #include <chrono>
 #include <filesystem>
-#include <fstream>
-#include <iterator>
 
 #include "cnc_bridge/common/error.h"
-#include "cnc_bridge/ros/dnc_drip_handlers.h"
 #include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/ros/params.h"
+#include "dnc_drip_handlers.h"
 
 namespace cnc_bridge
 {
+namespace
+{
+// XModem timing (seconds) and limits; defaults are the protocol's (docs/protocols/xmodem.md#timeouts-and-limits).
+dnc::XmodemWaits xmodemWaits(const ros::NodeHandle& pnh)
+{
+  dnc::XmodemWaits waits;
+  // ~start_timeout: receiving, how long to wait for the control to start sending (the operator
+  // starts the punch on the control), NAK repeated every ~nak_interval meanwhile.
+  waits.start_timeout = params::seconds(pnh, "start_timeout", 120.0);
+  waits.nak_interval = params::seconds(pnh, "nak_interval", 10.0);
+  // ~start_wait: sending, how long to wait for the control's NAK (the operator starts the receive).
+  waits.start_wait = params::seconds(pnh, "start_wait", 120.0);
+  // ~block_timeout: receiving, wait for the next packet before a NAK.
+  waits.block_timeout = params::seconds(pnh, "block_timeout", 10.0);
+  // ~ack_timeout: sending, wait for ACK/NAK after a packet before sending it again.
+  waits.ack_timeout = params::seconds(pnh, "ack_timeout", 10.0);
+  // ~eot_quiet: receiving, silence after EOT before it is believed (a garbled SOH looks like EOT).
+  waits.eot_quiet = params::seconds(pnh, "eot_quiet", 0.03);
+  // ~wait_characters (int, default 30), ~wait_floor (s, default 0.03): the longest gap between two
+  // bytes of a packet and the silence that ends the purge of a garbled packet before a NAK, in
+  // character times of the line, at least wait_floor (1 s at 300 baud, 30 ms at 9600 and above).
+  waits.wait_characters = static_cast<unsigned>(std::max(1, pnh.param("wait_characters", 30)));
+  waits.wait_floor = params::seconds(pnh, "wait_floor", 0.03);
+  // ~char_timeout, ~purge_quiet (s, default 0: from the line rate as above): fixed values instead.
+  if (pnh.param("char_timeout", 0.0) > 0)
+    waits.char_timeout = params::seconds(pnh, "char_timeout", 1.0);
+  if (pnh.param("purge_quiet", 0.0) > 0)
+    waits.purge_quiet = params::seconds(pnh, "purge_quiet", 1.0);
+  // ~max_retries (int, default 10): errors in a row on one block before the transfer aborts.
+  const int max_retries = pnh.param("max_retries", 10);
+  if (max_retries < 1)
+    ROS_WARN("~max_retries %d is below 1; using 10", max_retries);
+  waits.max_retries = max_retries < 1 ? 10u : static_cast<unsigned>(max_retries);
+  return waits;
+}
+}  // namespace
+
 DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh)
     : nh_(nh),
       pnh_(pnh),
@@ -44,6 +81,7 @@ DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   archive_ =
       std::make_unique<programs::ProgramArchive>(pnh.param<std::string>("archive_dir", programs_->root() + ".archive"),
                                                  static_cast<unsigned>(std::max(1, pnh.param("archive_keep", 20))));
+  files_ = std::make_unique<dnc::TransferFiles>(*programs_, *protected_, *name_pattern_, *archive_);
   // ~xmodem_mode (string, default "xmodem"): protocol when a request leaves it empty. A Haas
   // speaks XModem checksum only (xmodem); xmodem-crc and xmodem-1k suit PC-based controls.
   pnh.param<std::string>("xmodem_mode", default_protocol_, "xmodem");
@@ -59,44 +97,7 @@ DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   // ~binary (bool, default false): move bytes exactly (no EOB conversion; received files keep the
   // SUB padding of the last block).
   pnh.param("binary", text_options_.binary, false);
-  // XModem timing (seconds) and limits; defaults are the protocol's (docs/protocols/xmodem.md#timeouts-and-limits).
-  // ~start_timeout: receiving, how long to wait for the control to start sending (the operator
-  // starts the punch on the control), NAK repeated every ~nak_interval meanwhile.
-  xmodem_config_.start_timeout = params::seconds(pnh, "start_timeout", 120.0);
-  xmodem_config_.nak_interval = params::seconds(pnh, "nak_interval", 10.0);
-  // ~start_wait: sending, how long to wait for the control's NAK (the operator starts the receive).
-  xmodem_config_.start_wait = params::seconds(pnh, "start_wait", 120.0);
-  // ~block_timeout: receiving, wait for the next packet before a NAK.
-  xmodem_config_.block_timeout = params::seconds(pnh, "block_timeout", 10.0);
-  // ~ack_timeout: sending, wait for ACK/NAK after a packet before sending it again.
-  xmodem_config_.ack_timeout = params::seconds(pnh, "ack_timeout", 10.0);
-  // ~eot_quiet: receiving, silence after EOT before it is believed (a garbled SOH looks like EOT).
-  xmodem_config_.eot_quiet = params::seconds(pnh, "eot_quiet", 0.03);
-  // ~wait_characters (int, default 30), ~wait_floor (s, default 0.03): the longest gap between two
-  // bytes of a packet and the silence that ends the purge of a garbled packet before a NAK, in
-  // character times of the line, at least wait_floor (1 s at 300 baud, 30 ms at 9600 and above).
-  xmodem_config_.wait_characters = static_cast<unsigned>(std::max(1, pnh.param("wait_characters", 30)));
-  xmodem_config_.wait_floor = params::seconds(pnh, "wait_floor", 0.03);
-  xmodem::fitToLine(xmodem_config_, serial_.charactersPerSecond());  // eot_quiet: 12 characters at least
-  // ~char_timeout, ~purge_quiet (s, default 0: from the line rate as above): fixed values instead.
-  if (pnh.param("char_timeout", 0.0) > 0)
-    xmodem_config_.char_timeout = params::seconds(pnh, "char_timeout", 1.0);
-  if (pnh.param("purge_quiet", 0.0) > 0)
-    xmodem_config_.purge_quiet = params::seconds(pnh, "purge_quiet", 1.0);
-  // ~max_retries (int, default 10): errors in a row on one block before the transfer aborts.
-  int max_retries = pnh.param("max_retries", 10);
-  if (max_retries < 1)
-  {
-    ROS_WARN("~max_retries %d is below 1; using 10", max_retries);
-    max_retries = 10;
-  }
-  xmodem_config_.max_retries = static_cast<unsigned>(max_retries);
-  xmodem_config_.eot_retries = static_cast<unsigned>(max_retries);
-  // A Haas may take its time to ACK block 1 while a NAK it sent before is in flight: a second, as
-  // before the waits followed the line rate, unless a shorter char_timeout was set.
-  xmodem_config_.stale_nak_settle = pnh.param("char_timeout", 0.0) > 0
-                                        ? std::min(xmodem_config_.char_timeout, Milliseconds(1000))
-                                        : Milliseconds(1000);
+  xmodem_config_ = dnc::xmodemConfig(xmodemWaits(pnh), serial_.charactersPerSecond());
   // ~feedback_rate (Hz, default 20): action feedback at most this often (and after the last block).
   feedback_period_ = ros::Duration(1.0 / params::positive(pnh, "feedback_rate", 20.0));
 
@@ -162,40 +163,15 @@ DncNode::~DncNode()
 
 bool DncNode::tryReserve(const std::string& what)
 {
-  {
-    std::lock_guard<std::mutex> lock(busy_mutex_);
-    if (!busy_)
-    {
-      busy_ = true;
-      running_ = what;
-      cancel_ = false;            // a cancel for the previous transfer does not carry over
-      listen_stop_ = listening_;  // the request listener leaves the port (runReserved waits for it)
-      return true;
-    }
-  }
-  std::lock_guard<std::mutex> lock(stats_mutex_);
-  ++counters_.refused;
+  if (gate_.tryReserve(what))  // the request listener leaves the port (runReserved waits for it)
+    return true;
+  counters_.refused();
   return false;
-}
-
-void DncNode::release()
-{
-  {
-    std::lock_guard<std::mutex> lock(busy_mutex_);
-    busy_ = false;
-  }
-  idle_.notify_all();  // the request listener may take the port again
 }
 
 std::string DncNode::busyMessage()
 {
-  std::lock_guard<std::mutex> lock(busy_mutex_);
-  // One new-goal policy for everything that moves or cuts (docs/ROS_INTERFACE.md): name what
-  // runs and how to stop it; a running transfer is never replaced.
-  const bool goal = running_.rfind("goal ", 0) == 0;
-  return "refused: another transfer is running on " + serial_.device + " (one at a time): " + running_ +
-         (goal ? "; to replace it, cancel it first (" + pnh_.resolveName("transfer") + "/cancel with its goal id)"
-               : "; a service call runs to its end: wait for it");
+  return dnc::busyRefusal(serial_.device, gate_.running(), pnh_.resolveName("transfer") + "/cancel");
 }
 
 void DncNode::registerProtocol(const std::string& protocol, ProtocolHandler handler)
@@ -245,7 +221,7 @@ TransferResult DncNode::run(TransferGoal goal, const Feedback& feedback)
   }
   bool cancelled = false;
   TransferResult result = runReserved(std::move(goal), feedback, cancelled);
-  release();
+  gate_.release();
   return result;
 }
 
@@ -272,29 +248,16 @@ TransferResult DncNode::runReserved(TransferGoal goal, const Feedback& feedback,
   TransferJob job;
   job.send = goal.direction == TransferGoal::DIRECTION_SEND;
   job.goal = goal;
-  try
+  const dnc::JobCheck check = files_->check(goal.file, job.send);
+  if (!check.accepted())
   {
-    job.path = job.send ? programs_->resolveExisting(goal.file) : programs_->resolveForWrite(goal.file);
-    if (job.send)
-      programs::checkProtectedFile(*protected_, *name_pattern_, job.path, goal.file);
-  }
-  catch (const ConfigError& e)
-  {
-    result.message = std::string("refused: ") + e.what();
+    result.message = check.refusal;
+    if (check.counted)
+      counters_.refused();
     return result;
   }
-  catch (const Error& e)  // DisabledError ("refused: ..."), or the file cannot be read
-  {
-    result.message = e.what();
-    std::lock_guard<std::mutex> lock(stats_mutex_);
-    ++counters_.refused;
-    return result;
-  }
-
-  {
-    std::lock_guard<std::mutex> lock(stats_mutex_);
-    ++counters_.transfers;
-  }
+  job.path = check.path;
+  counters_.started();
   const std::string transfer_message = (job.send ? "sending " : "receiving ") + goal.file + " (" + goal.protocol + ")";
   state_->update(
       [&](MachineState& s)
@@ -306,20 +269,20 @@ TransferResult DncNode::runReserved(TransferGoal goal, const Feedback& feedback,
       });
   ROS_INFO("%s %s by %s", job.send ? "sending" : "receiving", job.path.c_str(), goal.protocol.c_str());
 
-  waitForListenerToLeave();
+  gate_.waitForListenerToLeave();
   try
   {
     // A status poller on the same line (haas_mdc_node) skips its polls while this is held. It
     // holds the lock itself for the length of one query (under a second), so a busy lock is tried
     // again for a while before the transfer is refused.
-    if (!port_lock_.lockForTransfer(std::chrono::seconds(2), [this] { return cancel_.load(); }))
+    if (!port_lock_.lockForTransfer(std::chrono::seconds(2), [this] { return gate_.cancelFlag().load(); }))
       throw LinkError(serial_.device + " is in use by another process (port lock " + port_lock_.lockFile() + ")");
     Transport& link = openLink();
     // Opening the port set its own message: while the transfer runs, state says what it is.
     state_->update([&](MachineState& s) { s.message = transfer_message; });
-    result = handler->second(link, job, feedback, cancel_);
+    result = handler->second(link, job, feedback, gate_.cancelFlag());
     // A protocol that reports a cancel in its result (drip, backup) rather than by CancelledError.
-    cancelled = !result.success && cancel_;
+    cancelled = !result.success && gate_.cancelFlag();
   }
   catch (const CancelledError& e)
   {
@@ -342,14 +305,7 @@ TransferResult DncNode::runReserved(TransferGoal goal, const Feedback& feedback,
     closeLink();
   port_lock_.unlock();
 
-  {
-    std::lock_guard<std::mutex> lock(stats_mutex_);
-    (result.success ? counters_.completed : cancelled ? counters_.cancelled : counters_.failed)++;
-    counters_.blocks += result.blocks;
-    counters_.retries += result.retries;
-    counters_.bytes += result.bytes;
-    counters_.last_result = result.message;
-  }
+  counters_.finished(result.success, cancelled, result.blocks, result.retries, result.bytes, result.message);
   state_->update(
       [&](MachineState& s)
       {
@@ -372,19 +328,17 @@ TransferResult DncNode::runReserved(TransferGoal goal, const Feedback& feedback,
 
 void DncNode::archiveProgram(const TransferJob& job)
 {
-  const std::string name = job.path.substr(job.path.find_last_of('/') + 1);
   try
   {
-    std::ifstream in(job.path, std::ios::binary);
-    const std::string content((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    if (const auto kept =
-            archive_->add(name, content, {"dnc_node", state_->machineName(), job.send ? "sent" : "received"}))
-      ROS_INFO("kept %s as version %u in %s", name.c_str(), kept->number, archive_->root().c_str());
+    const std::string kept =
+        files_->archive(job.path, {"dnc_node", state_->machineName(), job.send ? "sent" : "received"});
+    if (!kept.empty())
+      ROS_INFO("%s", kept.c_str());
   }
   catch (const Error& e)
   {
     // The transfer itself succeeded: an archive that cannot be written is reported, not a failure.
-    ROS_ERROR("%s was moved but not archived: %s", name.c_str(), e.what());
+    ROS_ERROR("%s was moved but not archived: %s", job.path.substr(job.path.find_last_of('/') + 1).c_str(), e.what());
   }
 }
 
@@ -392,15 +346,11 @@ TransferResult DncNode::runXmodem(Transport& link, const TransferJob& job,
                                   const std::function<void(const TransferFeedback&)>& feedback,
                                   const std::atomic<bool>& cancel)
 {
-  const xmodem::Mode mode = xmodem::parseMode(job.goal.protocol);
-  ros::Time last_feedback;
+  dnc::ProgressThrottle throttle(feedback_period_.toSec());
   auto progress = [&](const xmodem::Progress& p)
   {
-    const ros::Time now = ros::Time::now();
-    const bool last = p.total > 0 && p.bytes >= p.total;
-    if (!last && now - last_feedback < feedback_period_)
+    if (!throttle.due(ros::Time::now().toSec(), p))
       return;
-    last_feedback = now;
     TransferFeedback f;
     f.bytes = p.bytes;
     f.total = p.total;
@@ -411,27 +361,8 @@ TransferResult DncNode::runXmodem(Transport& link, const TransferJob& job,
       feedback(f);
     state_->update([&](MachineState& s) { s.block = p.block; });
   };
-  xmodem::FileResult file;
-  xmodem::Stats stats;
-  auto count = [&](bool failed)
-  {
-    std::lock_guard<std::mutex> lock(stats_mutex_);
-    counters_.timeouts += stats.timeouts;
-    if (failed)
-      counters_.retries += stats.retries;  // a successful transfer's retries come with its result
-  };
-  try
-  {
-    file = job.send
-               ? xmodem::sendFile(link, job.path, mode, xmodem_config_, text_options_, progress, &cancel, &stats)
-               : xmodem::receiveFile(link, job.path, mode, xmodem_config_, text_options_, progress, &cancel, &stats);
-  }
-  catch (...)
-  {
-    count(true);
-    throw;
-  }
-  count(false);
+  const xmodem::FileResult file = dnc::transferByXmodem(link, job.path, job.send, job.goal.protocol, xmodem_config_,
+                                                        text_options_, progress, cancel, counters_);
   TransferResult result;
   result.success = true;
   result.message = file.message;
@@ -441,135 +372,24 @@ TransferResult DncNode::runXmodem(Transport& link, const TransferJob& job,
   return result;
 }
 
-void DncNode::onGoal(GoalHandle goal)
-{
-  const auto& g = *goal.getGoal();
-  if (!tryReserve("goal " + goal.getGoalID().id + " (" + g.direction + " " + g.file + " by " +
-                  (g.protocol.empty() ? default_protocol_ : g.protocol) + ")"))
-  {
-    TransferResult result;
-    result.message = busyMessage();
-    ROS_WARN("~transfer goal for %s rejected: %s", goal.getGoal()->file.c_str(), result.message.c_str());
-    goal.setRejected(result, result.message);
-    return;
-  }
-  goal.setAccepted();
-  {
-    std::lock_guard<std::mutex> lock(goal_mutex_);
-    pending_goal_ = std::make_unique<GoalHandle>(goal);
-  }
-  goal_ready_.notify_all();
-}
-
-void DncNode::onCancel(GoalHandle goal)
-{
-  std::lock_guard<std::mutex> lock(goal_mutex_);
-  if ((current_goal_ && *current_goal_ == goal) || (pending_goal_ && *pending_goal_ == goal))
-    cancelRunning();
-}
-
 void DncNode::cancelRunning()
 {
-  cancel_ = true;
+  gate_.cancelFlag() = true;
   std::lock_guard<std::mutex> lock(link_mutex_);
   if (link_)
     link_->interrupt();
 }
 
-void DncNode::actionWorker()
-{
-  for (;;)
-  {
-    GoalHandle goal;
-    {
-      std::unique_lock<std::mutex> lock(goal_mutex_);
-      goal_ready_.wait(lock, [this] { return stopping_ || pending_goal_; });
-      if (!pending_goal_)
-        return;  // stopping
-      current_goal_ = std::move(pending_goal_);
-      goal = *current_goal_;
-    }
-    bool cancelled = false;
-    TransferResult result;
-    if (cancel_)
-    {
-      cancelled = true;  // cancelled before it started
-      result.message = "cancelled before it started";
-    }
-    else
-    {
-      result = runReserved(
-          *goal.getGoal(), [&goal](const TransferFeedback& f) { goal.publishFeedback(f); }, cancelled);
-    }
-    {
-      std::lock_guard<std::mutex> lock(goal_mutex_);
-      current_goal_.reset();
-    }
-    // Free before the result goes out: a client may send its next goal as soon as it has it.
-    release();
-    if (result.success)
-      goal.setSucceeded(result, result.message);
-    else if (cancelled || !ros::ok())
-      goal.setCanceled(result, result.message);
-    else
-      goal.setAborted(result, result.message);
-  }
-}
-
-namespace
-{
-// SendProgram and ReceiveProgram carry the same fields: one translation to and from the action.
-template <class Request, class Response, class Run>
-bool answerTransfer(const std::string& direction, const Request& request, Response& response, Run run)
-{
-  TransferGoal goal;
-  goal.direction = direction;
-  goal.file = request.file;
-  goal.protocol = request.protocol;
-  const TransferResult result = run(goal);
-  response.success = result.success;
-  response.message = result.message;
-  response.bytes = result.bytes;
-  response.blocks = result.blocks;
-  response.retries = result.retries;
-  return true;
-}
-}  // namespace
-
-bool DncNode::onSend(SendProgram::Request& request, SendProgram::Response& response)
-{
-  return answerTransfer(TransferGoal::DIRECTION_SEND, request, response,
-                        [this](const TransferGoal& goal) { return run(goal, nullptr); });
-}
-
-bool DncNode::onReceive(ReceiveProgram::Request& request, ReceiveProgram::Response& response)
-{
-  return answerTransfer(TransferGoal::DIRECTION_RECEIVE, request, response,
-                        [this](const TransferGoal& goal) { return run(goal, nullptr); });
-}
-
 void DncNode::transferDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& status)
 {
-  std::lock_guard<std::mutex> lock(stats_mutex_);
-  if (counters_.failed > 0 && counters_.last_result.find("fail") != std::string::npos)
-    status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "last transfer failed: " + counters_.last_result);
+  const dnc::TransferTotals totals = counters_.totals();
+  if (totals.lastFailed())
+    status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "last transfer failed: " + totals.last_result);
   else
     status.summary(diagnostic_msgs::DiagnosticStatus::OK,
-                   counters_.last_result.empty() ? "no transfer yet" : counters_.last_result);
-  status.add("transfers", counters_.transfers);
-  status.add("completed", counters_.completed);
-  status.add("failed (aborts)", counters_.failed);
-  status.add("cancelled", counters_.cancelled);
-  status.add("refused", counters_.refused);
-  status.add("blocks", counters_.blocks);
-  status.add("retries", counters_.retries);
-  status.add("timeouts", counters_.timeouts);
-  status.add("bytes", counters_.bytes);
-  if (requests_)
-  {
-    status.add("program requests", counters_.requests);
-    status.add("program requests served", counters_.requests_served);
-  }
+                   totals.last_result.empty() ? "no transfer yet" : totals.last_result);
+  for (const auto& [name, value] : totals.fields(requests_))
+    status.add(name, value);
   status.add("default protocol", default_protocol_);
   status.add("program_dir", programs_->root());
 }

@@ -12,8 +12,8 @@
 #include "cnc_bridge/common/atomic_file.h"
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/programs/program_request.h"
-#include "cnc_bridge/ros/dnc_node.h"
 #include "cnc_bridge/ros/params.h"
+#include "dnc_node.h"
 
 namespace cnc_bridge
 {
@@ -69,12 +69,7 @@ void DncNode::setUpRequests(ros::NodeHandle& nh, ros::NodeHandle& pnh)
 
 void DncNode::stopRequests()
 {
-  {
-    std::lock_guard<std::mutex> lock(busy_mutex_);
-    stop_requests_ = true;
-    listen_stop_ = true;
-  }
-  idle_.notify_all();
+  gate_.stopListener();
   if (request_thread_.joinable())
   {
     cancelRunning();  // a request being served stops at once
@@ -82,25 +77,10 @@ void DncNode::stopRequests()
   }
 }
 
-void DncNode::waitForListenerToLeave()
-{
-  std::unique_lock<std::mutex> lock(busy_mutex_);
-  listen_stop_ = listening_;
-  idle_.wait(lock, [this] { return !listening_; });
-}
-
 void DncNode::requestWorker()
 {
-  for (;;)
+  while (gate_.waitToListen())
   {
-    {
-      std::unique_lock<std::mutex> lock(busy_mutex_);
-      idle_.wait(lock, [this] { return stop_requests_ || !busy_; });
-      if (stop_requests_)
-        return;
-      listening_ = true;
-      listen_stop_ = false;
-    }
     bool reserved = false;
     std::optional<dnc::Punch> punch;
     std::string error;
@@ -124,11 +104,7 @@ void DncNode::requestWorker()
     {
       error = e.what();
     }
-    {
-      std::lock_guard<std::mutex> lock(busy_mutex_);
-      listening_ = false;
-    }
-    idle_.notify_all();
+    gate_.leftPort();
     if (punch)
       servePunch(*punch);
     if (!error.empty())
@@ -142,13 +118,9 @@ void DncNode::requestWorker()
       }
     }
     if (reserved)
-      release();
+      gate_.release();
     if (!error.empty())
-    {
-      // A port that cannot be opened or read is tried again after a pause, not in a busy loop.
-      std::unique_lock<std::mutex> lock(busy_mutex_);
-      idle_.wait_for(lock, std::chrono::seconds(2), [this] { return stop_requests_; });
-    }
+      gate_.pauseListener(std::chrono::seconds(2));  // a port that fails is tried again, not in a busy loop
   }
 }
 
@@ -168,21 +140,8 @@ std::optional<dnc::Punch> DncNode::listenForPunch(bool& reserved)
   auto may_start = [this, &reserved]
   {
     std::string refused;
-    {
-      std::lock_guard<std::mutex> lock(busy_mutex_);
-      if (busy_)
-      {
-        refused = running_;
-      }
-      else
-      {
-        busy_ = true;
-        running_ = "a program request punched by the control";
-        cancel_ = false;
-        reserved = true;
-      }
-    }
-    if (!refused.empty())
+    reserved = gate_.tryReserveForPunch("a program request punched by the control", refused);
+    if (!reserved)
     {
       // The control began to punch just as a transfer took the port: said, not dropped unseen.
       ProgramRequestEvent event;
@@ -192,7 +151,7 @@ std::optional<dnc::Punch> DncNode::listenForPunch(bool& reserved)
     }
     return reserved;
   };
-  return listener_->listen(listen_stop_, may_start, Milliseconds(0), &cancel_);
+  return listener_->listen(gate_.listenStop(), may_start, Milliseconds(0), &gate_.cancelFlag());
 }
 
 void DncNode::servePunch(const dnc::Punch& punch)
@@ -275,7 +234,8 @@ std::string DncNode::saveNextPunch(const std::string& name, bool& success)
     ScopedPortLock lock(port_lock_);
     // The control punches the program next: its own start, within ~start_timeout.
     const std::optional<dnc::Punch> program = listener_->listen(
-        listen_stop_, [] { return true; }, std::max(Milliseconds(1000), xmodem_config_.start_timeout), &cancel_);
+        gate_.listenStop(), [] { return true; }, std::max(Milliseconds(1000), xmodem_config_.start_timeout),
+        &gate_.cancelFlag());
     if (!program)
       return "not saved: the node stopped before the program came";
     AtomicFileWriter file(path);
@@ -308,7 +268,7 @@ std::string DncNode::answerRefusal(const dnc::Punch& punch, const std::string& s
   try
   {
     ScopedPortLock lock(port_lock_);
-    const std::string how = listener_->answer(answer, &cancel_);
+    const std::string how = listener_->answer(answer, &gate_.cancelFlag());
     return how + ": " + shown_line;
   }
   catch (const Error& e)
@@ -340,11 +300,7 @@ void DncNode::reportRequestInTransfer(const TransferJob& job)
 
 void DncNode::publishRequest(ProgramRequestEvent& event)
 {
-  {
-    std::lock_guard<std::mutex> lock(stats_mutex_);
-    ++counters_.requests;
-    counters_.requests_served += event.success ? 1 : 0;
-  }
+  counters_.request(event.success);
   event.header.stamp = ros::Time::now();
   event.machine = state_->machineName();
   event.source = "rs232 " + serial_.device;

@@ -6,7 +6,7 @@
 
 #include <ros/ros.h>
 
-#include "cnc_bridge/ros/dnc_node.h"
+#include "dnc_node.h"
 
 namespace cnc_bridge
 {

@@ -28,6 +28,8 @@
 #include "cnc_bridge/common/port_lock.h"
 #include "cnc_bridge/common/program_dir.h"
 #include "cnc_bridge/dnc/program_requests.h"
+#include "cnc_bridge/dnc/transfer_gate.h"
+#include "cnc_bridge/dnc/transfer_rules.h"
 #include "cnc_bridge/programs/archive.h"
 #include "cnc_bridge/programs/program_name.h"
 #include "cnc_bridge/programs/program_request.h"
@@ -75,7 +77,6 @@ class DncNode
   /// Takes the node for one transfer, \p what (named in the refusal of another); false (and
   /// counted as refused) if one is running.
   bool tryReserve(const std::string& what);
-  void release();
   std::string busyMessage();
   /// Opens the serial port if it is not open (the only place the link is opened).
   Transport& openLink();
@@ -113,8 +114,6 @@ class DncNode
   /// A received program that is a request (a punch that came during a receive transfer).
   void reportRequestInTransfer(const TransferJob& job);
   void publishRequest(ProgramRequestEvent& event);
-  /// Stops the listener (if it listens) and waits until it has left the port.
-  void waitForListenerToLeave();
 
   ros::NodeHandle nh_;
   ros::NodeHandle pnh_;
@@ -123,6 +122,7 @@ class DncNode
   std::unique_ptr<programs::ProtectedRange> protected_;  ///< refused on send unless allowed
   std::unique_ptr<programs::NamePattern> name_pattern_;
   std::unique_ptr<programs::ProgramArchive> archive_;  ///< every program sent or received, versioned
+  std::unique_ptr<dnc::TransferFiles> files_;          ///< what a transfer may touch, and the archiving
   std::string default_protocol_;
   bool keep_open_ = false;
   xmodem::Config xmodem_config_;
@@ -133,22 +133,14 @@ class DncNode
   std::unique_ptr<MachineStatePublisher> state_;
   PortLock port_lock_;
 
-  std::mutex busy_mutex_;
-  bool busy_ = false;      ///< a transfer runs (or an accepted goal waits for the worker)
-  std::string running_;    ///< what holds the node while busy_, for the refusal of another
+  /// One transfer at a time (an accepted goal holds it while it waits for the worker), the
+  /// request listener only while none runs; its cancel flag stops the running transfer.
+  dnc::TransferGate gate_;
   std::mutex link_mutex_;  ///< guards link_ for cancelRunning()
   std::unique_ptr<SerialPort> link_;
   uint64_t link_generation_ = 0;  ///< counts the links opened (guarded by link_mutex_)
-  std::atomic<bool> cancel_{false};
 
-  std::mutex stats_mutex_;
-  struct Counters
-  {
-    uint64_t transfers = 0, completed = 0, failed = 0, cancelled = 0, refused = 0;
-    uint64_t blocks = 0, retries = 0, timeouts = 0, bytes = 0;
-    uint64_t requests = 0, requests_served = 0;  ///< program requests punched by the control
-    std::string last_result;
-  } counters_;
+  dnc::TransferCounters counters_;
 
   ros::ServiceServer send_srv_;
   ros::ServiceServer receive_srv_;
@@ -160,8 +152,7 @@ class DncNode
   bool stopping_ = false;
   std::thread worker_;
 
-  // Program requests. listening_ and stop_requests_ are guarded by busy_mutex_; idle_ signals a
-  // change of busy_ or listening_.
+  // Program requests (the listener's turns on the port: gate_).
   bool requests_ = false;
   std::string request_protocol_;  ///< the protocol a LOAD is answered by (~request_mode)
   dnc::RequestListenerOptions request_options_;
@@ -169,10 +160,6 @@ class DncNode
   uint32_t answer_number_ = 1;  ///< the answer's O number when the request program has none
   std::unique_ptr<dnc::RequestListener> listener_;
   uint64_t listener_generation_ = 0;  ///< link_generation_ of the link listener_ was made for
-  bool listening_ = false;
-  bool stop_requests_ = false;
-  std::atomic<bool> listen_stop_{false};
-  std::condition_variable idle_;
   ros::Publisher requests_pub_;
   std::thread request_thread_;
 };

@@ -1,0 +1,88 @@
+#include "cnc_bridge/dnc/transfer_gate.h"
+
+namespace cnc_bridge::dnc
+{
+bool TransferGate::tryReserve(const std::string& what)
+{
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (busy_)
+    return false;
+  busy_ = true;
+  running_ = what;
+  cancel_ = false;
+  listen_stop_ = listening_;  // the listener leaves the port (waitForListenerToLeave)
+  return true;
+}
+
+bool TransferGate::tryReserveForPunch(const std::string& what, std::string& running)
+{
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (busy_)
+  {
+    running = running_;
+    return false;
+  }
+  busy_ = true;
+  running_ = what;
+  cancel_ = false;
+  return true;
+}
+
+void TransferGate::release()
+{
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    busy_ = false;
+  }
+  idle_.notify_all();
+}
+
+std::string TransferGate::running() const
+{
+  std::lock_guard<std::mutex> lock(mutex_);
+  return running_;
+}
+
+bool TransferGate::waitToListen()
+{
+  std::unique_lock<std::mutex> lock(mutex_);
+  idle_.wait(lock, [this] { return stop_listener_ || !busy_; });
+  if (stop_listener_)
+    return false;
+  listening_ = true;
+  listen_stop_ = false;
+  return true;
+}
+
+void TransferGate::leftPort()
+{
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    listening_ = false;
+  }
+  idle_.notify_all();
+}
+
+void TransferGate::waitForListenerToLeave()
+{
+  std::unique_lock<std::mutex> lock(mutex_);
+  listen_stop_ = listening_;
+  idle_.wait(lock, [this] { return !listening_; });
+}
+
+void TransferGate::stopListener()
+{
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stop_listener_ = true;
+    listen_stop_ = true;
+  }
+  idle_.notify_all();
+}
+
+void TransferGate::pauseListener(std::chrono::milliseconds pause)
+{
+  std::unique_lock<std::mutex> lock(mutex_);
+  idle_.wait_for(lock, pause, [this] { return stop_listener_; });
+}
+}  // namespace cnc_bridge::dnc
