@@ -159,19 +159,26 @@ TEST(TransferRules, CountersByOutcome)
   EXPECT_EQ(with_requests[expected.size() + 1], (std::pair<std::string, uint64_t>{"program requests served", 1}));
 }
 
-TEST(TransferRules, XmodemTransferCountsTheTimeoutsOfAFailure)
+TEST(TransferRules, XmodemTransferCountsTheTimeoutsAndRetriesOfAFailure)
 {
   TempDir dir("transfer_rules_xmodem");
   const std::string path = dir.write("O00001.nc", "G0 X1\n");
-  FakeTransport link;  // a control that never asks for the program
+  FakeTransport link;  // a control that asks for the program, then never acknowledges a block
+  link.feed(std::string(1, '\x15'));
   XmodemWaits waits;
-  waits.start_wait = Milliseconds(50);
+  waits.ack_timeout = Milliseconds(20);
+  waits.max_retries = 2;
   const xmodem::Config config = xmodemConfig(waits, 11520.0);
   TransferCounters counters;
   std::atomic<bool> cancel{false};
   EXPECT_THROW(transferByXmodem(link, path, true, "xmodem", config, {}, nullptr, cancel, counters), Error);
+  const TransferTotals totals = counters.totals();
+  EXPECT_GE(totals.timeouts, 1u);
+  EXPECT_GE(totals.retries, 1u);    // a failed transfer's retries are counted here
+  EXPECT_EQ(totals.transfers, 0u);  // started() is the node's
+
   EXPECT_THROW(transferByXmodem(link, path, true, "zmodem", config, {}, nullptr, cancel, counters), ConfigError);
-  EXPECT_EQ(counters.totals().transfers, 0u);  // started() is the node's
+  EXPECT_EQ(counters.totals().timeouts, totals.timeouts);
 }
 
 TEST(TransferGate, OneTransferAtATime)
