@@ -1,10 +1,10 @@
-// ethernut_node's ~run_job action (include/cnc_bridge/ros/ethernut_node.h): a goal loads an
+// ethernut_node's ~run_job action (src/nodes/ethernut_node.h): a goal loads an
 // ethernut::Job (refused before anything is sent if it is bad), publishes its preview, then streams
 // it segment by segment, carrying out the program's own steps between two segments
 // (docs/ethernut_node.md).
 #include <cmath>
 
-#include "cnc_bridge/ros/ethernut_node.h"
+#include "ethernut_node.h"
 
 namespace cnc_bridge
 {

@@ -1,7 +1,7 @@
-// ethernut_node (include/cnc_bridge/ros/ethernut_node.h): parameters, the link to the board, the
+// ethernut_node (src/nodes/ethernut_node.h): parameters, the link to the board, the
 // job preview as ROS messages and diagnostics. The client's events and the services:
 // ethernut_services.cpp; the ~run_job action: ethernut_jobs.cpp.
-#include "cnc_bridge/ros/ethernut_node.h"
+#include "ethernut_node.h"
 
 #include <nav_msgs/Path.h>
 #include <visualization_msgs/MarkerArray.h>

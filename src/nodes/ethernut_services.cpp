@@ -1,6 +1,6 @@
-// ethernut_node (include/cnc_bridge/ros/ethernut_node.h): the client's events as state, and the
+// ethernut_node (src/nodes/ethernut_node.h): the client's events as state, and the
 // services (pause, resume, reset, kill, set_mode, and the motion switch's effect on a running job).
-#include "cnc_bridge/ros/ethernut_node.h"
+#include "ethernut_node.h"
 
 namespace cnc_bridge
 {
