@@ -14,6 +14,7 @@
 #include <sstream>
 #include <thread>
 
+#include "cancel_probe.h"
 #include "cnc_bridge/common/atomic_file.h"
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/job_hold.h"
@@ -281,31 +282,8 @@ TEST(PortLock, ACancelledTransferStopsWaiting)
 }
 
 // ------------------------------------------------------------------------- JobHold
-namespace
-{
-constexpr auto kPatience = std::chrono::seconds(10);  // a wait that must end ends long before this
-
-// A `cancelled` predicate for a wait on another thread: tells the test when the wait has begun
-// (its first question), and says "cancelled" once the test sets cancel.
-struct CancelProbe
-{
-  std::promise<void> asked;
-  std::atomic<bool> asked_once{false};
-  std::atomic<bool> cancel{false};
-
-  JobHold::Cancelled predicate()
-  {
-    return [this]
-    {
-      if (!asked_once.exchange(true))
-      {
-        asked.set_value();
-      }
-      return cancel.load();
-    };
-  }
-};
-}  // namespace
+using cnc_bridge::test::CancelProbe;
+using cnc_bridge::test::kPatience;
 
 TEST(JobHold, AResumeWithNothingHeldChangesNothingAndDoesNotEndALaterHold)
 {

@@ -8,6 +8,7 @@
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/programs/daily_time.h"
+#include "scoped_time_zone.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::programs;
@@ -17,22 +18,6 @@ namespace
 class DailyTimeTest : public ::testing::Test
 {
  protected:
-  void SetUp() override
-  {
-    if (const char* tz = std::getenv("TZ"))
-      saved_ = tz;
-    ::setenv("TZ", "CET-1CEST,M3.5.0,M10.5.0/3", 1);  // 2026: CEST from 29 March 02:00 to 25 October 03:00
-    ::tzset();
-  }
-  void TearDown() override
-  {
-    if (saved_)
-      ::setenv("TZ", saved_->c_str(), 1);
-    else
-      ::unsetenv("TZ");
-    ::tzset();
-  }
-
   /// A local time; \p dst -1 lets mktime choose, 0/1 picks one of a repeated hour.
   static std::time_t local(int year, int month, int day, int hour, int minute, int dst = -1)
   {
@@ -46,7 +31,8 @@ class DailyTimeTest : public ::testing::Test
     return std::mktime(&t);
   }
 
-  std::optional<std::string> saved_;
+  // 2026: CEST from 29 March 02:00 to 25 October 03:00.
+  const cnc_bridge::test::ScopedTimeZone time_zone_{"CET-1CEST,M3.5.0,M10.5.0/3"};
 };
 
 DailyTime at(const std::string& text)

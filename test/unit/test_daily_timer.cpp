@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "cnc_bridge/programs/daily_timer.h"
+#include "scoped_time_zone.h"
 
 using namespace cnc_bridge::programs;
 
@@ -48,22 +49,6 @@ std::time_t utc(int year, int month, int day, int hour, int minute, int second =
 class DailyTimerTest : public ::testing::Test
 {
  protected:
-  void SetUp() override
-  {
-    if (const char* tz = std::getenv("TZ"))
-      saved_ = tz;
-    ::setenv("TZ", "UTC0", 1);
-    ::tzset();
-  }
-  void TearDown() override
-  {
-    if (saved_)
-      ::setenv("TZ", saved_->c_str(), 1);
-    else
-      ::unsetenv("TZ");
-    ::tzset();
-  }
-
   /// The action: counts its runs and wakes waitForRuns().
   DailyTimer::Action counting()
   {
@@ -80,7 +65,7 @@ class DailyTimerTest : public ::testing::Test
     return ran_.wait_for(lock, std::chrono::seconds(10), [&] { return runs_ >= runs; });
   }
 
-  std::optional<std::string> saved_;
+  const cnc_bridge::test::ScopedTimeZone time_zone_{"UTC0"};
   std::mutex mutex_;
   std::condition_variable ran_;
   int runs_ = 0;

@@ -8,6 +8,7 @@
 #include <future>
 #include <sstream>
 
+#include "cancel_probe.h"
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/ethernut/job.h"
 #include "cnc_bridge/ethernut/motion_hold.h"
@@ -239,31 +240,8 @@ TEST(EthernutPreview, AManyPointJobStaysWithinTheLimitAndKeepsAtLeastHalfOfIt)
 }
 
 // ------------------------------------------------------------------------- MotionHold
-namespace
-{
-constexpr auto kPatience = std::chrono::seconds(10);  // a wait that must end ends long before this
-
-// A `cancelled` predicate for a wait on another thread: says when the wait has begun (its first
-// question), and "cancelled" once the test sets cancel.
-struct CancelProbe
-{
-  std::promise<void> asked;
-  std::atomic<bool> asked_once{false};
-  std::atomic<bool> cancel{false};
-
-  JobHold::Cancelled predicate()
-  {
-    return [this]
-    {
-      if (!asked_once.exchange(true))
-      {
-        asked.set_value();
-      }
-      return cancel.load();
-    };
-  }
-};
-}  // namespace
+using cnc_bridge::test::CancelProbe;
+using cnc_bridge::test::kPatience;
 
 TEST(EthernutMotionHold, ADisableHoldsOnlyARunningGoalAndTheFirstDisableNamesIt)
 {
