@@ -82,10 +82,13 @@ struct Rs274Result
   std::string error;  // what rs274 said if it stopped on an error
 };
 
-Rs274Result runRs274(const std::string& program, const std::string& tool_table)
+// \p home: rs274 keeps its tool data in $HOME/.tool.mmap, shared by every rs274 of that HOME
+// (LinuxCNC 2.9's tool data memory map): two runs at once, of this test or of anything else,
+// would read each other's tool table. Each run gets a HOME of its own.
+Rs274Result runRs274(const std::string& program, const std::string& tool_table, const std::string& home)
 {
   Rs274Result result;
-  std::string command = "rs274 -g";
+  std::string command = "HOME='" + home + "' rs274 -g";
   if (!tool_table.empty())
   {
     command += " -t '" + tool_table + "'";
@@ -425,7 +428,7 @@ size_t crossCheck(const std::string& dir, const std::string& file, cnc_bridge::t
       out << "T" << t << " P" << t << " Z0 D0\n";
     }
   }
-  const Rs274Result reference = runRs274(rs274_path, table);
+  const Rs274Result reference = runRs274(rs274_path, table, tmp.path);
   EXPECT_EQ(reference.error, "") << "rs274 refused the program";
   std::vector<Canon> mine;
   try
