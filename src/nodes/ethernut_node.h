@@ -108,8 +108,8 @@ class EthernutNode : public ethernut::ClientListener
   void onJobFinished(ethernut::JobOutcome outcome, const std::string& message) override;
   void onBoardError(float code) override;
 
-  template <typename F>
-  bool command(std_srvs::Trigger::Response& res, const char* what, F f);
+  template <typename Response, typename F>
+  bool command(Response& res, const std::string& what, F f);
   bool onPause(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   bool onResume(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   std::string releaseHolds();

@@ -124,8 +124,8 @@ void EthernutNode::onBoardError(float code)
 }
 
 // ------------------------------------------------------------------------- services
-template <typename F>
-bool EthernutNode::command(std_srvs::Trigger::Response& res, const char* what, F f)
+template <typename Response, typename F>
+bool EthernutNode::command(Response& res, const std::string& what, F f)
 {
   std::string why;
   auto c = client(why);
@@ -269,27 +269,12 @@ bool EthernutNode::onSetMode(EthernutSetMode::Request& req, EthernutSetMode::Res
   {
     return true;
   }
-  std::string why;
-  auto c = client(why);
-  if (!c)
-  {
-    res.success = false;
-    res.message = why;
-    return true;
-  }
-  try
-  {
-    c->setMode(mode);
-    res.success = true;
-    res.message = std::string("mode ") + ethernut::toString(mode);
-    state_->update([&](MachineState& m) { m.mode = stateMode(mode); });
-  }
-  catch (const Error& e)
-  {
-    res.success = false;
-    res.message = e.what();
-  }
-  return true;
+  return command(res, std::string("mode ") + ethernut::toString(mode),
+                 [&](ethernut::Client& c)
+                 {
+                   c.setMode(mode);
+                   state_->update([&](MachineState& m) { m.mode = stateMode(mode); });
+                 });
 }
 
 // Makes \p mode the mode of the next connection; while the board is in standalone mode (and the
