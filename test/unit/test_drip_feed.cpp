@@ -399,7 +399,7 @@ TEST_P(DripEndToEnd, ProgramSeveralTimesTheBufferArrivesWholeInOrderWithoutOverr
   EXPECT_TRUE(run.stats.program_complete);
   EXPECT_GE(run.stats.xoff_events, 3u) << run.stats.summary();
   EXPECT_EQ(0u, run.stats.overruns) << run.stats.summary();
-  EXPECT_EQ(0u, run.stats.overflow) << run.stats.summary();
+  EXPECT_EQ(0u, run.stats.overflow_beyond_late) << run.stats.summary();
   EXPECT_LE(run.stats.max_after_xoff, options.xoff_allowance) << run.stats.summary();
   EXPECT_TRUE(run.ever_held);
   EXPECT_LE(run.result.xoff_events, run.stats.xoff_events);  // the last XOFF may follow the last byte
@@ -430,7 +430,7 @@ TEST_P(DripEndToEnd, AtEveryXoffQueuedPlusLaterWritesStayWithinTheAllowance)
   EXPECT_GE(run.stats.xoff_events, baud <= 9600 ? 30u : 100u) << run.stats.summary();
   EXPECT_LE(run.stats.max_after_xoff, options.xoff_allowance) << run.stats.summary();
   EXPECT_EQ(0u, run.stats.xoff_over_allowance) << run.stats.summary();
-  EXPECT_EQ(0u, run.stats.overflow) << run.stats.summary();
+  EXPECT_EQ(0u, run.stats.overflow_beyond_late) << run.stats.summary();
   EXPECT_LE(run.result.max_queued_at_xoff + options.chunk, options.xoff_allowance);
   EXPECT_GT(run.result.xoff_events, 0u);
 }
@@ -458,6 +458,70 @@ TEST(DripEndToEndAllowance, AHostQueueingAheadOfTheLineIsCaught)
   EXPECT_EQ(program, run.received);
   EXPECT_GT(run.stats.max_after_xoff, options.xoff_allowance) << run.stats.summary();
   EXPECT_GT(run.stats.overruns, 0u) << run.stats.summary();
+}
+
+namespace
+{
+// The simulated control on a scripted link: \p first_batch characters in one read, then
+// \p after_dc3 more once its DC3 has gone out. Buffer 64, XOFF at 40, next to no execution.
+sim::DripControlStats runScriptedControl(size_t first_batch, size_t after_dc3)
+{
+  FakeTransport link;
+  StopSignal stop;
+  sim::DripControlOptions control;
+  control.buffer_size = 64;
+  control.high_mark = 40;
+  control.low_mark = 20;
+  control.execution_cps = 1e-3;
+  link.onWrite(
+      [&](FakeTransport& fake, const std::vector<uint8_t>& bytes)
+      {
+        if (bytes == std::vector<uint8_t>{kDc3} && after_dc3 > 0)
+        {
+          fake.feed(std::string(after_dc3, 'X'));
+        }
+      });
+  link.feed(std::string(first_batch, 'X'));
+  size_t received = 0;
+  return sim::runDripControl(link, control, stop,
+                             [&](const uint8_t*, size_t size)
+                             {
+                               received += size;
+                               if (received == first_batch + after_dc3)
+                               {
+                                 stop.stop();
+                               }
+                             });
+}
+}  // namespace
+
+// A control thread scheduled late reads many characters at once; those past its high mark, taken
+// before its DC3 went out, are its own lateness (a real control's DC3 leaves at the character that
+// crosses the mark), and what they overflow is not the host's. Characters that still overflow
+// beyond that are: a host that ignores the DC3 is caught however late the control was.
+TEST(DripControl, ItsOwnLatenessIsToldApartFromAHostThatIgnoresTheXoff)
+{
+  // 100 at once: the 40th crosses the mark, 60 are late, 36 of them overflow.
+  auto stats = runScriptedControl(100, 0);
+  EXPECT_EQ(1u, stats.xoff_events);
+  EXPECT_EQ(60u, stats.late);
+  EXPECT_EQ(36u, stats.overflow);
+  EXPECT_EQ(0u, stats.overflow_beyond_late) << stats.summary();
+
+  // A prompt control (the 40th character alone crossed) and a host within the allowance.
+  stats = runScriptedControl(40, 10);
+  EXPECT_EQ(0u, stats.late);
+  EXPECT_EQ(10u, stats.max_after_xoff);
+  EXPECT_EQ(0u, stats.overflow) << stats.summary();
+
+  // One character late, then a host that sends 30 after the DC3: 41 + 30 = 71 in a 64 buffer,
+  // 7 lost, 6 of them beyond the control's lateness.
+  stats = runScriptedControl(41, 30);
+  EXPECT_EQ(1u, stats.late);
+  EXPECT_EQ(30u, stats.max_after_xoff);
+  EXPECT_EQ(20u, stats.overruns);
+  EXPECT_EQ(7u, stats.overflow);
+  EXPECT_EQ(6u, stats.overflow_beyond_late) << stats.summary();
 }
 
 // On a pty, whose kernel may hand the control's DC3 to the host late on a loaded machine (or

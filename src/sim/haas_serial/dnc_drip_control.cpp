@@ -21,6 +21,7 @@ std::string DripControlStats::summary() const
   std::ostringstream out;
   out << "received " << received << " characters, xoff " << xoff_events << ", max after xoff " << max_after_xoff
       << ", xoff over allowance " << xoff_over_allowance << ", overruns " << overruns << ", overflow " << overflow
+      << " (beyond the control's own lateness " << overflow_beyond_late << ", late " << late << ")"
       << ", parity errors " << parity_errors << ", program " << (program_complete ? "complete" : "incomplete");
   return out.str();
 }
@@ -48,6 +49,8 @@ DripControlStats runDripControl(Transport& link, const DripControlOptions& optio
   double credit = 0;  // characters the control could have executed but has not yet
   bool xoff = false;
   uint64_t after = 0;
+  uint64_t event_late = 0;      // this XOFF event: characters taken past the mark before the XOFF
+  uint64_t event_overflow = 0;  // this XOFF event: characters lost to a full buffer
   unsigned percents = 0;
   uint8_t last_char = 0;
   Clock::time_point completed_at;
@@ -64,6 +67,8 @@ DripControlStats runDripControl(Transport& link, const DripControlOptions& optio
       stats.overruns += after - options.allowance;
       ++stats.xoff_over_allowance;
     }
+    stats.late += event_late;
+    stats.overflow_beyond_late += event_overflow - std::min(event_overflow, event_late);
     xoff = false;
   };
 
@@ -91,9 +96,21 @@ DripControlStats runDripControl(Transport& link, const DripControlOptions& optio
       {
         ++after;
       }
+      else if (crossed)
+      {
+        ++event_late;  // a control reacting at the character that crossed would have sent DC3 already
+      }
       if (buffered >= options.buffer_size)
       {
         ++stats.overflow;
+        if (xoff || crossed)
+        {
+          ++event_overflow;
+        }
+        else
+        {
+          ++stats.overflow_beyond_late;  // a buffer smaller than its high mark
+        }
       }
       else
       {
@@ -105,7 +122,12 @@ DripControlStats runDripControl(Transport& link, const DripControlOptions& optio
         completed_at = Clock::now();
       }
       last_char = c;
-      crossed = crossed || (!xoff && buffered >= options.high_mark);
+      if (!xoff && !crossed && buffered >= options.high_mark)
+      {
+        crossed = true;
+        event_late = 0;
+        event_overflow = 0;
+      }
     }
     if (crossed)
     {

@@ -58,6 +58,12 @@ struct DripControlStats
   uint64_t xoff_over_allowance = 0;  ///< XOFF events after which more than the allowance came
   uint64_t overruns = 0;             ///< characters beyond the allowance, summed over all XOFFs
   uint64_t overflow = 0;             ///< characters lost to a full buffer
+  /// Characters the control took past its high mark before its XOFF went out, summed: its own
+  /// reaction time (a simulator thread scheduled late reads a batch at once), not the host's.
+  uint64_t late = 0;
+  /// Of the overflow, the characters beyond what the control's own lateness explains, per XOFF
+  /// event: the host's share, 0 for a host that honours XOFF within the buffer's headroom.
+  uint64_t overflow_beyond_late = 0;
   uint64_t parity_errors = 0;        ///< 7E1: bytes whose bit 7 was set but did not give even parity
   bool program_complete = false;     ///< the second '%' arrived
 
