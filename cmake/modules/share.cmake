@@ -1,11 +1,12 @@
 # share module: programs over Ethernet. cnc_bridge_share (the SMB store on Samba's libsmbclient,
-# on cnc_bridge_programs of programs.cmake), its tests, its part of cnc_dnc, and share_node.
+# on cnc_bridge_programs of programs.cmake; share_node's settings and what its services decide),
+# its tests, its part of cnc_dnc, and share_node.
 find_path(SMBCLIENT_INCLUDE_DIR libsmbclient.h PATH_SUFFIXES samba-4.0)
 find_library(SMBCLIENT_LIBRARY smbclient)
 if(NOT SMBCLIENT_INCLUDE_DIR OR NOT SMBCLIENT_LIBRARY)
   message(FATAL_ERROR "libsmbclient not found: install the Debian package libsmbclient-dev")
 endif()
-cnc_core_module(cnc_bridge_share src/share/smb_store.cpp)
+cnc_core_module(cnc_bridge_share src/share/smb_store.cpp src/share/share_settings.cpp src/share/share_service.cpp)
 target_include_directories(cnc_bridge_share PRIVATE ${SMBCLIENT_INCLUDE_DIR})
 target_link_libraries(cnc_bridge_share PUBLIC cnc_bridge_programs ${SMBCLIENT_LIBRARY})
 
@@ -15,6 +16,9 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   target_link_libraries(test_smb_store cnc_bridge_share)
   target_compile_definitions(test_smb_store PRIVATE
                              SERVED_SHARE_CONF="${PROJECT_SOURCE_DIR}/config/share/served_share.smb.conf")
+  # share_node's settings and decisions, on local folders (no server).
+  cnc_core_gtest(test_share_core test/unit/test_share_settings.cpp test/unit/test_share_service.cpp)
+  target_link_libraries(test_share_core cnc_bridge_share)
 endif()
 
 # cnc_dnc send/receive --share and cnc_dnc list, and their test against smbd.

@@ -1,0 +1,73 @@
+// share_node's settings (docs/share_node.md), one struct per part of the node: the node reads them
+// from its parameters (src/nodes/share_params.cpp) and builds the core objects from them. What can
+// be checked without ROS is checked here: ~url against ~serve_dir, the requests folder's name,
+// the archive's version count.
+#pragma once
+
+#include <chrono>
+#include <optional>
+#include <string>
+
+#include "cnc_bridge/programs/daily_time.h"
+#include "cnc_bridge/programs/program_name.h"
+#include "cnc_bridge/programs/program_request.h"
+
+namespace cnc_bridge::share
+{
+/// \brief The share and how it is reached.
+struct StoreSettings
+{
+  std::string address;           ///< smb://... or a local folder (~url or ~serve_dir)
+  std::string credentials_file;  ///< smbclient authentication file; "" for guest
+  std::chrono::milliseconds timeout{10000};
+};
+
+/// \brief The local side: the program folder, how the control names programs, the protected
+/// range and the archive every transfer keeps its program in.
+struct ProgramSettings
+{
+  std::string program_dir;
+  programs::NamePattern pattern;
+  programs::ProtectedRange protected_range{"O08000-O09999", false, "~allow_protected_programs"};
+  std::optional<std::string> archive_dir;  ///< none: beside the program folder (archiveDir())
+  unsigned archive_keep = 20;
+  std::string machine;  ///< named in each archived version
+};
+
+/// \brief Program requests from the control: in request files of a folder of the share, and in
+/// DPRNT lines.
+struct RequestSettings
+{
+  programs::RequestWords words;
+  std::string folder = "requests";  ///< a folder of the share; "" for none
+  bool dprnt = true;
+};
+
+/// \brief The rest of the node: removal, withdrawals and the periods of its checks and answers.
+struct NodeSettings
+{
+  bool enable_remove = false;
+  std::optional<programs::DailyTime> withdraw_at;  ///< none: never
+  double feedback_rate = 20;                       ///< Hz
+  double publish_timeout = 60;                     ///< s, each machine of ~publish_to_machines
+  double check_period = 5;                         ///< s
+};
+
+/// \brief The share's address from ~url and ~serve_dir, of which exactly one is given (\p url_name
+/// and \p serve_dir_name are how the user sets them, named in the errors). A served folder is
+/// written like a local ~url; it must be an existing folder, not an smb:// address.
+/// \throws ConfigError naming what is wrong.
+std::string shareAddress(const std::string& url, const std::string& serve_dir, const std::string& url_name,
+                         const std::string& serve_dir_name);
+
+/// \brief The address of the requests folder \p folder of the share at \p address.
+/// \throws ConfigError if \p folder is no plain name inside the share (programs::checkName()).
+std::string requestsAddress(const std::string& address, const std::string& folder);
+
+/// \brief ~archive_dir if given, else `<program_root>.archive` beside the program folder
+/// (\p program_root its resolved path, ProgramDirectory::root()).
+std::string archiveDir(const std::optional<std::string>& given, const std::string& program_root);
+
+/// \brief ~archive_keep as given: at least one version is kept.
+unsigned archiveKeep(int given);
+}  // namespace cnc_bridge::share
