@@ -35,7 +35,7 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
 endif()
 
 if(NOT CNC_BRIDGE_CORE_ONLY)
-  cnc_node(share_node src/nodes/share_node.cpp)
+  cnc_node(share_node src/nodes/share_node.cpp src/nodes/share_params.cpp src/nodes/share_services.cpp)
   target_link_libraries(share_node cnc_bridge_share)
   if(CATKIN_ENABLE_TESTING)
     # The real share_node against a real smbd, both started by the test (the server's port is free
