@@ -64,8 +64,8 @@ struct DripControlStats
   /// Of the overflow, the characters beyond what the control's own lateness explains, per XOFF
   /// event: the host's share, 0 for a host that honours XOFF within the buffer's headroom.
   uint64_t overflow_beyond_late = 0;
-  uint64_t parity_errors = 0;        ///< 7E1: bytes whose bit 7 was set but did not give even parity
-  bool program_complete = false;     ///< the second '%' arrived
+  uint64_t parity_errors = 0;     ///< 7E1: bytes whose bit 7 was set but did not give even parity
+  bool program_complete = false;  ///< the second '%' arrived
 
   /// \brief One line for the simulator's exit report.
   std::string summary() const;
