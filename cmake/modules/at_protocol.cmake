@@ -1,6 +1,7 @@
 # at_protocol: the '@'-terminated controller protocol with 1 ms setpoint streaming
 # (docs/protocols/at_protocol.md).
-# Core library (codec, sequencing rules, trajectory planner, sender thread, the controller session),
+# Core library (codec, sequencing rules, trajectory planner, sender thread, the controller session
+# and its diagnostics, the goal runner),
 # its unit tests, the controller simulator, the streaming benchmark tool, the fuzz target, and
 # at_controller_node.
 cnc_core_module(cnc_bridge_at_protocol
@@ -11,6 +12,7 @@ cnc_core_module(cnc_bridge_at_protocol
   src/at_protocol/sender.cpp
   src/at_protocol/deadman.cpp
   src/at_protocol/controller_session.cpp
+  src/at_protocol/session_monitor.cpp
   src/at_protocol/goal_runner.cpp)
 target_link_libraries(cnc_bridge_at_protocol PUBLIC cnc_bridge_gcode)
 

@@ -107,7 +107,8 @@ ControllerSession::ControllerSession(ControllerLinks links, Options options, Con
       coolant_(options_.coolant),
       motion_enabled_(options_.motion_enabled),
       command_link_(links_.command_name, [this] { return openCommandLink(); }),
-      report_link_(links_.report_name, links_.open_report)
+      report_link_(links_.report_name, links_.open_report),
+      jog_timer_([this] { return checkJogDeadman(); })
 {
   options_.limits.validate();
   if (!options_.disabled_refusal)
@@ -143,10 +144,15 @@ void ControllerSession::start()
                       [this](LinkState state, const std::string& why) { linkChanged(kCommandLink, state, why); });
   report_link_.start([this](Transport& link) { reportSession(link); },
                      [this](LinkState state, const std::string& why) { linkChanged(kReportLink, state, why); });
+  if (jog_deadman_.enabled())
+  {
+    jog_timer_.start();
+  }
 }
 
 void ControllerSession::stop()
 {
+  jog_timer_.stop();  // before the links: an expiry in progress still sends its F0@
   if (links_.stop_opening)
   {
     links_.stop_opening();
@@ -452,6 +458,7 @@ Answer ControllerSession::jog(const std::string& axis_name, double feed_m_s)
     if (answer.success && feed > 0)
     {
       jog_deadman_.renew(Deadman::Clock::now());
+      jog_timer_.poke();  // the deadline moved (or was set)
     }
     else if (answer.success)
     {
@@ -474,6 +481,31 @@ std::optional<JogStop> ControllerSession::expireJog(Deadman::Clock::time_point n
   const Answer sent = send({JogFeed{0}});
   return JogStop{sent.success, "jog stopped: " + jog_deadman_.describe("jog command"),
                  sent.success ? "" : sent.message};
+}
+
+/// The deadman thread's check: stops an expired jog, records it and tells the listener.
+Deadman::Clock::duration ControllerSession::checkJogDeadman()
+{
+  Deadman::Clock::duration remaining{};
+  const std::optional<JogStop> stop = expireJog(Deadman::Clock::now(), &remaining);
+  if (stop)
+  {
+    {
+      std::lock_guard<std::mutex> lock(jog_stop_mutex_);
+      last_jog_stop_ = stop->sent ? stop->why : stop->why + ", but feed 0 could not be sent: " + stop->failure;
+    }
+    if (listener_)
+    {
+      listener_->onJogStopped(*stop);
+    }
+  }
+  return remaining;
+}
+
+std::string ControllerSession::lastJogStop() const
+{
+  std::lock_guard<std::mutex> lock(jog_stop_mutex_);
+  return last_jog_stop_;
 }
 
 Answer ControllerSession::spindle(double rpm, double* sent_rpm)

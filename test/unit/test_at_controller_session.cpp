@@ -2,11 +2,14 @@
 // snapshot, link loss reported (and the e-stop then unknown), the motion gate refusing with
 // nothing sent, a disable during an operation, and a goal's plan; the goal runner
 // (goal_runner.h): program stops held until resume, cancel while held, M01 and M30, a pause by a
-// disable resumed to the path's end. The tests wait on the events of the listeners or on the bytes
-// the fake controller receives, never on sleeps.
+// disable resumed to the path's end; the jog deadman's stop and the session monitor's diagnostics.
+// The tests wait on the events of the listeners or on the bytes the fake controller receives, never
+// on sleeps.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <future>
 #include <mutex>
@@ -14,6 +17,7 @@
 
 #include "cnc_bridge/at_protocol/controller_session.h"
 #include "cnc_bridge/at_protocol/goal_runner.h"
+#include "cnc_bridge/at_protocol/session_monitor.h"
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/transport/fake_transport.h"
 #include "cnc_bridge/transport/forwarding_transport.h"
@@ -50,6 +54,7 @@ struct Recorder : ControllerListener
   std::vector<LinkEvent> links;
   std::vector<std::string> reports;  // the events' messages, position reports as "position"
   std::vector<std::string> errors;
+  std::vector<JogStop> jog_stops;
   std::vector<std::shared_ptr<FakeTransport>> command_links, report_links;
 
   void onLink(LinkState combined, const std::string& why, bool reports_lost) override
@@ -63,6 +68,10 @@ struct Recorder : ControllerListener
   void onReportError(const std::string& what) override
   {
     record([&] { errors.push_back(what); });
+  }
+  void onJogStopped(const JogStop& stop) override
+  {
+    record([&] { jog_stops.push_back(stop); });
   }
 
   std::unique_ptr<Transport> open(std::vector<std::shared_ptr<FakeTransport>>& opened, const std::string& name)
@@ -113,6 +122,13 @@ struct Recorder : ControllerListener
     return command_links.back();
   }
 };
+
+/// The value of \p key in a monitor report's \p values ("(none)" if it has none).
+std::string valueOf(const SessionMonitor::Values& values, const std::string& key)
+{
+  const auto found = std::find_if(values.begin(), values.end(), [&](const auto& value) { return value.first == key; });
+  return found == values.end() ? "(none)" : found->second;
+}
 
 struct AtControllerSession : ::testing::Test
 {
@@ -245,6 +261,56 @@ TEST_F(AtControllerSession, MotionIsRefusedWhileDisabledAndTheControllerReceives
   EXPECT_EQ(answer.message, "sent JX@F51@");
   EXPECT_TRUE(session->jogDeadman().armed());
   EXPECT_EQ(received(), "S0@JX@F51@");
+}
+
+TEST_F(AtControllerSession, AJogWithNoNewJogCommandWithinTheDeadmanTimeGetsFeedZeroAndIsTold)
+{
+  ControllerSession::Options deadman = options(true);
+  deadman.jog_timeout = 0.05;
+  start(deadman);
+  SessionMonitor monitor(*session);
+  report("E0\n", 1);
+  const auto jogged = Deadman::Clock::now();
+  const Answer answer = session->jog("x", 0.01);
+  ASSERT_TRUE(answer.success) << answer.message;
+  // Nothing renews the jog: the session's deadman thread sends F0@ and tells the listener.
+  ASSERT_TRUE(recorder.waitFor([&] { return !recorder.jog_stops.empty(); }));
+  EXPECT_GE(Deadman::Clock::now() - jogged, std::chrono::milliseconds(50));  // not before its time
+  EXPECT_EQ(received(), "JX@F51@F0@");
+  {
+    std::lock_guard<std::mutex> lock(recorder.mutex);
+    ASSERT_EQ(recorder.jog_stops.size(), 1u);
+    EXPECT_TRUE(recorder.jog_stops[0].sent) << recorder.jog_stops[0].failure;
+    EXPECT_EQ(recorder.jog_stops[0].why, "jog stopped: no jog command for 0.05 s");
+  }
+  EXPECT_FALSE(session->jogDeadman().armed());
+  EXPECT_EQ(session->lastJogStop(), "jog stopped: no jog command for 0.05 s");
+  EXPECT_EQ(valueOf(monitor.report().controller, "last jog stop"), "jog stopped: no jog command for 0.05 s");
+}
+
+TEST_F(AtControllerSession, TheMonitorShowsTheEStopAsItsLevelAndTheCountersAsDiagnosticsWriteThem)
+{
+  start(options(true));
+  SessionMonitor monitor(*session);
+  SessionMonitor::Report now = monitor.report();
+  EXPECT_EQ(now.level, SessionMonitor::Level::kWarn);
+  EXPECT_EQ(now.summary, "emergency stop state unknown (no E0/E1 report yet)");
+  EXPECT_EQ(valueOf(now.controller, "last jog stop"), "none");
+  EXPECT_EQ(valueOf(now.controller, "jog deadman (s, 0: off)"), "0.5");
+  report("E1\n", 1);
+  now = monitor.report();
+  EXPECT_EQ(now.level, SessionMonitor::Level::kError);
+  EXPECT_EQ(now.summary, "emergency stop (E1)");
+  recorder.lastReportLink()->feed("hello\nE0\nJY\n");
+  ASSERT_TRUE(recorder.waitFor([&] { return recorder.reports.size() >= 3; }));
+  now = monitor.report();
+  EXPECT_EQ(now.level, SessionMonitor::Level::kOk);
+  EXPECT_EQ(now.summary.rfind("phase: ", 0), 0u) << now.summary;
+  EXPECT_EQ(valueOf(now.streaming, "report errors"), "1");
+  EXPECT_EQ(valueOf(now.streaming, "underruns (setpoint later than one period)"), "0");
+  EXPECT_EQ(valueOf(now.controller, "mode"), "jog Y");
+  EXPECT_EQ(valueOf(now.controller, "at home"), "False");
+  EXPECT_EQ(valueOf(now.controller, "spindle value (0..255)"), "0");
 }
 
 TEST_F(AtControllerSession, AnEStopRefusesMotionAndAFailedWriteDropsTheCommandLink)

@@ -1,8 +1,13 @@
 // The jog deadman's rule on a clock the test sets: a renewal lasts the timeout, renewing pushes
-// the expiry out, the expiry is reported once, and a timeout of 0 never arms.
+// the expiry out, the expiry is reported once, and a timeout of 0 never arms. Its timer thread:
+// checks at start, on a poke and once the time a check asked for has passed (waited on with a
+// deadline, not slept).
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <condition_variable>
+#include <mutex>
+#include <vector>
 
 #include "cnc_bridge/at_protocol/deadman.h"
 #include "cnc_bridge/common/error.h"
@@ -62,4 +67,33 @@ TEST(AtDeadman, DescribesItsTimeoutAndRefusesANegativeOne)
   EXPECT_EQ(Deadman(0.5).describe("jog command"), "no jog command for 0.5 s");
   EXPECT_THROW(Deadman(-1.0), ConfigError);
   EXPECT_THROW(Deadman(std::nan("")), ConfigError);
+}
+
+TEST(AtDeadman, TheTimerChecksAtStartOnAPokeAndWhenTheTimeACheckAskedForHasPassed)
+{
+  std::mutex mutex;
+  std::condition_variable checked;
+  std::vector<Deadman::Clock::time_point> checks;
+  Deadman::Clock::duration next = Deadman::Clock::duration::zero();  // what the next check returns
+  DeadmanTimer timer(
+      [&]
+      {
+        std::lock_guard<std::mutex> lock(mutex);
+        checks.push_back(Deadman::Clock::now());
+        const Deadman::Clock::duration wait = next;
+        next = Deadman::Clock::duration::zero();
+        checked.notify_all();
+        return wait;
+      });
+  std::unique_lock<std::mutex> lock(mutex);
+  timer.start();
+  ASSERT_TRUE(checked.wait_for(lock, 10s, [&] { return checks.size() == 1; }));  // at start; zero: until a poke
+  next = 50ms;
+  timer.poke();
+  ASSERT_TRUE(checked.wait_for(lock, 10s, [&] { return checks.size() == 2; }));  // the poke
+  ASSERT_TRUE(checked.wait_for(lock, 10s, [&] { return checks.size() == 3; }));  // 50 ms later
+  EXPECT_GE(checks[2] - checks[1], 50ms);
+  lock.unlock();
+  timer.stop();
+  EXPECT_EQ(checks.size(), 3u);  // the last check returned zero and nothing poked it since
 }

@@ -61,7 +61,16 @@ struct ReportEvent
   std::string message;  ///< "emergency stop (E1)", "auto mode", "jog mode, axis Y", "at home"
 };
 
-/// \brief Events of the session, called on the link threads, without the session's locks held.
+/// \brief A jog stopped by its deadman (ControllerSession::expireJog).
+struct JogStop
+{
+  bool sent = false;    ///< F0@ went out
+  std::string why;      ///< "jog stopped: no jog command for 0.5 s"
+  std::string failure;  ///< why F0@ could not be sent ("" if it was)
+};
+
+/// \brief Events of the session, called on the link threads (a jog's stop on the deadman's),
+/// without the session's locks held.
 class ControllerListener
 {
  public:
@@ -73,6 +82,8 @@ class ControllerListener
   virtual void onReport(const ReportEvent& event, const ControllerSnapshot& now) {}
   /// A report line that could not be read (counted in reportErrors()).
   virtual void onReportError(const std::string& what) {}
+  /// The deadman stopped a jog: no jog command came within Options::jog_timeout (lastJogStop()).
+  virtual void onJogStopped(const JogStop& stop) {}
 };
 
 /// \brief How the two links are opened: each opener blocks until its link is open, or throws.
@@ -141,16 +152,9 @@ struct Answer
   std::string message;
 };
 
-/// \brief A jog stopped by its deadman (ControllerSession::expireJog).
-struct JogStop
-{
-  bool sent = false;    ///< F0@ went out
-  std::string why;      ///< "jog stopped: no jog command for 0.5 s"
-  std::string failure;  ///< why F0@ could not be sent ("" if it was)
-};
-
 /// \brief The session with one '@' controller. Thread-safe; start() once, stop() (or the
-/// destructor) before the listener goes away.
+/// destructor) before the listener goes away. A jog's deadman runs on a thread of its own: a jog
+/// not renewed within Options::jog_timeout gets feed 0 (expireJog) and the listener is told.
 class ControllerSession
 {
  public:
@@ -187,6 +191,9 @@ class ControllerSession
   SetpointSender& sender() { return *sender_; }
   const Options& options() const { return options_; }
   Deadman& jogDeadman() { return jog_deadman_; }
+  /// \returns the deadman's last stop in words ("jog stopped: no jog command for 0.5 s", with the
+  /// failure if F0@ could not be sent), "" if it has not stopped a jog.
+  std::string lastJogStop() const;
 
   // ---- the motion gate --------------------------------------------------------------------------
 
@@ -217,7 +224,8 @@ class ControllerSession
   /// \brief H@; refused unless motion may start.
   Answer home();
   /// \brief If the deadman of a jog expired at \p now, sends F0@ and \returns the stop; nothing
-  /// if it did not expire (\p remaining is then the time left, zero when it is not armed).
+  /// if it did not expire (\p remaining is then the time left, zero when it is not armed). The
+  /// session's deadman thread calls it when the deadline comes.
   std::optional<JogStop> expireJog(Deadman::Clock::time_point now, Deadman::Clock::duration* remaining);
   /// \brief The coolant of the next operations (the protocol switches it only with one).
   void setCoolant(bool on) { coolant_ = on; }
@@ -256,6 +264,7 @@ class ControllerSession
   void onReport(const Report& report);
   void linkChanged(int which, LinkState state, const std::string& why);
   void notifyReport(ReportEvent::Kind kind, const std::string& message);
+  Deadman::Clock::duration checkJogDeadman();
 
   Options options_;
   ControllerListener* listener_;
@@ -283,8 +292,12 @@ class ControllerSession
   std::string disabled_by_;         // who disabled motion while running_job_ ran
   std::string motion_disabled_by_;  // who disabled motion last
 
+  mutable std::mutex jog_stop_mutex_;  // guards last_jog_stop_
+  std::string last_jog_stop_;
+
   ReconnectingLink command_link_;
   ReconnectingLink report_link_;
+  DeadmanTimer jog_timer_;  // last: stopped before what its checks use goes away
 };
 }  // namespace at_protocol
 }  // namespace cnc_bridge

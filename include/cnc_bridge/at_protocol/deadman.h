@@ -2,12 +2,16 @@
 // asking for it, as teleoperation commands do (a velocity command that is not repeated within its
 // timeout stops the robot). The '@' protocol has no such timeout of its own: a jog feed stays in
 // force on the controller until the next one, so the host stops a jog whose client went silent.
-// This file holds the timing rule, free of ROS and of any timer, so it is tested on its own.
+// This file holds the timing rule (Deadman, tested on its own) and the thread that applies it in
+// time (DeadmanTimer), free of ROS.
 #pragma once
 
 #include <chrono>
+#include <condition_variable>
+#include <functional>
 #include <mutex>
 #include <string>
+#include <thread>
 
 namespace cnc_bridge
 {
@@ -48,6 +52,39 @@ class Deadman
   mutable std::mutex mutex_;
   bool armed_ = false;
   Clock::time_point deadline_;
+};
+
+/// \brief A thread that looks at a deadman when its deadline may have come, on the steady clock
+/// (a change of the system time neither fires nor delays it).
+///
+/// \p check runs on the timer's thread once at start(), after each poke() and when the time it
+/// last returned has passed; it returns the time until it is to run again, zero for "not until
+/// the next poke()" (nothing armed).
+class DeadmanTimer
+{
+ public:
+  using Check = std::function<Deadman::Clock::duration()>;
+
+  explicit DeadmanTimer(Check check);
+  ~DeadmanTimer();
+  DeadmanTimer(const DeadmanTimer&) = delete;
+  DeadmanTimer& operator=(const DeadmanTimer&) = delete;
+
+  void start();
+  /// \brief Joins the thread: no check runs after it returns.
+  void stop();
+  /// \brief A deadline was set or moved: check at once.
+  void poke();
+
+ private:
+  void run();
+
+  Check check_;
+  std::mutex mutex_;  // guards poked_, stopping_
+  std::condition_variable changed_;
+  bool poked_ = false;
+  bool stopping_ = false;
+  std::thread thread_;
 };
 }  // namespace at_protocol
 }  // namespace cnc_bridge
