@@ -49,7 +49,8 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
 endif()
 
 if(NOT CNC_BRIDGE_CORE_ONLY)
-  cnc_node(at_controller_node src/nodes/at_controller_node.cpp)
+  cnc_node(at_controller_node src/nodes/at_controller_node.cpp src/nodes/at_controller_params.cpp
+           src/nodes/at_controller_goal.cpp)
   target_link_libraries(at_controller_node cnc_bridge_at_protocol cnc_bridge_gcode)
 endif()
 
