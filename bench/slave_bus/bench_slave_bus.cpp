@@ -14,7 +14,7 @@
 
 #include "cnc_bridge/slave_bus/bus_session.h"
 #include "cnc_bridge/slave_bus/value_codec.h"
-#include "cnc_bridge/transport/paced_transport.h"
+#include "cnc_bridge/testing/paced_transport.h"
 #include "cnc_bridge/transport/serial_port.h"
 
 using namespace cnc_bridge;

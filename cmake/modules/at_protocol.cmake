@@ -30,6 +30,7 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
 endif()
 
 cnc_tool(sim_at_controller src/sim/sim_at_controller.cpp)
+target_link_libraries(sim_at_controller cnc_bridge_testing)
 cnc_tool(at_stream_bench bench/at_controller/at_stream_bench.cpp)
 # cnc_plan: the '@' path as 1 ms setpoints (CSV, PNG through scripts/plot_plan.py), ROS-free.
 cnc_tool(cnc_plan src/cli/cnc_plan.cpp)

@@ -10,8 +10,7 @@ cnc_core_module(cnc_bridge_drip
 # The simulated control, shared by sim_haas_serial and the unit tests that run it in-process.
 add_library(cnc_bridge_dnc_sim STATIC
   src/sim/haas_serial/dnc_drip_control.cpp
-  src/sim/haas_serial/dnc_punch.cpp
-  src/sim/haas_serial/simulated_line.cpp)
+  src/sim/haas_serial/dnc_punch.cpp)
 target_include_directories(cnc_bridge_dnc_sim PUBLIC ${PROJECT_SOURCE_DIR}/src/sim/haas_serial)
 target_link_libraries(cnc_bridge_dnc_sim PUBLIC cnc_bridge_drip)
 
@@ -34,7 +33,7 @@ cnc_fuzz_target(fuzz_dnc_program test/fuzz/fuzz_dnc_program.cpp)
 
 # Benchmark driver (bench/dnc/run_bench.sh runs it from a build directory).
 cnc_tool(dnc_drip_bench bench/dnc/drip_bench.cpp)
-target_link_libraries(dnc_drip_bench cnc_bridge_dnc_sim)
+target_link_libraries(dnc_drip_bench cnc_bridge_dnc_sim cnc_bridge_testing)
 
 # dnc_node's drip and backup protocols (xmodem.cmake declares the node).
 if(NOT CNC_BRIDGE_CORE_ONLY AND TARGET dnc_node)

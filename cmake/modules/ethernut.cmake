@@ -11,7 +11,7 @@ target_link_libraries(cnc_bridge_ethernut PUBLIC cnc_bridge_gcode)  # a job's G-
 cnc_sim_library(cnc_bridge_ethernut_sim src/sim/ethernut/board.cpp)
 target_link_libraries(cnc_bridge_ethernut_sim PUBLIC cnc_bridge_ethernut)
 cnc_tool(sim_ethernut src/sim/sim_ethernut.cpp)
-target_link_libraries(sim_ethernut cnc_bridge_ethernut_sim)
+target_link_libraries(sim_ethernut cnc_bridge_ethernut_sim cnc_bridge_testing)
 cnc_tool(bench_ethernut bench/ethernut/bench_ethernut.cpp)
 target_link_libraries(bench_ethernut cnc_bridge_ethernut)
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)

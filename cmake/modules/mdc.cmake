@@ -5,7 +5,7 @@ cnc_core_module(cnc_bridge_mdc src/mdc/mdc_protocol.cpp src/mdc/mdc_client.cpp s
 cnc_sim_library(cnc_bridge_mdc_sim src/sim/mdc/sim_machine.cpp)
 target_link_libraries(cnc_bridge_mdc_sim PUBLIC cnc_bridge_mdc)
 cnc_tool(sim_haas_mdc src/sim/sim_haas_mdc.cpp)
-target_link_libraries(sim_haas_mdc cnc_bridge_mdc_sim)
+target_link_libraries(sim_haas_mdc cnc_bridge_mdc_sim cnc_bridge_testing)
 cnc_tool(bench_mdc_poll bench/mdc/bench_mdc_poll.cpp)
 cnc_fuzz_target(fuzz_mdc_reply test/fuzz/fuzz_mdc_reply.cpp)
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)

@@ -1,10 +1,9 @@
 # xmodem module: XModem program transfer (core library cnc_bridge_xmodem, the cnc_dnc tool, the
-# sim_haas_serial xmodem mode, dnc_node) and the fault-injection transport its tests use.
+# sim_haas_serial xmodem mode, dnc_node).
 cnc_core_module(cnc_bridge_xmodem
   src/xmodem/packet.cpp
   src/xmodem/session.cpp
-  src/xmodem/file_transfer.cpp
-  src/transport/faulty_transport.cpp)
+  src/xmodem/file_transfer.cpp)
 
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   cnc_core_gtest(test_xmodem test/unit/test_xmodem.cpp)

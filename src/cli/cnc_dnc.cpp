@@ -28,7 +28,7 @@
 #include <vector>
 
 #include "cnc_bridge/common/error.h"
-#include "cnc_bridge/sim/sim_support.h"
+#include "cnc_bridge/common/stop_handler.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
 #include "progress_line.h"
@@ -188,11 +188,11 @@ xmodem::Config transferConfig(const po::variables_map& vm)
 int withPort(const po::variables_map& vm, const std::function<std::string(Transport&, std::atomic<bool>&)>& transfer)
 {
   static std::atomic<bool> cancel{false};
-  sim::installStopHandler();
+  installStopHandler();
   // A start request the receiver sent before this program opened the port is kept: it is the one
   // the transfer needs (a receiver repeats it only after its NAK interval, 10 s for lrzsz rx).
   SerialPort port(serialSettings(vm), InputOnOpen::kKeep);
-  sim::onStop(
+  onStop(
       [&port]
       {
         cancel = true;

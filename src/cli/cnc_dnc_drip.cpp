@@ -22,10 +22,10 @@
 #include <vector>
 
 #include "cnc_bridge/common/error.h"
+#include "cnc_bridge/common/stop_handler.h"
 #include "cnc_bridge/dnc/backup.h"
 #include "cnc_bridge/dnc/dnc_codes.h"
 #include "cnc_bridge/dnc/drip_feed.h"
-#include "cnc_bridge/sim/sim_support.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "progress_line.h"
 #include "protected_options.h"
@@ -226,8 +226,8 @@ int runDrip(const std::vector<std::string>& args)
   }
 
   static std::atomic<bool> cancel{false};
-  sim::installStopHandler();
-  sim::onStop([] { cancel = true; });
+  installStopHandler();
+  onStop([] { cancel = true; });
   drip.cancel = &cancel;
   SerialPort port(settings);
   dnc::DripSender sender(port, drip);
@@ -270,8 +270,8 @@ int runBackup(const std::vector<std::string>& args)
   backup.quiet_timeout = seconds(vm["quiet"].as<double>());
   backup.send_dc1 = !vm["no-dc1"].as<bool>();
   static std::atomic<bool> cancel{false};
-  sim::installStopHandler();
-  sim::onStop([] { cancel = true; });
+  installStopHandler();
+  onStop([] { cancel = true; });
   backup.cancel = &cancel;
   SerialPort port(serialSettings(vm));
   const std::string file = vm["file"].as<std::string>();

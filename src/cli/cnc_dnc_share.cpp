@@ -17,10 +17,10 @@
 #include <vector>
 
 #include "cnc_bridge/common/error.h"
+#include "cnc_bridge/common/stop_handler.h"
 #include "cnc_bridge/programs/archive.h"
 #include "cnc_bridge/programs/fan_out.h"
 #include "cnc_bridge/share/smb_store.h"
-#include "cnc_bridge/sim/sim_support.h"
 #include "progress_line.h"
 #include "protected_options.h"
 
@@ -123,8 +123,8 @@ programs::StoreProgress showOn(ProgressLine& line)
 const std::atomic<bool>* cancelOnStop()
 {
   static std::atomic<bool> cancel{false};
-  sim::installStopHandler();
-  sim::onStop([] { cancel = true; });
+  installStopHandler();
+  onStop([] { cancel = true; });
   return &cancel;
 }
 }  // namespace

@@ -34,7 +34,7 @@
 #include "cnc_bridge/at_protocol/sender.h"
 #include "cnc_bridge/at_protocol/sequencer.h"
 #include "cnc_bridge/common/error.h"
-#include "cnc_bridge/sim/sim_support.h"
+#include "cnc_bridge/testing/sim_support.h"
 #include "cnc_bridge/transport/tcp.h"
 
 using namespace cnc_bridge;

@@ -5,7 +5,7 @@
 #include <iostream>
 
 #include "cnc_bridge/common/log.h"
-#include "cnc_bridge/sim/sim_support.h"
+#include "cnc_bridge/testing/sim_support.h"
 #include "cnc_bridge/transport/tcp.h"
 #include "sim/ethernut/board.h"
 

@@ -16,8 +16,8 @@
 #include <sstream>
 
 #include "cnc_bridge/common/error.h"
-#include "cnc_bridge/sim/sim_support.h"
-#include "cnc_bridge/transport/pty.h"
+#include "cnc_bridge/testing/pty.h"
+#include "cnc_bridge/testing/sim_support.h"
 #include "sim/mdc/sim_machine.h"
 
 namespace asio = boost::asio;

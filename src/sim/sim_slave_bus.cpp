@@ -9,9 +9,10 @@
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/log.h"
-#include "cnc_bridge/sim/sim_support.h"
-#include "cnc_bridge/transport/paced_transport.h"
-#include "cnc_bridge/transport/pty.h"
+#include "cnc_bridge/testing/paced_transport.h"
+#include "cnc_bridge/testing/pty.h"
+#include "cnc_bridge/testing/sim_support.h"
+#include "cnc_bridge/transport/serial_port.h"
 #include "sim/slave_bus/sim_master.h"
 
 namespace

@@ -1,7 +1,6 @@
 // SerialPort: Boost.Asio's serial_port does the I/O; the line settings, output queue size, drain
 // and input flush use termios directly.
 #include "cnc_bridge/transport/serial_port.h"
-#include "cnc_bridge/transport/paced_transport.h"
 #include "cnc_bridge/transport/port_doctor.h"
 
 #include <sys/ioctl.h>
@@ -70,6 +69,11 @@ std::string SerialSettings::describe() const
     out << " " << toString(flow_control);
   }
   return out.str();
+}
+
+unsigned bitsPerCharacter(unsigned data_bits, bool parity, unsigned stop_bits)
+{
+  return 1 + data_bits + (parity ? 1 : 0) + stop_bits;
 }
 
 double SerialSettings::charactersPerSecond() const

@@ -6,7 +6,7 @@
 #include <cstdlib>
 
 #include "cnc_bridge/common/log.h"
-#include "cnc_bridge/transport/fake_transport.h"
+#include "cnc_bridge/testing/fake_transport.h"
 #include "sim/slave_bus/sim_master.h"
 
 using namespace cnc_bridge;

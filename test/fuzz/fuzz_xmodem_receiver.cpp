@@ -6,7 +6,7 @@
 #include <vector>
 
 #include "cnc_bridge/common/error.h"
-#include "cnc_bridge/transport/fake_transport.h"
+#include "cnc_bridge/testing/fake_transport.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
 #include "cnc_bridge/xmodem/packet.h"
 #include "cnc_bridge/xmodem/session.h"

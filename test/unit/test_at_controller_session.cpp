@@ -19,7 +19,7 @@
 #include "cnc_bridge/at_protocol/goal_runner.h"
 #include "cnc_bridge/at_protocol/session_monitor.h"
 #include "cnc_bridge/common/error.h"
-#include "cnc_bridge/transport/fake_transport.h"
+#include "cnc_bridge/testing/fake_transport.h"
 #include "cnc_bridge/transport/forwarding_transport.h"
 
 using namespace cnc_bridge;

@@ -11,7 +11,7 @@
 #include <thread>
 
 #include "cnc_bridge/ethernut/client.h"
-#include "cnc_bridge/transport/fake_transport.h"
+#include "cnc_bridge/testing/fake_transport.h"
 #include "cnc_bridge/transport/tcp.h"
 #include "sim/ethernut/board.h"
 

@@ -15,8 +15,8 @@
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/mdc/mdc_client.h"
 #include "cnc_bridge/mdc/mdc_monitor.h"
-#include "cnc_bridge/transport/fake_transport.h"
-#include "cnc_bridge/transport/pty.h"
+#include "cnc_bridge/testing/fake_transport.h"
+#include "cnc_bridge/testing/pty.h"
 #include "cnc_bridge/transport/serial_port.h"
 
 using namespace cnc_bridge;

@@ -7,8 +7,8 @@
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/slave_bus/bus_session.h"
-#include "cnc_bridge/transport/fake_transport.h"
-#include "cnc_bridge/transport/pty.h"
+#include "cnc_bridge/testing/fake_transport.h"
+#include "cnc_bridge/testing/pty.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "sim/slave_bus/sim_master.h"
 

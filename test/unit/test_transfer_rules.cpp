@@ -12,7 +12,7 @@
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/dnc/transfer_gate.h"
 #include "cnc_bridge/dnc/transfer_rules.h"
-#include "cnc_bridge/transport/fake_transport.h"
+#include "cnc_bridge/testing/fake_transport.h"
 #include "temp_dir.h"
 
 using namespace cnc_bridge;

@@ -24,11 +24,11 @@
 #include <vector>
 
 #include "cnc_bridge/common/error.h"
+#include "cnc_bridge/testing/fake_transport.h"
+#include "cnc_bridge/testing/paced_transport.h"
+#include "cnc_bridge/testing/pty.h"
 #include "cnc_bridge/transport/backoff.h"
-#include "cnc_bridge/transport/fake_transport.h"
 #include "cnc_bridge/transport/forwarding_transport.h"
-#include "cnc_bridge/transport/paced_transport.h"
-#include "cnc_bridge/transport/pty.h"
 #include "cnc_bridge/transport/reconnecting_link.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/transport/tcp.h"

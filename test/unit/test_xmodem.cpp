@@ -16,9 +16,9 @@
 #include <thread>
 
 #include "cnc_bridge/common/error.h"
+#include "cnc_bridge/testing/fake_transport.h"
+#include "cnc_bridge/testing/faulty_transport.h"
 #include "cnc_bridge/transport/buffered_input.h"
-#include "cnc_bridge/transport/fake_transport.h"
-#include "cnc_bridge/transport/faulty_transport.h"
 #include "cnc_bridge/transport/forwarding_transport.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
 #include "cnc_bridge/xmodem/packet.h"

@@ -26,7 +26,7 @@
 #include <vector>
 
 #include "cnc_bridge/common/error.h"
-#include "cnc_bridge/transport/pty.h"
+#include "cnc_bridge/testing/pty.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
 #include "peer_process.h"

@@ -20,8 +20,8 @@
 #include <thread>
 
 #include "cnc_bridge/common/error.h"
+#include "cnc_bridge/testing/pty.h"
 #include "cnc_bridge/transport/forwarding_transport.h"
-#include "cnc_bridge/transport/pty.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
 #include "cnc_bridge/xmodem/session.h"

@@ -26,6 +26,9 @@ enum class FlowControl
   kRtsCts
 };
 
+/// \brief Bits on the wire per character: start + data + parity + stop.
+unsigned bitsPerCharacter(unsigned data_bits, bool parity, unsigned stop_bits);
+
 /// \brief Line settings of a serial port. Defaults: 9600 8N1, no flow control.
 struct SerialSettings
 {

@@ -15,8 +15,8 @@
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/sim/haas_serial_modes.h"
-#include "cnc_bridge/sim/sim_support.h"
-#include "cnc_bridge/transport/pty.h"
+#include "cnc_bridge/testing/pty.h"
+#include "cnc_bridge/testing/sim_support.h"
 #include "cnc_bridge/transport/tcp.h"
 #include "dprnt_program.h"
 

@@ -1,6 +1,6 @@
 // PacedTransport: sleeps until the simulated line is free, in slices of a few milliseconds, so the
 // receiver sees a steady trickle as from a UART rather than bursts.
-#include "cnc_bridge/transport/paced_transport.h"
+#include "cnc_bridge/testing/paced_transport.h"
 
 #include <algorithm>
 #include <sstream>
@@ -8,11 +8,6 @@
 
 namespace cnc_bridge
 {
-unsigned bitsPerCharacter(unsigned data_bits, bool parity, unsigned stop_bits)
-{
-  return 1 + data_bits + (parity ? 1 : 0) + stop_bits;
-}
-
 PacedTransport::PacedTransport(Transport& inner, double characters_per_second, Release release)
     : ForwardingTransport(inner), rate_(characters_per_second), release_(release), line_free_at_(Clock::now())
 {

@@ -1,6 +1,6 @@
 // A Transport decorator that lets bytes out no faster than a real serial line would carry them.
 // Simulators use it to behave like a 9600 or 115200 baud port on a pty (which has no baud rate),
-// and a host can use it to pace a drip-feed so that little is queued when the control says XOFF.
+// benchmarks to pace their writes to a real port. (bitsPerCharacter() is in serial_port.h.)
 #pragma once
 
 #include <chrono>
@@ -9,9 +9,6 @@
 
 namespace cnc_bridge
 {
-/// \brief Bits on the wire per character: start + data + parity + stop.
-unsigned bitsPerCharacter(unsigned data_bits, bool parity, unsigned stop_bits);
-
 /// \brief Paces writes of an inner transport to \p characters_per_second. Reads pass through.
 /// Not thread-safe beyond what the inner transport offers (interrupt() is forwarded).
 class PacedTransport : public ForwardingTransport

@@ -1,20 +1,27 @@
-// Simulator support: signal thread and announcement line.
-#include "cnc_bridge/sim/sim_support.h"
+// Stop on SIGINT/SIGTERM: a thread waits for the signal, then stops and runs the callbacks.
+#include "cnc_bridge/common/stop_handler.h"
 
 #include <csignal>
-#include <iostream>
 #include <mutex>
 #include <thread>
 #include <vector>
 
 namespace cnc_bridge
 {
-namespace sim
-{
 namespace
 {
-std::mutex callbacks_mutex;
-std::vector<std::function<void()>> callbacks;
+/// The registered callbacks, made on first use (no mutable global).
+struct Callbacks
+{
+  std::mutex mutex;
+  std::vector<std::function<void()>> list;
+};
+
+Callbacks& callbacks()
+{
+  static Callbacks instance;
+  return instance;
+}
 }  // namespace
 
 StopSignal& installStopHandler()
@@ -35,8 +42,8 @@ StopSignal& installStopHandler()
                          int signal_number = 0;
                          sigwait(&set, &signal_number);
                          stop.stop();
-                         std::lock_guard<std::mutex> lock(callbacks_mutex);
-                         for (auto& callback : callbacks)
+                         std::lock_guard<std::mutex> lock(callbacks().mutex);
+                         for (auto& callback : callbacks().list)
                          {
                            callback();
                          }
@@ -48,13 +55,7 @@ StopSignal& installStopHandler()
 
 void onStop(std::function<void()> callback)
 {
-  std::lock_guard<std::mutex> lock(callbacks_mutex);
-  callbacks.push_back(std::move(callback));
+  std::lock_guard<std::mutex> lock(callbacks().mutex);
+  callbacks().list.push_back(std::move(callback));
 }
-
-void announce(const std::string& what, const std::string& where)
-{
-  std::cout << what << " " << where << std::endl;
-}
-}  // namespace sim
 }  // namespace cnc_bridge

@@ -1,5 +1,5 @@
 // SimulatedLine: a serial line in memory, each character one character time on the wire.
-#include "simulated_line.h"
+#include "cnc_bridge/testing/simulated_line.h"
 
 #include <algorithm>
 #include <thread>
@@ -56,7 +56,7 @@ size_t SimulatedLine::End::read(uint8_t* buffer, size_t size, Milliseconds timeo
   }
 }
 
-void SimulatedLine::End::write(const uint8_t* data, size_t size, Milliseconds)
+void SimulatedLine::End::write(const uint8_t* data, size_t size, Milliseconds /*timeout*/)
 {
   std::lock_guard<std::mutex> lock(line_.mutex_);
   const auto now = Clock::now();

@@ -1,0 +1,21 @@
+// What every simulator shares: a clean stop on SIGINT/SIGTERM that also wakes blocking I/O
+// (cnc_bridge/common/stop_handler.h), and the first line of output that tells the test or the user
+// where the simulator listens.
+#pragma once
+
+#include <string>
+
+#include "cnc_bridge/common/stop_handler.h"
+
+namespace cnc_bridge
+{
+namespace sim
+{
+using cnc_bridge::installStopHandler;
+using cnc_bridge::onStop;
+
+/// \brief Prints the first line of a simulator: "<what> <where>", flushed at once, e.g.
+/// "sim_haas_serial pty /dev/pts/3" or "sim_ethernut tcp 127.0.0.1:6666".
+void announce(const std::string& what, const std::string& where);
+}  // namespace sim
+}  // namespace cnc_bridge
