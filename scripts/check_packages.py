@@ -186,6 +186,7 @@ PROGRAM_PACKAGES = {
     "clang-format": ["clang-format"],
     "clang-tidy": ["clang-tidy"],  # the lint step, on the core
     "cmake": ["cmake"], "cc": ["build-essential"], "ccache": ["ccache"],
+    "nm": ["build-essential"],  # binutils: the install-space test's look at what nodes ship
     "roscore": ["python3-roslaunch"], "roslaunch": ["python3-roslaunch"], "rostest": ["python3-rostest"],
     "rosrun": ["rosbash"], "rosparam": ["python3-rosparam"], "rosbag": ["python3-rosbag"],
     "rostopic": ["python3-rostopic"], "rosservice": ["python3-rosservice"], "rosnode": ["python3-rosnode"],

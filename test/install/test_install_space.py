@@ -8,7 +8,9 @@ no source checkout on any path):
   - every installed launch file loads and every node it starts exists (roslaunch's own check);
   - dnc_node started through its installed launch file reaches LINK_UP on its simulator
     (sim_haas_serial xmodem, also from the install space);
-  - `cnc_dnc send` (from the PATH of the install space) stores a program on the XModem simulator.
+  - `cnc_dnc send` (from the PATH of the install space) stores a program on the XModem simulator;
+  - no installed node or library carries the test doubles of cnc_bridge_testing, whose headers are
+    not installed either (the simulators do carry them).
 
 Writes JUnit XML (one case per check).
 
@@ -258,6 +260,38 @@ def check_runtime_packages_cover_programs(space):
                       "does not bring: " + ", ".join(uncovered))
 
 
+# Classes and functions of cnc_bridge_testing (include/cnc_bridge/testing/), as nm -C prints them.
+TEST_DOUBLE = re.compile(r"\bcnc_bridge::(?:FakeTransport|FaultyTransport|PacedTransport|PtyMaster|sim::SimulatedLine|"
+                         r"sim::announce)\b")
+
+
+def test_doubles_in(path):
+    result = subprocess.run(["nm", "-C", "--defined-only", path], capture_output=True, text=True)
+    if result.returncode != 0:
+        raise Failure("nm %s: %s" % (path, result.stderr[-500:]))
+    return sorted(set(TEST_DOUBLE.findall(result.stdout)))
+
+
+def check_no_test_doubles_shipped(space):
+    """The nodes and the package's libraries define none of the test doubles; a simulator, which
+    links them, does (so the symbol names looked for are the right ones)."""
+    programs = os.path.join(space.prefix, "lib", PACKAGE)
+    files = [os.path.join(programs, name) for name in os.listdir(programs) if name.endswith("_node")]
+    files += [os.path.join(space.prefix, "lib", name) for name in os.listdir(os.path.join(space.prefix, "lib"))
+              if name.startswith("libcnc_bridge") and name.endswith(".so")]
+    if not any(path.endswith("_node") for path in files) or not any(path.endswith(".so") for path in files):
+        raise Failure("no node or no library installed? " + str(files))
+    shipped = ["%s (%s)" % (os.path.basename(path), ", ".join(found))
+               for path in sorted(files) for found in [test_doubles_in(path)] if found]
+    if shipped:
+        raise Failure("installed nodes and libraries that carry test doubles: " + "; ".join(shipped))
+    if not test_doubles_in(os.path.join(programs, "sim_haas_serial")):
+        raise Failure("sim_haas_serial defines no test double: the symbol names looked for are out of date")
+    headers = os.path.join(space.prefix, "include", PACKAGE, "testing")
+    if os.path.exists(headers):
+        raise Failure("the headers of cnc_bridge_testing are installed: " + headers)
+
+
 def check_node_reaches_link_up(space):
     """dnc_node through its installed launch file, on the installed XModem simulator's pty."""
     port = free_port()
@@ -322,6 +356,7 @@ def main():
               ("launch_files_load_and_their_nodes_exist", lambda: check_launch_files(space)),
               ("cell_simulators_installed", lambda: check_simulators_of_cell(space)),
               ("runtime_packages_cover_installed_programs", lambda: check_runtime_packages_cover_programs(space)),
+              ("no_test_doubles_in_nodes_and_libraries", lambda: check_no_test_doubles_shipped(space)),
               ("dnc_node_launch_reaches_link_up", lambda: check_node_reaches_link_up(space)),
               ("cnc_dnc_send_to_xmodem_simulator", lambda: check_cnc_dnc_send(space))]
     results = []
