@@ -1,5 +1,5 @@
-// Helpers of the at_controller rostests: wait for a state that satisfies a condition, call a
-// service, and follow a path goal. Every wait is on a message or a result, with a deadline.
+// Helpers of the at_controller rostests: wait for a state that satisfies a condition (topic_watch.h),
+// call a service, and follow a path goal. Every wait is on a message or a result, with a deadline.
 #pragma once
 
 #include <actionlib/client/simple_action_client.h>
@@ -8,11 +8,10 @@
 #include <std_srvs/SetBool.h>
 #include <std_srvs/Trigger.h>
 
+#include <algorithm>
 #include <chrono>
-#include <condition_variable>
 #include <fstream>
 #include <functional>
-#include <mutex>
 #include <string>
 #include <thread>
 #include <vector>
@@ -22,66 +21,41 @@
 #include "cnc_bridge/AtSpindle.h"
 #include "cnc_bridge/AtToolChange.h"
 #include "cnc_bridge/MachineState.h"
+#include "topic_watch.h"
 
 namespace at_test
 {
 using FollowPathClient = actionlib::SimpleActionClient<cnc_bridge::AtFollowPathAction>;
 
-/// The latest state, and a wait for a state that satisfies a predicate.
-class StateWatch
+/// The states of the machine, and waits for the latest one to satisfy a predicate.
+class StateWatch : public topic_watch::TopicWatch<cnc_bridge::MachineState>
 {
  public:
-  explicit StateWatch(const std::string& topic)
-  {
-    ros::NodeHandle nh;
-    sub_ = nh.subscribe<cnc_bridge::MachineState>(topic, 100,
-                                                  [this](const cnc_bridge::MachineState::ConstPtr& state)
-                                                  {
-                                                    {
-                                                      std::lock_guard<std::mutex> lock(mutex_);
-                                                      last_ = *state;
-                                                      ++count_;
-                                                      if (state->link != cnc_bridge::MachineState::LINK_UP)
-                                                      {
-                                                        ++not_up_;
-                                                      }
-                                                    }
-                                                    cv_.notify_all();
-                                                  });
-  }
+  explicit StateWatch(const std::string& topic) : TopicWatch(topic, 100) {}
   /// \returns true if a state satisfying \p predicate arrived within \p seconds.
   bool waitFor(const std::function<bool(const cnc_bridge::MachineState&)>& predicate, double seconds = 10.0)
   {
-    std::unique_lock<std::mutex> lock(mutex_);
-    return cv_.wait_for(lock, std::chrono::duration<double>(seconds), [&] { return count_ > 0 && predicate(last_); });
+    return waitForLatest(predicate, seconds);
   }
-  cnc_bridge::MachineState last()
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    return last_;
-  }
+  cnc_bridge::MachineState last() { return latest(); }
   /// States seen so far whose link was not UP (each change of the state is published).
-  uint64_t linkNotUpCount()
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    return not_up_;
-  }
+  uint64_t linkNotUpCount() { return linkNotUp(all()); }
   /// \returns true if, within \p seconds, the link was seen not UP (after \p not_up_before such
   /// states) and is UP again.
   bool waitForLinkBackUp(uint64_t not_up_before, double seconds)
   {
-    std::unique_lock<std::mutex> lock(mutex_);
-    return cv_.wait_for(lock, std::chrono::duration<double>(seconds),
-                        [&] { return not_up_ > not_up_before && last_.link == cnc_bridge::MachineState::LINK_UP; });
+    return Messages::waitFor(
+        [&](const std::vector<cnc_bridge::MachineState>& states)
+        { return linkNotUp(states) > not_up_before && states.back().link == cnc_bridge::MachineState::LINK_UP; },
+        seconds);
   }
 
  private:
-  ros::Subscriber sub_;
-  std::mutex mutex_;
-  std::condition_variable cv_;
-  cnc_bridge::MachineState last_;
-  uint64_t count_ = 0;
-  uint64_t not_up_ = 0;
+  static uint64_t linkNotUp(const std::vector<cnc_bridge::MachineState>& states)
+  {
+    return std::count_if(states.begin(), states.end(),
+                         [](const cnc_bridge::MachineState& s) { return s.link != cnc_bridge::MachineState::LINK_UP; });
+  }
 };
 
 template <class Service>

@@ -10,7 +10,6 @@
 #include <array>
 #include <atomic>
 #include <cctype>
-#include <condition_variable>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -215,15 +214,10 @@ TEST_F(AtController, DisablingMotionMidPathStopsItAndTheControllerGetsNoMoreSetp
   CommandLog received{command_log};
   const auto start = state.last().position;
   const double end_x = start.x + 0.05;
-  std::mutex m;
-  std::vector<cnc_bridge::AtFollowPathFeedback> feedback;
+  topic_watch::Messages<cnc_bridge::AtFollowPathFeedback> feedback;
   client.sendGoal(lineGoal(end_x, start.y, start.z, 0.02, prefix + "machine"),  // 2.5 s of setpoints
                   FollowPathClient::SimpleDoneCallback(), FollowPathClient::SimpleActiveCallback(),
-                  [&](const cnc_bridge::AtFollowPathFeedbackConstPtr& f)
-                  {
-                    std::lock_guard<std::mutex> lock(m);
-                    feedback.push_back(*f);
-                  });
+                  [&](const cnc_bridge::AtFollowPathFeedbackConstPtr& f) { feedback.add(*f); });
   ASSERT_TRUE(state.waitFor([&](const auto& s) { return s.position.x > start.x + 0.01; }));
   const size_t at_disable = received.lines().size();
   const auto switched = switchMotion(false);
@@ -257,10 +251,10 @@ TEST_F(AtController, DisablingMotionMidPathStopsItAndTheControllerGetsNoMoreSetp
   // Paused, not ended: the goal is active, its feedback says why and where.
   EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::ACTIVE) << client.getState().getText();
   {
-    std::lock_guard<std::mutex> lock(m);
-    ASSERT_FALSE(feedback.empty());
-    EXPECT_TRUE(feedback.back().paused);
-    EXPECT_EQ(feedback.back().event.find(why), 0u) << feedback.back().event;
+    const auto so_far = feedback.all();
+    ASSERT_FALSE(so_far.empty());
+    EXPECT_TRUE(so_far.back().paused);
+    EXPECT_EQ(so_far.back().event.find(why), 0u) << so_far.back().event;
   }
   // ~resume and motion are refused while disabled, naming the run-time switch; nothing is sent.
   const auto early = call<std_srvs::Trigger>(node + "/resume");
@@ -389,39 +383,23 @@ TEST_F(AtController, ProgramStopsHoldTheGoalUntilResumeAndM30EndsIt)
   CommandLog received{command_log};
   const size_t mark = received.lines().size();
   const auto start_position = state.last().position;
-  std::mutex m;
-  std::condition_variable cv;
-  std::vector<cnc_bridge::AtFollowPathFeedback> feedback;
+  topic_watch::Messages<cnc_bridge::AtFollowPathFeedback> feedback;
   // Waits for a feedback whose event is \p event (feedback and state are separate topics).
   const auto event_arrived = [&](const std::string& event)
-  {
-    std::unique_lock<std::mutex> lock(m);
-    return cv.wait_for(lock, std::chrono::seconds(20),
-                       [&] { return !feedback.empty() && feedback.back().event == event; });
-  };
+  { return feedback.waitForLatest([&](const auto& f) { return f.event == event; }, 20.0); };
   cnc_bridge::AtFollowPathGoal goal;
   goal.gcode_file = "program_stops.nc";
   goal.coolant = cnc_bridge::AtFollowPathGoal::COOLANT_DEFAULT;
   goal.tool = -1;
   client.sendGoal(goal, FollowPathClient::SimpleDoneCallback(), FollowPathClient::SimpleActiveCallback(),
-                  [&](const cnc_bridge::AtFollowPathFeedbackConstPtr& f)
-                  {
-                    {
-                      std::lock_guard<std::mutex> lock(m);
-                      feedback.push_back(*f);
-                    }
-                    cv.notify_all();
-                  });
+                  [&](const cnc_bridge::AtFollowPathFeedbackConstPtr& f) { feedback.add(*f); });
   const std::string resume = node + "/resume";
   // M00 on line 7: the first operation ended (M0@) at X10 and nothing follows it.
   const auto first = received.linesUntil(mark, "M0", 20.0);
   ASSERT_FALSE(first.empty());
   ASSERT_TRUE(state.waitFor([](const auto& s) { return s.execution == cnc_bridge::MachineState::EXECUTION_PAUSED; }));
   ASSERT_TRUE(event_arrived("M00 program stop at line 7: waiting for " + resume));
-  {
-    std::lock_guard<std::mutex> lock(m);
-    EXPECT_TRUE(feedback.back().paused);
-  }
+  EXPECT_TRUE(feedback.latest().paused);
   EXPECT_EQ(state.last().block, 7u);
   // Protocol order: M1@, then P1@ (M08), then S64@ (S6000 of 24000 rev/min), then the setpoints.
   ASSERT_GE(first.size(), 5u);
@@ -471,8 +449,8 @@ TEST_F(AtController, ProgramStopsHoldTheGoalUntilResumeAndM30EndsIt)
     ASSERT_EQ(sent[k], planned[k]) << "setpoint " << k;
   }
   // The dwell was announced.
-  std::lock_guard<std::mutex> lock(m);
-  EXPECT_TRUE(std::any_of(feedback.begin(), feedback.end(),
+  const auto all_feedback = feedback.all();
+  EXPECT_TRUE(std::any_of(all_feedback.begin(), all_feedback.end(),
                           [](const auto& f) { return f.event == "G04 dwell of 0.300 s at line 11"; }));
 }
 

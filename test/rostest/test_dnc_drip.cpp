@@ -10,7 +10,6 @@
 #include <ros/ros.h>
 #include <sys/stat.h>
 
-#include <condition_variable>
 #include <fstream>
 #include <functional>
 #include <iostream>
@@ -24,6 +23,7 @@
 #include "cnc_bridge/MachineState.h"
 #include "cnc_bridge/PlanDrip.h"
 #include "cnc_bridge/TransferAction.h"
+#include "topic_watch.h"
 
 namespace
 {
@@ -58,9 +58,8 @@ bool waitForContent(const std::string& path, const std::function<bool(const std:
   return waitUntil([&] { return ready(readFile(path)); }, seconds);
 }
 
-struct Watch
+struct Watch : topic_watch::Record
 {
-  std::mutex mutex;
   std::vector<cnc_bridge::TransferFeedback> feedback;
   std::vector<cnc_bridge::DncLine> lines;
   uint32_t max_state_block = 0;
@@ -72,20 +71,18 @@ TEST(DncDrip, FeedThroughTheActionWithFeedbackLinesAndState)
 {
   ros::NodeHandle nh;
   Watch watch;
-  auto line_sub = nh.subscribe<cnc_bridge::DncLine>(ns + "/dnc/current_line", 1000,
-                                                    [&](const cnc_bridge::DncLine::ConstPtr& msg)
-                                                    {
-                                                      std::lock_guard<std::mutex> lock(watch.mutex);
-                                                      watch.lines.push_back(*msg);
-                                                    });
-  auto state_sub =
-      nh.subscribe<cnc_bridge::MachineState>(ns + "/state", 100,
-                                             [&](const cnc_bridge::MachineState::ConstPtr& msg)
-                                             {
-                                               std::lock_guard<std::mutex> lock(watch.mutex);
-                                               watch.max_state_block = std::max(watch.max_state_block, msg->block);
-                                               watch.state_paused |= msg->execution == msg->EXECUTION_PAUSED;
-                                             });
+  auto line_sub = nh.subscribe<cnc_bridge::DncLine>(ns + "/dnc/current_line", 1000, watch.appendTo(watch.lines));
+  auto state_sub = nh.subscribe<cnc_bridge::MachineState>(
+      ns + "/state", 100,
+      [&](const cnc_bridge::MachineState::ConstPtr& msg)
+      {
+        watch.update(
+            [&]
+            {
+              watch.max_state_block = std::max(watch.max_state_block, msg->block);
+              watch.state_paused |= msg->execution == msg->EXECUTION_PAUSED;
+            });
+      });
   Client client(ns + "/dnc_node/transfer", true);
   ASSERT_TRUE(client.waitForServer(ros::Duration(20)));
   // The simulator makes its pty link when it starts; the node opens it per transfer.
@@ -97,12 +94,7 @@ TEST(DncDrip, FeedThroughTheActionWithFeedbackLinesAndState)
   goal.direction = goal.DIRECTION_SEND;
   goal.protocol = "drip";
   goal.file = "drip_rostest.nc";
-  client.sendGoal(goal, Client::SimpleDoneCallback(), Client::SimpleActiveCallback(),
-                  [&](const cnc_bridge::TransferFeedbackConstPtr& f)
-                  {
-                    std::lock_guard<std::mutex> lock(watch.mutex);
-                    watch.feedback.push_back(*f);
-                  });
+  client.sendGoal(goal, Client::SimpleDoneCallback(), Client::SimpleActiveCallback(), watch.appendTo(watch.feedback));
   ASSERT_TRUE(client.waitForResult(ros::Duration(60)));
   ASSERT_EQ(actionlib::SimpleClientGoalState::SUCCEEDED, client.getState().state_) << client.getResult()->message;
   const auto result = client.getResult();
@@ -191,13 +183,7 @@ class RunningFeed
   explicit RunningFeed(Client& client) : client_(client)
   {
     ros::NodeHandle nh;
-    line_sub_ = nh.subscribe<cnc_bridge::DncLine>(ns + "/dnc/current_line", 1000,
-                                                  [this](const cnc_bridge::DncLine::ConstPtr& msg)
-                                                  {
-                                                    std::lock_guard<std::mutex> lock(mutex_);
-                                                    lines_.push_back(*msg);
-                                                    changed_.notify_all();
-                                                  });
+    line_sub_ = nh.subscribe<cnc_bridge::DncLine>(ns + "/dnc/current_line", 1000, record_.appendTo(lines_));
   }
   bool connected()
   {
@@ -210,35 +196,27 @@ class RunningFeed
     goal.protocol = "drip";
     goal.file = "drip_rostest.nc";
     goal.start_block = start_block;
-    client_.sendGoal(goal, Client::SimpleDoneCallback(), Client::SimpleActiveCallback(),
-                     [this](const cnc_bridge::TransferFeedbackConstPtr& f)
-                     {
-                       std::lock_guard<std::mutex> lock(mutex_);
-                       feedback_.push_back(*f);
-                       changed_.notify_all();
-                     });
+    client_.sendGoal(goal, Client::SimpleDoneCallback(), Client::SimpleActiveCallback(), record_.appendTo(feedback_));
   }
   /// Waits (on messages, not time) until \p ready holds for what has arrived.
   bool waitFor(const std::function<bool(const std::vector<cnc_bridge::DncLine>&,
                                         const std::vector<cnc_bridge::TransferFeedback>&)>& ready,
                double seconds = 30)
   {
-    std::unique_lock<std::mutex> lock(mutex_);
-    return changed_.wait_for(lock, std::chrono::duration<double>(seconds), [&] { return ready(lines_, feedback_); });
+    return record_.waitFor([&] { return ready(lines_, feedback_); }, seconds);
   }
   size_t lineCount()
   {
-    std::lock_guard<std::mutex> lock(mutex_);
+    std::lock_guard<std::mutex> lock(record_.mutex);
     return lines_.size();
   }
 
  private:
   Client& client_;
-  ros::Subscriber line_sub_;
-  std::mutex mutex_;
-  std::condition_variable changed_;
+  topic_watch::Record record_;
   std::vector<cnc_bridge::DncLine> lines_;
   std::vector<cnc_bridge::TransferFeedback> feedback_;
+  ros::Subscriber line_sub_;  // last: unsubscribed before what the callback fills goes
 };
 
 bool lineAtLeast(const std::vector<cnc_bridge::DncLine>& lines, uint32_t n)
@@ -349,14 +327,7 @@ TEST(DncDrip, PauseStopsTheFeedAndResumeFinishesIt)
   auto pause = nh.serviceClient<std_srvs::Trigger>(ns + "/dnc_node/pause");
   auto resume = nh.serviceClient<std_srvs::Trigger>(ns + "/dnc_node/resume");
   ASSERT_TRUE(pause.waitForExistence(ros::Duration(20)));
-  std::mutex state_mutex;
-  std::vector<uint8_t> executions;
-  auto state_sub = nh.subscribe<cnc_bridge::MachineState>(ns + "/state", 100,
-                                                          [&](const cnc_bridge::MachineState::ConstPtr& msg)
-                                                          {
-                                                            std::lock_guard<std::mutex> lock(state_mutex);
-                                                            executions.push_back(msg->execution);
-                                                          });
+  topic_watch::TopicWatch<cnc_bridge::MachineState> states(ns + "/state", 100);
   Client client(ns + "/dnc_node/transfer", true);
   ASSERT_TRUE(client.waitForServer(ros::Duration(20)));
   RunningFeed feed(client);
@@ -368,10 +339,7 @@ TEST(DncDrip, PauseStopsTheFeedAndResumeFinishesIt)
   std_srvs::Trigger srv;
   ASSERT_TRUE(pause.call(srv));
   ASSERT_TRUE(srv.response.success) << srv.response.message;
-  {
-    std::lock_guard<std::mutex> lock(state_mutex);
-    executions.clear();
-  }
+  states.clear();
   // The sender confirms in its feedback once it stands still; from then on, over the next five
   // feedback messages (one per feedback period while paused), nothing more goes out.
   size_t paused_at = 0;
@@ -408,13 +376,8 @@ TEST(DncDrip, PauseStopsTheFeedAndResumeFinishesIt)
   EXPECT_TRUE(all_paused);
   EXPECT_EQ(bytes_when_paused, last_bytes);
   EXPECT_EQ(lines_when_paused, feed.lineCount());
-  ASSERT_TRUE(waitUntil(
-      [&]
-      {
-        std::lock_guard<std::mutex> lock(state_mutex);
-        return !executions.empty() && executions.back() == cnc_bridge::MachineState::EXECUTION_PAUSED;
-      },
-      10));
+  ASSERT_TRUE(states.waitForLatest(
+      [](const auto& s) { return s.execution == cnc_bridge::MachineState::EXECUTION_PAUSED; }, 10));
   EXPECT_FALSE(client.getState().isDone());
 
   ASSERT_TRUE(pause.call(srv));  // pausing twice is harmless
@@ -454,10 +417,11 @@ TEST(DncDrip, CancelReportsWhereItStoppedAndTheLinkCarriesTheNextFeed)
   ASSERT_FALSE(result->stopped_at_block.empty());
 
   // Diagnostics count it as a cancel, not as a failure.
-  ros::NodeHandle nh;
-  std::mutex diag_mutex;
-  std::string cancelled_count;
-  auto diag_sub = nh.subscribe<diagnostic_msgs::DiagnosticArray>(
+  struct Diagnostics : topic_watch::Record
+  {
+    std::string cancelled_count;
+  } diagnostics;
+  auto diag_sub = ros::NodeHandle().subscribe<diagnostic_msgs::DiagnosticArray>(
       "/diagnostics", 100,
       [&](const diagnostic_msgs::DiagnosticArray::ConstPtr& msg)
       {
@@ -473,19 +437,12 @@ TEST(DncDrip, CancelReportsWhereItStoppedAndTheLinkCarriesTheNextFeed)
           }
           if (this_node && !cancelled.empty())
           {
-            std::lock_guard<std::mutex> lock(diag_mutex);
-            cancelled_count = cancelled;
+            diagnostics.update([&] { diagnostics.cancelled_count = cancelled; });
           }
         }
       });
-  EXPECT_TRUE(waitUntil(
-      [&]
-      {
-        std::lock_guard<std::mutex> lock(diag_mutex);
-        return cancelled_count == "1";
-      },
-      10))
-      << "cancelled in diagnostics: '" << cancelled_count << "'";
+  EXPECT_TRUE(diagnostics.waitFor([&] { return diagnostics.cancelled_count == "1"; }, 10))
+      << "cancelled in diagnostics: '" << diagnostics.cancelled_count << "'";
 
   // The same link takes the restart after the block it stopped at.
   const int stopped = std::stoi(result->stopped_at_block.substr(1));
@@ -505,24 +462,19 @@ TEST(DncBackup, TheActionStoresWhatTheControlPunches)
   ASSERT_TRUE(client.waitForServer(ros::Duration(20)));
   struct stat info;
   ASSERT_TRUE(waitUntil([&] { return ::stat(punch_pty.c_str(), &info) == 0; }, 20));
-  std::mutex mutex;
-  std::vector<cnc_bridge::TransferFeedback> feedback;
+  topic_watch::Messages<cnc_bridge::TransferFeedback> received;
   cnc_bridge::TransferGoal goal;
   goal.direction = goal.DIRECTION_RECEIVE;
   goal.protocol = "backup";
   goal.file = "backup.nc";
   client.sendGoal(goal, Client::SimpleDoneCallback(), Client::SimpleActiveCallback(),
-                  [&](const cnc_bridge::TransferFeedbackConstPtr& f)
-                  {
-                    std::lock_guard<std::mutex> lock(mutex);
-                    feedback.push_back(*f);
-                  });
+                  [&](const cnc_bridge::TransferFeedbackConstPtr& f) { received.add(*f); });
   ASSERT_TRUE(client.waitForResult(ros::Duration(60)));
   ASSERT_EQ(actionlib::SimpleClientGoalState::SUCCEEDED, client.getState().state_) << client.getResult()->message;
   const std::string program = readFile(program_path);
   EXPECT_EQ(program, readFile(backup_dir + "/backup.nc"));
   EXPECT_EQ(103u, client.getResult()->stopped_at_line);
-  std::lock_guard<std::mutex> lock(mutex);
+  const auto feedback = received.all();
   ASSERT_FALSE(feedback.empty());
   EXPECT_GT(feedback.back().line, 0u);
 }

@@ -11,13 +11,15 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <fstream>
-#include <mutex>
+#include <memory>
 
 #include "cnc_bridge/MachineState.h"
 #include "cnc_bridge/ReceiveProgram.h"
 #include "cnc_bridge/SendProgram.h"
 #include "cnc_bridge/TransferAction.h"
+#include "topic_watch.h"
 
 using cnc_bridge::MachineState;
 
@@ -87,12 +89,7 @@ class DncNodeTest : public ::testing::Test
     ASSERT_TRUE(send_.waitForExistence(ros::Duration(30)));
     ASSERT_TRUE(receive_.waitForExistence(ros::Duration(30)));
     ASSERT_TRUE(waitForFile(param("link"), 30)) << "the simulator's pty link never appeared";
-    state_sub_ = nh_.subscribe<MachineState>("state", 50,
-                                             [this](const cnc_bridge::MachineStateConstPtr& s)
-                                             {
-                                               std::lock_guard<std::mutex> lock(mutex_);
-                                               states_.push_back(*s);
-                                             });
+    states_ = std::make_unique<topic_watch::TopicWatch<MachineState>>("state", 50, nh_);
   }
 
   void writeProgram(const std::string& name, const std::string& contents)
@@ -100,18 +97,12 @@ class DncNodeTest : public ::testing::Test
     std::ofstream(program_dir_ + "/" + name, std::ios::binary) << contents;
   }
 
-  std::vector<MachineState> states()
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    return states_;
-  }
+  std::vector<MachineState> states() { return states_->all(); }
 
   std::string ns_, program_dir_, control_dir_;
   ros::NodeHandle nh_;
   ros::ServiceClient send_, receive_;
-  ros::Subscriber state_sub_;
-  std::mutex mutex_;
-  std::vector<MachineState> states_;
+  std::unique_ptr<topic_watch::TopicWatch<MachineState>> states_;
 };
 }  // namespace
 
@@ -157,13 +148,14 @@ TEST_F(DncNodeTest, TransferActionGivesFeedbackAndAResult)
   cnc_bridge::TransferGoal goal;
   goal.direction = cnc_bridge::TransferGoal::DIRECTION_SEND;
   goal.file = "O01234.nc";
-  std::vector<cnc_bridge::TransferFeedback> feedback;
-  client.sendGoal(goal, {}, {}, [&](const cnc_bridge::TransferFeedbackConstPtr& f) { feedback.push_back(*f); });
+  topic_watch::Messages<cnc_bridge::TransferFeedback> received;
+  client.sendGoal(goal, {}, {}, [&](const cnc_bridge::TransferFeedbackConstPtr& f) { received.add(*f); });
   ASSERT_TRUE(client.waitForResult(ros::Duration(60)));
   EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client.getState().getText();
   const auto result = client.getResult();
   EXPECT_TRUE(result->success);
   EXPECT_EQ(result->bytes, contents.size());
+  const auto feedback = received.all();
   ASSERT_FALSE(feedback.empty());
   EXPECT_EQ(feedback.back().bytes, feedback.back().total);
   EXPECT_FLOAT_EQ(feedback.back().percent, 100.0f);
@@ -181,20 +173,9 @@ TEST_F(DncNodeTest, CancelStopsATransferAndASecondRequestMeanwhileIsRefused)
   cnc_bridge::TransferGoal goal;
   goal.direction = cnc_bridge::TransferGoal::DIRECTION_SEND;
   goal.file = "O04321.nc";
-  std::mutex m;
-  std::condition_variable cv;
-  bool got_feedback = false;
-  client.sendGoal(goal, {}, {},
-                  [&](const cnc_bridge::TransferFeedbackConstPtr&)
-                  {
-                    std::lock_guard<std::mutex> lock(m);
-                    got_feedback = true;
-                    cv.notify_all();
-                  });
-  {
-    std::unique_lock<std::mutex> lock(m);
-    ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(30), [&] { return got_feedback; }));
-  }
+  topic_watch::Messages<cnc_bridge::TransferFeedback> feedback;
+  client.sendGoal(goal, {}, {}, [&](const cnc_bridge::TransferFeedbackConstPtr& f) { feedback.add(*f); });
+  ASSERT_TRUE(feedback.waitFor([](const auto& all) { return !all.empty(); }, 30));
   cnc_bridge::SendProgram busy;
   busy.request.file = "small.nc";
   ASSERT_TRUE(send_.call(busy));
@@ -238,16 +219,8 @@ TEST_F(DncNodeTest, ReceivesAProgramThroughTheTransferAction)
   cnc_bridge::TransferGoal goal;
   goal.direction = cnc_bridge::TransferGoal::DIRECTION_RECEIVE;
   goal.file = "received_by_action.nc";
-  std::mutex m;
-  std::condition_variable cv;
-  std::vector<cnc_bridge::TransferFeedback> feedback;
-  client.sendGoal(goal, {}, {},
-                  [&](const cnc_bridge::TransferFeedbackConstPtr& f)
-                  {
-                    std::lock_guard<std::mutex> lock(m);
-                    feedback.push_back(*f);
-                    cv.notify_all();
-                  });
+  topic_watch::Messages<cnc_bridge::TransferFeedback> received;
+  client.sendGoal(goal, {}, {}, [&](const cnc_bridge::TransferFeedbackConstPtr& f) { received.add(*f); });
   ASSERT_TRUE(client.waitForResult(ros::Duration(60)));
   EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client.getState().getText();
   const auto result = client.getResult();
@@ -257,8 +230,8 @@ TEST_F(DncNodeTest, ReceivesAProgramThroughTheTransferAction)
   EXPECT_EQ(result->bytes, expected.size());
   EXPECT_EQ(result->blocks, 8u);
   // Feedback and result travel on different topics: the feedback may arrive after the result.
-  std::unique_lock<std::mutex> lock(m);
-  ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(10), [&] { return !feedback.empty(); }));
+  ASSERT_TRUE(received.waitFor([](const auto& all) { return !all.empty(); }, 10));
+  const auto feedback = received.all();
   EXPECT_GE(feedback.front().block, 1u);
   EXPECT_GT(feedback.front().bytes, 0u);
   EXPECT_EQ(feedback.front().total, 0u);  // a receiver does not know the size
@@ -278,20 +251,11 @@ TEST_F(DncNodeTest, CancellingAReceiveKeepsThePreviousFileOrNone)
     cnc_bridge::TransferGoal goal;
     goal.direction = cnc_bridge::TransferGoal::DIRECTION_RECEIVE;
     goal.file = file;
-    std::mutex m;
-    std::condition_variable cv;
-    bool got_block = false;
-    client.sendGoal(goal, {}, {},
-                    [&](const cnc_bridge::TransferFeedbackConstPtr& f)
-                    {
-                      std::lock_guard<std::mutex> lock(m);
-                      got_block = got_block || f->block >= 1;
-                      cv.notify_all();
-                    });
-    {
-      std::unique_lock<std::mutex> lock(m);
-      ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(30), [&] { return got_block; })) << file;
-    }
+    topic_watch::Messages<cnc_bridge::TransferFeedback> feedback;
+    client.sendGoal(goal, {}, {}, [&](const cnc_bridge::TransferFeedbackConstPtr& f) { feedback.add(*f); });
+    const auto got_block = [](const auto& all)
+    { return std::any_of(all.begin(), all.end(), [](const auto& f) { return f.block >= 1; }); };
+    ASSERT_TRUE(feedback.waitFor(got_block, 30)) << file;
     client.cancelGoal();
     ASSERT_TRUE(client.waitForResult(ros::Duration(20))) << file;
     EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::PREEMPTED)

@@ -11,10 +11,8 @@
 #include <termios.h>
 #include <unistd.h>
 
-#include <condition_variable>
 #include <fstream>
 #include <future>
-#include <mutex>
 
 #include "../unit/peer_process.h"
 #include "../unit/temp_dir.h"
@@ -22,6 +20,7 @@
 #include "cnc_bridge/ProgramRequestEvent.h"
 #include "cnc_bridge/ReceiveProgram.h"
 #include "cnc_bridge/programs/archive.h"
+#include "topic_watch.h"
 
 using cnc_bridge::ProgramRequestEvent;
 using cnc_bridge::test::Peer;
@@ -100,42 +99,8 @@ class PtyPair
   int fd_ = -1;
 };
 
-/// The program_requests messages of one dnc_node, in order.
-class EventWatch
-{
- public:
-  /// Subscribes in \p nh's namespace and waits (up to 20 s) until dnc_node has advertised.
-  explicit EventWatch(ros::NodeHandle nh)
-  {
-    sub_ = nh.subscribe<ProgramRequestEvent>("program_requests", 20,
-                                             [this](const ProgramRequestEvent::ConstPtr& e)
-                                             {
-                                               std::lock_guard<std::mutex> lock(mutex_);
-                                               events_.push_back(*e);
-                                               changed_.notify_all();
-                                             });
-    const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(20);
-    while (sub_.getNumPublishers() == 0 && ros::WallTime::now() < deadline)
-      ros::WallDuration(0.01).sleep();  // a subscriber's connection has no event to wait on
-  }
-  bool connected() const { return sub_.getNumPublishers() > 0; }
-
-  /// The next message not yet taken (within \p seconds).
-  std::optional<ProgramRequestEvent> next(double seconds = 20)
-  {
-    std::unique_lock<std::mutex> lock(mutex_);
-    if (!changed_.wait_for(lock, std::chrono::duration<double>(seconds), [&] { return events_.size() > taken_; }))
-      return std::nullopt;
-    return events_[taken_++];
-  }
-
- private:
-  ros::Subscriber sub_;
-  std::mutex mutex_;
-  std::condition_variable changed_;
-  std::vector<ProgramRequestEvent> events_;
-  size_t taken_ = 0;
-};
+/// The program_requests messages of one dnc_node (in \p nh's namespace), in order.
+using EventWatch = topic_watch::TopicWatch<ProgramRequestEvent>;
 
 class DncRequestsTest : public ::testing::Test
 {
@@ -158,15 +123,9 @@ class DncRequestsTest : public ::testing::Test
     control_ = param("control_link");
     program_dir_ = param("program_dir");
     python_ = param("python_peer");
-    state_sub_ = nh_.subscribe<cnc_bridge::MachineState>("state", 50,
-                                                         [this](const cnc_bridge::MachineState::ConstPtr& s)
-                                                         {
-                                                           std::lock_guard<std::mutex> lock(mutex_);
-                                                           states_.push_back(*s);
-                                                           changed_.notify_all();
-                                                         });
-    events_ = std::make_unique<EventWatch>(nh_);
-    ASSERT_TRUE(events_->connected()) << "dnc_node never advertised program_requests";
+    states_ = std::make_unique<topic_watch::TopicWatch<cnc_bridge::MachineState>>("state", 50, nh_);
+    events_ = std::make_unique<EventWatch>("program_requests", 20, nh_);
+    ASSERT_TRUE(events_->waitForPublisher(20)) << "dnc_node never advertised program_requests";
   }
 
   /// The control punches \p program by XModem (python3-xmodem, or lrzsz sx) and exits 0 once done.
@@ -200,10 +159,7 @@ class DncRequestsTest : public ::testing::Test
   ros::NodeHandle nh_;
   std::string control_, program_dir_, python_;
   std::unique_ptr<EventWatch> events_;
-  ros::Subscriber state_sub_;
-  std::mutex mutex_;
-  std::condition_variable changed_;
-  std::vector<cnc_bridge::MachineState> states_;
+  std::unique_ptr<topic_watch::TopicWatch<cnc_bridge::MachineState>> states_;
 };
 std::unique_ptr<PtyPair> DncRequestsTest::pair_;
 std::unique_ptr<PtyPair> DncRequestsTest::text_pair_;
@@ -280,10 +236,7 @@ TEST_F(DncRequestsTest, RequestDuringATransferIsReportedNotDropped)
 {
   ros::ServiceClient client = nh_.serviceClient<cnc_bridge::ReceiveProgram>("dnc_node/receive_program");
   ASSERT_TRUE(client.waitForExistence(ros::Duration(20)));
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    states_.clear();
-  }
+  states_->clear();
   auto call = std::async(std::launch::async,
                          [&]
                          {
@@ -293,18 +246,16 @@ TEST_F(DncRequestsTest, RequestDuringATransferIsReportedNotDropped)
                            client.call(srv);
                            return srv.response;
                          });
-  {
-    std::unique_lock<std::mutex> lock(mutex_);
-    ASSERT_TRUE(changed_.wait_for(lock, std::chrono::seconds(20),
-                                  [&]
-                                  {
-                                    for (const auto& s : states_)
-                                      if (s.execution == cnc_bridge::MachineState::EXECUTION_ACTIVE)
-                                        return true;
-                                    return false;
-                                  }))
-        << "the receive never started";
-  }
+  ASSERT_TRUE(states_->waitFor(
+      [](const auto& states)
+      {
+        for (const auto& s : states)
+          if (s.execution == cnc_bridge::MachineState::EXECUTION_ACTIVE)
+            return true;
+        return false;
+      },
+      20))
+      << "the receive never started";
   const std::string request = "%\nO00004 (LOAD O1234)\nM30\n%\n";
   ASSERT_EQ(punch(request), 0);
   const auto response = call.get();
@@ -322,15 +273,15 @@ TEST_F(DncRequestsTest, RequestDuringATransferIsReportedNotDropped)
 // as text.
 TEST_F(DncRequestsTest, TextPunchIsDripFedTheProgramOrAnsweredAsText)
 {
-  EventWatch events(ros::NodeHandle(param("text_namespace")));
-  ASSERT_TRUE(events.connected()) << "the text dnc_node never advertised program_requests";
+  EventWatch events("program_requests", 20, ros::NodeHandle(param("text_namespace")));
+  ASSERT_TRUE(events.waitForPublisher(20)) << "the text dnc_node never advertised program_requests";
   const std::string program = "%\nO01234 (BRACKET OP2)\nG00 X1. Y2.\nM30\n%\n";
   std::ofstream(param("text_program_dir") + "/O01234.nc") << program;
 
   // This node's words are LOAD and GET (~request_load_words).
   ASSERT_TRUE(text_pair_->write("%\nO00005 (GET O1234)\nM30\n%\n"));
   EXPECT_EQ(text_pair_->readProgram(20), program);
-  const auto served = events.next();
+  const auto served = events.next(20);
   ASSERT_TRUE(served);
   EXPECT_TRUE(served->success) << served->outcome;
   EXPECT_EQ(served->request, "GET");
@@ -338,7 +289,7 @@ TEST_F(DncRequestsTest, TextPunchIsDripFedTheProgramOrAnsweredAsText)
 
   ASSERT_TRUE(text_pair_->write("%\r\nO00006 (LOAD O4444)\r\nM30\r\n%\r\n"));
   EXPECT_EQ(text_pair_->readProgram(20), "%\nO00006 (O04444 NOT FOUND IN PROGRAMS)\nM30\n%\n");
-  const auto refused = events.next();
+  const auto refused = events.next(20);
   ASSERT_TRUE(refused);
   EXPECT_FALSE(refused->success);
   EXPECT_NE(refused->outcome.find("answered as text"), std::string::npos) << refused->outcome;

@@ -16,7 +16,6 @@
 #include <array>
 #include <atomic>
 #include <chrono>
-#include <condition_variable>
 #include <fstream>
 #include <map>
 #include <mutex>
@@ -27,6 +26,7 @@
 #include "cnc_bridge/MachineState.h"
 #include "cnc_bridge/RunJobAction.h"
 #include "cnc_bridge/gcode/gcode.h"
+#include "topic_watch.h"
 
 using cnc_bridge::MachineState;
 using cnc_bridge::RunJobAction;
@@ -39,10 +39,8 @@ namespace
 std::string ns, prefix, sim_log, sim_messages, program_dir;
 
 // Everything the node publishes that the tests look at, in arrival order.
-struct Watch
+struct Watch : topic_watch::Record
 {
-  std::mutex mutex;
-  std::condition_variable cv;
   MachineState state;
   bool have_state = false;
   std::vector<std::pair<ros::WallTime, uint8_t>> links;  // every link value, with arrival time
@@ -59,51 +57,54 @@ struct Watch
   template <typename F>
   bool waitFor(F condition, double seconds = 20.0)
   {
-    std::unique_lock<std::mutex> lock(mutex);
-    return cv.wait_for(lock, std::chrono::duration<double>(seconds), condition);
+    return Record::waitFor(condition, seconds);
   }
 };
 Watch* watch = nullptr;
 
 void onState(const MachineState::ConstPtr& m)
 {
-  std::lock_guard<std::mutex> lock(watch->mutex);
-  if (!watch->have_state || watch->state.link != m->link)
-  {
-    watch->links.push_back({ros::WallTime::now(), m->link});
-  }
-  watch->state = *m;
-  watch->have_state = true;
-  ++watch->events;
-  watch->cv.notify_all();
+  watch->update(
+      [&]
+      {
+        if (!watch->have_state || watch->state.link != m->link)
+        {
+          watch->links.push_back({ros::WallTime::now(), m->link});
+        }
+        watch->state = *m;
+        watch->have_state = true;
+        ++watch->events;
+      });
 }
 
 void onPath(const nav_msgs::Path::ConstPtr& m)
 {
-  std::lock_guard<std::mutex> lock(watch->mutex);
-  watch->path = *m;
-  watch->path_seq = ++watch->events;
-  watch->cv.notify_all();
+  watch->update(
+      [&]
+      {
+        watch->path = *m;
+        watch->path_seq = ++watch->events;
+      });
 }
 
 void onMarkers(const visualization_msgs::MarkerArray::ConstPtr& m)
 {
-  std::lock_guard<std::mutex> lock(watch->mutex);
-  watch->markers = *m;
-  watch->cv.notify_all();
+  watch->update([&] { watch->markers = *m; });
 }
 
 void onFeedback(const RunJobFeedbackConstPtr& f)
 {
-  std::lock_guard<std::mutex> lock(watch->mutex);
-  if (watch->feedback.empty())
-  {
-    watch->first_feedback_seq = ++watch->events;
-  }
-  watch->feedback.push_back(*f);
-  watch->feedback_times.push_back(ros::WallTime::now());
-  watch->last_feedback_time = ros::WallTime::now();
-  watch->cv.notify_all();
+  watch->update(
+      [&]
+      {
+        if (watch->feedback.empty())
+        {
+          watch->first_feedback_seq = ++watch->events;
+        }
+        watch->feedback.push_back(*f);
+        watch->feedback_times.push_back(ros::WallTime::now());
+        watch->last_feedback_time = ros::WallTime::now();
+      });
 }
 
 void onDiagnostics(const diagnostic_msgs::DiagnosticArray::ConstPtr& m)
@@ -114,13 +115,15 @@ void onDiagnostics(const diagnostic_msgs::DiagnosticArray::ConstPtr& m)
     {
       continue;
     }
-    std::lock_guard<std::mutex> lock(watch->mutex);
-    watch->protocol.clear();
-    for (const auto& kv : status.values)
-    {
-      watch->protocol[kv.key] = kv.value;
-    }
-    watch->cv.notify_all();
+    watch->update(
+        [&]
+        {
+          watch->protocol.clear();
+          for (const auto& kv : status.values)
+          {
+            watch->protocol[kv.key] = kv.value;
+          }
+        });
   }
 }
 

@@ -13,7 +13,6 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
-#include <condition_variable>
 #include <fstream>
 #include <functional>
 #include <map>
@@ -31,6 +30,7 @@
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/transport/backoff.h"
 #include "cnc_bridge/transport/tcp.h"
+#include "topic_watch.h"
 
 using cnc_bridge::CycleEvent;
 using cnc_bridge::MachineState;
@@ -95,21 +95,12 @@ struct MdcDiagnostics
 };
 
 // Everything the nodes publish, recorded from the start so no test misses a transition.
-struct Recorder
+struct Recorder : topic_watch::Record
 {
-  std::mutex mutex;
-  std::condition_variable changed;
   std::vector<MachineState> ngc_states, classic_states;
   std::vector<CycleEvent> events;
   std::vector<MacroVariables> variables;  // the NGC node's `variables` topic
   std::vector<MdcDiagnostics> ngc_diagnostics, classic_diagnostics;
-
-  template <class Predicate>
-  bool waitFor(Predicate predicate, double seconds)
-  {
-    std::unique_lock<std::mutex> lock(mutex);
-    return changed.wait_for(lock, std::chrono::duration<double>(seconds), [&] { return predicate(); });
-  }
 
   bool sawState(const std::function<bool(const MachineState&)>& match, double seconds, bool classic = false)
   {
@@ -602,31 +593,10 @@ int main(int argc, char** argv)
   pnh.param<std::string>("classic_queries", classic_queries, "");
   Recorder rec;
   recorder = &rec;
-  auto record = [&](std::vector<MachineState>& into)
-  {
-    return [&](const MachineState::ConstPtr& s)
-    {
-      std::lock_guard<std::mutex> lock(rec.mutex);
-      into.push_back(*s);
-      rec.changed.notify_all();
-    };
-  };
-  auto ngc = nh.subscribe<MachineState>(kNgc + "/state", 1000, record(rec.ngc_states));
-  auto classic = nh.subscribe<MachineState>(kClassic + "/state", 1000, record(rec.classic_states));
-  auto events = nh.subscribe<CycleEvent>(kNgc + "/events", 100,
-                                         [&](const CycleEvent::ConstPtr& e)
-                                         {
-                                           std::lock_guard<std::mutex> lock(rec.mutex);
-                                           rec.events.push_back(*e);
-                                           rec.changed.notify_all();
-                                         });
-  auto variables = nh.subscribe<MacroVariables>(kNgc + "/variables", 100,
-                                                [&](const MacroVariables::ConstPtr& m)
-                                                {
-                                                  std::lock_guard<std::mutex> lock(rec.mutex);
-                                                  rec.variables.push_back(*m);
-                                                  rec.changed.notify_all();
-                                                });
+  auto ngc = nh.subscribe<MachineState>(kNgc + "/state", 1000, rec.appendTo(rec.ngc_states));
+  auto classic = nh.subscribe<MachineState>(kClassic + "/state", 1000, rec.appendTo(rec.classic_states));
+  auto events = nh.subscribe<CycleEvent>(kNgc + "/events", 100, rec.appendTo(rec.events));
+  auto variables = nh.subscribe<MacroVariables>(kNgc + "/variables", 100, rec.appendTo(rec.variables));
   auto diagnostics = nh.subscribe<diagnostic_msgs::DiagnosticArray>(
       "/diagnostics", 100,
       [&](const diagnostic_msgs::DiagnosticArray::ConstPtr& array)
@@ -641,9 +611,7 @@ int main(int argc, char** argv)
           d.stamp = array->header.stamp;
           for (const auto& kv : status.values)
             d.values[kv.key] = kv.value;
-          std::lock_guard<std::mutex> lock(rec.mutex);
-          (ngc ? rec.ngc_diagnostics : rec.classic_diagnostics).push_back(d);
-          rec.changed.notify_all();
+          rec.update([&] { (ngc ? rec.ngc_diagnostics : rec.classic_diagnostics).push_back(d); });
         }
       });
   ros::AsyncSpinner spinner(2);

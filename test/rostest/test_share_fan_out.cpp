@@ -16,7 +16,6 @@
 
 #include <std_srvs/Trigger.h>
 
-#include <condition_variable>
 #include <cstdio>
 #include <ctime>
 #include <filesystem>
@@ -26,6 +25,7 @@
 #include "cnc_bridge/FanOutProgram.h"
 #include "cnc_bridge/ProgramRequestEvent.h"
 #include "temp_dir.h"
+#include "topic_watch.h"
 
 using namespace cnc_bridge;
 using cnc_bridge::test::readFile;
@@ -162,26 +162,15 @@ TEST_F(ShareFanOutTest, OneCallPublishesToEachMachineAndReportsTheMissingOne)
 
 TEST_F(ShareFanOutTest, WithdrawAllKeepsEveryProgramInTheArchiveAndEmptiesTheShare)
 {
-  std::mutex mutex;
-  std::condition_variable arrived;
-  std::vector<ProgramRequestEvent> events;
-  ros::NodeHandle nh;
-  ros::Subscriber sub = nh.subscribe<ProgramRequestEvent>("/cell/vf2/withdrawals", 10,
-                                                          [&](const ProgramRequestEvent::ConstPtr& event)
-                                                          {
-                                                            std::lock_guard<std::mutex> lock(mutex);
-                                                            events.push_back(*event);
-                                                            arrived.notify_all();
-                                                          });
+  topic_watch::TopicWatch<ProgramRequestEvent> withdrawals("/cell/vf2/withdrawals", 10);
   const std::string first = "%\nO01000 (OP1)\nG0 X1.\nM30\n%\n";
   const std::string second = program(3000);
   writeFile(share("vf2") + "/O01000.nc", first);
   writeFile(share("vf2") + "/O01001.nc", second);
   writeFile(share("st10") + "/O01000.nc", first);  // another machine's: stays
   // The subscription must be connected before the call, or the events could go to no one.
-  for (int i = 0; i < 100 && sub.getNumPublishers() == 0; ++i)
-    ros::WallDuration(0.05).sleep();
-  ASSERT_EQ(sub.getNumPublishers(), 1u);
+  withdrawals.waitForPublisher(5);
+  ASSERT_EQ(withdrawals.publishers(), 1u);
 
   std_srvs::Trigger call;
   ASSERT_TRUE(ros::service::call("/cell/vf2/share_node/withdraw_all", call));
@@ -194,8 +183,8 @@ TEST_F(ShareFanOutTest, WithdrawAllKeepsEveryProgramInTheArchiveAndEmptiesTheSha
   EXPECT_NE(readFile(programs_ + ".archive/O01001.nc/v0001.meta").find("withdrawn"), std::string::npos);
   EXPECT_EQ(readFile(share("st10") + "/O01000.nc"), first);
   {
-    std::unique_lock<std::mutex> lock(mutex);
-    ASSERT_TRUE(arrived.wait_for(lock, std::chrono::seconds(10), [&] { return events.size() >= 2; }));
+    ASSERT_TRUE(withdrawals.waitFor([](const auto& events) { return events.size() >= 2; }, 10));
+    const auto events = withdrawals.all();
     for (const ProgramRequestEvent& event : events)
     {
       EXPECT_TRUE(event.success) << event.outcome;
@@ -229,19 +218,22 @@ TEST_F(ShareFanOutTest, WithdrawAtItsTimeOfDayEmptiesTheShareThenNotBefore)
   std::snprintf(tz, sizeof tz, "TST+0:00:%02d", offset);
   std::strftime(time_of_day, sizeof time_of_day, "%H:%M", &fields);
 
-  std::mutex mutex;
-  std::condition_variable arrived;
-  std::vector<ProgramRequestEvent> events;
-  std::time_t first_event = 0;
+  struct Withdrawals : topic_watch::Record
+  {
+    std::vector<ProgramRequestEvent> events;
+    std::time_t first_event = 0;
+  } seen;
   ros::NodeHandle nh;
   ros::Subscriber sub = nh.subscribe<ProgramRequestEvent>("/cell/hmc/withdrawals", 10,
                                                           [&](const ProgramRequestEvent::ConstPtr& event)
                                                           {
-                                                            std::lock_guard<std::mutex> lock(mutex);
-                                                            if (events.empty())
-                                                              first_event = std::time(nullptr);
-                                                            events.push_back(*event);
-                                                            arrived.notify_all();
+                                                            seen.update(
+                                                                [&]
+                                                                {
+                                                                  if (seen.events.empty())
+                                                                    seen.first_event = std::time(nullptr);
+                                                                  seen.events.push_back(*event);
+                                                                });
                                                           });
   std::filesystem::create_directories(share("hmc"));
   const std::string first = "%\nO01000 (OP1)\nG0 X1.\nM30\n%\n";
@@ -250,11 +242,11 @@ TEST_F(ShareFanOutTest, WithdrawAtItsTimeOfDayEmptiesTheShareThenNotBefore)
   writeFile(share("hmc") + "/O01001.nc", second);
   start("hmc", {"_url:=" + share("hmc"), std::string("_withdraw_at:=") + time_of_day}, "", tz);
   {
-    std::unique_lock<std::mutex> lock(mutex);
-    ASSERT_TRUE(arrived.wait_for(lock, std::chrono::seconds(40), [&] { return events.size() >= 2; }))
+    ASSERT_TRUE(seen.waitFor([&] { return seen.events.size() >= 2; }, 40))
         << "no withdrawal at " << time_of_day << " " << tz;
-    EXPECT_GE(first_event, at);  // at the time, not before it
-    for (const ProgramRequestEvent& event : events)
+    std::lock_guard<std::mutex> lock(seen.mutex);
+    EXPECT_GE(seen.first_event, at);  // at the time, not before it
+    for (const ProgramRequestEvent& event : seen.events)
     {
       EXPECT_TRUE(event.success) << event.outcome;
       EXPECT_EQ(event.request, "WITHDRAW");

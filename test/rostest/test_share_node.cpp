@@ -10,9 +10,8 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include <condition_variable>
 #include <filesystem>
-#include <mutex>
+#include <memory>
 #include <optional>
 
 #include "cnc_bridge/ComparePrograms.h"
@@ -28,6 +27,7 @@
 #include "cnc_bridge/WithdrawProgram.h"
 #include "samba_server.h"
 #include "temp_dir.h"
+#include "topic_watch.h"
 
 using namespace cnc_bridge;
 using cnc_bridge::test::readFile;
@@ -46,21 +46,9 @@ class ShareNodeTest : public ::testing::Test
     server_ = std::make_unique<test::SambaServer>(dir_.path);
     server_->start();
     programs_ = dir_.path + "/programs";
-    state_sub_ = nh_.subscribe<MachineState>("/cell/lathe/state", 100,
-                                             [this](const MachineState::ConstPtr& s)
-                                             {
-                                               std::lock_guard<std::mutex> lock(mutex_);
-                                               last_ = *s;
-                                               have_state_ = true;
-                                               changed_.notify_all();
-                                             });
-    requests_sub_ = nh_.subscribe<ProgramRequestEvent>("/cell/lathe/program_requests", 100,
-                                                       [this](const ProgramRequestEvent::ConstPtr& e)
-                                                       {
-                                                         std::lock_guard<std::mutex> lock(mutex_);
-                                                         requests_.push_back(*e);
-                                                         changed_.notify_all();
-                                                       });
+    states_ = std::make_unique<topic_watch::TopicWatch<MachineState>>("/cell/lathe/state", 100, nh_);
+    requests_ =
+        std::make_unique<topic_watch::TopicWatch<ProgramRequestEvent>>("/cell/lathe/program_requests", 100, nh_);
     node_ = ::fork();
     if (node_ == 0)
     {
@@ -86,33 +74,39 @@ class ShareNodeTest : public ::testing::Test
   /// Waits for a state whose link is \p link; \returns its message ("<none>" if none came in time).
   std::string waitForLink(uint8_t link, double seconds)
   {
-    std::unique_lock<std::mutex> lock(mutex_);
-    const bool seen = changed_.wait_for(lock, std::chrono::duration<double>(seconds),
-                                        [&] { return have_state_ && last_.link == link; });
-    return seen ? last_.message : "<none>";
+    std::string message;
+    const bool seen = states_->waitForLatest(
+        [&](const MachineState& state)
+        {
+          message = state.message;
+          return state.link == link;
+        },
+        seconds);
+    return seen ? message : "<none>";
   }
 
   /// The next program request event (after the \p seen first ones); nothing if none came in time.
   std::optional<ProgramRequestEvent> waitForRequest(size_t seen, double seconds)
   {
-    std::unique_lock<std::mutex> lock(mutex_);
-    if (!changed_.wait_for(lock, std::chrono::duration<double>(seconds), [&] { return requests_.size() > seen; }))
-      return std::nullopt;
-    return requests_[seen];
+    std::optional<ProgramRequestEvent> request;
+    requests_->waitFor(
+        [&](const std::vector<ProgramRequestEvent>& requests)
+        {
+          if (requests.size() > seen)
+            request = requests[seen];
+          return request.has_value();
+        },
+        seconds);
+    return request;
   }
 
   TempDir dir_{"cnc_share_node"};
-  ros::Subscriber requests_sub_;
-  std::vector<ProgramRequestEvent> requests_;
+  std::unique_ptr<topic_watch::TopicWatch<ProgramRequestEvent>> requests_;
   std::unique_ptr<test::SambaServer> server_;
   std::string programs_;
   pid_t node_ = -1;
   ros::NodeHandle nh_;
-  ros::Subscriber state_sub_;
-  std::mutex mutex_;
-  std::condition_variable changed_;
-  MachineState last_;
-  bool have_state_ = false;
+  std::unique_ptr<topic_watch::TopicWatch<MachineState>> states_;
 };
 }  // namespace
 
@@ -257,9 +251,8 @@ TEST_F(ShareNodeTest, RequestsFromTheControlArePublishedIntoTheShare)
   writeFile(programs_ + "/O01234.nc", program);
   writeFile(programs_ + "/O01235.nc", "%\nO01235 (BY DPRNT)\nM30\n%\n");
   // Events are not queued for a subscriber that is not connected yet: wait for the connection.
-  for (int i = 0; i < 200 && requests_sub_.getNumPublishers() == 0; ++i)
-    ros::WallDuration(0.05).sleep();  // polling the connection count, not a wait for the event
-  ASSERT_GT(requests_sub_.getNumPublishers(), 0u);
+  requests_->waitForPublisher(10);
+  ASSERT_GT(requests_->publishers(), 0u);
   const std::string requests = server_->folder("secure") + "/requests";
   std::filesystem::create_directories(requests);
   writeFile(requests + "/from_operator.nc", "%\nO00001 (LOAD O1234)\nM30\n%\n");

@@ -13,7 +13,6 @@
 #include <tf2_ros/transform_listener.h>
 
 #include <algorithm>
-#include <condition_variable>
 #include <map>
 #include <mutex>
 
@@ -21,6 +20,7 @@
 #include "cnc_bridge/MachineState.h"
 #include "cnc_bridge/SlaveCommand.h"
 #include "cnc_bridge/SlaveResponse.h"
+#include "topic_watch.h"
 
 namespace
 {
@@ -35,14 +35,8 @@ class Responses
     ros::NodeHandle nh;
     for (const auto& name : names)
     {
-      subs_.push_back(
-          nh.subscribe<cnc_bridge::SlaveResponse>(ns + "/slaves/" + name + "/response", 100,
-                                                  [this, name](const cnc_bridge::SlaveResponse::ConstPtr& msg)
-                                                  {
-                                                    std::lock_guard<std::mutex> lock(mutex_);
-                                                    received_[name].push_back(*msg);
-                                                    cv_.notify_all();
-                                                  }));
+      subs_.push_back(nh.subscribe<cnc_bridge::SlaveResponse>(ns + "/slaves/" + name + "/response", 100,
+                                                              record_.appendTo(received_[name])));
     }
     // A reply published before its subscription is connected is lost: the tests trigger replies at
     // once, so wait until the node's publishers are connected.
@@ -60,20 +54,18 @@ class Responses
   /// Waits until \p pred holds on the responses so far.
   bool waitFor(const std::function<bool(std::map<std::string, std::vector<cnc_bridge::SlaveResponse>>&)>& pred)
   {
-    std::unique_lock<std::mutex> lock(mutex_);
-    return cv_.wait_for(lock, std::chrono::duration<double>(kWait.toSec()), [&] { return pred(received_); });
+    return record_.waitFor([&] { return pred(received_); }, kWait.toSec());
   }
   std::vector<cnc_bridge::SlaveResponse> of(const std::string& name)
   {
-    std::lock_guard<std::mutex> lock(mutex_);
+    std::lock_guard<std::mutex> lock(record_.mutex);
     return received_[name];
   }
 
  private:
-  std::vector<ros::Subscriber> subs_;
-  std::mutex mutex_;
-  std::condition_variable cv_;
+  topic_watch::Record record_;
   std::map<std::string, std::vector<cnc_bridge::SlaveResponse>> received_;
+  std::vector<ros::Subscriber> subs_;  // last: unsubscribed before what the callbacks fill goes
 };
 
 template <class M>
@@ -110,15 +102,17 @@ class DiagnosticsWatch
         "/diagnostics", 100,
         [this](const diagnostic_msgs::DiagnosticArray::ConstPtr& msg)
         {
-          std::lock_guard<std::mutex> lock(mutex_);
-          for (const auto& status : msg->status)
-          {
-            for (const auto& kv : status.values)
-            {
-              values_[status.name][kv.key] = kv.value;
-            }
-          }
-          cv_.notify_all();
+          record_.update(
+              [&]
+              {
+                for (const auto& status : msg->status)
+                {
+                  for (const auto& kv : status.values)
+                  {
+                    values_[status.name][kv.key] = kv.value;
+                  }
+                }
+              });
         });
   }
   using Values = std::map<std::string, std::string>;
@@ -127,51 +121,50 @@ class DiagnosticsWatch
   /// one status come from one message, so they are consistent with each other); copies them to \p out.
   bool waitForStatus(const std::string& name, const std::function<bool(const Values&)>& pred, Values* out = nullptr)
   {
-    std::unique_lock<std::mutex> lock(mutex_);
-    return cv_.wait_for(lock, std::chrono::duration<double>(kWait.toSec()),
-                        [&]
-                        {
-                          for (const auto& status : values_)
-                          {
-                            if (status.first.find(name) != std::string::npos && pred(status.second))
-                            {
-                              if (out)
-                              {
-                                *out = status.second;
-                              }
-                              return true;
-                            }
-                          }
-                          return false;
-                        });
+    return record_.waitFor(
+        [&]
+        {
+          for (const auto& status : values_)
+          {
+            if (status.first.find(name) != std::string::npos && pred(status.second))
+            {
+              if (out)
+              {
+                *out = status.second;
+              }
+              return true;
+            }
+          }
+          return false;
+        },
+        kWait.toSec());
   }
 
   /// Waits until a status whose name contains \p name has key \p key with a numeric value satisfying \p pred.
   bool waitFor(const std::string& name, const std::string& key, const std::function<bool(double)>& pred)
   {
-    std::unique_lock<std::mutex> lock(mutex_);
-    return cv_.wait_for(lock, std::chrono::duration<double>(kWait.toSec()),
-                        [&]
-                        {
-                          // Status names carry the node's namespace: "cell/laser1/slave_bus_node: slave bus".
-                          for (const auto& status : values_)
-                          {
-                            const auto value = status.second.find(key);
-                            if (status.first.find(name) != std::string::npos && value != status.second.end() &&
-                                pred(std::stod(value->second)))
-                            {
-                              return true;
-                            }
-                          }
-                          return false;
-                        });
+    return record_.waitFor(
+        [&]
+        {
+          // Status names carry the node's namespace: "cell/laser1/slave_bus_node: slave bus".
+          for (const auto& status : values_)
+          {
+            const auto value = status.second.find(key);
+            if (status.first.find(name) != std::string::npos && value != status.second.end() &&
+                pred(std::stod(value->second)))
+            {
+              return true;
+            }
+          }
+          return false;
+        },
+        kWait.toSec());
   }
 
  private:
-  ros::Subscriber sub_;
-  std::mutex mutex_;
-  std::condition_variable cv_;
+  topic_watch::Record record_;
   std::map<std::string, std::map<std::string, std::string>> values_;
+  ros::Subscriber sub_;  // last: unsubscribed before what the callback fills goes
 };
 
 DiagnosticsWatch* diagnostics = nullptr;
