@@ -6,6 +6,7 @@ cnc_core_module(cnc_bridge_drip
   src/dnc/nc_program.cpp
   src/dnc/drip_feed.cpp
   src/dnc/backup.cpp)
+target_link_libraries(cnc_bridge_drip PUBLIC cnc_bridge_gcode)  # the block lexer of nc_program.cpp
 
 # The simulated control, shared by sim_haas_serial and the unit tests that run it in-process.
 add_library(cnc_bridge_dnc_sim STATIC

@@ -1,10 +1,10 @@
 # G-code parser: a ROS-free streaming parser shared by ethernut_node (job streaming and preview)
 # and at_controller_node (path planning).
-cnc_core_module(cnc_bridge_gcode src/gcode/gcode.cpp src/gcode/gcode_words.cpp src/gcode/gcode_cycles.cpp
+cnc_core_module(cnc_bridge_gcode src/gcode/lexer.cpp src/gcode/gcode.cpp src/gcode/gcode_words.cpp src/gcode/gcode_cycles.cpp
                 src/gcode/gcode_comp.cpp src/gcode/tool_table.cpp)
 target_link_libraries(cnc_bridge_gcode PUBLIC yaml-cpp)
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
-  cnc_core_gtest(test_gcode test/unit/test_gcode.cpp test/unit/test_program_steps.cpp)
+  cnc_core_gtest(test_gcode test/unit/test_gcode.cpp test/unit/test_gcode_lexer.cpp test/unit/test_program_steps.cpp)
   target_link_libraries(test_gcode cnc_bridge_gcode)
   target_compile_definitions(test_gcode PRIVATE CNC_BRIDGE_FIXTURE_DIR="${PROJECT_SOURCE_DIR}/test/data/gcode")
 endif()

@@ -3,14 +3,13 @@
 
 #include <sys/stat.h>
 
-#include <cctype>
 #include <cerrno>
 #include <cmath>
-#include <cstdlib>
 #include <cstring>
 #include <sstream>
 
 #include "cnc_bridge/common/error.h"
+#include "cnc_bridge/gcode/lexer.h"
 
 namespace cnc_bridge
 {
@@ -161,74 +160,21 @@ struct Word
 {
   char letter;
   std::string value;  // as written: "01", "54.1", "[#1+2]"
+  double number;      // the value when it is a plain number, else NaN (an expression, or nothing)
 };
 
-// Splits a block into address words, leaving out comments and anything after ';'.
+// The address words of a block, through the G-code parser's lexer in its lenient mode: comments
+// and anything after ';' left out, macro expressions kept as text.
 std::vector<Word> splitWords(const std::string& line)
 {
   std::vector<Word> words;
-  size_t i = 0;
-  const size_t n = line.size();
-  while (i < n)
+  gcode::BlockLexer lexer(line, gcode::BlockLexer::Mode::kLenient);
+  gcode::LexedWord word;
+  while (lexer.next(word))
   {
-    const char c = line[i];
-    if (c == ';')
-    {
-      break;
-    }
-    if (c == '(')
-    {
-      const size_t close = line.find(')', i);
-      if (close == std::string::npos)
-      {
-        break;
-      }
-      i = close + 1;
-      continue;
-    }
-    const char upper = static_cast<char>((c >= 'a' && c <= 'z') ? c - 'a' + 'A' : c);
-    if (upper < 'A' || upper > 'Z')
-    {
-      ++i;
-      continue;
-    }
-    Word word{upper, {}};
-    ++i;
-    int depth = 0;
-    while (i < n)
-    {
-      const char v = line[i];
-      if (v == '[')
-      {
-        ++depth;
-      }
-      else if (v == ']')
-      {
-        depth = depth > 0 ? depth - 1 : 0;
-      }
-      else if (depth == 0 &&
-               (std::isalpha(static_cast<unsigned char>(v)) || v == '(' || v == ';' || v == ' ' || v == '\t'))
-      {
-        break;
-      }
-      word.value.push_back(v);
-      ++i;
-    }
-    words.push_back(std::move(word));
+    words.push_back(Word{word.letter, std::string(word.text), word.numeric ? word.value : std::nan("")});
   }
   return words;
-}
-
-// The numeric value of a word, or NaN for an expression or nothing.
-double numeric(const std::string& value)
-{
-  if (value.empty())
-  {
-    return std::nan("");
-  }
-  char* end = nullptr;
-  const double v = std::strtod(value.c_str(), &end);
-  return (end != nullptr && *end == '\0') ? v : std::nan("");
 }
 
 bool is(double value, double code)
@@ -288,7 +234,7 @@ void ModalTracker::apply(const std::string& line)
   }
   for (const auto& w : words)
   {
-    const double v = numeric(w.value);
+    const double v = w.number;
     switch (w.letter)
     {
       case 'N':

@@ -1,10 +1,10 @@
 // The G-code parser: a single pass over each line's characters with no regex and no allocation
 // once the block's move buffer has grown to the longest arc; numbers through std::from_chars
 // (locale-independent, no exponent: 'E' is a word letter in G-code, not part of a number).
-// A line is scanned into words (scanLine), the words are applied to a copy of the modal state in
-// the RS-274 order of execution (applyWords, gcode_words.cpp), and the motion they ask for becomes moves: straight
-// (moveStraight), arcs cut into chords (moveArc), canned cycles (runCycle, gcode_cycles.cpp),
-// G28/G30 (referenceReturn). Cutter compensation offsets the moves (gcode_comp.cpp).
+// A line is scanned into words (scanLine, through the BlockLexer of lexer.h), the words are applied to a copy of the
+// modal state in the RS-274 order of execution (applyWords, gcode_words.cpp), and the motion they ask for becomes
+// moves: straight (moveStraight), arcs cut into chords (moveArc), canned cycles (runCycle, gcode_cycles.cpp), G28/G30
+// (referenceReturn). Cutter compensation offsets the moves (gcode_comp.cpp).
 #include "cnc_bridge/gcode/gcode.h"
 
 #include <algorithm>
@@ -13,6 +13,7 @@
 #include <cstring>
 #include <sstream>
 
+#include "cnc_bridge/gcode/lexer.h"
 #include "gcode_internal.h"
 
 namespace cnc_bridge
@@ -21,17 +22,6 @@ namespace gcode
 {
 namespace
 {
-std::string describeChar(char c)
-{
-  const auto byte = static_cast<unsigned char>(c);
-  if (byte >= 32 && byte < 127)
-  {
-    return std::string("'") + c + "'";
-  }
-  static const char kHex[] = "0123456789abcdef";
-  return std::string("byte 0x") + kHex[byte >> 4] + kHex[byte & 15];
-}
-
 inline bool isSpace(char c)
 {
   return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v';
@@ -70,84 +60,14 @@ bool scanLine(std::string_view text, const ParserOptions& options, uint32_t line
     ++i;
   }
 
-  while (i < size)
+  BlockLexer lexer(text, BlockLexer::Mode::kStrict, line, i);
+  LexedWord word;
+  while (lexer.next(word))
   {
-    const char c = data[i];
-    if (isSpace(c))
-    {
-      ++i;
-      continue;
-    }
-    if (c == '(')
-    {
-      const size_t open = i;
-      ++i;
-      while (i < size && data[i] != ')')
-      {
-        if (data[i] == '(')
-        {
-          throw fail(i, "nested '(' inside a comment");
-        }
-        ++i;
-      }
-      if (i >= size)
-      {
-        throw fail(open, "comment '(' not closed on this line");
-      }
-      ++i;
-      continue;
-    }
-    if (c == ';')
-    {
-      break;
-    }
-    if (c == '#' || c == '[' || c == '=')
-    {
-      throw fail(i, std::string("macro expressions ('") + c + "') are not supported");
-    }
-    char letter = c;
-    if (letter >= 'a' && letter <= 'z')
-    {
-      letter = static_cast<char>(letter - 'a' + 'A');
-    }
-    if (letter < 'A' || letter > 'Z')
-    {
-      throw fail(i, "unexpected character " + describeChar(c));
-    }
-    const size_t letter_index = i;
-    ++i;
-    while (i < size && isSpace(data[i]))
-    {
-      ++i;
-    }
-    // Number: optional sign, digits with at most one '.', no exponent.
-    bool negative = false;
-    if (i < size && (data[i] == '+' || data[i] == '-'))
-    {
-      negative = data[i] == '-';
-      ++i;
-    }
-    const size_t number_start = i;
-    double value = 0.0;
-    if (i < size && data[i] == '.' && (i + 1 >= size || data[i + 1] < '0' || data[i + 1] > '9'))
-    {
-      throw fail(letter_index, std::string("word ") + letter + " has no number");
-    }
-    auto result = std::from_chars(data + i, data + size, value, std::chars_format::fixed);
-    if (result.ec != std::errc() || result.ptr == data + number_start)
-    {
-      throw fail(letter_index, std::string("word ") + letter + " has no number");
-    }
-    i = static_cast<size_t>(result.ptr - data);
-    const bool decimal = std::memchr(data + number_start, '.', i - number_start) != nullptr;
-    if (negative)
-    {
-      value = -value;
-    }
-    if (!std::isfinite(value))
-    {
-      throw fail(letter_index, std::string("word ") + letter + " number out of range");
-    }
+    const char letter = word.letter;
+    const size_t letter_index = word.column - 1;
+    const double value = word.value;
+    const bool decimal = word.decimal;
     block.has_words = true;
 
     switch (letter)

@@ -103,9 +103,9 @@ struct ModalState
 
 /// \brief Follows the modal words of a program block by block. Not thread-safe.
 ///
-/// Parses words as a letter and a number (Fanuc/Haas syntax); skips (comments) and everything
-/// after ';'. Macro expressions ('#', '[') are not evaluated: a word whose value is an expression
-/// keeps its text.
+/// Reads words with the G-code parser's lexer in its lenient mode (gcode::BlockLexer): a letter
+/// and a number (Fanuc/Haas syntax); (comments) and everything after ';' skipped. Macro
+/// expressions ('#', '[') are not evaluated: a word whose value is an expression keeps its text.
 class ModalTracker
 {
  public:
