@@ -125,7 +125,7 @@ EthernutNode::~EthernutNode()
     stopping_ = true;
   }
   standalone_cv_.notify_all();
-  reconnector_->stop();
+  link_->stop();
   action_.shutdown();
 }
 
@@ -236,17 +236,16 @@ void EthernutNode::readJobParameters()
 // ------------------------------------------------------------------------- link
 void EthernutNode::startLink()
 {
-  Reconnector::Callbacks callbacks;
-  callbacks.connect = [this] { connect(); };
-  callbacks.session = [this] { runSession(); };
-  callbacks.on_state = [this](LinkState link, const std::string& why) { state_->setLink(link, why); };
-  callbacks.disconnect = [this] { disconnect(); };
-  reconnector_ = std::make_unique<Reconnector>("ethernut " + host_ + ":" + std::to_string(port_), callbacks,
-                                               Backoff(Milliseconds(200), Milliseconds(5000)));
-  reconnector_->start();
+  link_ = std::make_unique<ReconnectingLink>(
+      "ethernut " + host_ + ":" + std::to_string(port_), [this] { return connect(); },
+      Backoff(Milliseconds(200), Milliseconds(5000)));
+  link_->start([this](Transport&) { runSession(); },
+               [this](LinkState link, const std::string& why) { state_->setLink(link, why); });
 }
 
-void EthernutNode::connect()
+// Opens the connection and the client on it: the client is the session's, kept with its
+// connection in session_ for the services and the job thread.
+std::shared_ptr<Transport> EthernutNode::connect()
 {
   ethernut::ClientOptions options;
   {
@@ -267,6 +266,7 @@ void EthernutNode::connect()
     ethernut::addCounters(earlier_sessions_, session_.client->stats());  // diagnostics count since the start
   }
   session_ = Session{link, client};
+  return link;
 }
 
 void EthernutNode::runSession()
@@ -277,19 +277,6 @@ void EthernutNode::runSession()
   {
     std::lock_guard<std::mutex> lock(mutex_);
     standalone_ = true;
-  }
-}
-
-void EthernutNode::disconnect()
-{
-  const Session s = session();
-  if (s.client)
-  {
-    s.client->stop();
-  }
-  if (s.link)
-  {
-    s.link->interrupt();
   }
 }
 
@@ -358,7 +345,7 @@ void EthernutNode::protocolDiagnostics(diagnostic_updater::DiagnosticStatusWrapp
   status.add("invalid frames", total.bad_frames);
   status.add("unexpected messages", total.unexpected_messages);
   status.add("last board error code", st.last_board_error);
-  status.add("reconnects", reconnector_ ? reconnector_->reconnects() : 0u);
+  status.add("reconnects", link_ ? link_->reconnects() : 0u);
   kill_->addTo(status);
   motion_->addTo(status);
 }

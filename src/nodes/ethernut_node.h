@@ -31,7 +31,7 @@
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/runtime_switch.h"
 #include "cnc_bridge/ros/single_goal_action_server.h"
-#include "cnc_bridge/transport/backoff.h"
+#include "cnc_bridge/transport/reconnecting_link.h"
 #include "cnc_bridge/transport/tcp.h"
 
 namespace cnc_bridge
@@ -91,9 +91,8 @@ class EthernutNode : public ethernut::ClientListener
   void readLinkParameters(const ethernut::Settings& settings);
   void readJobParameters();
   void startLink();
-  void connect();
+  std::shared_ptr<Transport> connect();
   void runSession();
-  void disconnect();
   Session session();
   std::shared_ptr<ethernut::Client> client(std::string& why);
 
@@ -174,6 +173,6 @@ class EthernutNode : public ethernut::ClientListener
   std::shared_ptr<const ethernut::Job> running_job_;  // execute()'s job, under job_mutex_
   ethernut::MotionHold motion_hold_;                  // a disable holding the running goal until ~resume
 
-  std::unique_ptr<Reconnector> reconnector_;
+  std::unique_ptr<ReconnectingLink> link_;
 };
 }  // namespace cnc_bridge

@@ -21,8 +21,10 @@ namespace cnc_bridge
 class ReconnectingLink
 {
  public:
-  /// Creates and opens the link; throws (LinkError, ConfigError, ...) when it cannot.
-  using Opener = std::function<std::unique_ptr<Transport>()>;
+  /// Creates and opens the link; throws (LinkError, ConfigError, ...) when it cannot. Shared, so
+  /// that a protocol client built on it in the opener can keep it alive as long as the client is
+  /// (a unique_ptr converts).
+  using Opener = std::function<std::shared_ptr<Transport>()>;
   /// Talks over the open link until it fails (throws) or is interrupted / stopped (returns).
   using Session = std::function<void(Transport& link)>;
   /// Told of every state change, with the failure text (empty when there is none).
