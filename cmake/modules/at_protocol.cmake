@@ -29,8 +29,11 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   target_link_libraries(test_at_protocol cnc_bridge_at_protocol)
 endif()
 
+# The simulated controller (a peer model, not shipped in the protocol library) and its program.
+cnc_sim_library(cnc_bridge_at_protocol_sim src/sim/at_protocol/sim_controller.cpp)
+target_link_libraries(cnc_bridge_at_protocol_sim PUBLIC cnc_bridge_at_protocol cnc_bridge_testing)
 cnc_tool(sim_at_controller src/sim/sim_at_controller.cpp)
-target_link_libraries(sim_at_controller cnc_bridge_testing)
+target_link_libraries(sim_at_controller cnc_bridge_at_protocol_sim cnc_bridge_testing)
 cnc_tool(at_stream_bench bench/at_controller/at_stream_bench.cpp)
 # cnc_plan: the '@' path as 1 ms setpoints (CSV, PNG through scripts/plot_plan.py), ROS-free.
 cnc_tool(cnc_plan src/cli/cnc_plan.cpp)
