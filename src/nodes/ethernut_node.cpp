@@ -239,8 +239,7 @@ void EthernutNode::startLink()
   link_ = std::make_unique<ReconnectingLink>(
       "ethernut " + host_ + ":" + std::to_string(port_), [this] { return connect(); },
       Backoff(Milliseconds(200), Milliseconds(5000)));
-  link_->start([this](Transport&) { runSession(); },
-               [this](LinkState link, const std::string& why) { state_->setLink(link, why); });
+  link_->start([this](Transport&) { runSession(); }, state_->linkStateHandler());
 }
 
 // Opens the connection and the client on it: the client is the session's, kept with its

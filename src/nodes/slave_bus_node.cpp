@@ -167,8 +167,7 @@ class SlaveBusNode
     state_.diagnostics().add("slave bus", this, &SlaveBusNode::diagnose);
     link_ = std::make_unique<ReconnectingLink>("slave bus " + settings_.describe(),
                                                [this] { return std::make_unique<SerialPort>(settings_); });
-    link_->start([this](Transport& port) { ioLoop(port); },
-                 [this](LinkState link, const std::string& why) { state_.setLink(link, why); });
+    link_->start([this](Transport& port) { ioLoop(port); }, state_.linkStateHandler());
     ROS_INFO_STREAM("slave_bus_node: " << table_.slaves().size() << " slaves on a bus of " << table_.busSize() << ", "
                                        << slave_bus::toString(framing_) << " framing, WirePacker CRC "
                                        << slave_bus::toString(table_.wire().crc) << ", payloads up to "

@@ -14,6 +14,7 @@
 #include <string>
 
 #include "cnc_bridge/MachineState.h"
+#include "cnc_bridge/transport/reconnecting_link.h"
 #include "cnc_bridge/transport/transport.h"
 
 namespace cnc_bridge
@@ -34,6 +35,13 @@ class MachineStatePublisher
   /// \brief Sets the link state and its message. An empty message keeps the current one while the
   /// link is down or connecting, and clears it when the link is up (the error no longer holds).
   void setLink(LinkState link, const std::string& message = "");
+  /// \brief The state handler to start a ReconnectingLink with: its changes become this machine's
+  /// link state (the state topic and the link diagnostics). Calls setLink(); a node that does more
+  /// on a change (forget what it knew of the machine) calls it from its own handler.
+  ReconnectingLink::StateHandler linkStateHandler()
+  {
+    return [this](LinkState link, const std::string& why) { setLink(link, why); };
+  }
   /// \brief Sets the tool position in metres (machine frame) and marks it valid.
   void setPosition(double x, double y, double z);
   /// \brief Sets the last position sent to the machine in metres (machine frame) and marks it valid.
