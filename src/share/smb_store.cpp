@@ -218,50 +218,75 @@ SMBCCTX* SmbProgramStore::context()
     throw Error("libsmbclient: cannot initialise a context: " + std::string(std::strerror(error)));
   }
   context_ = context;
-  // Connect and check the share and folder now, so that their errors say so.
+  reached_ = false;
+  if (!repairs_.empty())
+  {
+    checkFolder();  // a repair needs the folder; if it cannot be reached, say why
+    repairLocked();
+    if (context_ == nullptr)
+      throw LinkError("cannot open " + url_.describe() +
+                      ": the link failed again while repairing an interrupted write");
+  }
+  return context_;
+}
+
+void SmbProgramStore::checkFolder()
+{
+  SMBCCTX* ctx = context_;
   struct stat info;
-  if (smbc_getFunctionStat(context_)(context_, url_.pathOf("").c_str(), &info) != 0)
+  if (smbc_getFunctionStat(ctx)(ctx, url_.pathOf("").c_str(), &info) != 0)
   {
     const int error = errno;
     dropContext();
-    std::string reason;
-    switch (error)
-    {
-      case EACCES:
-      case EPERM:
-        reason = credentials_.guest ? "access denied to a guest: the share needs a user (give a credentials file)"
-                                    : "access denied for user '" + credentials_.username +
-                                          "': wrong user name or password, or the user may not use this share";
-        break;
-      case ENOENT:
-      case ENODEV:
-      case ENOTDIR:
-        reason = url_.folder.empty() ? "no share '" + url_.share + "' on " + url_.host
-                                     : "no share '" + url_.share + "' or no folder '" + url_.folder + "' in it";
-        break;
-      case ECONNREFUSED:
-        reason = "connection refused: no SMB server answers on " + url_.host + ":" + std::to_string(url_.port);
-        break;
-      case ETIMEDOUT:
-        reason =
-            "no answer within " + std::to_string(static_cast<double>(timeout_.count()) / 1000.0).substr(0, 4) + " s";
-        break;
-      default:
-        reason = std::strerror(error);
-    }
-    throw LinkError("cannot open " + url_.describe() + ": " + reason);
+    throw LinkError("cannot open " + url_.describe() + ": " + connectionFailure(error));
   }
   if (!S_ISDIR(info.st_mode))
   {
     dropContext();
     throw LinkError("cannot open " + url_.describe() + ": '" + url_.folder + "' is not a folder");
   }
-  repairLocked();
-  return context_;
+  reached_ = true;
+}
+
+std::string SmbProgramStore::connectionFailure(int error) const
+{
+  switch (error)
+  {
+    case EACCES:
+    case EPERM:
+      return credentials_.guest ? "access denied to a guest: the share needs a user (give a credentials file)"
+                                : "access denied for user '" + credentials_.username +
+                                      "': wrong user name or password, or the user may not use this share";
+    case ENOENT:
+    case ENODEV:
+    case ENOTDIR:
+      return url_.folder.empty() ? "no share '" + url_.share + "' on " + url_.host
+                                 : "no share '" + url_.share + "' or no folder '" + url_.folder + "' in it";
+    case ECONNREFUSED:
+      return "connection refused: no SMB server answers on " + url_.host + ":" + std::to_string(url_.port);
+    case ETIMEDOUT:
+      return "no answer within " + std::to_string(static_cast<double>(timeout_.count()) / 1000.0).substr(0, 4) + " s";
+    default:
+      return std::strerror(error);
+  }
 }
 
 void SmbProgramStore::fail(const std::string& action, const std::string& name, int error)
 {
+  // Nothing has reached the folder on this connection yet: the server, the login, the share or the
+  // folder may be what failed, not the program.
+  if (!reached_ && context_ != nullptr)
+  {
+    const bool program_or_folder =
+        error == ENOENT || error == ENOTDIR || error == ENODEV || error == EACCES || error == EPERM;
+    if (program_or_folder)
+      checkFolder();  // tells them apart: throws unless the folder is there and may be used
+    else
+    {
+      dropContext();
+      throw LinkError("cannot open " + url_.describe() + ": " + connectionFailure(error));
+    }
+  }
   if (error == ENOENT)
     throw NotFoundError("no program '" + name + "' in " + url_.describe());
   std::string reason = std::strerror(error);
@@ -283,6 +308,7 @@ ProgramEntry SmbProgramStore::statLocked(const std::string& name)
   struct stat info;
   if (smbc_getFunctionStat(ctx)(ctx, url_.pathOf(name).c_str(), &info) != 0)
     fail("stat of", name, errno);
+  reached_ = true;
   ProgramEntry entry;
   entry.name = name;
   entry.size = static_cast<uint64_t>(info.st_size);
@@ -308,6 +334,18 @@ void SmbProgramStore::renameLocked(const std::string& from, const std::string& t
   SMBCCTX* ctx = context();
   if (smbc_getFunctionRename(ctx)(ctx, url_.pathOf(from).c_str(), ctx, url_.pathOf(to).c_str()) != 0)
     fail("rename of", from + " to " + to, errno);
+  reached_ = true;
+}
+
+bool SmbProgramStore::moveAsideLocked(const std::string& name, const std::string& aside)
+{
+  SMBCCTX* ctx = context();
+  if (smbc_getFunctionRename(ctx)(ctx, url_.pathOf(name).c_str(), ctx, url_.pathOf(aside).c_str()) == 0)
+    return true;
+  const int error = errno;
+  if (error == ENOENT && reached_)
+    return false;  // no earlier version
+  fail("rename of", name + " to " + aside, error);
 }
 
 void SmbProgramStore::unlinkLocked(const std::string& name)
@@ -315,6 +353,7 @@ void SmbProgramStore::unlinkLocked(const std::string& name)
   SMBCCTX* ctx = context();
   if (smbc_getFunctionUnlink(ctx)(ctx, url_.pathOf(name).c_str()) != 0)
     fail("removal of", name, errno);
+  reached_ = true;
 }
 
 void SmbProgramStore::repairLocked()
@@ -358,6 +397,7 @@ std::vector<ProgramEntry> SmbProgramStore::list()
   SMBCFILE* dir = smbc_getFunctionOpendir(ctx)(ctx, url_.pathOf("").c_str());
   if (dir == nullptr)
     fail("listing of", url_.folder.empty() ? "/" : url_.folder, errno);
+  reached_ = true;
   std::vector<ProgramEntry> entries;
   errno = 0;
   struct stat info;
@@ -380,6 +420,16 @@ std::vector<ProgramEntry> SmbProgramStore::list()
   return entries;
 }
 
+SMBCFILE* SmbProgramStore::openLocked(const std::string& name, int flags)
+{
+  SMBCCTX* ctx = context();
+  SMBCFILE* file = smbc_getFunctionOpen(ctx)(ctx, url_.pathOf(name).c_str(), flags, 0644);
+  if (file == nullptr)
+    fail((flags & O_CREAT) != 0 ? "creating" : "opening", name, errno);
+  reached_ = true;
+  return file;
+}
+
 ProgramEntry SmbProgramStore::stat(const std::string& name)
 {
   std::lock_guard<std::recursive_mutex> lock(libraryMutex());
@@ -399,28 +449,34 @@ void SmbProgramStore::readTo(const std::string& name, const programs::StoreSink&
                              const programs::StoreProgress& progress, const std::atomic<bool>* cancel)
 {
   std::lock_guard<std::recursive_mutex> lock(libraryMutex());
-  const uint64_t total = statLocked(name).size;
-  SMBCCTX* ctx = context();
-  SMBCFILE* file = smbc_getFunctionOpen(ctx)(ctx, url_.pathOf(name).c_str(), O_RDONLY, 0);
-  if (file == nullptr)
-    fail("opening", name, errno);
-  std::string chunk(kChunk, '\0');
-  uint64_t done = 0;
+  SMBCFILE* file = openLocked(name, O_RDONLY);
+  SMBCCTX* ctx = context_;
   try
   {
-    for (;;)
+    // The size as the file was opened, as smbclient's get reads it: reads of exactly what is left,
+    // so that no request is spent to find the end (libsmbclient repeats a short read).
+    struct stat info;
+    if (smbc_getFunctionFstat(ctx)(ctx, file, &info) != 0)
+      fail("stat of", name, errno);
+    const auto total = static_cast<uint64_t>(info.st_size);
+    std::string chunk(static_cast<size_t>(std::min<uint64_t>(kChunk, total)), '\0');
+    uint64_t done = 0;
+    while (done < total)
     {
       throwIfCancelled(cancel, "reading " + name);
-      const ssize_t n = smbc_getFunctionRead(ctx)(ctx, file, chunk.data(), chunk.size());
+      const size_t want = static_cast<size_t>(std::min<uint64_t>(chunk.size(), total - done));
+      const ssize_t n = smbc_getFunctionRead(ctx)(ctx, file, chunk.data(), want);
       if (n < 0)
         fail("reading", name, errno);
       if (n == 0)
-        break;
+        break;  // shortened since it was opened
       sink(chunk.data(), static_cast<size_t>(n));
       done += static_cast<uint64_t>(n);
       if (progress)
         progress(done, total);
     }
+    if (done == 0 && progress)
+      progress(0, 0);
   }
   catch (...)
   {
@@ -429,18 +485,14 @@ void SmbProgramStore::readTo(const std::string& name, const programs::StoreSink&
     throw;
   }
   smbc_getFunctionClose(ctx)(ctx, file);
-  if (done == 0 && progress)
-    progress(0, 0);
 }
 
 std::string SmbProgramStore::readHead(const std::string& name, size_t bytes)
 {
   std::lock_guard<std::recursive_mutex> lock(libraryMutex());
   programs::checkName(name);
-  SMBCCTX* ctx = context();
-  SMBCFILE* file = smbc_getFunctionOpen(ctx)(ctx, url_.pathOf(name).c_str(), O_RDONLY, 0);
-  if (file == nullptr)
-    fail("opening", name, errno);
+  SMBCFILE* file = openLocked(name, O_RDONLY);
+  SMBCCTX* ctx = context_;
   std::string head(bytes, '\0');
   size_t got = 0;
   while (got < bytes)
@@ -475,10 +527,7 @@ void SmbProgramStore::write(const std::string& name, const std::string& data, co
   // 1. Upload under the temporary name.
   try
   {
-    SMBCFILE* file =
-        smbc_getFunctionOpen(ctx)(ctx, url_.pathOf(repair.temporary).c_str(), O_WRONLY | O_CREAT | O_EXCL, 0644);
-    if (file == nullptr)
-      fail("creating", repair.temporary, errno);
+    SMBCFILE* file = openLocked(repair.temporary, O_WRONLY | O_CREAT | O_EXCL);
     try
     {
       for (size_t done = 0; done < data.size();)
@@ -517,9 +566,7 @@ void SmbProgramStore::write(const std::string& name, const std::string& data, co
   bool replaced = false;
   try
   {
-    replaced = existsLocked(name);
-    if (replaced)
-      renameLocked(name, repair.previous);
+    replaced = moveAsideLocked(name, repair.previous);
     renameLocked(repair.temporary, name);
   }
   catch (...)

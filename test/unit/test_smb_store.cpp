@@ -8,6 +8,7 @@
 #include <condition_variable>
 #include <cstdlib>
 #include <filesystem>
+#include <functional>
 #include <mutex>
 #include <random>
 #include <thread>
@@ -152,6 +153,65 @@ TEST_F(SmbStoreTest, MissingShareIsNamed)
   }
   SmbProgramStore store2(server_->url("guest/nofolder"), SmbCredentials{});
   EXPECT_THROW(store2.list(), LinkError);
+}
+
+// A store connects with its first call, whatever it is: a failure of that call names what failed
+// (login, share, folder), not the program it was about, and leaves nothing on the share.
+TEST_F(SmbStoreTest, TheFirstCallOfAStoreNamesWhatFailedAtTheShare)
+{
+  std::filesystem::create_directories(server_->folder("guest") + "/programs");
+  test::writeFile(server_->folder("guest") + "/afile", "not a folder");
+  const std::string bad_password = server_->credentials("wrong.auth", "not-the-password");
+  struct Case
+  {
+    std::string url;
+    std::string credentials;  // empty: guest
+    std::string says;
+  };
+  const std::vector<Case> cases = {
+      {server_->url("nosuchshare"), "", "no share 'nosuchshare'"},
+      {server_->url("guest/nofolder"), "", "no folder 'nofolder'"},
+      {server_->url("guest/afile"), "", "'afile' is not a folder"},
+      {server_->url("secure"), "", "access denied to a guest"},
+      {server_->url("secure"), bad_password, "wrong user name or password"},
+  };
+  using Call = std::function<void(SmbProgramStore&)>;
+  const std::vector<std::pair<std::string, Call>> calls = {
+      {"list", [](SmbProgramStore& s) { s.list(); }},
+      {"read", [](SmbProgramStore& s) { s.read("O01000.nc"); }},
+      {"readHead", [](SmbProgramStore& s) { s.readHead("O01000.nc", 100); }},
+      {"stat", [](SmbProgramStore& s) { s.stat("O01000.nc"); }},
+      {"write", [](SmbProgramStore& s) { s.write("O01000.nc", "%\nO01000\n%\n"); }},
+      {"rename", [](SmbProgramStore& s) { s.rename("O01000.nc", "O01001.nc"); }},
+      {"remove", [](SmbProgramStore& s) { s.remove("O01000.nc"); }},
+  };
+  for (const auto& c : cases)
+  {
+    for (const auto& [call_name, call] : calls)
+    {
+      SmbProgramStore store(c.url, c.credentials.empty() ? SmbCredentials{} : SmbCredentials::fromFile(c.credentials));
+      try
+      {
+        call(store);
+        ADD_FAILURE() << call_name << " on " << c.url << " succeeded";
+      }
+      catch (const LinkError& e)
+      {
+        EXPECT_NE(std::string(e.what()).find(c.says), std::string::npos) << call_name << ": " << e.what();
+      }
+      catch (const std::exception& e)
+      {
+        ADD_FAILURE() << call_name << " on " << c.url << ": not a link error: " << e.what();
+      }
+    }
+  }
+  EXPECT_EQ(filesOnDisk(server_->folder("guest")), (std::vector<std::string>{"afile", "programs"}));
+  EXPECT_TRUE(filesOnDisk(server_->folder("secure")).empty());
+  // On a share that works, the first call's missing program is just that.
+  SmbProgramStore store(server_->url("guest/programs"), SmbCredentials{});
+  EXPECT_THROW(store.read("O01000.nc"), NotFoundError);
+  EXPECT_THROW(SmbProgramStore(server_->url("guest/programs"), SmbCredentials{}).stat("O01000.nc"), NotFoundError);
+  EXPECT_THROW(SmbProgramStore(server_->url("guest/programs"), SmbCredentials{}).remove("O01000.nc"), NotFoundError);
 }
 
 TEST_F(SmbStoreTest, MissingFileIsNotFound)

@@ -30,6 +30,8 @@
 // libsmbclient's own declaration of its context type, repeated so that this header need not include it.
 // NOLINTNEXTLINE(bugprone-reserved-identifier,cert-dcl37-c,cert-dcl51-cpp,modernize-use-using)
 typedef struct _SMBCCTX SMBCCTX;
+// NOLINTNEXTLINE(bugprone-reserved-identifier,cert-dcl37-c,cert-dcl51-cpp,modernize-use-using)
+typedef struct _SMBCFILE SMBCFILE;
 
 namespace cnc_bridge::share
 {
@@ -96,12 +98,22 @@ class SmbProgramStore : public programs::ProgramStore
 
  private:
   /// The context, created (and leftovers of an earlier failure repaired) if there is none.
+  /// Connecting is left to the first call that needs the share, so that a transfer costs no
+  /// requests beyond its own (a failure of that first call is explained by checkFolder()).
   SMBCCTX* context();
   void dropContext();
+  /// Stats the share folder: \throws LinkError saying whether the server, the login, the share or
+  /// the folder failed. Marks the folder reached.
+  void checkFolder();
+  std::string connectionFailure(int error) const;
   /// Turns errno after a failed call into the matching exception and drops the context if the
   /// link is gone. Never returns.
   [[noreturn]] void fail(const std::string& action, const std::string& name, int error);
   programs::ProgramEntry statLocked(const std::string& name);
+  /// Opens \p name in the folder (O_RDONLY, or O_WRONLY | O_CREAT | O_EXCL for an upload).
+  SMBCFILE* openLocked(const std::string& name, int flags);
+  /// Renames \p name to \p aside; false if there is no \p name.
+  bool moveAsideLocked(const std::string& name, const std::string& aside);
   void renameLocked(const std::string& from, const std::string& to);
   void unlinkLocked(const std::string& name);
   bool existsLocked(const std::string& name);
@@ -112,6 +124,7 @@ class SmbProgramStore : public programs::ProgramStore
   SmbCredentials credentials_;
   std::chrono::milliseconds timeout_;
   SMBCCTX* context_ = nullptr;
+  bool reached_ = false;  ///< a call on this context has reached the folder (login, share and folder work)
   struct Repair
   {
     std::string name, temporary, previous;
