@@ -22,11 +22,6 @@ namespace gcode
 {
 namespace
 {
-inline bool isSpace(char c)
-{
-  return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v';
-}
-
 // Scans one line into words. Returns false for a tape marker or a deleted block (block says which).
 bool scanLine(std::string_view text, const ParserOptions& options, uint32_t line, Scan& scan, Block& block)
 {
@@ -40,7 +35,7 @@ bool scanLine(std::string_view text, const ParserOptions& options, uint32_t line
   const char* const data = text.data();
   const size_t size = text.size();
   size_t i = 0;
-  while (i < size && isSpace(data[i]))
+  while (i < size && isBlank(data[i]))
   {
     ++i;
   }
@@ -672,7 +667,7 @@ constexpr size_t kMaxLabels = 100000;
 int64_t leadingLabel(std::string_view line, char letter)
 {
   size_t i = 0;
-  while (i < line.size() && isSpace(line[i]))
+  while (i < line.size() && isBlank(line[i]))
   {
     ++i;
   }
@@ -685,7 +680,7 @@ int64_t leadingLabel(std::string_view line, char letter)
     return -1;
   }
   ++i;
-  while (i < line.size() && isSpace(line[i]))
+  while (i < line.size() && isBlank(line[i]))
   {
     ++i;
   }

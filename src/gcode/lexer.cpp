@@ -13,11 +13,6 @@ namespace gcode
 {
 namespace
 {
-inline bool isBlank(char c)
-{
-  return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v';
-}
-
 inline char upper(char c)
 {
   return (c >= 'a' && c <= 'z') ? static_cast<char>(c - 'a' + 'A') : c;

@@ -13,6 +13,12 @@ namespace cnc_bridge
 {
 namespace gcode
 {
+/// \brief A blank between words: space, tab, CR, FF, VT (not the end of line).
+inline bool isBlank(char c)
+{
+  return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v';
+}
+
 /// \brief One address word.
 struct LexedWord
 {
