@@ -21,6 +21,7 @@
 #include "cnc_bridge/AtSpindle.h"
 #include "cnc_bridge/AtToolChange.h"
 #include "cnc_bridge/MachineState.h"
+#include "line_log.h"
 #include "topic_watch.h"
 
 namespace at_test
@@ -96,47 +97,8 @@ inline cnc_bridge::AtFollowPathGoal lineGoal(double x, double y, double z, doubl
 /// The simulator's --command-log: every message the controller received, one per line. A test
 /// marks the log, makes its requests, then sends a harmless barrier message: the command socket
 /// keeps order, so once the barrier is in the log, everything sent before it is there too.
-class CommandLog
-{
- public:
-  explicit CommandLog(std::string path) : path_(std::move(path)) {}
+using CommandLog = line_log::LineLog;
 
-  /// The lines received so far.
-  std::vector<std::string> lines() const
-  {
-    std::vector<std::string> result;
-    std::ifstream in(path_);
-    for (std::string line; std::getline(in, line);)
-    {
-      result.push_back(line);
-    }
-    return result;
-  }
-
-  /// The lines after the first \p mark lines up to and including \p barrier, once it arrived
-  /// (within \p seconds); empty if it did not.
-  std::vector<std::string> linesUntil(size_t mark, const std::string& barrier, double seconds = 10.0) const
-  {
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
-    do
-    {
-      const auto all = lines();
-      for (size_t i = mark; i < all.size(); ++i)
-      {
-        if (all[i] == barrier)
-        {
-          return {all.begin() + static_cast<long>(mark), all.begin() + static_cast<long>(i) + 1};
-        }
-      }
-      // The simulator writes the file from another process; there is nothing to wait on but the file.
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    } while (std::chrono::steady_clock::now() < deadline);
-    return {};
-  }
-
- private:
-  std::string path_;
-};
 /// Waits, before a test, until the action server is there and the controller reports its links
 /// up, its position and a clear e-stop (fails the test otherwise).
 inline void waitUntilReady(FollowPathClient& client, StateWatch& state)

@@ -16,6 +16,7 @@
 #include <sstream>
 
 #include "at_test_support.h"
+#include "process_kill.h"
 
 using namespace at_test;
 
@@ -23,14 +24,6 @@ namespace
 {
 std::string node, ns, prefix, pid_file, command_log, profile = "trapezoid";
 double jog_timeout = 0.5;  // the node's ~jog_timeout
-
-pid_t simulatorPid()
-{
-  std::ifstream in(pid_file);
-  pid_t pid = 0;
-  in >> pid;
-  return pid;
-}
 
 bool near(const geometry_msgs::Point& p, double x, double y, double z, double tolerance)
 {
@@ -511,7 +504,7 @@ TEST_F(AtController, EmergencyStopMidPathStopsMotionAndAbortsWithTheReason)
   const auto start = state.last().position;
   client.sendGoal(lineGoal(start.x - 0.1, start.y, start.z, 0.02, prefix + "machine"));
   ASSERT_TRUE(state.waitFor([&](const auto& s) { return s.position.x < start.x - 0.01; }));
-  const pid_t pid = simulatorPid();
+  const pid_t pid = process_kill::pidFromFile(pid_file);
   ASSERT_GT(pid, 0);
   ASSERT_EQ(kill(pid, SIGUSR1), 0);  // the simulator's emergency stop button
   ASSERT_TRUE(client.waitForResult(ros::Duration(10.0)));

@@ -3,9 +3,7 @@
 // report link lost makes the e-stop unknown, which refuses motion until the controller reports E0;
 // the node killed mid-goal leaves the controller holding its last setpoint, and the node started
 // again (respawn) runs the next goal.
-#include <ros/network.h>
 #include <signal.h>
-#include <xmlrpcpp/XmlRpcClient.h>
 
 #include <algorithm>
 #include <cmath>
@@ -13,48 +11,14 @@
 #include <sstream>
 
 #include "at_test_support.h"
+#include "process_kill.h"
 
 using namespace at_test;
+using process_kill::nodePid;
 
 namespace
 {
 std::string node, ns, pid_file, command_log;
-
-pid_t simulatorPid()
-{
-  std::ifstream in(pid_file);
-  pid_t pid = 0;
-  in >> pid;
-  return pid;
-}
-
-/// The process id of the node \p name, as its own XML-RPC server tells it (ROS slave API getPid);
-/// 0 if it cannot be asked.
-pid_t nodePid(const std::string& name)
-{
-  XmlRpc::XmlRpcValue args, result, uri;
-  args[0] = ros::this_node::getName();
-  args[1] = name;
-  if (!ros::master::execute("lookupNode", args, result, uri, true))
-  {
-    return 0;
-  }
-  std::string host;
-  uint32_t port = 0;
-  if (!ros::network::splitURI(static_cast<std::string>(uri), host, port))
-  {
-    return 0;
-  }
-  XmlRpc::XmlRpcClient client(host.c_str(), static_cast<int>(port), "/");
-  XmlRpc::XmlRpcValue caller, answer;
-  caller[0] = ros::this_node::getName();
-  if (!client.execute("getPid", caller, answer) || answer.getType() != XmlRpc::XmlRpcValue::TypeArray ||
-      answer.size() < 3)
-  {
-    return 0;
-  }
-  return static_cast<int>(answer[2]);
-}
 
 /// Setpoint lines ("feed pos feed pos feed pos") among \p lines.
 size_t countSetpoints(const std::vector<std::string>& lines)
@@ -126,7 +90,7 @@ TEST_F(AtControllerLink, ReportLinkLossMakesTheEmergencyStopUnknownAndRefusesMot
   CommandLog received{command_log};
   const size_t mark = received.lines().size();
   const auto start = state.last().position;
-  const pid_t pid = simulatorPid();
+  const pid_t pid = process_kill::pidFromFile(pid_file);
   ASSERT_GT(pid, 0);
   ASSERT_EQ(kill(pid, SIGHUP), 0);
   ASSERT_TRUE(state.waitFor([](const auto& s) { return s.estop == cnc_bridge::MachineState::ESTOP_UNKNOWN; }))
@@ -171,12 +135,10 @@ TEST_F(AtControllerLink, NodeDeathStopsTheSetpointsTheControllerHoldsTheLastOneA
   const pid_t pid = nodePid(node);
   ASSERT_GT(pid, 0);
   ASSERT_EQ(kill(pid, SIGKILL), 0);
-  // Measurement windows (that nothing more arrives needs a span of time): what was on its way
-  // arrives within the first, nothing in the second.
-  ros::WallDuration(0.3).sleep();
+  // What was on its way arrives within the first window, nothing in the second.
+  const auto windows = process_kill::countOverWindows([&] { return received.lines().size(); });
+  EXPECT_EQ(windows.after_second, windows.after_first);
   const auto after_death = received.lines();
-  ros::WallDuration(0.5).sleep();
-  EXPECT_EQ(received.lines().size(), after_death.size());
   // Long dead by now: a state stamped later comes from the respawned node (states are restamped
   // and published at ~state_rate).
   const ros::Time dead_by = ros::Time::now();

@@ -71,13 +71,7 @@ class Responses
 template <class M>
 ros::Publisher advertiseAndWait(const std::string& topic)
 {
-  ros::NodeHandle nh;
-  auto pub = nh.advertise<M>(topic, 10);
-  const auto deadline = ros::WallTime::now() + kWait;
-  while (pub.getNumSubscribers() == 0 && ros::WallTime::now() < deadline)
-  {
-    ros::WallDuration(0.01).sleep();  // polling the connection count: roscpp offers no wait for it
-  }
+  auto pub = topic_watch::advertiseAndWait<M>(topic, kWait.toSec());
   EXPECT_GT(pub.getNumSubscribers(), 0u) << topic;
   return pub;
 }

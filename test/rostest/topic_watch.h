@@ -4,6 +4,7 @@
 //   Record          a test's own fields behind one mutex, filled by its callbacks (several topics)
 //   Messages<T>     values of one stream (e.g. an action's feedback), in order
 //   TopicWatch<M>   Messages<M> of one topic, subscribed for as long as the watch lives
+//   advertiseAndWait<M>  a publisher whose subscriber (the node) is connected
 #pragma once
 
 #include <ros/ros.h>
@@ -165,4 +166,19 @@ class TopicWatch : public Messages<M>
  private:
   ros::Subscriber subscriber_;
 };
+
+/// \brief A publisher of \p topic once a subscriber is connected (a message published before the
+/// connection is lost); after \p seconds without one, the caller finds getNumSubscribers() 0.
+/// Polled every 10 ms: roscpp offers no event for a new connection.
+template <class M>
+ros::Publisher advertiseAndWait(const std::string& topic, double seconds = 20.0, ros::NodeHandle nh = ros::NodeHandle())
+{
+  ros::Publisher publisher = nh.advertise<M>(topic, 10);
+  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(seconds);
+  while (publisher.getNumSubscribers() == 0 && ros::WallTime::now() < deadline)
+  {
+    ros::WallDuration(0.01).sleep();
+  }
+  return publisher;
+}
 }  // namespace topic_watch
