@@ -1,13 +1,14 @@
 // ethernut_node against sim_ethernut: jobs streamed in order despite RESENDs (checked against the
 // simulator's log of accepted coordinates and against our own parse of the program), G53 moves
 // skipped or refused, the preview published before the job runs, pause/resume, cancel, a second goal
-// rejected while a job runs, the kill gate, diagnostics, and link loss (silence and a dropped
-// connection).
+// rejected while a job runs, the kill gate, diagnostics, link loss (silence and a dropped
+// connection), and the node's death in the middle of a job.
 #include <actionlib/client/simple_action_client.h>
 #include <diagnostic_msgs/DiagnosticArray.h>
 #include <gtest/gtest.h>
 #include <nav_msgs/Path.h>
 #include <ros/ros.h>
+#include <signal.h>
 #include <std_srvs/SetBool.h>
 #include <std_srvs/Trigger.h>
 #include <visualization_msgs/MarkerArray.h>
@@ -26,6 +27,7 @@
 #include "cnc_bridge/MachineState.h"
 #include "cnc_bridge/RunJobAction.h"
 #include "cnc_bridge/gcode/gcode.h"
+#include "process_kill.h"
 #include "topic_watch.h"
 
 using cnc_bridge::MachineState;
@@ -1016,6 +1018,60 @@ TEST(EthernutLink, DroppedConnectionAbortsTheJobAndTheNodeReconnects)
   ASSERT_TRUE(watch->waitFor([] { return diag("reconnects") >= 2; }, 10.0));
   std::lock_guard<std::mutex> lock(watch->mutex);
   EXPECT_GE(diag("keepalive misses"), 1);
+}
+
+// The state the test last received (a copy, taken under the lock).
+MachineState lastState()
+{
+  std::lock_guard<std::mutex> lock(watch->mutex);
+  return watch->state;
+}
+
+// Node death: the node killed (SIGKILL: no pause, no goodbye) while the board moves the second set
+// of a job. Nothing reaches the board after the death, the third set least of all; the board holds
+// the set in flight where it was when the connection ended (the simulated board stops the move and
+// answers no NEXT) and keeps that position across connections. The launch respawns the node, which
+// reads the held position from the board's report and runs the next job.
+TEST(EthernutNodeDeath,
+     NothingReachesTheBoardAfterTheNodeDiesTheBoardHoldsTheSetInFlightAndARespawnedNodeRunsTheNextJob)
+{
+  ASSERT_TRUE(boardReady());
+  const pid_t pid = process_kill::nodePid(ns + "/ethernut_node");
+  ASSERT_GT(pid, 0);
+  auto client = actionClient();
+  const size_t done_before = simLog().size();
+  const size_t messages_before = simMessages().size();
+  // 10 mm apart at the simulator's 20 mm/s: every set moves for half a second.
+  client->sendGoal(pointsGoal({{0.010, 0, 0}, {0.020, 0, 0}, {0.030, 0, 0}, {0.040, 0, 0}}));
+  // The board reports its position every 20 ms: the kill lands well inside the second move.
+  ASSERT_TRUE(watch->waitFor([] { return watch->state.position.x > 0.012; }));
+  const double x_at_kill = lastState().position.x;
+  ASSERT_EQ(kill(pid, SIGKILL), 0);
+  const auto windows = process_kill::countOverWindows([] { return simMessages().size(); });
+  EXPECT_EQ(windows.after_second, windows.after_first) << "the board received messages after the node died";
+  EXPECT_EQ(simMessagesNamed("coordinates", messages_before), 2) << "only the first two sets reached the board";
+  expectSameCoordinates(simLog(), done_before, {{10, 0, 0}});  // the set in flight was not finished
+  const ros::Time dead_by = ros::Time::now();                  // a state stamped later comes from the respawned node
+
+  // Respawned: its state (from the board's first report on the new connection) is the held
+  // position, part-way to the set in flight.
+  ASSERT_TRUE(watch->waitFor(
+      [&]
+      {
+        return watch->state.header.stamp > dead_by && watch->state.link == MachineState::LINK_UP &&
+               watch->state.position_valid && watch->state.execution == MachineState::EXECUTION_READY;
+      },
+      30.0))
+      << "no state from a respawned node";
+  EXPECT_NE(process_kill::nodePid(ns + "/ethernut_node"), pid);
+  const double held_x = lastState().position.x;
+  EXPECT_GE(held_x, x_at_kill);
+  EXPECT_LT(held_x, 0.0195);
+  auto next = actionClient();
+  next->sendGoal(pointsGoal({{0.005, 0.001, 0}}));
+  ASSERT_TRUE(next->waitForResult(ros::Duration(20.0)));
+  ASSERT_EQ(next->getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << next->getState().getText();
+  expectSameCoordinates(simLog(), done_before, {{10, 0, 0}, {5, 1, 0}});
 }
 
 int main(int argc, char** argv)
