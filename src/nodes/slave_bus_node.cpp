@@ -167,7 +167,9 @@ class SlaveBusNode
     state_.diagnostics().add("slave bus", this, &SlaveBusNode::diagnose);
     link_ = std::make_unique<ReconnectingLink>("slave bus " + settings_.describe(),
                                                [this] { return std::make_unique<SerialPort>(settings_); });
-    link_->start([this](Transport& port) { ioLoop(port); }, state_.linkStateHandler());
+    queue_.close();  // until the link is up: nothing waits to be sent when it opens
+    link_->start([this](Transport& port) { ioLoop(port); },
+                 [this](LinkState link, const std::string& why) { onLinkState(link, why); });
     ROS_INFO_STREAM("slave_bus_node: " << table_.slaves().size() << " slaves on a bus of " << table_.busSize() << ", "
                                        << slave_bus::toString(framing_) << " framing, WirePacker CRC "
                                        << slave_bus::toString(table_.wire().crc) << ", payloads up to "
@@ -210,7 +212,7 @@ class SlaveBusNode
     }
     if (!queue_.pushFrame(std::move(step)))
     {
-      refuseFull();
+      refuseNotQueued("bus/frame");
     }
   }
 
@@ -233,7 +235,7 @@ class SlaveBusNode
     }
     if (!queue_.pushCommand(slave.address - 1u, std::move(payload)))
     {
-      refuseFull();
+      refuseNotQueued("slaves/" + slave.name + "/command");
     }
   }
 
@@ -243,12 +245,46 @@ class SlaveBusNode
     ROS_ERROR_STREAM_THROTTLE(1.0, why);
   }
 
-  void refuseFull()
+  /// The queue took nothing: the link is down (closed queue), or it is full.
+  void refuseNotQueued(const std::string& input)
   {
-    refuse("slave bus: " + std::to_string(queue_.size()) + " steps already queued (~max_queued_steps): step refused");
+    if (!queue_.isOpen())
+    {
+      return refuse(input + " refused: the slave bus link is not up (" + settings_.describe() +
+                    "); nothing is kept to be sent when it returns");
+    }
+    refuse(input + " refused: " + std::to_string(queue_.size()) +
+           " steps already queued (~max_queued_steps): step refused");
   }
 
   // ---- link -------------------------------------------------------------------------------------
+
+  /// The link's state changes. The queue is open only while the link is up: steps that waited
+  /// through an outage would move the machine when the link returns, long after they were asked
+  /// for, so they are dropped (counted and logged) and inputs meanwhile are refused.
+  void onLinkState(LinkState link, const std::string& why)
+  {
+    if (link == LinkState::kUp)
+    {
+      queue_.open();
+    }
+    else
+    {
+      dropQueuedSteps();
+    }
+    state_.setLink(link, why);
+  }
+
+  void dropQueuedSteps()
+  {
+    const size_t dropped = queue_.close();
+    if (dropped > 0)
+    {
+      monitor_.droppedWithLink(dropped);
+      ROS_ERROR_STREAM("slave bus link down: " << dropped
+                                               << " queued steps dropped; they are not sent when the link returns");
+    }
+  }
 
   /// The session on the open port (the link's thread): sends queued steps one at a time and
   /// publishes what comes back, until the port fails or the node stops.

@@ -2,7 +2,11 @@
 // receive state machine on the serial link, forwards each payload to its slave as a WirePacker
 // frame, and while idle polls the slaves and writes their answers up the link (the uplink format of
 // include/cnc_bridge/slave_bus/array_protocol.h). First line: "sim_slave_bus pty <path>".
+#include <unistd.h>
+
 #include <boost/program_options.hpp>
+#include <cstdio>
+#include <fstream>
 #include <iostream>
 #include <memory>
 #include <sstream>
@@ -54,13 +58,36 @@ SimSlave parseSlave(const std::string& text)
   return SimSlave(static_cast<uint8_t>(address), parseSimRole(parts[1]),
                   parts.size() == 3 ? parseEncoding(parts[2]) : Encoding::kBytes);
 }
+
+/// --delivery-log: one line per payload handed to a slave, "ADDRESS HEX" (e.g. "1 04d2"), flushed
+/// at once: a test reads the file from another process to see what the machine received. Appended
+/// to, so a simulator started again adds to its predecessor's record.
+std::function<void(uint8_t, const std::vector<uint8_t>&)> deliveryLogger(const std::string& path)
+{
+  auto out = std::make_shared<std::ofstream>(path, std::ios::app);
+  if (!*out)
+  {
+    throw ConfigError("--delivery-log: cannot open " + path);
+  }
+  return [out](uint8_t address, const std::vector<uint8_t>& payload)
+  {
+    *out << static_cast<int>(address) << ' ';
+    for (const uint8_t byte : payload)
+    {
+      char digits[3];
+      std::snprintf(digits, sizeof digits, "%02x", byte);
+      *out << digits;
+    }
+    *out << std::endl;
+  };
+}
 }  // namespace
 
 int main(int argc, char** argv)
 {
   namespace po = boost::program_options;
   po::options_description options("sim_slave_bus options");
-  std::string link, framing, wirepacker_crc;
+  std::string link, framing, wirepacker_crc, delivery_log, pid_file;
   std::vector<std::string> slave_specs;
   std::vector<unsigned> noisy_slaves;
   unsigned baud = 0, resync_gap_ms = 0, corrupt_every = 0, max_payload = 0;
@@ -85,7 +112,11 @@ int main(int argc, char** argv)
       "noisy-slave", po::value(&noisy_slaves)->composing(),
       "ADDR, repeatable: this slave's I2C answers fail the master's CRC check (status 3)")(
       "corrupt-uplink-every", po::value(&corrupt_every)->default_value(0),
-      "corrupt one byte of every Nth uplink write (0: never)")("verbose,v", "log every frame on stderr");
+      "corrupt one byte of every Nth uplink write (0: never)")(
+      "delivery-log", po::value(&delivery_log),
+      "append every payload handed to a slave to this file as 'ADDRESS HEX', one per line")(
+      "pid-file", po::value(&pid_file), "write the process id here (a test that stops the simulator reads it)")(
+      "verbose,v", "log every frame on stderr");
   po::variables_map vm;
   try
   {
@@ -116,6 +147,10 @@ int main(int argc, char** argv)
     sim_options.resync_gap = Milliseconds(resync_gap_ms);
     sim_options.corrupt_uplink_every = corrupt_every;
     sim_options.wire = WireFormat::of(parseWireCrc(wirepacker_crc), max_payload);
+    if (!delivery_log.empty())
+    {
+      sim_options.on_delivery = deliveryLogger(delivery_log);
+    }
     for (const unsigned address : noisy_slaves)
     {
       if (address < 1 || address > slaves.size())
@@ -143,6 +178,10 @@ int main(int argc, char** argv)
                     { std::cerr << toString(level) << ": " << line << "\n"; });
     }
     SimMaster master(*transport, std::move(slaves), sim_options);
+    if (!pid_file.empty())
+    {
+      std::ofstream(pid_file) << ::getpid() << "\n";
+    }
     sim::announce("sim_slave_bus", "pty " + pty.slavePath());
     master.run(stop);
     const auto& s = master.stats();

@@ -76,6 +76,12 @@ void BusMonitor::refused()
   ++refused_;
 }
 
+void BusMonitor::droppedWithLink(size_t steps)
+{
+  std::lock_guard<std::mutex> lock(mutex_);
+  dropped_with_link_ += steps;
+}
+
 uint64_t BusMonitor::masterReports(MasterStatus code) const
 {
   const auto found = master_reports_.find(static_cast<uint8_t>(code));
@@ -121,6 +127,7 @@ BusMonitor::Report BusMonitor::report()
       {"payloads too long for the master (status 4)", too_long},
       {"replies from unconfigured addresses", unknown_replies_},
       {"refused inputs", refused_},
+      {"steps dropped with the link", dropped_with_link_},
   };
   // Per slave, one numeric key each, "<name>: <counter>", so that tools and tests can read them.
   for (size_t i = 0; i < slaves_.size(); ++i)

@@ -22,6 +22,10 @@ bool StepQueue::pushFrame(StepPayloads payloads)
 bool StepQueue::pushCommand(size_t slot, std::vector<uint8_t> payload)
 {
   std::lock_guard<std::mutex> lock(mutex_);
+  if (!open_)
+  {
+    return false;
+  }
   // Only the last step can take it: joining an earlier one would reorder commands across an
   // explicit frame or overtake a command to the same slave.
   if (!steps_.empty() && steps_.back().from_commands && steps_.back().payloads.at(slot).empty())
@@ -36,7 +40,7 @@ bool StepQueue::pushCommand(size_t slot, std::vector<uint8_t> payload)
 
 bool StepQueue::pushLocked(Step step)
 {
-  if (steps_.size() >= max_steps_)
+  if (!open_ || steps_.size() >= max_steps_)
   {
     return false;
   }
@@ -89,6 +93,27 @@ bool StepQueue::stopped() const
 {
   std::lock_guard<std::mutex> lock(mutex_);
   return stopped_;
+}
+
+size_t StepQueue::close()
+{
+  std::lock_guard<std::mutex> lock(mutex_);
+  open_ = false;
+  const size_t dropped = steps_.size();
+  steps_.clear();
+  return dropped;
+}
+
+void StepQueue::open()
+{
+  std::lock_guard<std::mutex> lock(mutex_);
+  open_ = true;
+}
+
+bool StepQueue::isOpen() const
+{
+  std::lock_guard<std::mutex> lock(mutex_);
+  return open_;
 }
 
 size_t StepQueue::size() const

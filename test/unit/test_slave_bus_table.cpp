@@ -152,6 +152,28 @@ TEST(StepQueue, AFullQueueRefusesAndAStepOfCommandsLeavesAfterTheDelay)
   EXPECT_EQ(step, (sb::StepPayloads{{2}, {5}}));
 }
 
+// The link went down: what waited is dropped, not sent when the link returns, and nothing is
+// queued meanwhile, not even a command whose slot is free in a waiting step.
+TEST(StepQueue, AClosedQueueDropsItsStepsAndRefusesPushesUntilOpened)
+{
+  sb::StepQueue queue(2, 10, Milliseconds(60000));
+  EXPECT_TRUE(queue.isOpen());
+  ASSERT_TRUE(queue.pushFrame({{1}, {}}));
+  ASSERT_TRUE(queue.pushCommand(0, {2}));
+  EXPECT_EQ(queue.close(), 2u);
+  EXPECT_FALSE(queue.isOpen());
+  EXPECT_EQ(queue.size(), 0u);
+  EXPECT_FALSE(queue.pushFrame({{3}, {}}));
+  EXPECT_FALSE(queue.pushCommand(1, {4}));
+  sb::StepPayloads step;
+  EXPECT_FALSE(queue.take(step, Milliseconds(0)));
+  queue.open();
+  ASSERT_TRUE(queue.pushFrame({{5}, {6}}));
+  ASSERT_TRUE(queue.take(step, Milliseconds(0)));
+  EXPECT_EQ(step, (sb::StepPayloads{{5}, {6}}));
+  EXPECT_EQ(queue.close(), 0u);
+}
+
 TEST(StepQueue, StopWakesAWaitingTake)
 {
   sb::StepQueue queue(2, 2, Milliseconds(1));

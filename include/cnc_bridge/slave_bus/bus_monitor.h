@@ -36,6 +36,8 @@ class BusMonitor
   std::string masterStatus(const UplinkRecord& record);
   /// \brief An input (frame, command, step) was refused; the caller logs why.
   void refused();
+  /// \brief \p steps waiting for the link were dropped when it went down; the caller logs it.
+  void droppedWithLink(size_t steps);
 
   struct Report
   {
@@ -66,6 +68,7 @@ class BusMonitor
   uint64_t unknown_replies_ = 0;
   uint64_t unconfigured_timeouts_ = 0;
   uint64_t refused_ = 0;
+  uint64_t dropped_with_link_ = 0;
   uint64_t last_timeouts_ = 0, last_link_errors_ = 0, last_bad_frames_ = 0, last_slave_errors_ = 0;
 };
 }  // namespace slave_bus

@@ -135,6 +135,10 @@ void SimMaster::deliver(const StepReceiver::Delivery& delivery)
   // The real bytes of the I2C write, as I2C_send_packed() sends them.
   slaves_[delivery.address - 1].receive(WirePacker::pack(delivery.payload, options_.wire));
   ++stats_.deliveries;
+  if (options_.on_delivery)
+  {
+    options_.on_delivery(delivery.address, delivery.payload);
+  }
 }
 
 void SimMaster::sendStatus(MasterStatus status, int address)

@@ -7,6 +7,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -87,6 +88,9 @@ class SimMaster
     WireFormat wire;
     /// Corrupt one byte of every Nth uplink write (0 = never): exercises the PC's CRC check.
     unsigned corrupt_uplink_every = 0;
+    /// Told of every payload handed to a slave (address, payload), e.g. to log what the machine
+    /// received; empty: nobody is told.
+    std::function<void(uint8_t address, const std::vector<uint8_t>& payload)> on_delivery;
   };
   struct Stats
   {
