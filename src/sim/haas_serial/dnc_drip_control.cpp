@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <deque>
 #include <sstream>
 #include <thread>
 #include <vector>
@@ -22,14 +23,86 @@ std::string DripControlStats::summary() const
   out << "received " << received << " characters, xoff " << xoff_events << ", max after xoff " << max_after_xoff
       << ", xoff over allowance " << xoff_over_allowance << ", overruns " << overruns << ", overflow " << overflow
       << " (beyond the control's own lateness " << overflow_beyond_late << ", late " << late << ")"
-      << ", parity errors " << parity_errors << ", program " << (program_complete ? "complete" : "incomplete");
+      << ", parity errors " << parity_errors << ", program " << (program_complete ? "complete" : "incomplete")
+      << (reset ? ", reset" : "");
   return out.str();
 }
 
+namespace
+{
 using Clock = std::chrono::steady_clock;
 
+/// The characters in the control's buffer, in order, and the block the control reads from them
+/// (DripControlHooks): executing a character moves it into the block; its end of block runs it.
+class Execution
+{
+ public:
+  explicit Execution(const DripControlHooks& hooks) : hooks_(hooks) {}
+
+  void buffered(uint8_t c)
+  {
+    pending_.push_back(c);
+    waiting_ = false;
+  }
+
+  void execute(size_t count)
+  {
+    for (size_t i = 0; i < count && !pending_.empty(); ++i)
+    {
+      read(pending_.front());
+      pending_.pop_front();
+    }
+  }
+
+  void executeAll() { execute(pending_.size()); }
+
+  /// Reports, once, a buffer run empty in the middle of a program.
+  void checkStarved()
+  {
+    if (pending_.empty() && inProgram() && !waiting_)
+    {
+      waiting_ = true;
+      if (hooks_.waiting_for_data)
+      {
+        hooks_.waiting_for_data();
+      }
+    }
+  }
+
+ private:
+  void read(uint8_t c)
+  {
+    if (c == '\n')
+    {
+      if (!block_.empty())
+      {
+        last_ = block_;
+        block_.clear();
+        if (hooks_.executed)
+        {
+          hooks_.executed(last_);
+        }
+      }
+    }
+    else if (c >= 0x20 && c < 0x7f)  // not CR, tape-feed NULs or DC codes
+    {
+      block_.push_back(static_cast<char>(c));
+    }
+  }
+
+  bool inProgram() const { return !last_.empty() && last_ != "%"; }
+
+  const DripControlHooks& hooks_;
+  std::deque<uint8_t> pending_;
+  std::string block_;  // read so far, its end of block not yet
+  std::string last_;   // the block executed last
+  bool waiting_ = false;
+};
+}  // namespace
+
 DripControlStats runDripControl(Transport& link, const DripControlOptions& options, StopSignal& stop,
-                                const std::function<void(const uint8_t*, size_t)>& sink, UartModel* line)
+                                const std::function<void(const uint8_t*, size_t)>& sink, UartModel* line,
+                                const DripControlHooks& hooks)
 {
   DripControlStats stats;
   if (options.realtime)
@@ -45,6 +118,7 @@ DripControlStats runDripControl(Transport& link, const DripControlOptions& optio
   }
   UartModel own_uart(options.line_cps);
   UartModel& uart = line != nullptr ? *line : own_uart;
+  Execution execution(hooks);
   size_t buffered = 0;
   double credit = 0;  // characters the control could have executed but has not yet
   bool xoff = false;
@@ -115,6 +189,7 @@ DripControlStats runDripControl(Transport& link, const DripControlOptions& optio
       else
       {
         ++buffered;
+        execution.buffered(c);
       }
       if (c == '%' && ++percents == 2)
       {
@@ -144,12 +219,18 @@ DripControlStats runDripControl(Transport& link, const DripControlOptions& optio
 
   while (!stop.stopped())
   {
+    if (hooks.reset && hooks.reset())
+    {
+      stats.reset = true;
+      break;
+    }
     const size_t wanted = uart.allowed(sizeof(buffer));
     const size_t n = link.read(buffer, wanted, uart.timeout());
     uart.took(n, wanted);
     const auto now = Clock::now();
     if (options.execution_cps <= 0)
     {
+      execution.executeAll();
       buffered = 0;
     }
     else
@@ -157,6 +238,7 @@ DripControlStats runDripControl(Transport& link, const DripControlOptions& optio
       credit += std::chrono::duration<double>(now - last).count() * options.execution_cps;
       const auto executed = static_cast<size_t>(std::min<double>(static_cast<double>(buffered), std::floor(credit)));
       buffered -= executed;
+      execution.execute(executed);
       credit -= static_cast<double>(executed);
       if (buffered == 0)
       {
@@ -165,6 +247,7 @@ DripControlStats runDripControl(Transport& link, const DripControlOptions& optio
     }
     last = now;
     take(buffer, n);
+    execution.checkStarved();
     if (xoff && buffered <= options.low_mark)
     {
       closeXoffEvent();
@@ -184,6 +267,10 @@ DripControlStats runDripControl(Transport& link, const DripControlOptions& optio
   if (xoff)
   {
     closeXoffEvent();
+  }
+  if (stats.program_complete)
+  {
+    execution.executeAll();
   }
   return stats;
 }

@@ -66,6 +66,7 @@ struct DripControlStats
   uint64_t overflow_beyond_late = 0;
   uint64_t parity_errors = 0;     ///< 7E1: bytes whose bit 7 was set but did not give even parity
   bool program_complete = false;  ///< the second '%' arrived
+  bool reset = false;             ///< the operator reset the control (DripControlHooks::reset)
 
   /// \brief One line for the simulator's exit report.
   std::string summary() const;
@@ -135,11 +136,32 @@ class UartModel
   double credit_ = 0;
   std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
 };
-/// \brief Runs the control until the program ends (stop_at_end), \p stop is signalled, or the link
-/// fails. \p sink receives every received character (parity masked) in order. \p line: the UART
-/// model to use (kept across runs by the caller); nullptr = a new one of options.line_cps.
+/// \brief What the control does with what it received, for a log of its execution, and the
+/// operator's RESET. Every member may be empty.
+///
+/// A block executes when its end of block (LF) is executed, so a block whose end has not arrived
+/// never runs; its text is given without the end of block, tape-feed NULs and DC codes. When the
+/// buffer runs empty in the middle of a program (the last block executed is not a '%'), the control
+/// waits for data, as a DNC control does when its host stops sending: it does not run on.
+struct DripControlHooks
+{
+  std::function<void(const std::string& block)> executed;  ///< a block, once executed
+  std::function<void()> waiting_for_data;                  ///< the buffer ran empty mid-program (once per time)
+  /// Polled while the control runs: true = the operator pressed RESET. The run ends at once, the
+  /// program abandoned: what is buffered and the block being read are dropped, and the next run
+  /// takes the next '%' as the start of a program (a control that starved needs a reset before a
+  /// restart, or it would read the restart's '%' as the end of the program it was running).
+  std::function<bool()> reset;
+};
+
+/// \brief Runs the control until the program ends (stop_at_end), \p stop is signalled, the operator
+/// resets it (\p hooks), or the link fails. \p sink receives every received character (parity
+/// masked) in order. \p line: the UART model to use (kept across runs by the caller); nullptr = a
+/// new one of options.line_cps. At the end of a program the blocks still buffered are executed at
+/// once (the next run starts with an empty buffer).
 DripControlStats runDripControl(Transport& link, const DripControlOptions& options, StopSignal& stop,
-                                const std::function<void(const uint8_t*, size_t)>& sink, UartModel* line = nullptr);
+                                const std::function<void(const uint8_t*, size_t)>& sink, UartModel* line = nullptr,
+                                const DripControlHooks& hooks = {});
 
 /// \brief A control punching a program (backup): options of the `punch` mode.
 struct PunchOptions
