@@ -47,6 +47,10 @@ if(NOT CNC_BRIDGE_CORE_ONLY AND CATKIN_ENABLE_TESTING AND TARGET dnc_node)
   add_rostest_gtest(test_dnc_drip test/rostest/dnc_drip.test test/rostest/test_dnc_drip.cpp)
   target_link_libraries(test_dnc_drip ${catkin_LIBRARIES} ${GTEST_LIBRARIES})
   add_dependencies(test_dnc_drip dnc_node sim_haas_serial ${PROJECT_NAME}_generate_messages_cpp)
+  # The feed breaking off: node death (respawn) and link loss, seen from the control's side.
+  add_rostest_gtest(test_dnc_drip_link test/rostest/dnc_drip_link.test test/rostest/test_dnc_drip_link.cpp)
+  target_link_libraries(test_dnc_drip_link ${catkin_LIBRARIES} ${GTEST_LIBRARIES})
+  add_dependencies(test_dnc_drip_link dnc_node sim_haas_serial ${PROJECT_NAME}_generate_messages_cpp)
 endif()
 
 # cnc_dnc drip / backup subcommands (xmodem.cmake declares the tool).
