@@ -16,7 +16,7 @@ using Clock = std::chrono::steady_clock;
 
 Milliseconds remaining(Clock::time_point deadline)
 {
-  const auto left = std::chrono::duration_cast<Milliseconds>(deadline - Clock::now());
+  const auto left = std::chrono::ceil<Milliseconds>(deadline - Clock::now());  // up: a wait, not a poll
   return std::max(left, Milliseconds(0));
 }
 }  // namespace

@@ -204,7 +204,25 @@ TEST(SerialPort, ReadTimesOutWithNothingToRead)
   const auto start = steady_clock::now();
   uint8_t byte;
   EXPECT_EQ(port.read(&byte, 1, Milliseconds(50)), 0u);
-  EXPECT_GE(steady_clock::now() - start, Milliseconds(45));
+  EXPECT_GE(steady_clock::now() - start, Milliseconds(50));
+}
+
+// A read of 1 ms waits 1 ms; it is not a poll that returns at once (a loop of such reads, as a
+// simulated control idling between programs makes, would spin a core).
+TEST(SerialPort, AShortTimeoutIsWaitedInFull)
+{
+  PtyMaster device;
+  SerialPort port(ptySettings(device));
+  uint8_t byte;
+  for (Transport* link : std::initializer_list<Transport*>{&port, &device})
+  {
+    const auto start = steady_clock::now();
+    for (int i = 0; i < 100; ++i)
+    {
+      ASSERT_EQ(link->read(&byte, 1, Milliseconds(1)), 0u);
+    }
+    EXPECT_GE(steady_clock::now() - start, Milliseconds(100)) << link->describe();
+  }
 }
 
 TEST(SerialPort, PartialReadsReturnWhatIsThere)

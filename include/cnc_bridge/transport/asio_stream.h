@@ -181,7 +181,9 @@ class AsioStreamTransport : public Transport
     {
       return kWaitForever;
     }
-    const auto left = std::chrono::duration_cast<Milliseconds>(deadline - std::chrono::steady_clock::now());
+    // Rounded up: 0.9 ms left is a wait of 1 ms, not a poll (a read of 1 ms would otherwise
+    // return at once, and a loop of such reads spin).
+    const auto left = std::chrono::ceil<Milliseconds>(deadline - std::chrono::steady_clock::now());
     return left.count() > 0 ? left : Milliseconds(0);
   }
   static bool expired(std::chrono::steady_clock::time_point deadline, Milliseconds timeout)
