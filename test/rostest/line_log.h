@@ -1,10 +1,12 @@
 // A simulator's record of what it received, one line each in a file it appends to from its own
 // process (e.g. sim_at_controller --command-log, sim_slave_bus --delivery-log): what the machine
-// got, seen from the machine's side.
+// got, seen from the machine's side. And the two ways to read other files a simulator writes.
 #pragma once
 
 #include <chrono>
 #include <fstream>
+#include <functional>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <utility>
@@ -12,6 +14,31 @@
 
 namespace line_log
 {
+/// \brief The whole content of \p path ("" if it cannot be read).
+inline std::string readFile(const std::string& path)
+{
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream out;
+  out << in.rdbuf();
+  return out.str();
+}
+
+/// \brief Waits until \p ready holds, checked every 20 ms for up to \p seconds: for files a
+/// simulator writes or a node's process, where there is nothing to subscribe to.
+inline bool waitUntil(const std::function<bool()>& ready, double seconds)
+{
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+  while (std::chrono::steady_clock::now() < deadline)
+  {
+    if (ready())
+    {
+      return true;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  return ready();
+}
+
 /// \brief The lines of one log file. A test marks the log (the number of lines so far), makes its
 /// requests, then waits for a line that must come after them (a barrier): the link keeps order,
 /// so once the barrier is in the log, everything sent before it is there too.

@@ -23,6 +23,7 @@
 #include "cnc_bridge/MachineState.h"
 #include "cnc_bridge/PlanDrip.h"
 #include "cnc_bridge/TransferAction.h"
+#include "line_log.h"
 #include "topic_watch.h"
 
 namespace
@@ -30,27 +31,8 @@ namespace
 std::string ns, pty, received_path, stats_path, program_path, backup_ns, backup_dir, punch_pty;
 using Client = actionlib::SimpleActionClient<cnc_bridge::TransferAction>;
 
-std::string readFile(const std::string& path)
-{
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream out;
-  out << in.rdbuf();
-  return out.str();
-}
-
-// Waits until \p ready holds, checked every 20 ms up to the limit (files the simulator writes, a
-// link it makes: there is nothing to subscribe to).
-bool waitUntil(const std::function<bool()>& ready, double seconds)
-{
-  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(seconds);
-  while (ros::WallTime::now() < deadline)
-  {
-    if (ready())
-      return true;
-    ros::WallDuration(0.02).sleep();
-  }
-  return ready();
-}
+using line_log::readFile;
+using line_log::waitUntil;
 
 // The simulator renames its stats file into place when a program is complete.
 bool waitForContent(const std::string& path, const std::function<bool(const std::string&)>& ready, double seconds)

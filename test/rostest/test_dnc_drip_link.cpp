@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <fstream>
 #include <functional>
+#include <memory>
 #include <regex>
 #include <sstream>
 
@@ -30,27 +31,8 @@ using Lines = std::vector<std::string>;
 const char* const kWaiting = "waiting for data";
 std::string program_path;
 
-std::string readFile(const std::string& path)
-{
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream out;
-  out << in.rdbuf();
-  return out.str();
-}
-
-// Waits until \p ready holds, checked every 20 ms up to the limit (files the simulator writes, a
-// node's process: there is nothing to subscribe to).
-bool waitUntil(const std::function<bool()>& ready, double seconds)
-{
-  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(seconds);
-  while (ros::WallTime::now() < deadline)
-  {
-    if (ready())
-      return true;
-    ros::WallDuration(0.02).sleep();
-  }
-  return ready();
-}
+using line_log::readFile;
+using line_log::waitUntil;
 
 /// The lines of \p text that end with a line feed (a partial last line left out).
 Lines wholeLines(const std::string& text)
@@ -239,18 +221,30 @@ void expectARestartAfterTheLastExecutedBlockRunsToTheEnd(Machine& machine, const
 }
 }  // namespace
 
+/// Each test: the control and the node ready, the control's record so far marked, a feed sent.
+class DncDripLink : public ::testing::Test
+{
+ protected:
+  void startFeed()
+  {
+    ASSERT_TRUE(machine.ready(client, control));
+    mark = std::make_unique<const Since>(control);
+    client.sendGoal(Machine::feed());
+  }
+
+  Control control;
+  Machine machine;
+  Client client{machine.node() + "/transfer", true};
+  std::unique_ptr<const Since> mark;  ///< what the control had before the feed
+};
+
 // First of the feeds: the simulator closes its pty after the 1200th character it received (the
 // cable pulled; what the node had queued beyond it is lost) and makes a new one at the same link
 // (plugged back in). The goal fails naming the port; the control executes the whole blocks it got
 // and waits. The node opens the port for each transfer, so the restart goes over the new link.
-TEST(DncDripLink, LinkLossFailsTheGoalNamingThePortLeavesTheControlWaitingAndTheRestartRunsOnTheNewLink)
+TEST_F(DncDripLink, LinkLossFailsTheGoalNamingThePortLeavesTheControlWaitingAndTheRestartRunsOnTheNewLink)
 {
-  Control control;
-  Machine machine;
-  Client client(machine.node() + "/transfer", true);
-  ASSERT_TRUE(machine.ready(client, control));
-  const Since mark(control);
-  client.sendGoal(Machine::feed());
+  ASSERT_NO_FATAL_FAILURE(startFeed());
   ASSERT_TRUE(client.waitForResult(ros::Duration(60)));
   EXPECT_EQ(actionlib::SimpleClientGoalState::ABORTED, client.getState().state_);
   const auto result = client.getResult();
@@ -258,9 +252,9 @@ TEST(DncDripLink, LinkLossFailsTheGoalNamingThePortLeavesTheControlWaitingAndThe
 
   // The link is gone: nothing more can arrive; the control executes its buffer and starves.
   ASSERT_TRUE(waitUntil([&] { return control.logEndsWith(kWaiting); }, 10));
-  const std::string received = mark.received(control);
+  const std::string received = mark->received(control);
   EXPECT_EQ(1200u, received.size());
-  expectAPrefixRunToItsLastWholeBlockThenWaiting(received, mark.log(control));
+  expectAPrefixRunToItsLastWholeBlockThenWaiting(received, mark->log(control));
   // The node reports what it wrote, which is more than arrived: a restart goes by the control.
   EXPECT_GE(result->stopped_at_line, wholeLines(received).size());
 
@@ -270,14 +264,9 @@ TEST(DncDripLink, LinkLossFailsTheGoalNamingThePortLeavesTheControlWaitingAndThe
 // The node killed (SIGKILL: no shutdown, nothing more written) in the middle of a feed. What it
 // had written reaches the control, nothing after; the control executes the whole blocks it got
 // and waits. roslaunch starts the node again (respawn); it runs the restart.
-TEST(DncDripLink, NodeDeathLeavesTheControlWaitingAfterTheBlocksItReceivedAndTheRespawnedNodeRunsTheRestart)
+TEST_F(DncDripLink, NodeDeathLeavesTheControlWaitingAfterTheBlocksItReceivedAndTheRespawnedNodeRunsTheRestart)
 {
-  Control control;
-  Machine machine;
-  Client client(machine.node() + "/transfer", true);
-  ASSERT_TRUE(machine.ready(client, control));
-  const Since mark(control);
-  client.sendGoal(Machine::feed());
+  ASSERT_NO_FATAL_FAILURE(startFeed());
   // By line 40 (some 900 characters) the control holds the feed: its DC3 goes at 512 buffered.
   const uint32_t sent = machine.waitForLine(40);
   ASSERT_GE(sent, 40u);
@@ -292,11 +281,11 @@ TEST(DncDripLink, NodeDeathLeavesTheControlWaitingAfterTheBlocksItReceivedAndThe
   // nothing more is executed.
   ros::WallDuration(0.5).sleep();
   ASSERT_TRUE(waitUntil([&] { return control.logEndsWith(kWaiting); }, 10));
-  const std::string received = mark.received(control);
-  const Lines log = mark.log(control);
+  const std::string received = mark->received(control);
+  const Lines log = mark->log(control);
   ros::WallDuration(0.5).sleep();
-  EXPECT_EQ(received, mark.received(control));
-  EXPECT_EQ(log, mark.log(control));
+  EXPECT_EQ(received, mark->received(control));
+  EXPECT_EQ(log, mark->log(control));
 
   expectAPrefixRunToItsLastWholeBlockThenWaiting(received, log);
   // Every line the node reported sent before it died was on its way: it arrived whole.

@@ -19,6 +19,7 @@
 #include "cnc_bridge/ReceiveProgram.h"
 #include "cnc_bridge/SendProgram.h"
 #include "cnc_bridge/TransferAction.h"
+#include "line_log.h"
 #include "topic_watch.h"
 
 using cnc_bridge::MachineState;
@@ -32,11 +33,7 @@ std::string param(const std::string& name)
   return value;
 }
 
-std::string readFile(const std::string& path)
-{
-  std::ifstream in(path, std::ios::binary);
-  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-}
+using line_log::readFile;
 
 bool exists(const std::string& path)
 {
