@@ -2,7 +2,6 @@
 // receive state machine on the serial link, forwards each payload to its slave as a WirePacker
 // frame, and while idle polls the slaves and writes their answers up the link (the uplink format of
 // include/cnc_bridge/slave_bus/array_protocol.h). First line: "sim_slave_bus pty <path>".
-#include <unistd.h>
 
 #include <boost/program_options.hpp>
 #include <cstdio>
@@ -180,7 +179,7 @@ int main(int argc, char** argv)
     SimMaster master(*transport, std::move(slaves), sim_options);
     if (!pid_file.empty())
     {
-      std::ofstream(pid_file) << ::getpid() << "\n";
+      sim::writePidFile(pid_file);
     }
     sim::announce("sim_slave_bus", "pty " + pty.slavePath());
     master.run(stop);

@@ -2,7 +2,6 @@
 #include "sim/at_protocol/sim_controller.h"
 
 #include <time.h>
-#include <unistd.h>
 
 #include <cmath>
 #include <iostream>
@@ -94,7 +93,7 @@ void SimController::run()
   }
   if (!options_.pid_file.empty())
   {
-    std::ofstream(options_.pid_file) << getpid() << "\n";
+    sim::writePidFile(options_.pid_file);
   }
   std::thread commands([&] { commandLoop(command_server); });
   std::thread reports([&] { report_server ? reportServerLoop(*report_server) : reportClientLoop(); });

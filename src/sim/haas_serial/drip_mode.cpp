@@ -5,7 +5,6 @@
 // For tests of a feed that breaks off: a log of the blocks it executes and of its waits for data,
 // SIGHUP as the operator's RESET, and a cable pulled once (--drop-link-after).
 #include <signal.h>
-#include <unistd.h>
 
 #include <atomic>
 #include <boost/program_options.hpp>
@@ -124,7 +123,7 @@ void listenForReset(const std::string& path)
 {
   if (!path.empty())
   {
-    std::ofstream(path) << getpid() << "\n";
+    writePidFile(path);
   }
   struct sigaction action
   {
