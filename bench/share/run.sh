@@ -7,7 +7,8 @@
 #   bench/share/run.sh [ROUNDS]      (as root: smbd must be able to become the user it serves)
 # Prints one line per size and direction: medians of ROUNDS, MB/s, and the throughput ratio
 # cnc_dnc / smbclient (>= 0.9 is the goal); and the fixed per-transfer cost (a 1-byte program:
-# process start, connect, authenticate, and for cnc_dnc the temporary name and renames).
+# process start, connect, authenticate, and for cnc_dnc the temporary name and renames); then the
+# same for one 1 MB transfer phase by phase (bench/share/phases.py, when strace is installed).
 set -euo pipefail
 root=$(cd "$(dirname "$0")/../.." && pwd)
 source "$root/scripts/env.sh"
@@ -117,3 +118,11 @@ else:
 PY
   done
 done
+
+# Where the time of one 1 MB transfer goes, phase by phase, from each client's SMB2 requests.
+if command -v strace >/dev/null; then
+  head -c 1048576 /dev/urandom >"$dir/local.nc"
+  python3 "$root/bench/share/phases.py" "$cnc_dnc" "$url" "$dir/auth" "$dir/local.nc" "$rounds"
+else
+  echo "bench/share: phases not measured: strace is not installed (apt-get install strace)"
+fi

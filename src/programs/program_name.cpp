@@ -12,7 +12,6 @@ namespace cnc_bridge::programs
 {
 namespace
 {
-constexpr size_t kHeaderBytes = 4096;
 constexpr int kMaxDigits = 8;
 
 bool sameLetters(const std::string& a, size_t at, const std::string& b)

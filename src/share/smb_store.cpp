@@ -67,6 +67,28 @@ std::recursive_mutex& libraryMutex()
   return mutex;
 }
 
+/// libsmbclient's own check of a cached connection, taken from the first context made (under the
+/// library lock).
+smbc_check_server_fn& libraryCheck()
+{
+  static smbc_check_server_fn check = nullptr;
+  return check;
+}
+
+/// libsmbclient checks a cached connection before every call that needs the server: if nothing
+/// has been heard from it (its own ECHO) within the timeout, it sends an ECHO and reconnects if
+/// that fails. An answer to a real request proves the connection as well as an echo does, so a
+/// store whose server answered within the timeout is not asked again: a short-lived store (one
+/// cnc_dnc transfer) saves a round trip. A failed call clears the store's answer, so a connection
+/// that went bad always gets libsmbclient's check.
+int checkServer(SMBCCTX* context, SMBCSRV* server)
+{
+  const auto* store = static_cast<const SmbProgramStore*>(smbc_getOptionUserData(context));
+  if (store->answeredRecently())
+    return 0;
+  return libraryCheck()(context, server);
+}
+
 void throwIfCancelled(const std::atomic<bool>* cancel, const std::string& what)
 {
   if (cancel != nullptr && cancel->load())
@@ -205,6 +227,9 @@ SMBCCTX* SmbProgramStore::context()
     throw Error("libsmbclient: cannot create a context: " + std::string(std::strerror(errno)));
   smbc_setOptionUserData(context, this);
   smbc_setFunctionAuthDataWithContext(context, &authenticate);
+  if (libraryCheck() == nullptr)
+    libraryCheck() = smbc_getFunctionCheckServer(context);
+  smbc_setFunctionCheckServer(context, &checkServer);
   smbc_setTimeout(context, static_cast<int>(timeout_.count()));
   smbc_setPort(context, static_cast<uint16_t>(url_.port));
   // A wrong password must fail as such, not fall back to an anonymous login.
@@ -219,6 +244,7 @@ SMBCCTX* SmbProgramStore::context()
   }
   context_ = context;
   reached_ = false;
+  answered_at_ = {};
   if (!repairs_.empty())
   {
     checkFolder();  // a repair needs the folder; if it cannot be reached, say why
@@ -245,7 +271,7 @@ void SmbProgramStore::checkFolder()
     dropContext();
     throw LinkError("cannot open " + url_.describe() + ": '" + url_.folder + "' is not a folder");
   }
-  reached_ = true;
+  answered();
 }
 
 std::string SmbProgramStore::connectionFailure(int error) const
@@ -271,8 +297,21 @@ std::string SmbProgramStore::connectionFailure(int error) const
   }
 }
 
+void SmbProgramStore::answered()
+{
+  reached_ = true;
+  answered_at_ = std::chrono::steady_clock::now();
+}
+
+bool SmbProgramStore::answeredRecently() const
+{
+  return answered_at_ != std::chrono::steady_clock::time_point{} &&
+         std::chrono::steady_clock::now() - answered_at_ < timeout_;
+}
+
 void SmbProgramStore::fail(const std::string& action, const std::string& name, int error)
 {
+  answered_at_ = {};  // whatever failed, the next call lets libsmbclient check the connection
   // Nothing has reached the folder on this connection yet: the server, the login, the share or the
   // folder may be what failed, not the program.
   if (!reached_ && context_ != nullptr)
@@ -308,7 +347,7 @@ ProgramEntry SmbProgramStore::statLocked(const std::string& name)
   struct stat info;
   if (smbc_getFunctionStat(ctx)(ctx, url_.pathOf(name).c_str(), &info) != 0)
     fail("stat of", name, errno);
-  reached_ = true;
+  answered();
   ProgramEntry entry;
   entry.name = name;
   entry.size = static_cast<uint64_t>(info.st_size);
@@ -334,14 +373,17 @@ void SmbProgramStore::renameLocked(const std::string& from, const std::string& t
   SMBCCTX* ctx = context();
   if (smbc_getFunctionRename(ctx)(ctx, url_.pathOf(from).c_str(), ctx, url_.pathOf(to).c_str()) != 0)
     fail("rename of", from + " to " + to, errno);
-  reached_ = true;
+  answered();
 }
 
 bool SmbProgramStore::moveAsideLocked(const std::string& name, const std::string& aside)
 {
   SMBCCTX* ctx = context();
   if (smbc_getFunctionRename(ctx)(ctx, url_.pathOf(name).c_str(), ctx, url_.pathOf(aside).c_str()) == 0)
+  {
+    answered();
     return true;
+  }
   const int error = errno;
   if (error == ENOENT && reached_)
     return false;  // no earlier version
@@ -353,7 +395,7 @@ void SmbProgramStore::unlinkLocked(const std::string& name)
   SMBCCTX* ctx = context();
   if (smbc_getFunctionUnlink(ctx)(ctx, url_.pathOf(name).c_str()) != 0)
     fail("removal of", name, errno);
-  reached_ = true;
+  answered();
 }
 
 void SmbProgramStore::repairLocked()
@@ -397,7 +439,7 @@ std::vector<ProgramEntry> SmbProgramStore::list()
   SMBCFILE* dir = smbc_getFunctionOpendir(ctx)(ctx, url_.pathOf("").c_str());
   if (dir == nullptr)
     fail("listing of", url_.folder.empty() ? "/" : url_.folder, errno);
-  reached_ = true;
+  answered();
   std::vector<ProgramEntry> entries;
   errno = 0;
   struct stat info;
@@ -426,7 +468,7 @@ SMBCFILE* SmbProgramStore::openLocked(const std::string& name, int flags)
   SMBCFILE* file = smbc_getFunctionOpen(ctx)(ctx, url_.pathOf(name).c_str(), flags, 0644);
   if (file == nullptr)
     fail((flags & O_CREAT) != 0 ? "creating" : "opening", name, errno);
-  reached_ = true;
+  answered();
   return file;
 }
 
@@ -484,7 +526,8 @@ void SmbProgramStore::readTo(const std::string& name, const programs::StoreSink&
       smbc_getFunctionClose(ctx)(ctx, file);
     throw;
   }
-  smbc_getFunctionClose(ctx)(ctx, file);
+  if (smbc_getFunctionClose(ctx)(ctx, file) == 0)
+    answered();
 }
 
 std::string SmbProgramStore::readHead(const std::string& name, size_t bytes)
@@ -513,8 +556,8 @@ std::string SmbProgramStore::readHead(const std::string& name, size_t bytes)
   return head;
 }
 
-void SmbProgramStore::write(const std::string& name, const std::string& data, const programs::StoreProgress& progress,
-                            const std::atomic<bool>* cancel)
+void SmbProgramStore::writeFrom(const std::string& name, uint64_t size, const programs::StoreSource& source,
+                                const programs::StoreProgress& progress, const std::atomic<bool>* cancel)
 {
   std::lock_guard<std::recursive_mutex> lock(libraryMutex());
   programs::checkName(name);
@@ -530,16 +573,23 @@ void SmbProgramStore::write(const std::string& name, const std::string& data, co
     SMBCFILE* file = openLocked(repair.temporary, O_WRONLY | O_CREAT | O_EXCL);
     try
     {
-      for (size_t done = 0; done < data.size();)
+      for (uint64_t done = 0; done < size;)
       {
         throwIfCancelled(cancel, "writing " + name);
-        const size_t n = std::min(kChunk, data.size() - done);
-        const ssize_t written = smbc_getFunctionWrite(ctx)(ctx, file, data.data() + done, n);
-        if (written <= 0)
-          fail("writing", repair.temporary, written < 0 ? errno : EIO);
-        done += static_cast<size_t>(written);
+        const std::string_view chunk = source(static_cast<size_t>(std::min<uint64_t>(kChunk, size - done)));
+        if (chunk.empty())
+          throw Error("writing " + name + ": its data ended after " + std::to_string(done) + " of " +
+                      std::to_string(size) + " bytes; " + url_.describe() + " keeps its previous version");
+        for (size_t sent = 0; sent < chunk.size();)
+        {
+          const ssize_t written = smbc_getFunctionWrite(ctx)(ctx, file, chunk.data() + sent, chunk.size() - sent);
+          if (written <= 0)
+            fail("writing", repair.temporary, written < 0 ? errno : EIO);
+          sent += static_cast<size_t>(written);
+        }
+        done += chunk.size();
         if (progress)
-          progress(done, data.size());
+          progress(done, size);
       }
     }
     catch (...)
@@ -550,7 +600,8 @@ void SmbProgramStore::write(const std::string& name, const std::string& data, co
     }
     if (smbc_getFunctionClose(ctx)(ctx, file) != 0)
       fail("closing", repair.temporary, errno);
-    if (data.empty() && progress)
+    answered();
+    if (size == 0 && progress)
       progress(0, 0);
   }
   catch (...)

@@ -1,5 +1,5 @@
-// Program names and numbers, program heads, the protected range, the local program store, and
-// getProgram()'s download written chunk by chunk.
+// Program names and numbers, program heads, the protected range, the local program store,
+// getProgram()'s download written chunk by chunk and putProgram()'s upload read chunk by chunk.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -157,4 +157,49 @@ TEST(GetProgram, WritesEachChunkAsItComesAndLeavesNothingWhenTheDownloadFails)
   ChunkedStore whole(dir.file("share"), -1);
   EXPECT_EQ(getProgram(whole, "O00001.nc", dir.file("O00001.nc")), program.size());
   EXPECT_EQ(test::readFile(dir.file("O00001.nc")), program);
+}
+
+// putProgram() reads the local file as it sends it: each chunk the store asks for is read then. A
+// file cut short while it is sent (a program saved over it) fails the upload with the file's name,
+// and the store keeps its previous version, with no temporary file.
+TEST(PutProgram, ReadsTheFileAsItSendsItAndRefusesAFileCutShortMeanwhile)
+{
+  test::TempDir dir;
+  std::filesystem::create_directories(dir.file("share"));
+  std::string program = "%\nO00007 (LONG)\n";
+  for (int i = 0; program.size() < 1024 * 1024; ++i)
+    program += "N" + std::to_string(i) + " G1 X1.\n";
+  program += "M30\n%\n";
+  const std::string local = dir.file("O00007.nc");
+  test::writeFile(local, program);
+  LocalProgramStore store(dir.file("share"));
+  store.write("O00007.nc", "old");
+
+  std::vector<uint64_t> seen;
+  EXPECT_EQ(putProgram(store, local, "", ProtectedRange("O08000-O09999", false, "--allow-protected"), NamePattern(),
+                       [&seen](uint64_t done, uint64_t) { seen.push_back(done); }),
+            program.size());
+  EXPECT_EQ(store.read("O00007.nc"), program);
+  EXPECT_GT(seen.size(), 10u) << "sent in chunks";
+
+  store.write("O00007.nc", "old");
+  try
+  {
+    putProgram(store, local, "", ProtectedRange("O08000-O09999", false, "--allow-protected"), NamePattern(),
+               [&local](uint64_t done, uint64_t)
+               {
+                 if (done < 200000)
+                   std::filesystem::resize_file(local, 100000);  // cut short after the first chunk
+               });
+    FAIL() << "a file cut short was sent";
+  }
+  catch (const Error& e)
+  {
+    EXPECT_NE(std::string(e.what()).find(local + " got shorter while it was sent"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(store.read("O00007.nc"), "old");
+  std::vector<std::string> names;
+  for (const auto& entry : std::filesystem::directory_iterator(dir.file("share")))
+    names.push_back(entry.path().filename().string());
+  EXPECT_EQ(names, std::vector<std::string>{"O00007.nc"});
 }

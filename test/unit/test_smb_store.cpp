@@ -15,6 +15,7 @@
 
 #include "cnc_bridge/share/smb_store.h"
 #include "samba_server.h"
+#include "smb_request_log.h"
 #include "temp_dir.h"
 
 using namespace cnc_bridge;
@@ -418,6 +419,85 @@ TEST_F(SmbStoreTest, RenameAndRemove)
 // config/share/served_share.smb.conf as an administrator installs it (path and user replaced): the
 // PC publishes into the served folder as cnc_dnc and share_node do (a local store), and a control
 // logging in with the user's password lists and reads the program, and saves one back.
+// An upload reads the local file as it sends it; a file cut short meanwhile (a program saved over
+// it) fails the upload naming the file, and the share keeps the previous version, with no
+// temporary file.
+TEST_F(SmbStoreTest, AnUploadOfAFileCutShortWhileItIsSentKeepsThePreviousVersion)
+{
+  SmbProgramStore store = guest();
+  const std::string old_version = "%\nO06000 (OLD)\nM30\n%\n";
+  store.write("O06000.nc", old_version);
+  const std::string local = dir_->file("O06000.nc");
+  test::writeFile(local, "%\nO06000 (NEW)\n" + randomBytes(5 * 1024 * 1024, 9));
+  try
+  {
+    putProgram(store, local, "", ProtectedRange("O08000-O09999", false, "--allow-protected"), NamePattern(),
+               [&local](uint64_t done, uint64_t)
+               {
+                 if (done <= 1024 * 1024)
+                   std::filesystem::resize_file(local, 1536 * 1024);
+               });
+    FAIL() << "a file cut short was sent";
+  }
+  catch (const Error& e)
+  {
+    EXPECT_NE(std::string(e.what()).find(local + " got shorter while it was sent"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(readFile(server_->folder("guest") + "/O06000.nc"), old_version);
+  EXPECT_EQ(filesOnDisk(server_->folder("guest")), std::vector<std::string>{"O06000.nc"});
+}
+
+// What a transfer costs on the wire, counted by a proxy between the store and smbd. On a connected
+// store a replacing upload is its atomic replace and nothing more: the temporary file (create,
+// write, close), the old version moved aside and the new one renamed in (create, set info, close
+// each), the old one deleted (create, close).
+TEST_F(SmbStoreTest, AReplacingUploadSendsItsAtomicReplaceAndNothingMore)
+{
+  test::SmbRequestLog wire(server_->port);
+  SmbProgramStore store(wire.url("guest"), SmbCredentials{});
+  store.write("O05000.nc", "%\nO05000 (FIRST)\nM30\n%\n");
+  wire.clear();
+  const std::string second = "%\nO05000 (SECOND)\nM30\n%\n";
+  store.write("O05000.nc", second);
+  EXPECT_EQ(wire.commands(), (std::vector<std::string>{"CREATE", "WRITE", "CLOSE", "CREATE", "SET_INFO", "CLOSE",
+                                                       "CREATE", "SET_INFO", "CLOSE", "CREATE", "CLOSE"}));
+  EXPECT_EQ(readFile(server_->folder("guest") + "/O05000.nc"), second);
+}
+
+// libsmbclient sends an ECHO before it reuses a connection it has not heard from within the
+// timeout; the store counts the answers to its own requests, so a fresh store (one cnc_dnc
+// transfer) spends none: one connection, no ECHO, for an upload and for a stat and a download.
+TEST_F(SmbStoreTest, AFreshStoreSpendsNoEchoOnAConnectionThatJustAnswered)
+{
+  test::SmbRequestLog wire(server_->port);
+  const std::string program = randomBytes(100 * 1024, 11);
+  SmbProgramStore(wire.url("guest"), SmbCredentials{}).write("O05001.nc", program);
+  SmbProgramStore reader(wire.url("guest"), SmbCredentials{});
+  EXPECT_EQ(reader.stat("O05001.nc").size, program.size());
+  EXPECT_EQ(reader.read("O05001.nc"), program);
+  const auto sent = wire.commands();
+  EXPECT_EQ(std::count(sent.begin(), sent.end(), "NEGOTIATE"), 2) << "one connection per store";
+  EXPECT_EQ(std::count(sent.begin(), sent.end(), "ECHO"), 0);
+}
+
+// The store's answers count for as long as libsmbclient trusts its own ECHO (the timeout). A store
+// idle for longer lets libsmbclient check the connection, which finds the server restarted and
+// reconnects: the call works.
+TEST_F(SmbStoreTest, AStoreIdleLongerThanItsTimeoutReconnectsToARestartedServer)
+{
+  test::SmbRequestLog wire(server_->port);
+  SmbProgramStore store(wire.url("guest"), SmbCredentials{}, std::chrono::milliseconds(1000));
+  const std::string program = "%\nO05002 (KEPT)\nM30\n%\n";
+  store.write("O05002.nc", program);
+  server_->stop();
+  server_->start();
+  std::this_thread::sleep_for(std::chrono::milliseconds(1100));  // the idle time under test: past the timeout
+  wire.clear();
+  EXPECT_EQ(store.read("O05002.nc"), program);
+  const auto sent = wire.commands();
+  EXPECT_EQ(std::count(sent.begin(), sent.end(), "NEGOTIATE"), 1) << "reconnected once";
+}
+
 TEST(ServedShare, SnippetServesThePublishedPrograms)
 {
   TempDir dir("cnc_served_share");

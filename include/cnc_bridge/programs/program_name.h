@@ -7,6 +7,7 @@
 // macros in O08000-O09999).
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -42,10 +43,13 @@ struct ProgramHeader
   std::string comment;             ///< the text of the first (comment), trimmed; "" if none
 };
 
+/// How much of the start of a program readHeader() looks at.
+constexpr size_t kHeaderBytes = 4096;
 /// \brief Reads the O number and the first comment from the head of a program's text (the
-/// leading '%' line and blank lines are skipped; only the first 4 KB are looked at). Never throws.
+/// leading '%' line and blank lines are skipped; only the first kHeaderBytes are looked at).
+/// Never throws.
 ProgramHeader readHeader(const std::string& text);
-/// \brief readHeader() of the first 4 KB of a file. \throws Error if it cannot be read.
+/// \brief readHeader() of the first kHeaderBytes of a file. \throws Error if it cannot be read.
 ProgramHeader readHeaderOfFile(const std::string& path);
 
 /// \brief "O01234" (at least five digits).

@@ -14,6 +14,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "cnc_bridge/common/error.h"
@@ -40,6 +41,9 @@ class NotFoundError : public Error
 using StoreProgress = std::function<void(uint64_t done, uint64_t total)>;
 /// \brief Takes the bytes of a file in order, one chunk at a time (readTo()).
 using StoreSink = std::function<void(const char* data, size_t size)>;
+/// \brief Gives the bytes of an upload in order (writeFrom()): a view of the next \p max bytes
+/// (fewer only at the end), valid until the next call; empty when there are no more.
+using StoreSource = std::function<std::string_view(size_t max)>;
 
 /// \brief A folder of programs. Names are relative to the folder: '/'-separated, no empty, '.' or
 /// '..' component (checkName()). Implementations are thread-safe (calls are serialised).
@@ -65,11 +69,17 @@ class ProgramStore
                       const std::atomic<bool>* cancel = nullptr);
   /// \brief At most the first \p bytes of the file (for listings). \throws as read().
   virtual std::string readHead(const std::string& name, size_t bytes) = 0;
-  /// \brief Replaces (or creates) \p name with \p data atomically (see the file comment).
-  /// \throws Error, CancelledError; the previous version is in place and no temporary file remains
-  /// unless the server vanished (then the next connection removes it).
-  virtual void write(const std::string& name, const std::string& data, const StoreProgress& progress = nullptr,
-                     const std::atomic<bool>* cancel = nullptr) = 0;
+  /// \brief Replaces (or creates) \p name with the \p size bytes \p source gives, atomically (see
+  /// the file comment), each chunk sent as it comes: an upload of a local file holds one chunk in
+  /// memory, not the whole program (putProgram()).
+  /// \throws Error (also when \p source ends before \p size bytes), CancelledError, what \p source
+  /// throws; the previous version is in place and no temporary file remains unless the server
+  /// vanished (then the next connection removes it).
+  virtual void writeFrom(const std::string& name, uint64_t size, const StoreSource& source,
+                         const StoreProgress& progress = nullptr, const std::atomic<bool>* cancel = nullptr) = 0;
+  /// \brief writeFrom() with \p data in memory. \throws as writeFrom().
+  void write(const std::string& name, std::string_view data, const StoreProgress& progress = nullptr,
+             const std::atomic<bool>* cancel = nullptr);
   /// \brief Renames \p from to \p to, replacing \p to if it exists.
   virtual void rename(const std::string& from, const std::string& to) = 0;
   /// \throws NotFoundError if \p name does not exist.
@@ -96,8 +106,8 @@ class LocalProgramStore : public ProgramStore
   std::string read(const std::string& name, const StoreProgress& progress = nullptr,
                    const std::atomic<bool>* cancel = nullptr) override;
   std::string readHead(const std::string& name, size_t bytes) override;
-  void write(const std::string& name, const std::string& data, const StoreProgress& progress = nullptr,
-             const std::atomic<bool>* cancel = nullptr) override;
+  void writeFrom(const std::string& name, uint64_t size, const StoreSource& source,
+                 const StoreProgress& progress = nullptr, const std::atomic<bool>* cancel = nullptr) override;
   void rename(const std::string& from, const std::string& to) override;
   void remove(const std::string& name) override;
 
@@ -118,7 +128,8 @@ struct ProgramListing
 std::vector<ProgramListing> listPrograms(ProgramStore& store, const NamePattern& pattern);
 
 /// \brief Sends the local file \p local_path to \p store as \p name (its base name if empty),
-/// refusing a protected program before a byte is written. \returns the bytes written.
+/// refusing a protected program before a byte is written, and reading the file as it is sent.
+/// \returns the bytes written.
 /// \throws DisabledError (protected), ConfigError, Error, CancelledError.
 uint64_t putProgram(ProgramStore& store, const std::string& local_path, std::string name, const ProtectedRange& range,
                     const NamePattern& pattern, const StoreProgress& progress = nullptr,

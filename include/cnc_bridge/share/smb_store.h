@@ -85,8 +85,8 @@ class SmbProgramStore : public programs::ProgramStore
   void readTo(const std::string& name, const programs::StoreSink& sink,
               const programs::StoreProgress& progress = nullptr, const std::atomic<bool>* cancel = nullptr) override;
   std::string readHead(const std::string& name, size_t bytes) override;
-  void write(const std::string& name, const std::string& data, const programs::StoreProgress& progress = nullptr,
-             const std::atomic<bool>* cancel = nullptr) override;
+  void writeFrom(const std::string& name, uint64_t size, const programs::StoreSource& source,
+                 const programs::StoreProgress& progress = nullptr, const std::atomic<bool>* cancel = nullptr) override;
   void rename(const std::string& from, const std::string& to) override;
   void remove(const std::string& name) override;
 
@@ -95,6 +95,9 @@ class SmbProgramStore : public programs::ProgramStore
 
   /// The credentials, for libsmbclient's authentication callback.
   const SmbCredentials& credentials() const { return credentials_; }
+  /// Whether the server answered a call on this connection within the timeout, for libsmbclient's
+  /// check of a connection it reuses (it sends an ECHO unless this is true).
+  bool answeredRecently() const;
 
  private:
   /// The context, created (and leftovers of an earlier failure repaired) if there is none.
@@ -102,6 +105,8 @@ class SmbProgramStore : public programs::ProgramStore
   /// requests beyond its own (a failure of that first call is explained by checkFolder()).
   SMBCCTX* context();
   void dropContext();
+  /// The server answered a call: the folder is reached and the connection works.
+  void answered();
   /// Stats the share folder: \throws LinkError saying whether the server, the login, the share or
   /// the folder failed. Marks the folder reached.
   void checkFolder();
@@ -125,6 +130,7 @@ class SmbProgramStore : public programs::ProgramStore
   std::chrono::milliseconds timeout_;
   SMBCCTX* context_ = nullptr;
   bool reached_ = false;  ///< a call on this context has reached the folder (login, share and folder work)
+  std::chrono::steady_clock::time_point answered_at_{};  ///< the server's last answer; cleared by a failure
   struct Repair
   {
     std::string name, temporary, previous;
