@@ -203,3 +203,47 @@ TEST(PutProgram, ReadsTheFileAsItSendsItAndRefusesAFileCutShortMeanwhile)
     names.push_back(entry.path().filename().string());
   EXPECT_EQ(names, std::vector<std::string>{"O00007.nc"});
 }
+
+namespace
+{
+/// A folder whose write first overwrites the local file being sent with a protected program of the
+/// same size (another program saved over it after the check).
+class SwappingStore : public LocalProgramStore
+{
+ public:
+  SwappingStore(const std::string& root, std::string local, std::string swapped)
+      : LocalProgramStore(root), local_(std::move(local)), swapped_(std::move(swapped))
+  {
+  }
+  void writeFrom(const std::string& name, uint64_t size, const StoreSource& source, const StoreProgress& progress,
+                 const std::atomic<bool>* cancel) override
+  {
+    test::writeFile(local_, swapped_);
+    LocalProgramStore::writeFrom(name, size, source, progress, cancel);
+  }
+
+ private:
+  std::string local_, swapped_;
+};
+}  // namespace
+
+// The protected range is checked on the head of the file, and the head sent must be that head: a
+// protected program saved over the file between the check and the upload is not sent.
+TEST(PutProgram, SendsOnlyTheHeadItChecked)
+{
+  test::TempDir dir;
+  std::filesystem::create_directories(dir.file("share"));
+  const std::string local = dir.file("O00008.nc");
+  test::writeFile(local, "%\nO00008 (FREE)\nM30\n%\n");
+  SwappingStore store(dir.file("share"), local, "%\nO09008 (WIPS)\nM99\n%\n");
+  try
+  {
+    putProgram(store, local, "", ProtectedRange("O08000-O09999", false, "--allow-protected"), NamePattern());
+    FAIL() << "sent a program other than the one checked";
+  }
+  catch (const Error& e)
+  {
+    EXPECT_NE(std::string(e.what()).find(local + " changed while it was sent"), std::string::npos) << e.what();
+  }
+  EXPECT_TRUE(std::filesystem::is_empty(dir.file("share")));
+}
