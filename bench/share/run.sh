@@ -6,7 +6,8 @@
 # credentials file.
 #   bench/share/run.sh [ROUNDS]      (as root: smbd must be able to become the user it serves)
 # Prints one line per size and direction: medians of ROUNDS, MB/s, and the throughput ratio
-# cnc_dnc / smbclient (>= 0.9 is the goal); and the fixed per-transfer cost (a 1-byte program:
+# cnc_dnc / smbclient (>= 0.9 is the goal), the median of the rounds' ratios (and, beside it, the
+# ratio of the two medians); and the fixed per-transfer cost (a 1-byte program:
 # process start, connect, authenticate, and for cnc_dnc the temporary name and renames); then the
 # same for one 1 MB transfer phase by phase (bench/share/phases.py, when strace is installed).
 set -euo pipefail
@@ -71,12 +72,10 @@ timed() {
   end=$(date +%s.%N)
   echo "$end - $start" | python3 -c 'import sys; print("%.4f" % eval(sys.stdin.read()))'
 }
-median() { python3 -c 'import sys, statistics; print("%.4f" % statistics.median(float(x) for x in sys.argv[1:]))' "$@"; }
 
 echo "bench/share: $(date -u '+%Y-%m-%d %H:%M UTC'), load $(cut -d' ' -f1-3 /proc/loadavg), smbd $(smbd --version | cut -d' ' -f2), $rounds rounds, medians"
 for size in 1 1048576 20971520; do
   head -c "$size" /dev/urandom >"$dir/local.nc"
-  declare -A t=()
   for direction in up down; do
     declare -A runs=([cnc_dnc]="" [smbclient]="")
     # Round by round, the two tools one after the other (which goes first alternates), so that a
@@ -102,19 +101,21 @@ for size in 1 1048576 20971520; do
         fi
       done
     done
-    for tool in cnc_dnc smbclient; do
-      # shellcheck disable=SC2086  # the runs are words of the one string
-      t[$direction.$tool]=$(median ${runs[$tool]})
-    done
-    python3 - "$size" "$direction" "${t[$direction.cnc_dnc]}" "${t[$direction.smbclient]}" <<'PY'
+    # The ratio of each round (the two tools one after the other, under the same load), and its
+    # median: a burst of load on the machine falls on both tools of a round alike.
+    python3 - "$size" "$direction" "${runs[cnc_dnc]}" "${runs[smbclient]}" <<'PY'
+import statistics
 import sys
-size, direction, ours, theirs = int(sys.argv[1]), sys.argv[2], float(sys.argv[3]), float(sys.argv[4])
+size, direction = int(sys.argv[1]), sys.argv[2]
+ours_runs, theirs_runs = ([float(x) for x in runs.split()] for runs in sys.argv[3:5])
+ours, theirs = statistics.median(ours_runs), statistics.median(theirs_runs)
+ratio = statistics.median(t / o for o, t in zip(ours_runs, theirs_runs))
 label = "1 byte (fixed cost)" if size == 1 else "%d MB" % (size // 1048576)
 if size == 1:
     print("%-20s %-4s cnc_dnc %.3f s, smbclient %.3f s (difference %+.3f s)" % (label, direction, ours, theirs, ours - theirs))
 else:
-    print("%-20s %-4s cnc_dnc %.3f s %6.1f MB/s, smbclient %.3f s %6.1f MB/s, throughput ratio %.2f"
-          % (label, direction, ours, size / ours / 1e6, theirs, size / theirs / 1e6, theirs / ours))
+    print("%-20s %-4s cnc_dnc %.3f s %6.1f MB/s, smbclient %.3f s %6.1f MB/s, throughput ratio %.2f (of the medians %.2f)"
+          % (label, direction, ours, size / ours / 1e6, theirs, size / theirs / 1e6, ratio, theirs / ours))
 PY
   done
 done
