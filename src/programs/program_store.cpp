@@ -22,13 +22,13 @@ namespace fs = std::filesystem;
 namespace
 {
 constexpr size_t kChunk = size_t{64} * 1024;
+}  // namespace
 
 void throwIfCancelled(const std::atomic<bool>* cancel, const std::string& what)
 {
   if (cancel != nullptr && cancel->load())
     throw CancelledError(what + " cancelled");
 }
-}  // namespace
 
 void checkName(const std::string& name)
 {
@@ -140,21 +140,31 @@ void LocalProgramStore::writeFrom(const std::string& name, uint64_t size, const 
                                   const StoreProgress& progress, const std::atomic<bool>* cancel)
 {
   AtomicFileWriter writer(path(name));
+  writeChunks(
+      name, size, source, kChunk, root_,
+      [&writer](std::string_view chunk) { writer.write(reinterpret_cast<const uint8_t*>(chunk.data()), chunk.size()); },
+      progress, cancel);
+  writer.commit();
+}
+
+void writeChunks(const std::string& name, uint64_t size, const StoreSource& source, size_t chunk_size,
+                 const std::string& where, const std::function<void(std::string_view chunk)>& write,
+                 const StoreProgress& progress, const std::atomic<bool>* cancel)
+{
   for (uint64_t done = 0; done < size;)
   {
     throwIfCancelled(cancel, "writing " + name);
-    const std::string_view chunk = source(static_cast<size_t>(std::min<uint64_t>(kChunk, size - done)));
+    const std::string_view chunk = source(static_cast<size_t>(std::min<uint64_t>(chunk_size, size - done)));
     if (chunk.empty())
       throw Error("writing " + name + ": its data ended after " + std::to_string(done) + " of " + std::to_string(size) +
-                  " bytes; " + root_ + " keeps its previous version");
-    writer.write(reinterpret_cast<const uint8_t*>(chunk.data()), chunk.size());
+                  " bytes; " + where + " keeps its previous version");
+    write(chunk);
     done += chunk.size();
     if (progress)
       progress(done, size);
   }
   if (size == 0 && progress)
     progress(0, 0);
-  writer.commit();
 }
 
 void LocalProgramStore::rename(const std::string& from, const std::string& to)

@@ -88,12 +88,6 @@ int checkServer(SMBCCTX* context, SMBCSRV* server)
     return 0;
   return libraryCheck()(context, server);
 }
-
-void throwIfCancelled(const std::atomic<bool>* cancel, const std::string& what)
-{
-  if (cancel != nullptr && cancel->load())
-    throw CancelledError(what + " cancelled");
-}
 }  // namespace
 
 SmbUrl SmbUrl::parse(const std::string& url)
@@ -505,7 +499,7 @@ void SmbProgramStore::readTo(const std::string& name, const programs::StoreSink&
     uint64_t done = 0;
     while (done < total)
     {
-      throwIfCancelled(cancel, "reading " + name);
+      programs::throwIfCancelled(cancel, "reading " + name);
       const size_t want = static_cast<size_t>(std::min<uint64_t>(chunk.size(), total - done));
       const ssize_t n = smbc_getFunctionRead(ctx)(ctx, file, chunk.data(), want);
       if (n < 0)
@@ -573,24 +567,19 @@ void SmbProgramStore::writeFrom(const std::string& name, uint64_t size, const pr
     SMBCFILE* file = openLocked(repair.temporary, O_WRONLY | O_CREAT | O_EXCL);
     try
     {
-      for (uint64_t done = 0; done < size;)
-      {
-        throwIfCancelled(cancel, "writing " + name);
-        const std::string_view chunk = source(static_cast<size_t>(std::min<uint64_t>(kChunk, size - done)));
-        if (chunk.empty())
-          throw Error("writing " + name + ": its data ended after " + std::to_string(done) + " of " +
-                      std::to_string(size) + " bytes; " + url_.describe() + " keeps its previous version");
-        for (size_t sent = 0; sent < chunk.size();)
-        {
-          const ssize_t written = smbc_getFunctionWrite(ctx)(ctx, file, chunk.data() + sent, chunk.size() - sent);
-          if (written <= 0)
-            fail("writing", repair.temporary, written < 0 ? errno : EIO);
-          sent += static_cast<size_t>(written);
-        }
-        done += chunk.size();
-        if (progress)
-          progress(done, size);
-      }
+      programs::writeChunks(
+          name, size, source, kChunk, url_.describe(),
+          [&](std::string_view chunk)
+          {
+            for (size_t sent = 0; sent < chunk.size();)
+            {
+              const ssize_t written = smbc_getFunctionWrite(ctx)(ctx, file, chunk.data() + sent, chunk.size() - sent);
+              if (written <= 0)
+                fail("writing", repair.temporary, written < 0 ? errno : EIO);
+              sent += static_cast<size_t>(written);
+            }
+          },
+          progress, cancel);
     }
     catch (...)
     {
@@ -601,8 +590,6 @@ void SmbProgramStore::writeFrom(const std::string& name, uint64_t size, const pr
     if (smbc_getFunctionClose(ctx)(ctx, file) != 0)
       fail("closing", repair.temporary, errno);
     answered();
-    if (size == 0 && progress)
-      progress(0, 0);
   }
   catch (...)
   {

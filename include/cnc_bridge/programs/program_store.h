@@ -86,6 +86,18 @@ class ProgramStore
   virtual void remove(const std::string& name) = 0;
 };
 
+/// \brief \throws CancelledError ("<what> cancelled") if \p cancel is set.
+void throwIfCancelled(const std::atomic<bool>* cancel, const std::string& what);
+
+/// \brief The loop of every writeFrom(): takes \p size bytes from \p source in chunks of at most
+/// \p chunk_size and hands each to \p write, checking \p cancel before each chunk and reporting
+/// \p progress after it (once with 0 of 0 for an empty program).
+/// \throws CancelledError; Error if \p source ends early (naming \p name, and \p where as keeping the
+/// previous version); what \p write throws.
+void writeChunks(const std::string& name, uint64_t size, const StoreSource& source, size_t chunk_size,
+                 const std::string& where, const std::function<void(std::string_view chunk)>& write,
+                 const StoreProgress& progress, const std::atomic<bool>* cancel);
+
 /// \brief Refuses a name that is empty, absolute, has an empty, '.' or '..' component, or a
 /// control character. \throws ConfigError naming it.
 void checkName(const std::string& name);
