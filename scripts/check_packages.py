@@ -142,7 +142,7 @@ ROSDEP_EXCEPTIONS = {
 }
 
 # Installed for building and running the scripts and benchmarks, not a dependency of the package.
-TOOLS = {"build-essential", "cmake", "ccache", "bc", "nodejs", "npm", "clang-tidy"}
+TOOLS = {"build-essential", "cmake", "ccache", "bc", "nodejs", "npm", "time", "clang-tidy"}
 
 # Python module (top-level name) -> the Debian 12 package that provides it.
 PYTHON_MODULE_PACKAGE = {
@@ -192,6 +192,7 @@ PROGRAM_PACKAGES = {
     "rostopic": ["python3-rostopic"], "rosservice": ["python3-rosservice"], "rosnode": ["python3-rosnode"],
     "rviz": ["rviz"],
     "bc": ["bc"],  # bench/dprnt
+    "/usr/bin/time": ["time"],  # bench/gcode: CPU time of rs274 and of the parser
     "node": ["nodejs"], "npm": ["npm"],  # bench/gcode's peer, npm gcode-parser
     "rs274": ["linuxcnc-uspace"],  # test_gcode_rs274's reference interpreter
 }

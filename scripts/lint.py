@@ -2,7 +2,8 @@
 """Style checks, written as JUnit XML: every C++ file clang-formatted (.clang-format), every
 launch file with a doc on each <arg>, no citation of a document a reader of the repository cannot
 open, the module table of docs/DEVELOPING.md matching the tree
-(scripts/check_module_table.py), clang-tidy clean on the core (scripts/check_clang_tidy.py, with the
+(scripts/check_module_table.py), no sleep standing in for synchronisation in test/
+(scripts/check_test_sleeps.py), clang-tidy clean on the core (scripts/check_clang_tidy.py, with the
 compile commands of the build given by --build). (The core's freedom from ROS: scripts/check_ros_free.py.)
 
 The files come from git, or from a walk of the tree outside a git checkout (scripts/repo_files.py);
@@ -17,6 +18,7 @@ import xml.etree.ElementTree as ET
 
 import check_clang_tidy
 import check_module_table
+import check_test_sleeps
 from repo_files import git_files, repo_files, walked_files
 from tool_cases import ToolCases
 
@@ -134,6 +136,8 @@ def main():
     tools.add("references resolvable", check_references(text), checked=len(text))
     table = check_module_table.problems()
     tools.add("module table", [(check_module_table.GUIDE, problem) for problem in table], checked=1)
+    sleeps, sleep_files = check_test_sleeps.problems()
+    tools.add("no sleep as synchronisation", sleeps, checked=sleep_files)
     tidy, tidied = check_clang_tidy.findings(os.path.abspath(args.build))
     tools.add("clang-tidy", tidy, checked=tidied)
     if os.path.exists(os.path.join(ROOT, "config/cell.yaml")):

@@ -30,13 +30,38 @@ fi
 
 status=0
 export ASAN_OPTIONS=detect_leaks=1:abort_on_error=0 UBSAN_OPTIONS=print_stacktrace=1
-for test in "$build"/bin/test_*; do
-  [[ -x "$test" ]] || continue
-  name=$(basename "$test")
-  # A hung test must not hold up the whole run: it fails after SANITIZER_TEST_TIMEOUT seconds.
+# The unit tests and fuzz targets this build declared (CMake's test_manifest.txt): each one must
+# be there, so a target that was not built fails instead of leaving the count.
+manifest="$build/test_manifest.txt"
+declared() {  # declared KIND: "NAME TIME_LIMIT PATH" per declared test of that kind
+  awk -v kind="$1" '$1 == kind { print $2, $3, $4 }' "$manifest"
+}
+if [[ ! -s "$manifest" ]] || [[ -z "$(declared gtest)" ]]; then
+  "$root/scripts/junit_step.py" failed "$results/asan_manifest.xml" asan_manifest \
+    "the sanitizer build declared no unit test ($manifest): no sanitizer case ran"
+  exit 1
+fi
+while read -r name limit test; do
   rm -f "$results/asan_$name.xml"
-  timeout -k 10 "${SANITIZER_TEST_TIMEOUT:-600}" "$test" --gtest_output="xml:$results/asan_$name.xml" >"$build/$name.log" 2>&1
+  if [[ ! -x "$test" ]]; then
+    status=1
+    "$root/scripts/junit_step.py" failed "$results/asan_$name.xml" "$name" \
+      "$name is declared but its sanitizer build $test is missing"
+    continue
+  fi
+  # A hung test must not hold up the whole run: it fails after twice its own time limit (the
+  # sanitizers slow it down), killed with everything it started.
+  timeout -k 10 $((limit * 2)) "$test" --gtest_output="xml:$results/asan_$name.xml" >"$build/$name.log" 2>&1 </dev/null
   exit_status=$?
+  if [[ $exit_status -eq 124 || $exit_status -eq 137 ]]; then
+    echo "sanitizer run hung: $name still running after $((limit * 2)) s (log: $build/$name.log)"
+    rm -f "$results/asan_$name.xml"
+    "$root/scripts/junit_step.py" failed "$results/asan_$name.xml" "$name" \
+      "hung under the sanitizers: still running after its time limit of $((limit * 2)) s, killed (log: $build/$name.log)"
+    sed -i "s/classname=\"/classname=\"asan./g" "$results/asan_$name.xml"
+    status=1
+    continue
+  fi
   if [[ $exit_status -ne 0 ]]; then
     status=1
     echo "sanitizer run failed: $name, exit status $exit_status (log: $build/$name.log)"
@@ -52,17 +77,20 @@ for test in "$build"/bin/test_*; do
   fi
   # Prefix suite names so these results are told apart from the plain build's.
   sed -i "s/classname=\"/classname=\"asan./g" "$results/asan_$name.xml"
-done
+done < <(declared gtest)
 
-for fuzzer in "$build"/bin/fuzz_*; do
-  [[ -x "$fuzzer" ]] || continue
-  name=$(basename "$fuzzer")
+while read -r name _ fuzzer; do
+  if [[ ! -x "$fuzzer" ]]; then
+    status=1
+    echo "<testsuite name=\"fuzz\"><testcase classname=\"fuzz\" name=\"$name\"><failure message=\"declared but not built: $fuzzer\"/></testcase></testsuite>" >"$results/fuzz_$name.xml"
+    continue
+  fi
   corpus="$build/corpus/$name"
   mkdir -p "$corpus"
   seeds="$root/test/fuzz/corpus/$name"
   [[ -d "$seeds" ]] || seeds=""
   # Crash inputs go to the build directory, never into the source tree.
-  if "$fuzzer" -max_total_time="$seconds" -timeout=5 -rss_limit_mb=2048 -print_final_stats=1 \
+  if timeout -k 10 $((seconds + 120)) "$fuzzer" -max_total_time="$seconds" -timeout=5 -rss_limit_mb=2048 -print_final_stats=1 \
       -artifact_prefix="$build/$name-" "$corpus" $seeds \
       >"$build/$name.log" 2>&1; then
     runs=$(grep -oE 'stat::number_of_executed_units: *[0-9]+' "$build/$name.log" | grep -oE '[0-9]+$')
@@ -76,5 +104,5 @@ for fuzzer in "$build"/bin/fuzz_*; do
     echo "reproduce: $fuzzer $(ls -t "$build/$name"-crash-* "$build/$name"-timeout-* "$build/$name"-oom-* 2>/dev/null | head -1)"
     echo "<testsuite name=\"fuzz\"><testcase classname=\"fuzz\" name=\"$name\"><failure message=\"crash, see $build/$name.log\"/></testcase></testsuite>" >"$results/fuzz_$name.xml"
   fi
-done
+done < <(declared fuzz)
 exit $status

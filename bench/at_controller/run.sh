@@ -6,6 +6,7 @@
 # REALTIME_PRIORITY=N gives the sender thread SCHED_FIFO priority N (needs CAP_SYS_NICE / root).
 # usage: BUILD_DIR=.build [REALTIME_PRIORITY=50] bench/at_controller/run.sh [SECONDS]
 set -euo pipefail
+source "$(dirname "$(readlink -f "$0")")/../provenance.sh"
 build=${BUILD_DIR:-$(cd "$(dirname "$0")/../.." && pwd)/.build}
 seconds=${1:-60}
 bin=$(dirname "$(find "$build" -type f -name at_stream_bench -perm -u+x | head -1)")
@@ -85,3 +86,4 @@ printf '%-22s %12s %12s\n' "stalls" "$(field "$idle" stalls)" "$(field "$loaded"
 printf '%-22s %12s %12s\n' "cyclictest late" "$(field "$platform_idle" late)" "$(field "$platform_loaded" late)"
 printf '%-22s %12s %12s\n' "cyclictest max_ms" "$(field "$platform_idle" max_ms)" "$(field "$platform_loaded" max_ms)"
 printf '%-22s %12s %12s\n' "setpoints" "$(field "$idle" setpoints)" "$(field "$loaded" setpoints)"
+bench_done

@@ -5,6 +5,7 @@
 # (60 s to connect) or at any moment in it, or a state topic is below 9 Hz.
 # usage: bench/cell/run.sh [N] [SECONDS]
 set -uo pipefail
+source "$(dirname "$(readlink -f "$0")")/../provenance.sh"
 here=$(cd "$(dirname "$0")" && pwd)
 root=$(cd "$here/../.." && pwd)
 source "$root/scripts/env.sh"
@@ -47,6 +48,5 @@ sys.exit(1 if down else 0)
 PY
 echo "machines: $count; measuring ${seconds}s; load before: $(cut -d' ' -f1-3 /proc/loadavg)"
 python3 "$here/measure_cell.py" "$work/cell.yaml" "$seconds"
-status=$?
-echo "load after: $(cut -d' ' -f1-3 /proc/loadavg)"
-exit $status
+[[ $? -eq 0 ]] || bench_failed "measure_cell.py (output above)"
+bench_done

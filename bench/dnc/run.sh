@@ -15,6 +15,7 @@
 # Programs are generated in /tmp and deleted. Builds nothing: runs BUILD_DIR's binaries.
 # usage: BUILD_DIR=.build [MEMORY_MB=200] bench/dnc/run.sh
 set -euo pipefail
+source "$(dirname "$(readlink -f "$0")")/../provenance.sh"
 build=${BUILD_DIR:-$(cd "$(dirname "$0")/../.." && pwd)/.build}
 # SCHED_FIFO priority of the sender in measurements 2 and 3 (DripOptions::realtime_priority; the
 # simulated control's UART runs at 10); 0 = the normal scheduler.
@@ -65,8 +66,12 @@ model_row() {  # label realtime
   python3 "$here/control_model.py" "$link" 115200 5760 256 120 >"$program.model" &
   local model=$!
   for _ in $(seq 100); do [[ -e $link ]] && break; sleep 0.05; done
-  "$dnc" drip --port "$link" --realtime "$2" "$program" >/dev/null 2>&1 || true
-  wait "$model"
+  if ! "$dnc" drip --port "$link" --realtime "$2" "$program" >"$program.drip" 2>&1; then
+    wait "$model" || true
+    bench_failed "the drip-feed to the independent model ($1) failed: $(tail -1 "$program.drip")"
+    return
+  fi
+  wait "$model" || { bench_failed "the independent model ($1) failed"; return; }
   out=$(cat "$program.model")
   echo "independent model, pty 115200, $1, sender SCHED_FIFO $2 (load $(cut -d' ' -f1 /proc/loadavg)): $out"
 }
@@ -85,4 +90,4 @@ for line in memory pty; do
   awk -v l="$line" -v f="$(field line_fraction "$rate")" -v c="$(field chars_per_s "$rate")" 'BEGIN {
     printf "%s line: %.0f characters/s = %.2f%% of the line rate (11520/s) vs target >= 97%%: ratio %.3f\n", l, c, 100 * f, f / 0.97 }'
 done
-echo "load average at the end: $(cut -d' ' -f1-3 /proc/loadavg)"
+bench_done

@@ -7,6 +7,7 @@
 #      the goal p99 < 2 ms.
 # usage: BUILD_DIR=.build bench/dprnt/run.sh [LINES] [SAMPLES]
 set -euo pipefail
+source "$(dirname "$(readlink -f "$0")")/../provenance.sh"
 root=$(cd "$(dirname "$0")/../.." && pwd)
 build=${BUILD_DIR:-$root/.build}
 lines=${1:-2000000}
@@ -63,3 +64,4 @@ echo "$result"
 p99=$(echo "$result" | awk '{print $5}')
 printf "%-28s %10s %10s\n" "" "p99 ms" "x goal 2ms"
 printf "%-28s %10.3f %10.2f\n" "dprnt_node over pty" "$p99" "$(echo "$p99 / 2" | bc -l)"
+bench_done

@@ -5,6 +5,7 @@
 # Builds nothing: uses sim_ethernut and bench_ethernut from BUILD_DIR (default .build/).
 #   BUILD_DIR=.build bench/ethernut/run.sh [coordinates] [rounds]
 set -euo pipefail
+source "$(dirname "$(readlink -f "$0")")/../provenance.sh"
 build=${BUILD_DIR:-$(cd "$(dirname "$0")/../.." && pwd)/.build}
 n=${1:-20000}
 rounds=${2:-5}
@@ -46,3 +47,4 @@ awk -v rounds="$rounds" '
     printf "%-48s %8d %10.0f %10.0f %14.1f\n", "ethernut client -> sim_ethernut (NEXT per set)", n, s[ns], s[int((ns + 1) / 2)], sc[int((ns + 1) / 2)];
     printf "ratio streaming / bound: best %.0f%%, median %.0f%% (goal >= 80%%); client CPU per message, bound / ours: %.0f%%\n", 100 * s[ns] / e[ne], 100 * s[int((ns + 1) / 2)] / e[int((ne + 1) / 2)], 100 * ec[int((ne + 1) / 2)] / sc[int((ns + 1) / 2)];
   }' "$out/echo_results" "$out/stream_results"
+bench_done

@@ -1,11 +1,13 @@
 #!/usr/bin/env bash
 # G-code parse rate: cnc_bridge's gcode::Reader vs the npm package gcode-parser (the parser behind
-# cncjs), same generated 1,000,000-line program, same machine, same run. Builds nothing: uses
+# cncjs), same generated 1,000,000-line program, same machine, same run; and vs LinuxCNC's rs274,
+# the reference RS274/NGC interpreter, on a 100,000-line program. Builds nothing: uses
 # bench_gcode from BUILD_DIR (default .build/). Installs gcode-parser with npm into
 # bench/gcode/node_modules on first use (git-ignored). Then the parser's peak memory (ru_maxrss)
 # on a program of lines/10 and of lines: streaming, it must not grow with the file.
 #   BUILD_DIR=.build bench/gcode/run.sh [lines]
 set -euo pipefail
+source "$(dirname "$(readlink -f "$0")")/../provenance.sh"
 here=$(cd "$(dirname "$0")" && pwd)
 build=${BUILD_DIR:-$(cd "$(dirname "$0")/../.." && pwd)/.build}
 lines=${1:-1000000}
@@ -32,6 +34,37 @@ awk -v tl="$their_lines" -v ts="$their_s" -v ol="$our_lines" -v os="$our_s" -v o
   printf "%-34s %12d %10.3f %14.0f\n", "cnc_bridge gcode::Reader", ol, os, or;
   printf "ratio cnc_bridge / gcode-parser: %.1fx (goal >= 5x); cnc_bridge also cut arcs into %d moves\n", or / tr, om;
 }'
+# The reference interpreter: LinuxCNC's rs274 (C++, the canonical calls of every block printed)
+# against bench_gcode on one 100,000-line program, best of 3 each, wall and CPU time (user + sys,
+# which the load of other processes changes less).
+reference=$(mktemp /tmp/bench_gcode_rs274_XXXXXX.nc)
+trap 'rm -f "$program" "$small" "$reference"' EXIT
+/usr/bin/python3 "$here/gen_program.py" "$reference" 100000
+best_of_3() {  # best_of_3 COMMAND...: "wall cpu" seconds, the best of three runs each
+  local wall=1e9 cpu=1e9 w c
+  for _ in 1 2 3; do
+    read -r w c < <({ /usr/bin/time -f "%e %U %S" "$@" </dev/null >/dev/null 2>/dev/null; } 2>&1 | awk '{ print $1, $2 + $3 }')
+    wall=$(awk -v a="$wall" -v b="$w" 'BEGIN { print (b < a) ? b : a }')
+    cpu=$(awk -v a="$cpu" -v b="$c" 'BEGIN { print (b < a) ? b : a }')
+  done
+  echo "$wall $cpu"
+}
+if command -v rs274 >/dev/null; then
+  rs274 -g "$reference" </dev/null >"$reference.out" 2>&1 || bench_failed "rs274 refused the benchmark program"
+  grep -q "PROGRAM_END" "$reference.out" || bench_failed "rs274 did not reach the program's end"
+  rm -f "$reference.out"
+  read -r rs_wall rs_cpu < <(best_of_3 rs274 -g "$reference")
+  read -r our_wall our_cpu < <(best_of_3 "$ours" "$reference" 1)
+  awk -v rw="$rs_wall" -v rc="$rs_cpu" -v ow="$our_wall" -v oc="$our_cpu" 'BEGIN {
+    printf "%-34s %12s %10s %10s\n", "100,000 lines, best of 3", "wall s", "CPU s", "lines/s (CPU)";
+    printf "%-34s %12.3f %10.3f %10.0f\n", "LinuxCNC rs274 -g", rw, rc, 100000 / rc;
+    printf "%-34s %12.3f %10.3f %10.0f\n", "cnc_bridge gcode::Reader", ow, oc, 100000 / oc;
+    printf "ratio cnc_bridge / rs274: %.1fx by CPU time, %.1fx by wall time\n", rc / oc, rw / ow;
+  }'
+else
+  bench_failed "rs274 (Debian linuxcnc-uspace) is not installed: no comparison with the reference interpreter"
+fi
 printf "peak memory (ru_maxrss), one pass: %d lines (%d KiB file) %d KiB; %d lines (%d KiB file) %d KiB; growth %+d KiB\n" \
   "$small_lines" "$(( $(stat -c %s "$small") / 1024 ))" "$small_rss" \
   "$big_lines" "$(( $(stat -c %s "$program") / 1024 ))" "$big_rss" "$((big_rss - small_rss))"
+bench_done

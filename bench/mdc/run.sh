@@ -8,6 +8,7 @@
 #      answered (counted by the simulator) with every period at 1 ms.
 # MDC_BENCH_SECONDS (default 10) sets the length of each measurement.
 set -eo pipefail
+source "$(dirname "$(readlink -f "$0")")/../provenance.sh"
 root=$(cd "$(dirname "$0")/../.." && pwd)
 source "$root/scripts/env.sh"
 build=${BUILD_DIR:-$root/.build}
@@ -66,3 +67,4 @@ fast=$(grep -E "answered [0-9]+ queries" "$tmp/fast.err" | sed -E 's/.*answered 
 node_rate=$(python3 -c "n, t = '$fast'.split(); print('%.0f' % (int(n) / float(t)))")
 echo "node (periods 1 ms, 11 queries): $node_rate queries/s answered by the simulator"
 python3 -c "print('ratio node/peer (queries/s): %.2f' % ($node_rate / max($peer_rate, 1)))"
+bench_done

@@ -11,6 +11,7 @@
 # process start, connect, authenticate, and for cnc_dnc the temporary name and renames); then the
 # same for one 1 MB transfer phase by phase (bench/share/phases.py, when strace is installed).
 set -euo pipefail
+source "$(dirname "$(readlink -f "$0")")/../provenance.sh"
 root=$(cd "$(dirname "$0")/../.." && pwd)
 source "$root/scripts/env.sh"
 build=${BUILD_DIR:-$root/.build}
@@ -127,3 +128,4 @@ if command -v strace >/dev/null; then
 else
   echo "bench/share: phases not measured: strace is not installed (apt-get install strace)"
 fi
+bench_done

@@ -8,6 +8,7 @@
 #     topics), raw, side by side with the core session as a ratio.
 # Builds nothing: runs BUILD_DIR's binaries. usage: BUILD_DIR=.build bench/slave_bus/run.sh [STEPS]
 set -euo pipefail
+source "$(dirname "$(readlink -f "$0")")/../provenance.sh"
 root=$(cd "$(dirname "$0")/../.." && pwd)
 build=${BUILD_DIR:-$root/.build}
 steps=${1:-2000}
@@ -28,7 +29,9 @@ start_sim() { # link framing baud
 run() { # framing baud steps
   local link=$tmp/link_$1_$2
   start_sim "$link" "$1" "$2"
-  "$bench" --port "$link" --framing "$1" --baud "$2" --steps "$3" | tee "$tmp/core_$1_$2.txt" || true
+  "$bench" --port "$link" --framing "$1" --baud "$2" --steps "$3" >"$tmp/core_$1_$2.txt" 2>&1 ||
+    bench_failed "the core session ($1, $2 baud): $(tail -1 "$tmp/core_$1_$2.txt")"
+  cat "$tmp/core_$1_$2.txt"
   kill "${pids[-1]}"; wait "${pids[-1]}" 2>/dev/null || true
 }
 for framing in raw framed; do
@@ -52,11 +55,16 @@ if [[ -f "$build/devel/setup.bash" && -x "$build/devel/lib/cnc_bridge/slave_bus_
   "$build/devel/lib/cnc_bridge/slave_bus_node" _port:="$link" _enable_motion:=true >"$tmp/node.log" 2>&1 &
   pids+=($!)
   node_steps=$((steps / 4))
-  python3 "$root/bench/slave_bus/node_steps.py" "$node_steps" | tee "$tmp/node.txt" || true
-  core=$(grep -oE 'steps/s: [0-9.]+' "$tmp/core_raw_0.txt" | grep -oE '[0-9.]+$')
-  node=$(grep -oE 'steps/s: [0-9.]+' "$tmp/node.txt" | grep -oE '[0-9.]+$' || echo 0)
-  awk -v n="$node" -v c="$core" 'BEGIN { printf "node vs core session (raw, pty): %.1f vs %.1f steps/s = %.3f\n", n, c, n / c }'
+  if python3 "$root/bench/slave_bus/node_steps.py" "$node_steps" >"$tmp/node.txt" 2>&1; then
+    cat "$tmp/node.txt"
+    core=$(grep -oE 'steps/s: [0-9.]+' "$tmp/core_raw_0.txt" | grep -oE '[0-9.]+$')
+    node=$(grep -oE 'steps/s: [0-9.]+' "$tmp/node.txt" | grep -oE '[0-9.]+$')
+    awk -v n="$node" -v c="$core" 'BEGIN { printf "node vs core session (raw, pty): %.1f vs %.1f steps/s = %.3f\n", n, c, n / c }'
+  else
+    cat "$tmp/node.txt"
+    bench_failed "the steps through slave_bus_node (output above; node log $tmp/node.log)"
+  fi
 else
   echo "(no devel space with slave_bus_node in $build: node benchmark skipped)"
 fi
-echo "load average at end: $(cut -d' ' -f1-3 /proc/loadavg)"
+bench_done

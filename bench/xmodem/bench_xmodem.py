@@ -125,7 +125,9 @@ def run_pair(tap, work, sender, receiver, out, payload, packet_size, baud=0, fau
     t_end = time.time()
     records, counts = link.stop()
     exact = os.path.exists(out) and open(out, "rb").read()[: len(payload)] == payload
-    result = {"total": t_end - t0, "receiver": t_rx - t0, "capped": capped, "exact": exact,
+    # Complete: the file arrived exactly, and both programs ended by themselves with status 0.
+    complete = exact and not capped and rx.returncode == 0 and tx.returncode == 0
+    result = {"total": t_end - t0, "receiver": t_rx - t0, "capped": capped, "exact": exact, "complete": complete,
               "out": rx_out, "counts": counts}
     p = phases(records, packet_size)
     if p:
@@ -163,16 +165,22 @@ def main():
         print("load average at the end: %s" % load())
 
         def med(name, key):
-            values = [x[key] for x in results[name] if key in x]
+            # Medians over complete runs only: a run in which a peer stalled, was killed or left a
+            # wrong file is counted and shown apart, never averaged in.
+            values = [x[key] for x in results[name] if key in x and x["complete"]]
             return statistics.median(values) if values else float("nan")
 
-        print("\n%d KiB, checksum-128, medians of %d runs per pair (seconds); every pair over the same tap" % (kb, rounds))
-        print("%-20s %12s %8s %8s %8s %8s  %s" % ("pair", "end to end", "start", "blocks", "end", "exact", "sender killed after its receiver exited"))
+        print("\n%d KiB, checksum-128, medians of the complete runs of %d per pair (seconds); every pair over the same tap"
+              % (kb, rounds))
+        print("%-20s %12s %8s %8s %8s %9s  %s" % ("pair", "end to end", "start", "blocks", "end", "complete",
+                                                   "apart: sender killed after its receiver exited / wrong file / exit status"))
         for name in pairs:
             runs = results[name]
-            print("%-20s %12.3f %8.3f %8.3f %8.3f %5d/%-2d  %d" % (
+            print("%-20s %12.3f %8.3f %8.3f %8.3f %6d/%-2d  %d / %d / %d" % (
                 name, med(name, "total"), med(name, "start"), med(name, "blocks"), med(name, "end"),
-                sum(x["exact"] for x in runs), len(runs), sum(x["capped"] for x in runs)))
+                sum(x["complete"] for x in runs), len(runs), sum(x["capped"] for x in runs),
+                sum(not x["exact"] for x in runs),
+                sum(x["exact"] and not x["capped"] and not x["complete"] for x in runs)))
         base_total, base_blocks = med("sx -> rx", "total"), med("sx -> rx", "blocks")
         print("\nratios to sx -> rx (its time / the pair's time: above 1 = faster than sx -> rx)")
         print("%-20s %12s %12s" % ("pair", "end to end", "blocks"))
@@ -180,7 +188,10 @@ def main():
             print("%-20s %11.2fx %11.2fx" % (name, base_total / med(name, "total"), base_blocks / med(name, "blocks")))
         print("\nevery run, end to end seconds (k = sender killed %.0f s after its receiver exited):" % SENDER_CAP)
         for name in pairs:
-            print("  %-20s %s" % (name, " ".join("%.2f%s" % (x["total"], "k" if x["capped"] else "") for x in results[name])))
+            print("  %-20s %s" % (name, " ".join("%.2f%s" % (x["total"], "" if x["complete"] else "k" if x["capped"] else "x")
+                                                 for x in results[name])))
+        print("  (x = incomplete: a wrong file or a non-zero exit status)")
+        ours_failed = [name for name in pairs if "cnc_dnc" in name and not all(x["complete"] for x in results[name])]
 
         # The noisy wire.
         if seeds > 0:
@@ -223,9 +234,15 @@ def main():
                              work + "/noisy_out.nc", program, 133, 115200, None)
             print("clean 115200 line, same program, crc: %.2f s" % clean["total"])
             print("load average at the end: %s" % load())
+        if ours_failed:
+            # A pair with cnc_dnc on either side that did not complete every run is a failure of the
+            # benchmark (the figures above are from the complete runs only).
+            print("FAILED: incomplete runs of %s" % ", ".join(ours_failed), file=sys.stderr)
+            return 1
+        return 0
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -112,7 +112,7 @@ def wait_until(condition, timeout, what):
     while time.monotonic() < deadline:
         if condition():
             return
-        time.sleep(0.1)
+        time.sleep(0.1)  # poll: the condition has no event to wait on
     raise Failure("timed out after %.0f s waiting for %s" % (timeout, what))
 
 

@@ -51,6 +51,7 @@ on_cell() { ip netns exec "$cell" env ROS_IP=10.251.0.1 ROS_MASTER_URI=$master b
 on_machine() { ip netns exec "$machine" env ROS_IP=10.251.0.2 ROS_MASTER_URI=$master bash -c "source $build/devel/setup.bash; $*"; }
 
 on_cell "roscore -p 11311" >"$log/roscore.log" 2>&1 &
+# poll: the master answers rostopic list once it is up
 on_cell "for i in \$(seq 100); do rostopic list >/dev/null 2>&1 && exit 0; sleep 0.1; done; exit 1" \
   || { result state_and_tf_cross_hosts "the master did not come up on the cell host"; exit 1; }
 on_machine "ROS_NAMESPACE=/cell/remote_mill rosrun cnc_bridge demo_motion_node _machine:=remote_mill _tf_prefix:=remote_mill/" \

@@ -75,7 +75,7 @@ class LinkWatch:
                         break
             if up is not None or time.time() >= deadline:
                 return down, up
-            time.sleep(0.05)
+            time.sleep(0.05)  # poll: the states are recorded by another thread
 
 
 class DiagnosticsWatch:
@@ -160,7 +160,7 @@ class TransferLoop(threading.Thread):
                     arrived = open(stored).read() if os.path.exists(stored) else None
                     if arrived == body:
                         break
-                    time.sleep(0.05)
+                    time.sleep(0.05)  # poll: the simulator writes the file from another process
                 if arrived != body:
                     self.false_successes.append("%s reported sent but %s" % (
                         name, "never arrived" if arrived is None else "arrived different (%d of %d bytes)" % (len(arrived), len(body))))
@@ -206,11 +206,11 @@ class CellChaos(unittest.TestCase):
             pids = pids_of(pattern)
             deadline = time.time() + recover
             while not pids and time.time() < deadline:
-                time.sleep(0.1)
+                time.sleep(0.1)  # poll: the process list
                 pids = pids_of(pattern)
             if not pids:
                 problems.append("kill %d: %s not running (not respawned?)" % (kill, pattern))
-                time.sleep(2.0)
+                time.sleep(2.0)  # pace: the campaign's pause before its next kill
                 continue
             since = time.time()
             for pid in pids:
@@ -248,7 +248,7 @@ class CellChaos(unittest.TestCase):
             state = rospy.wait_for_message(topic, MachineState, timeout=max(deadline - time.time(), 1.0))
             if state.link == MachineState.LINK_UP:
                 return
-            time.sleep(0.2)
+            time.sleep(0.2)  # poll: until a state says UP
         self.fail("%s not UP at the start" % topic)
 
 

@@ -34,7 +34,7 @@ inline bool waitUntil(const std::function<bool()>& ready, double seconds)
     {
       return true;
     }
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));  // poll: another process writes the file
   }
   return ready();
 }
@@ -75,7 +75,7 @@ class LineLog
         }
       }
       // The simulator writes the file from another process; there is nothing to wait on but the file.
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));  // poll
     } while (std::chrono::steady_clock::now() < deadline);
     return {};
   }
@@ -90,7 +90,7 @@ class LineLog
       {
         return false;
       }
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));  // as in linesUntil()
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));  // poll, as in linesUntil()
     }
     return true;
   }

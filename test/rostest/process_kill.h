@@ -64,9 +64,9 @@ struct Windows
 inline Windows countOverWindows(const std::function<size_t()>& count, double first_s = 0.3, double second_s = 0.5)
 {
   Windows windows;
-  ros::WallDuration(first_s).sleep();
+  ros::WallDuration(first_s).sleep();  // window: what was on its way arrives
   windows.after_first = count();
-  ros::WallDuration(second_s).sleep();
+  ros::WallDuration(second_s).sleep();  // window: nothing more may arrive
   windows.after_second = count();
   return windows;
 }

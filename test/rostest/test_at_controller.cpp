@@ -45,6 +45,18 @@ struct AtController : ::testing::Test
 };
 }  // namespace
 
+// Closes a window in which the controller must receive nothing from line \p from of its log on:
+// an A@ (auto mode; harmless, the controller is in auto) sent now must be the first line that
+// arrives. The node writes every command in order on one link, so anything it had sent before
+// arrives first; the A@ arriving proves the node and the link were running through the window
+// (a slow machine cannot make the window pass by sending nothing yet).
+void expectNothingReceivedBeforeAMarker(const CommandLog& received, size_t from)
+{
+  const auto marker = call<std_srvs::Trigger>(node + "/set_auto");
+  ASSERT_TRUE(marker.success) << marker.message;
+  EXPECT_EQ(received.linesUntil(from, "A"), std::vector<std::string>{"A"});
+}
+
 // The setpoints of one operation in the simulator's command log: "feed pos feed pos feed pos".
 std::vector<std::array<long, 6>> setpointLines(const std::vector<std::string>& lines)
 {
@@ -237,9 +249,11 @@ TEST_F(AtController, DisablingMotionMidPathStopsItAndTheControllerGetsNoMoreSetp
   EXPECT_TRUE(state.waitFor([&](const auto& s) { return std::fabs(s.position.x - held_x) <= 1.5e-6; }))
       << state.last().position.x << " vs " << held_x;
   EXPECT_LT(held_x, end_x - 0.01);
-  // A measurement window (that nothing arrives needs a span of time): no setpoint, no motion.
-  ros::WallDuration(0.5).sleep();
-  EXPECT_EQ(received.lines().size(), after_end);
+  // A measurement window (that nothing arrives needs a span of time), closed by a marker: no
+  // setpoint, no motion.
+  ros::WallDuration(0.5).sleep();  // window: a span in which nothing may arrive
+  expectNothingReceivedBeforeAMarker(received, after_end);
+  const size_t after_marker = after_end + 1;
   EXPECT_NEAR(state.last().position.x, held_x, 1.5e-6);
   // Paused, not ended: the goal is active, its feedback says why and where.
   EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::ACTIVE) << client.getState().getText();
@@ -259,7 +273,7 @@ TEST_F(AtController, DisablingMotionMidPathStopsItAndTheControllerGetsNoMoreSetp
   EXPECT_FALSE(jog.success);
   EXPECT_NE(jog.message.find(node + "/set_motion_enabled"), std::string::npos) << jog.message;
   EXPECT_NE(jog.message.find(node + "/enable_motion"), std::string::npos) << jog.message;
-  EXPECT_EQ(received.lines().size(), after_end);
+  EXPECT_EQ(received.lines().size(), after_marker);
   EXPECT_FALSE(client.getState().isDone());
 
   // Enabled and resumed: the rest of the path from the stop point, to the exact end point.
@@ -273,7 +287,7 @@ TEST_F(AtController, DisablingMotionMidPathStopsItAndTheControllerGetsNoMoreSetp
       << state.last().position;
   // The controller's side: one more operation that starts from rest at the stop point (no jump:
   // its first step is less than a period at full speed away) and ends on the end point at rest.
-  const auto rest = received.linesUntil(after_end, "M0");
+  const auto rest = received.linesUntil(after_marker, "M0");
   ASSERT_GE(rest.size(), 5u);
   EXPECT_EQ(rest[0], "M1");
   const auto setpoints = setpointLines(rest);
@@ -329,14 +343,15 @@ TEST_F(AtController, AJogStopsWithinTheJogTimeoutAfterItsClientGoesSilent)
   EXPECT_GE(stopped_after, jog_timeout);  // the deadman never fires before its time
   EXPECT_TRUE(state.waitFor([&](const auto& s) { return s.message == "jog stopped: no jog command for 0.5 s"; }))
       << state.last().message;
-  // Settled, then a measurement window in which the reported position does not move.
-  ros::WallDuration(0.3).sleep();
+  // Settled, then a measurement window in which the reported position does not move and the
+  // controller receives nothing after the F0@ (closed by a marker).
+  ros::WallDuration(0.3).sleep();  // window: the axis settles
   const double stopped_x = state.last().position.x;
-  ros::WallDuration(0.3).sleep();
+  ros::WallDuration(0.3).sleep();  // window: a span in which nothing may move
+  expectNothingReceivedBeforeAMarker(received, mark + lines.size());
   EXPECT_NEAR(state.last().position.x, stopped_x, 1e-9);
   EXPECT_GE(stopped_x - start_x, speed * jog_timeout - 1e-4);
   EXPECT_LE(stopped_x - start_x, speed * (jog_timeout + tolerance));
-  EXPECT_TRUE(call<std_srvs::Trigger>(node + "/set_auto").success);
 }
 
 // A client that keeps calling ~jog (10 Hz, as a joystick teleoperation node publishes) renews the
@@ -402,9 +417,9 @@ TEST_F(AtController, ProgramStopsHoldTheGoalUntilResumeAndM30EndsIt)
   EXPECT_EQ(first[first.size() - 2], "#");
   EXPECT_TRUE(state.waitFor([](const auto& s) { return near(s.position, 0.010, 0.005, 0.002, 1.5e-6); }))
       << state.last().position;
-  // Held: a measurement window in which the controller receives nothing.
-  ros::WallDuration(0.3).sleep();
-  EXPECT_EQ(received.lines().size(), mark + first.size());
+  // Held: a measurement window in which the controller receives nothing (closed by a marker).
+  ros::WallDuration(0.3).sleep();  // window: a span in which nothing may arrive
+  expectNothingReceivedBeforeAMarker(received, mark + first.size());
   EXPECT_FALSE(client.getState().isDone());
   auto answer = call<std_srvs::Trigger>(resume);
   EXPECT_TRUE(answer.success);
@@ -501,6 +516,8 @@ TEST_F(AtController, APathGoalInWorldArrivesTransformed)
 
 TEST_F(AtController, EmergencyStopMidPathStopsMotionAndAbortsWithTheReason)
 {
+  CommandLog received{command_log};
+  const size_t before_goal = received.lines().size();
   const auto start = state.last().position;
   client.sendGoal(lineGoal(start.x - 0.1, start.y, start.z, 0.02, prefix + "machine"));
   ASSERT_TRUE(state.waitFor([&](const auto& s) { return s.position.x < start.x - 0.01; }));
@@ -513,8 +530,13 @@ TEST_F(AtController, EmergencyStopMidPathStopsMotionAndAbortsWithTheReason)
   ASSERT_TRUE(state.waitFor([](const auto& s) { return s.estop == cnc_bridge::MachineState::ESTOP_ON; }));
   EXPECT_EQ(state.last().execution, cnc_bridge::MachineState::EXECUTION_ALARM);
   // Motion stopped. The simulator reports every 10 ms while moving; these are measurement windows
-  // (asserting that nothing moves needs a span of time), not waits for an event.
-  ros::WallDuration(0.5).sleep();
+  // (asserting that nothing moves needs a span of time), not waits for an event, each closed by a
+  // marker the controller must receive before anything else.
+  // The node ends the operation (#@ M0@); from then on the controller receives nothing.
+  const auto until_end = received.linesUntil(before_goal, "M0");
+  ASSERT_FALSE(until_end.empty()) << "the operation did not end";
+  const size_t at_estop = before_goal + until_end.size();
+  ros::WallDuration(0.5).sleep();  // window: a span in which nothing may move
   const double stopped_x = state.last().position.x;
   EXPECT_GT(stopped_x, start.x - 0.09);
   // Motion is refused during the emergency stop, and says why.
@@ -525,7 +547,8 @@ TEST_F(AtController, EmergencyStopMidPathStopsMotionAndAbortsWithTheReason)
   const auto home = call<std_srvs::Trigger>(node + "/home");
   EXPECT_FALSE(home.success);
   EXPECT_NE(home.message.find("emergency stop"), std::string::npos);
-  ros::WallDuration(0.5).sleep();
+  ros::WallDuration(0.5).sleep();  // window: a span in which nothing may move
+  expectNothingReceivedBeforeAMarker(received, at_estop);
   EXPECT_NEAR(state.last().position.x, stopped_x, 1e-9);
   ASSERT_EQ(kill(pid, SIGUSR2), 0);  // released
   ASSERT_TRUE(state.waitFor([](const auto& s) { return s.estop == cnc_bridge::MachineState::ESTOP_OFF; }));

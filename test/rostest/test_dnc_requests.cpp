@@ -52,7 +52,7 @@ class PtyPair
       : socat_({"/usr/bin/socat", "pty,rawer,link=" + node_link, "pty,rawer,link=" + control_link}, "/tmp", "")
   {
     for (int i = 0; i < 500 && !(exists(node_link) && exists(control_link)); ++i)
-      ::usleep(10000);  // socat makes the links as it starts; nothing else to wait on
+      ::usleep(10000);  // poll: socat makes the links as it starts; nothing else to wait on
     fd_ = ::open(control_link.c_str(), O_RDWR | O_NOCTTY);
   }
   ~PtyPair()

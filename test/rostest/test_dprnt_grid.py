@@ -123,7 +123,7 @@ class TestDprntGrid(unittest.TestCase):
         deadline = time.monotonic() + 10
         # Two subscribers: this test's own collector and surface_mapper.
         while stray.get_num_connections() < 2 and time.monotonic() < deadline:
-            time.sleep(0.01)  # rospy offers no wait for a subscriber
+            time.sleep(0.01)  # poll: rospy offers no wait for a subscriber
         self.assertEqual(stray.get_num_connections(), 2, "surface_mapper subscribes to cycle_start")
         self.assertIsNotNone(self.starts.wait(lambda m: True, timeout=30, start=self.starts.count()))
         self.assertIsNotNone(self.values.wait(lambda m: True, timeout=30, start=self.values.count() + 29))

@@ -181,7 +181,7 @@ bool waitForSimMessage(const std::string& name, size_t from, double seconds = 10
       return true;
     }
     // The board writes the log from another process: the file is all there is to wait on.
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));  // poll
   } while (std::chrono::steady_clock::now() < deadline);
   return false;
 }

@@ -62,7 +62,7 @@ bool waitForQuery(const std::string& log, const std::string& query, size_t from,
     if (std::find(lines.begin() + static_cast<long>(std::min(from, lines.size())), lines.end(), query) != lines.end())
       return true;
     // The simulator writes the log from another process: the file is all there is to wait on.
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));  // poll
   } while (std::chrono::steady_clock::now() < deadline);
   return false;
 }
@@ -489,7 +489,7 @@ TEST(HaasMdcNode, TheSimulatedControlRefusesAThirdConnection)
     }
     if (!other_client_connected)
     {
-      ros::Duration(0.2).sleep();  // the other client reconnects
+      ros::Duration(0.2).sleep();  // poll: the other client's reconnect sets a flag, nothing to wait on
       continue;
     }
     bool closed = false;
@@ -507,8 +507,18 @@ TEST(HaasMdcNode, TheSimulatedControlRefusesAThirdConnection)
     {
       closed = true;
     }
-    // Give the node time to notice a drop (its next poll is within 0.25 s).
-    ros::Duration(0.5).sleep();
+    // The window is closed by the node's own traffic, not by a pause: two status polls of the node
+    // reach the control after the attempt, then a state published after them reaches the test. A
+    // drop the node noticed meanwhile was published before that state (one publisher, in order).
+    const size_t queries_after_attempt = queriesReceived(ngc_queries).size();
+    ASSERT_TRUE(waitForQuery(ngc_queries, "?Q500", queries_after_attempt)) << "the node stopped polling";
+    ASSERT_TRUE(waitForQuery(ngc_queries, "?Q500", queriesReceived(ngc_queries).size())) << "the node stopped polling";
+    size_t states_after_polls;
+    {
+      std::lock_guard<std::mutex> lock(recorder->mutex);
+      states_after_polls = recorder->ngc_states.size();
+    }
+    ASSERT_TRUE(recorder->waitFor([&] { return recorder->ngc_states.size() > states_after_polls; }, 10.0));
     bool node_kept_its_link = true;
     {
       std::lock_guard<std::mutex> lock(recorder->mutex);

@@ -5,8 +5,12 @@
 #include <sensor_msgs/JointState.h>
 #include <tf2_ros/transform_listener.h>
 
-#include <atomic>
+#include <chrono>
 #include <cmath>
+#include <condition_variable>
+#include <mutex>
+#include <set>
+#include <vector>
 
 #include "cnc_bridge/MachineState.h"
 
@@ -39,15 +43,31 @@ TEST(MachineState, LatchedStateDescribesTheMachine)
   EXPECT_NEAR(state->feed_rate, 2 * M_PI * 0.1 / 4.0, 1e-6);
 }
 
-TEST(MachineState, StateArrivesAtTheConfiguredRate)
+TEST(MachineState, StateFollowsTheMovingMachine)
 {
-  std::atomic<int> count{0};
+  // Each state published while the demo machine moves is newer than the last and places the tool
+  // somewhere else on its circle. (The publishing rate is measured in bench/cell, not asserted.)
+  std::mutex mutex;
+  std::condition_variable arrived;
+  std::vector<cnc_bridge::MachineState> states;
   ros::NodeHandle nh;
   auto sub = nh.subscribe<cnc_bridge::MachineState>(ns + "/state", 100,
-                                                    [&](const cnc_bridge::MachineState::ConstPtr&) { ++count; });
-  ros::WallDuration(2.0).sleep();  // the measurement window
-  // 20 Hz timer plus a publish on every change (the demo moves at 50 Hz): well above 20 Hz.
-  EXPECT_GE(count.load(), 35);
+                                                    [&](const cnc_bridge::MachineState::ConstPtr& state)
+                                                    {
+                                                      std::lock_guard<std::mutex> lock(mutex);
+                                                      states.push_back(*state);
+                                                      arrived.notify_all();
+                                                    });
+  std::unique_lock<std::mutex> lock(mutex);
+  ASSERT_TRUE(arrived.wait_for(lock, std::chrono::seconds(10), [&] { return states.size() >= 10; }));
+  std::set<std::pair<double, double>> positions;
+  for (size_t i = 1; i < states.size(); ++i)
+  {
+    EXPECT_GE(states[i].header.stamp, states[i - 1].header.stamp) << "state " << i;
+    EXPECT_NEAR(std::hypot(states[i].position.x + 0.38, states[i].position.y + 0.2), 0.1, 1e-6);
+    positions.insert({states[i].position.x, states[i].position.y});
+  }
+  EXPECT_GE(positions.size(), 2u) << "the tool did not move across " << states.size() << " states";
 }
 
 TEST(MachineState, JointStatesCarryThePositionInMetres)
@@ -81,12 +101,16 @@ TEST(MachineState, TfGivesTheToolInTheMachineFrameAndUnderTheSpindle)
   // Through the URDF: the table carries machine zero, so the tool tip stays under the spindle
   // (x = y = 0 in the base frame) and coincides with the head's tip.
   ASSERT_TRUE(buffer.canTransform(base, tool, ros::Time(0), ros::Duration(10.0)));
-  ros::Duration(0.3).sleep();  // let both tf sources publish for the same instant
-  const auto in_base = buffer.lookupTransform(base, tool, ros::Time(0));
+  // One instant both tf sources (the node and robot_state_publisher) have published past: the
+  // wait ends when the later of them has.
+  const ros::Time instant = ros::Time::now();
+  ASSERT_TRUE(buffer.canTransform(base, tool, instant, ros::Duration(10.0)));
+  const auto in_base = buffer.lookupTransform(base, tool, instant);
   EXPECT_NEAR(in_base.transform.translation.x, 0.0, 0.03);
   EXPECT_NEAR(in_base.transform.translation.y, 0.0, 0.03);
   EXPECT_NEAR(in_base.transform.translation.z, 0.9 - 0.3, 1e-3);
-  const auto tip = buffer.lookupTransform(head, tool, ros::Time(0));
+  ASSERT_TRUE(buffer.canTransform(head, tool, instant, ros::Duration(10.0)));
+  const auto tip = buffer.lookupTransform(head, tool, instant);
   EXPECT_NEAR(std::hypot(tip.transform.translation.x, tip.transform.translation.y), 0.0, 0.03);
 }
 

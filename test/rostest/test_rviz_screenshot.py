@@ -111,7 +111,7 @@ class RvizScreenshot(unittest.TestCase):
             apart = side_by_side(saddles, 40)
             if filled > 0.07 and apart >= len(machines):
                 break
-            time.sleep(1.0)  # rviz is still loading the models: look again
+            time.sleep(1.0)  # poll: rviz is still loading the models, look again
         rospy.loginfo("scene %d px: %.1f%% drawn, %.2f%% blue, saddles %s; screenshot %s", area, 100 * filled,
                       100 * blue, sorted((int(c), n) for n, c in saddles), path)
         self.assertGreater(area, 200 * 200, "no rviz scene area found on the screen")

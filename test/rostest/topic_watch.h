@@ -158,7 +158,7 @@ class TopicWatch : public Messages<M>
     const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(seconds);
     while (!connected() && ros::WallTime::now() < deadline)
     {
-      ros::WallDuration(0.01).sleep();
+      ros::WallDuration(0.01).sleep();  // poll: roscpp offers no wait for a connection
     }
     return connected();
   }
@@ -177,7 +177,7 @@ ros::Publisher advertiseAndWait(const std::string& topic, double seconds = 20.0,
   const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(seconds);
   while (publisher.getNumSubscribers() == 0 && ros::WallTime::now() < deadline)
   {
-    ros::WallDuration(0.01).sleep();
+    ros::WallDuration(0.01).sleep();  // poll: roscpp offers no wait for a subscriber
   }
   return publisher;
 }

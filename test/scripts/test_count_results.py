@@ -34,8 +34,9 @@ class CountResults(unittest.TestCase):
         with open(os.path.join(self.directory.name, name), "w") as f:
             f.write(text)
 
-    def tally(self):
-        return count_results.count(self.directory.name)
+    def tally(self, allowed_skips=frozenset()):
+        tally, failures, _ = count_results.count(self.directory.name, allowed_skips)
+        return tally, failures
 
     def test_cases_are_counted_by_kind(self):
         self.write("gtest-test_a.xml", GTEST_TWO_PASS)
@@ -43,7 +44,7 @@ class CountResults(unittest.TestCase):
         self.write("rosunit-py.xml", PYTHON_ROSTEST)
         self.write("lint.xml", LINT_TWO_TOOLS)
         self.write("install_space.xml", ROSTEST_WRAPPER_PASSED.replace("rostest.runner.RosTest", "install"))
-        tally, failures = self.tally()
+        tally, failures = self.tally(allowed_skips={"__main__.T.test_b"})
         self.assertEqual(tally["unit tests"], [2, 0, 0])
         self.assertEqual(tally["install space"], [1, 0, 0])
         self.assertEqual(tally["rostests (C++)"], [2, 0, 0])
@@ -60,6 +61,46 @@ class CountResults(unittest.TestCase):
         self.assertEqual(tally["rostests (C++)"], [2, 0, 0])
         self.assertEqual(tally["rostest runs"], [0, 1, 0])
         self.assertIn("did not generate test results", failures[0])
+
+    def test_a_unit_case_and_its_sanitizer_run_are_one_case(self):
+        self.write("gtest-test_a.xml", GTEST_TWO_PASS)
+        self.write("asan_test_a.xml", GTEST_TWO_PASS.replace('classname="S"', 'classname="asan.S"'))
+        tally, failures, sanitized = count_results.count(self.directory.name, set())
+        self.assertEqual(tally["unit tests"], [2, 0, 0])
+        self.assertEqual(sanitized, 2)
+        self.assertEqual(failures, [])
+
+    def test_a_case_that_fails_only_under_the_sanitizers_fails_once(self):
+        self.write("gtest-test_a.xml", GTEST_TWO_PASS)
+        self.write("asan_test_a.xml", GTEST_TWO_PASS.replace('classname="S"', 'classname="asan.S"').replace(
+            '<testcase name="b" status="run" classname="asan.S"/>',
+            '<testcase name="b" status="run" classname="asan.S"><failure message="heap-use-after-free"/></testcase>'))
+        tally, failures = self.tally()
+        self.assertEqual(tally["unit tests"], [1, 1, 0])
+        self.assertEqual(len(failures), 1)
+        self.assertIn("asan.S.b", failures[0])
+        self.assertIn("heap-use-after-free", failures[0])
+
+    def test_the_same_case_name_in_two_binaries_is_two_cases(self):
+        self.write("gtest-test_a.xml", GTEST_TWO_PASS)
+        self.write("gtest-test_b.xml", GTEST_TWO_PASS)
+        self.write("asan_test_a.xml", GTEST_TWO_PASS.replace('classname="S"', 'classname="asan.S"'))
+        tally, _ = self.tally()
+        self.assertEqual(tally["unit tests"], [4, 0, 0])
+
+    def test_an_unexpected_skip_fails_and_an_expected_one_is_a_skip(self):
+        self.write("rosunit-py.xml", PYTHON_ROSTEST)
+        tally, failures = self.tally()
+        self.assertEqual(tally["rostests (Python)"], [1, 1, 0])
+        self.assertIn("unexpected skip", failures[0])
+        tally, failures = self.tally(allowed_skips={"__main__.T.test_b"})
+        self.assertEqual(tally["rostests (Python)"], [1, 0, 1])
+        self.assertEqual(failures, [])
+
+    def test_the_suite_expects_no_skip_it_does_not_list(self):
+        # The list the real run reads: every line names a case (classname.name), no wildcard.
+        for line in count_results.expected_skips():
+            self.assertRegex(line, r"^[\w.]+\.\w+$")
 
     def test_a_result_with_no_case_fails(self):
         self.write("rosunit-ethernut_link.xml", GTEST_FILTER_MATCHED_NOTHING)
@@ -99,7 +140,7 @@ class JunitStep(unittest.TestCase):
             f.write("==1==ERROR: LeakSanitizer: detected memory leaks\n")
 
     def failures(self):
-        _, failures = count_results.count(self.directory.name)
+        _, failures, _ = count_results.count(self.directory.name, set())
         return failures
 
     def test_a_leak_report_after_an_all_pass_xml_is_a_failure(self):
@@ -123,7 +164,7 @@ class JunitStep(unittest.TestCase):
 
     def test_a_step_that_could_not_run_is_one_failed_case(self):
         junit_step.failed(os.path.join(self.directory.name, "step_lint.xml"), "lint", "lint.py crashed")
-        tally, failures = count_results.count(self.directory.name)
+        tally, failures, _ = count_results.count(self.directory.name, set())
         self.assertEqual(tally["steps that could not run"], [0, 1, 0])
         self.assertIn("lint.py crashed", failures[0])
 

@@ -185,7 +185,7 @@ TEST(PortLock, ATransferWaitingForTheLockGoesBeforeTheNextQuery)
   std::thread transfer([&] { got = dnc.lockForTransfer(std::chrono::seconds(10)); });
   // Bounded wait for the transfer to announce itself (it polls every 20 ms).
   for (int i = 0; i < 500 && !poller.wantedElsewhere(); ++i)
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));  // poll: a flag of another thread
   ASSERT_TRUE(poller.wantedElsewhere());
   poller.unlock();  // the query is done
   // The next query must not take the line from the waiting transfer.
@@ -225,7 +225,7 @@ TEST(PortLock, QueriesAndTransfersNeverOverlapAndTransfersAreNotStarved)
             continue;
           }
           enter();
-          std::this_thread::sleep_for(std::chrono::milliseconds(2));  // the query's round trip
+          std::this_thread::sleep_for(std::chrono::milliseconds(2));  // stands for the query's round trip
           --inside;
           lock.unlock();
           ++queries;
@@ -241,7 +241,7 @@ TEST(PortLock, QueriesAndTransfersNeverOverlapAndTransfersAreNotStarved)
       continue;
     ++transfers;
     enter();
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));  // the transfer
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));  // stands for the transfer
     --inside;
     dnc.unlock();
   }

@@ -441,6 +441,10 @@ size_t crossCheck(const std::string& dir, const std::string& file, cnc_bridge::t
     return 0;
   }
   EXPECT_EQ(mine.size(), reference.moves.size());
+  // Two empty lists agree vacuously: every program of the corpus moves somewhere, so a side that
+  // produced no move (rs274 not run, a parser that dropped everything) fails here.
+  EXPECT_GT(reference.moves.size(), 0u) << "rs274 printed no move";
+  EXPECT_GT(mine.size(), 0u) << "cnc_bridge produced no move";
   const double tolerance = 0.001 + 0.00005 * 25.4;  // inch programs: rs274 prints 0.0001 in
   const size_t n = std::min(mine.size(), reference.moves.size());
   size_t bad = 0;

@@ -345,7 +345,7 @@ TEST(MdcPoller, SkipsPollsWhileADncTransferHoldsThePort)
   EXPECT_FALSE(fake.waitForWritten(1, 200ms));
   const auto deadline = std::chrono::steady_clock::now() + 10s;
   while (poller.skippedForPortLock() == 0 && std::chrono::steady_clock::now() < deadline)
-    std::this_thread::sleep_for(2ms);  // a counter of another thread: nothing to wait on but itself
+    std::this_thread::sleep_for(2ms);  // poll: a counter of another thread: nothing to wait on but itself
   EXPECT_GT(poller.skippedForPortLock(), 0u);
   EXPECT_EQ(fake.written().size(), 0u);
   EXPECT_THROW(poller.withClient([](MdcClient&) {}), LinkError);

@@ -231,7 +231,7 @@ TEST(RequestListener, TheSimulatedHaasPunchesARequestAndStoresTheAnswer)
              "--send-on", "signal", "--send", "--nak-interval", "0.2", "--timeout-scale", "0.2"},
             dir.path, "");
   for (int i = 0; i < 1000 && !test::exists(link); ++i)
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));  // the simulator makes its pty as it starts
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));  // poll: the simulator makes its pty as it starts
   SerialSettings settings;
   settings.device = link;
   SerialPort pc(settings);
@@ -246,7 +246,7 @@ TEST(RequestListener, TheSimulatedHaasPunchesARequestAndStoresTheAnswer)
   // The control stores a received program under its O number, atomically.
   const std::string stored = memory + "/O00031.nc";
   for (int i = 0; i < 500 && !test::exists(stored); ++i)
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));  // its rename has no event to wait on here
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));  // poll: its rename has no event to wait on here
   EXPECT_EQ(readFile(stored), answer);
 }
 
