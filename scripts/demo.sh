@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The simulated cell (`make demo`): the machines of config/cell.yaml with their simulators, nodes
 # and models (launch/cell.launch), a rosbag of the run, and the scripted scenario of
-# scripts/cell_demo.py printing what happens. Ctrl-C stops everything.
+# scripts/cell_demo.py printing what happens. Ctrl-C, or SIGTERM to this script, stops everything.
 #   GUI=1          also open rviz with rviz/cell.rviz
 #   DEMO_ONCE=1    stop after the scenario (exit status: the scenario's)
 #   DEMO_OUTPUT=D  output folder (default output/demo-<time>)
@@ -25,15 +25,26 @@ stop() {
   wait "$launch_pid" 2>/dev/null || true
 }
 trap stop EXIT
-trap 'exit 130' INT TERM
 
 once=()
 [[ "${DEMO_ONCE:-0}" == "1" ]] && once=(--once)
 set +e
+# The scenario runs in the background and this script waits for it, so that a SIGTERM or SIGINT
+# sent to this script alone (kill PID, not only Ctrl-C at the terminal) stops it at once: bash runs
+# a trap only once the foreground command has ended, but it interrupts a `wait`.
 python3 "$root/scripts/cell_demo.py" --cell "$root/config/cell.yaml" --output "$out" --programs "$out/programs" \
   --program "$root/config/demo/O05555.nc" --job "$root/config/demo/ethernut_job.nc" \
-  --path-program "$root/config/demo/at_path.nc" --recorded "${once[@]}"
+  --path-program "$root/config/demo/at_path.nc" --recorded "${once[@]}" &
+scenario_pid=$!
+stop_scenario() {
+  kill -TERM "$scenario_pid" 2>/dev/null  # rospy shuts the scenario down on SIGTERM
+  wait "$scenario_pid" 2>/dev/null
+  exit 130
+}
+trap stop_scenario INT TERM
+wait "$scenario_pid"
 status=$?
+trap - INT TERM
 set -e
 echo "demo: rosbag $out/cell.bag, surface map $(ls "$out"/*.png 2>/dev/null | head -1)"
 exit $status
