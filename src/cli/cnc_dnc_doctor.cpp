@@ -6,8 +6,10 @@
 // settings it applied; which other processes have the port open; and with --listen S, what the
 // control sends in S seconds (press PUNCH or SEND, or start a DPRNT program): bytes, framing
 // errors, the data bits and parity the bytes show, whether the baud rate looks right, and the
-// control profiles of config/controls/ that match. Exit status 0 when the port opens (and, with
-// --listen, something was received), 1 otherwise, 2 for a bad command line.
+// control profiles of config/controls/ that match; a peer whose bytes say what it waits for (an
+// XModem receiver's NAK or 'C', a control's DC1 asking for a drip-feed) is named, the line judged
+// good. Exit status 0 when the port opens and no other process has it open (and, with --listen,
+// something was received), 1 otherwise, 2 for a bad command line.
 #include <termios.h>
 #include <unistd.h>
 
@@ -97,11 +99,19 @@ void printGuess(const LineGuess& guess, double seconds)
 {
   if (guess.bytes == 0 && guess.framing_errors == 0)
   {
-    std::cout << "listen: nothing received in " << seconds << " s: " << kNoAnswerHint << "\n";
+    // Not kNoAnswerHint: its advice is to run this very command.
+    std::cout << "listen: nothing received in " << seconds
+              << " s: the control sends only while the doctor listens, so start the doctor first and then press "
+                 "PUNCH/SEND on the control (or start its DPRNT program, or put it in RECV for XModem) within the "
+                 "time given to --listen. If it did send meanwhile: check that the cable is a null-modem one "
+                 "and goes to the control's serial port, and the control's baud rate, parity, data and stop "
+                 "bits (Haas settings 11, 12, 37, 13; Fanuc parameters 0101-0103)\n";
     return;
   }
   std::cout << "listen: " << guess.bytes << " bytes (NUL leader left out), " << guess.framing_errors
             << " framing errors, " << static_cast<int>(guess.text_share * 100 + 0.5) << "% program text\n";
+  if (!guess.peer.empty())
+    std::cout << "peer: " << guess.peer << "\n";
   std::cout << "line: " << guess.line << "\n";
   if (guess.profiles.empty())
   {
@@ -161,13 +171,15 @@ int runDoctor(const std::vector<std::string>& args)
     std::cout << "port " << settings.device << ": cannot open\n" << e.what() << "\n";
     return 1;
   }
-  const auto holders = processesHolding(settings.device, ::getpid());
+  // A port another program has open is not free for a transfer: the two take each other's bytes.
+  const auto holders = processesCompetingFor(settings.device, ::getpid());
   if (!holders.empty())
   {
-    std::cout << "also open in:";
+    std::cout << "port " << settings.device << ": also open in another process, so not free for a transfer "
+              << "(two programs on one port take each other's bytes):\n";
     for (const auto& holder : holders)
-      std::cout << " " << holder;
-    std::cout << " (two programs on one port take each other's bytes)\n";
+      std::cout << "  " << describeHolder(holder) << "\n";
+    return 1;
   }
   if (!vm.count("listen"))
     return 0;

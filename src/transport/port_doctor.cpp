@@ -172,6 +172,24 @@ std::string busyDevice(const std::string& device)
 }
 }  // namespace
 
+std::string describeHolder(const std::string& holder)
+{
+  // "PID (command)": /proc/PID/comm, cut to 15 characters by the kernel.
+  const size_t open = holder.find(" (");
+  const std::string pid = holder.substr(0, open);
+  const std::string command = open == std::string::npos ? "" : holder.substr(open + 2, holder.size() - open - 3);
+  const bool node = command.size() > 5 && command.compare(command.size() - 5, 5, "_node") == 0;
+  if (node)
+    return holder +
+           ": a node of cnc_bridge (stop it with `rosnode kill` or its launch file, or give it "
+           "another port)";
+  if (command == "cnc_dnc" || command == "cnc_plan")
+    return holder + ": cnc_bridge's " + command + " (let it finish, or end it: kill " + pid + ")";
+  if (command.rfind("sim_", 0) == 0)
+    return holder + ": a simulator of cnc_bridge (kill " + pid + ")";
+  return holder + ": another program (a terminal program, a DNC package, ModemManager; end it: kill " + pid + ")";
+}
+
 std::vector<std::string> serialAdaptersById(const std::string& by_id_dir)
 {
   std::vector<std::string> adapters;
@@ -207,6 +225,46 @@ std::vector<std::string> processesHolding(const std::string& device, pid_t excep
     }
   }
   return holders;
+}
+
+namespace
+{
+/// The index N of /dev/pts/N that \p device resolves to, or -1 for any other device.
+long ptsIndex(const std::string& device)
+{
+  const std::string path = realPath(device);
+  const std::string prefix = "/dev/pts/";
+  if (path.compare(0, prefix.size(), prefix) != 0 || path.size() == prefix.size() ||
+      path.find_first_not_of("0123456789", prefix.size()) != std::string::npos)
+    return -1;
+  return std::stol(path.substr(prefix.size()));
+}
+
+/// Whether process \p pid holds the master of /dev/pts/\p index (its fdinfo's tty-index).
+bool holdsPtyMaster(const std::string& pid, long index)
+{
+  const std::string fd_dir = "/proc/" + pid + "/fd";
+  for (const auto& fd : entries(fd_dir))
+  {
+    if (readLink(fd_dir + "/" + fd) != "/dev/ptmx")
+      continue;
+    std::ifstream info("/proc/" + pid + "/fdinfo/" + fd);
+    for (std::string line; std::getline(info, line);)
+      if (line.rfind("tty-index:", 0) == 0 && std::stol(line.substr(10)) == index)
+        return true;
+  }
+  return false;
+}
+}  // namespace
+
+std::vector<std::string> processesCompetingFor(const std::string& device, pid_t except)
+{
+  const long index = ptsIndex(device);
+  std::vector<std::string> competing;
+  for (const auto& holder : processesHolding(device, except))
+    if (index < 0 || !holdsPtyMaster(holder.substr(0, holder.find(' ')), index))
+      competing.push_back(holder);
+  return competing;
 }
 
 std::string explainOpenFailure(const std::string& device, int error_number, const std::string& by_id_dir)
@@ -278,6 +336,45 @@ bool programText(uint8_t low7)
   return (low7 >= 0x20 && low7 < 0x7f) || low7 == '\r' || low7 == '\n' || low7 == '\t' ||
          (low7 >= 0x11 && low7 <= 0x14);  // DC1-DC4 around punched programs
 }
+
+/// The protocol a peer speaks when nearly all of its characters (low 7 bits) are one control
+/// character that means "waiting", else empty. A baud rate that differs would garble them into
+/// varied bytes, so many of one kind, intact, show a good line.
+std::string recognizePeer(const std::vector<uint8_t>& bytes, size_t counted)
+{
+  if (counted == 0)
+    return "";
+  size_t nak = 0, crc = 0, dc1 = 0;
+  for (const uint8_t b : bytes)
+  {
+    const uint8_t low7 = b & 0x7f;
+    nak += low7 == 0x15 ? 1 : 0;
+    crc += low7 == 'C' ? 1 : 0;
+    dc1 += low7 == 0x11 ? 1 : 0;
+  }
+  // An XModem receiver repeats its request every few seconds (lrzsz rx every 10 s), a control
+  // sends one DC1 when it is ready for a drip-feed: a lone NAK or DC1 counts, with a word that
+  // it was one (a garbled character is seldom exactly one of them).
+  const auto most = [&](size_t n) { return n * 10 >= counted * 9; };
+  if (counted == 1 && dc1 == 1)
+    return "a control asking for a drip-feed (one DC1, the reader start): the line looks good; start the feed "
+           "now (cnc_dnc drip --port DEV FILE, or the node's transfer with protocol drip)";
+  if (counted == 1 && nak == 1)
+    return "an XModem receiver waiting for a program (one NAK so far; a receiver repeats it every few seconds): "
+           "the line looks good; send the program now (cnc_dnc send --port DEV FILE, or the node's send_program)";
+  if (counted == 1)
+    return "";
+  if (most(nak))
+    return "an XModem receiver waiting for a program (it repeats NAK, checksum mode): the line is good; send the "
+           "program now (cnc_dnc send --port DEV FILE, or the node's send_program)";
+  if (most(crc))
+    return "an XModem receiver waiting for a program (it repeats 'C', CRC mode): the line is good; send the program "
+           "now (cnc_dnc send --port DEV FILE, or the node's send_program)";
+  if (most(dc1))
+    return "a control asking for a drip-feed (DC1): the line is good; start the feed now (cnc_dnc drip --port DEV "
+           "FILE, or the node's transfer with protocol drip)";
+  return "";
+}
 }  // namespace
 
 LineGuess guessLineSettings(const std::vector<uint8_t>& bytes, size_t framing_errors, unsigned baud)
@@ -302,7 +399,8 @@ LineGuess guessLineSettings(const std::vector<uint8_t>& bytes, size_t framing_er
     return guess;
   }
   guess.text_share = static_cast<double>(text) / static_cast<double>(guess.bytes);
-  guess.baud_suspect = guess.text_share < 0.9 || framing_errors * 50 > guess.bytes;
+  guess.peer = framing_errors * 50 > guess.bytes ? "" : recognizePeer(bytes, guess.bytes);
+  guess.baud_suspect = guess.peer.empty() && (guess.text_share < 0.9 || framing_errors * 50 > guess.bytes);
   const auto share = [&](size_t n) { return static_cast<double>(n) / static_cast<double>(guess.bytes); };
   std::ostringstream line;
   if (guess.baud_suspect)
@@ -342,7 +440,8 @@ LineGuess guessLineSettings(const std::vector<uint8_t>& bytes, size_t framing_er
          << " bytes have it set): 8-bit data, or a baud rate that garbles some characters";
   }
   if (!guess.baud_suspect)
-    line << "; " << baud << " baud looks right (the characters are program text)";
+    line << "; " << baud << " baud looks right ("
+         << (guess.peer.empty() ? "the characters are program text" : "the peer's characters arrive intact") << ")";
   guess.line = line.str();
   for (const auto& profile : serialProfiles())
   {

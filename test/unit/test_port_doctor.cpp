@@ -1,6 +1,8 @@
 // The port doctor: open failures explained in words (missing device, permission, busy) as every
-// SerialPort user reports them, a silent control, and `cnc_dnc doctor --listen` judging 7E1 from
-// 8N1 by the punch output of the simulated control at 9600 baud.
+// SerialPort user reports them, a silent control, a port another program holds, and `cnc_dnc
+// doctor --listen` judging 7E1 from 8N1 by the punch output of the simulated control at 9600 baud
+// and reading a peer that waits in its protocol (the simulated Haas and lrzsz rx in XModem RECV,
+// a control asking for a drip-feed) as a good line.
 #include <arpa/inet.h>
 #include <fcntl.h>
 #include <grp.h>
@@ -170,9 +172,149 @@ ToolRun listenToPunch(bool seven_e1)
   ::waitpid(sim, nullptr, 0);
   return result;
 }
+/// Starts \p argv (stdin, stdout and stderr from \p io, /dev/null if empty); \returns its pid.
+pid_t start(const std::vector<std::string>& argv, const std::string& io = "")
+{
+  const pid_t pid = ::fork();
+  if (pid == 0)
+  {
+    const int in = ::open(io.empty() ? "/dev/null" : io.c_str(), O_RDWR | O_NOCTTY);
+    const int null = ::open("/dev/null", O_WRONLY);
+    ::dup2(in, 0);
+    ::dup2(io.empty() ? null : in, 1);
+    ::dup2(null, 2);
+    for (int fd = 3; fd < 1024; ++fd)
+      ::close(fd);  // not the test's own ptys: the program holds only what it is given
+    std::vector<const char*> args;
+    for (const auto& arg : argv)
+      args.push_back(arg.c_str());
+    args.push_back(nullptr);
+    ::execvp(args[0], const_cast<char* const*>(args.data()));
+    ::_exit(127);
+  }
+  return pid;
+}
+
+void stop(pid_t pid)
+{
+  ::kill(pid, SIGTERM);
+  ::waitpid(pid, nullptr, 0);
+}
+
+/// `cnc_dnc doctor --listen SECONDS` on \p link once it exists (a peer's pty).
+ToolRun doctorListening(const std::string& link, const std::string& seconds = "2")
+{
+  ToolRun result;
+  if (appears(link, std::chrono::seconds(10)))
+    result = run(std::string(CNC_DNC) + " doctor --port " + link + " --baud 9600 --listen " + seconds);
+  else
+    result.output = "the peer made no link " + link;
+  return result;
+}
+
+void expectAGoodLine(const ToolRun& doctor, const std::string& peer)
+{
+  EXPECT_EQ(doctor.status, 0) << doctor.output;
+  EXPECT_NE(doctor.output.find("peer: " + peer), std::string::npos) << doctor.output;
+  EXPECT_NE(doctor.output.find("9600 baud looks right (the peer's characters arrive intact)"), std::string::npos)
+      << doctor.output;
+  EXPECT_EQ(doctor.output.find("likely not"), std::string::npos) << "a healthy line judged wrong: " << doctor.output;
+}
 }  // namespace
 
 // ---------------------------------------------------------------------------------------------
+TEST(PortDoctor, APeerWaitingInItsProtocolIsAGoodLineNotAWrongBaudRate)
+{
+  std::vector<uint8_t> naks(12, 0x15), crcs_7e1(8, 0xC3), dc1s(3, 0x11);  // 'C' at 7E1: its parity bit set
+  const LineGuess nak = guessLineSettings(naks, 0, 9600);
+  EXPECT_FALSE(nak.baud_suspect) << nak.line;
+  EXPECT_NE(nak.peer.find("XModem receiver waiting for a program (it repeats NAK"), std::string::npos) << nak.peer;
+  EXPECT_EQ(nak.parity, 'N');
+  const LineGuess crc = guessLineSettings(crcs_7e1, 0, 9600);
+  EXPECT_NE(crc.peer.find("it repeats 'C', CRC mode"), std::string::npos) << crc.peer;
+  EXPECT_EQ(crc.data_bits, 7u);
+  EXPECT_EQ(crc.parity, 'E');
+  const LineGuess dc1 = guessLineSettings(dc1s, 0, 9600);
+  EXPECT_NE(dc1.peer.find("asking for a drip-feed (DC1)"), std::string::npos) << dc1.peer;
+  EXPECT_FALSE(dc1.baud_suspect);
+  EXPECT_NE(guessLineSettings({0x11}, 0, 9600).peer.find("one DC1"), std::string::npos);
+  // Not one kind of character, or with framing errors: not a peer, a baud rate to check.
+  std::vector<uint8_t> mixed = {0x15, 0x15, 0x8f, 0x3a, 0x15, 0xe1};
+  EXPECT_EQ(guessLineSettings(mixed, 0, 9600).peer, "");
+  EXPECT_TRUE(guessLineSettings(mixed, 0, 9600).baud_suspect);
+  EXPECT_EQ(guessLineSettings(naks, 6, 9600).peer, "");
+  EXPECT_NE(guessLineSettings({0x15}, 0, 9600).peer.find("one NAK so far"), std::string::npos);
+}
+
+TEST(PortDoctor, ASimulatedHaasWaitingInRecvIsAGoodLine)
+{
+  TempDir dir;
+  const std::string link = dir.path + "/haas.pty";
+  const pid_t haas = start({SIM_HAAS_SERIAL, "xmodem", "--link", link, "--dir", dir.path, "--nak-interval", "0.2"});
+  const ToolRun doctor = doctorListening(link);
+  stop(haas);
+  expectAGoodLine(doctor, "an XModem receiver waiting for a program (it repeats NAK, checksum mode)");
+}
+
+TEST(PortDoctor, LrzszRxWaitingIsAGoodLine)
+{
+  TempDir dir;
+  const std::string ours = dir.path + "/ours.pty", theirs = dir.path + "/theirs.pty";
+  const pid_t line = start({"socat", "pty,rawer,link=" + ours, "pty,rawer,link=" + theirs});
+  ASSERT_TRUE(appears(theirs, std::chrono::seconds(10)));
+  const pid_t rx = start({"rx", dir.path + "/received.nc"}, theirs);
+  const ToolRun doctor = doctorListening(ours, "4");
+  stop(rx);
+  stop(line);
+  EXPECT_EQ(doctor.status, 0) << doctor.output;
+  EXPECT_NE(doctor.output.find("peer: an XModem receiver waiting for a program"), std::string::npos) << doctor.output;
+  EXPECT_EQ(doctor.output.find("likely not"), std::string::npos) << doctor.output;
+}
+
+TEST(PortDoctor, ASimulatedControlAskingForADripFeedIsAGoodLine)
+{
+  TempDir dir;
+  const std::string link = dir.path + "/fanuc.pty";
+  const pid_t control = start({SIM_HAAS_SERIAL, "drip", "--link", link, "--dc1-at-start"});
+  const ToolRun doctor = doctorListening(link);
+  stop(control);
+  expectAGoodLine(doctor, "a control asking for a drip-feed");
+}
+
+TEST(PortDoctor, NothingReceivedSaysToPressPunchWhileListeningNotToRunItselfAgain)
+{
+  Pty pty;
+  const ToolRun doctor = run(std::string(CNC_DNC) + " doctor --port " + pty.path + " --listen 1");
+  EXPECT_EQ(doctor.status, 1) << doctor.output;
+  EXPECT_NE(doctor.output.find("press PUNCH/SEND on the control"), std::string::npos) << doctor.output;
+  EXPECT_EQ(doctor.output.find("doctor --port DEV --listen"), std::string::npos)
+      << "advice loops back: " << doctor.output;
+}
+
+TEST(PortDoctor, APortHeldByAnotherProgramExitsNonZeroNamingIt)
+{
+  Pty pty;
+  const pid_t holder = start({"sleep", "600"}, pty.path);  // holds the port open, as a terminal program would
+  ASSERT_GT(holder, 0);
+  bool held = false;
+  for (int i = 0; i < 500 && !held; ++i)
+  {
+    held = !processesHolding(pty.path, ::getpid()).empty();
+    if (!held)
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));  // poll: /proc has no event to wait on
+  }
+  const ToolRun doctor = run(std::string(CNC_DNC) + " doctor --port " + pty.path);
+  stop(holder);
+  ASSERT_TRUE(held);
+  EXPECT_EQ(doctor.status, 1) << doctor.output;
+  EXPECT_NE(doctor.output.find("not free for a transfer"), std::string::npos) << doctor.output;
+  EXPECT_NE(doctor.output.find(std::to_string(holder) + " (sleep): another program"), std::string::npos)
+      << doctor.output;
+  EXPECT_EQ(describeHolder("812 (dnc_node)").find("812 (dnc_node): a node of cnc_bridge"), 0u);
+  EXPECT_NE(describeHolder("9 (sim_haas_serial)").find("a simulator of cnc_bridge"), std::string::npos);
+  EXPECT_NE(describeHolder("10 (cnc_dnc)").find("cnc_bridge's cnc_dnc"), std::string::npos);
+}
+
 TEST(PortDoctor, MissingDeviceListsTheAdaptersById)
 {
   TempDir dir;
@@ -256,6 +398,7 @@ TEST(PortDoctor, SilentControlGetsTheSettingsToCompare)
   EXPECT_NE(doctor.output.find("port " + pty.path + ": opens"), std::string::npos) << doctor.output;
   EXPECT_NE(doctor.output.find("listen: nothing received in 1 s"), std::string::npos) << doctor.output;
   EXPECT_NE(doctor.output.find("Haas settings 11, 12, 37, 13"), std::string::npos) << doctor.output;
+  EXPECT_NE(doctor.output.find("null-modem"), std::string::npos) << doctor.output;
 
   // A transfer to a control that never asks says the same, and sends no block: only the CANs
   // that tell the control the transfer is off.

@@ -31,6 +31,14 @@ std::string explainConnectFailure(const std::string& where, int error_number);
 /// "PID (command)", from /proc/<pid>/fd; \p except is left out (-1: none).
 std::vector<std::string> processesHolding(const std::string& device, pid_t except = -1);
 
+/// \brief processesHolding() less the far end of a pty: a process that holds the pty's master
+/// (a simulated control, socat) is the peer on the line, not a program competing for the port.
+std::vector<std::string> processesCompetingFor(const std::string& device, pid_t except = -1);
+
+/// \brief What the holder "PID (command)" of a port is, in words: a node, tool or simulator of this
+/// suite (and how to stop it), or another program.
+std::string describeHolder(const std::string& holder);
+
 /// \brief The serial adapters in \p by_id_dir as "name -> /dev/ttyUSB0".
 std::vector<std::string> serialAdaptersById(const std::string& by_id_dir = "/dev/serial/by-id");
 
@@ -40,12 +48,16 @@ std::vector<std::string> serialAdaptersById(const std::string& by_id_dir = "/dev
 /// UART) gives framing errors.
 struct LineGuess
 {
-  size_t bytes = 0;                   ///< received, NUL leader/trailer left out
-  size_t framing_errors = 0;          ///< reported by the driver (a pty reports none)
-  double text_share = 0;              ///< of the bytes, the share whose low 7 bits are NC-program text
-  unsigned data_bits = 0;             ///< 7 or 8; 0 when nothing or nothing clear was received
-  char parity = '?';                  ///< 'N', 'E', 'O', 'M' (bit 7 always set), '?' unknown
-  bool baud_suspect = false;          ///< the characters are not text, or framing errors: the baud rate likely differs
+  size_t bytes = 0;           ///< received, NUL leader/trailer left out
+  size_t framing_errors = 0;  ///< reported by the driver (a pty reports none)
+  double text_share = 0;      ///< of the bytes, the share whose low 7 bits are NC-program text
+  unsigned data_bits = 0;     ///< 7 or 8; 0 when nothing or nothing clear was received
+  char parity = '?';          ///< 'N', 'E', 'O', 'M' (bit 7 always set), '?' unknown
+  bool baud_suspect = false;  ///< the characters are not text, or framing errors: the baud rate likely differs
+  /// What a peer that speaks a protocol is doing, when its bytes say so (an XModem receiver
+  /// repeating NAK or 'C', a control asking for a drip-feed with DC1), else empty; such bytes
+  /// arriving intact mean the line is good, though they are not program text.
+  std::string peer;
   std::string line;                   ///< what the settings look like, in words
   std::vector<std::string> profiles;  ///< config/controls/ profiles with these data bits and parity
 };
