@@ -20,6 +20,7 @@
 #include "cnc_bridge/common/stop_handler.h"
 #include "cnc_bridge/programs/archive.h"
 #include "cnc_bridge/programs/fan_out.h"
+#include "cnc_bridge/share/share_settings.h"
 #include "cnc_bridge/share/smb_store.h"
 #include "progress_line.h"
 #include "protected_options.h"
@@ -91,6 +92,7 @@ std::unique_ptr<programs::ProgramStore> openStore(const po::variables_map& vm, c
   const double timeout = vm["timeout"].as<double>();
   if (timeout <= 0)
     throw ConfigError("--timeout must be positive");
+  share::refusePassword(address, "--share");
   return share::openStore(address, vm["credentials"].as<std::string>(),
                           std::chrono::milliseconds(static_cast<int64_t>(timeout * 1000)));
 }

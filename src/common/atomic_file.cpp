@@ -7,7 +7,7 @@
 
 #include <cerrno>
 #include <cstring>
-#include <vector>
+#include <random>
 
 #include "cnc_bridge/common/error.h"
 
@@ -32,18 +32,51 @@ std::string baseName(const std::string& path)
 }
 }  // namespace
 
-AtomicFileWriter::AtomicFileWriter(std::string path) : path_(std::move(path))
+std::string AtomicFileWriter::tempShown() const
 {
-  std::string pattern = directoryOf(path_) + "/." + baseName(path_) + ".partial.XXXXXX";
-  std::vector<char> buffer(pattern.begin(), pattern.end());
-  buffer.push_back('\0');
-  fd_ = ::mkstemp(buffer.data());
-  if (fd_ < 0)
-  {
+  return directoryOf(path_) + "/" + temp_name_;
+}
+
+AtomicFileWriter::AtomicFileWriter(std::string path, mode_t mode) : path_(std::move(path))
+{
+  // The destination's folder is the caller's (resolved already); only the names in it are guarded.
+  dir_fd_ = ::open(directoryOf(path_).c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (dir_fd_ < 0)
     throw ConfigError("cannot create a temporary file beside " + path_ + ": " + std::strerror(errno));
+  own_dir_fd_ = true;
+  create(baseName(path_), mode);
+}
+
+AtomicFileWriter::AtomicFileWriter(int dir_fd, const std::string& name, std::string shown, mode_t mode)
+    : path_(std::move(shown)), dir_fd_(dir_fd)
+{
+  create(name, mode);
+}
+
+void AtomicFileWriter::create(const std::string& name, mode_t mode)
+{
+  name_ = name;
+  std::random_device random;
+  static const char kLetters[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789";
+  int error = EEXIST;
+  for (int attempt = 0; attempt < 100 && error == EEXIST; ++attempt)
+  {
+    std::string temp = "." + name + ".partial.";
+    for (int i = 0; i < 6; ++i)
+      temp += kLetters[random() % (sizeof(kLetters) - 1)];
+    // O_EXCL: never an existing file, nor the target of a link planted at the name.
+    fd_ =
+        ::openat(dir_fd_, temp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, mode & kProgramFileMode);
+    if (fd_ >= 0)
+    {
+      temp_name_ = temp;
+      return;
+    }
+    error = errno;
   }
-  temp_path_ = buffer.data();
-  ::fchmod(fd_, 0644);
+  if (own_dir_fd_)
+    ::close(dir_fd_);
+  throw ConfigError("cannot create a temporary file beside " + path_ + ": " + std::strerror(error));
 }
 
 AtomicFileWriter::~AtomicFileWriter()
@@ -51,6 +84,10 @@ AtomicFileWriter::~AtomicFileWriter()
   if (!committed_)
   {
     discard();
+  }
+  if (own_dir_fd_)
+  {
+    ::close(dir_fd_);
   }
 }
 
@@ -69,7 +106,7 @@ void AtomicFileWriter::write(const uint8_t* data, size_t size)
       {
         continue;
       }
-      throw Error("writing " + temp_path_ + ": " + std::strerror(errno));
+      throw Error("writing " + tempShown() + ": " + std::strerror(errno));
     }
     data += n;
     size -= static_cast<size_t>(n);
@@ -101,23 +138,18 @@ void AtomicFileWriter::commit()
     const std::string reason = std::strerror(errno);
     fd_ = -1;
     discard();
-    throw Error("flushing " + temp_path_ + ": " + reason);
+    throw Error("flushing " + tempShown() + ": " + reason);
   }
   fd_ = -1;
-  if (::rename(temp_path_.c_str(), path_.c_str()) != 0)
+  // renameat replaces a link at the destination itself, not the file it points to.
+  if (::renameat(dir_fd_, temp_name_.c_str(), dir_fd_, name_.c_str()) != 0)
   {
     const std::string reason = std::strerror(errno);
     discard();
-    throw Error("renaming " + temp_path_ + " to " + path_ + ": " + reason);
+    throw Error("renaming " + tempShown() + " to " + path_ + ": " + reason);
   }
   committed_ = true;
-  // Make the rename itself durable.
-  const int dir_fd = ::open(directoryOf(path_).c_str(), O_RDONLY | O_DIRECTORY);
-  if (dir_fd >= 0)
-  {
-    ::fsync(dir_fd);
-    ::close(dir_fd);
-  }
+  ::fsync(dir_fd_);  // makes the rename itself durable
 }
 
 void AtomicFileWriter::discard()
@@ -127,10 +159,10 @@ void AtomicFileWriter::discard()
     ::close(fd_);
     fd_ = -1;
   }
-  if (!committed_ && !temp_path_.empty())
+  if (!committed_ && !temp_name_.empty())
   {
-    ::unlink(temp_path_.c_str());
-    temp_path_.clear();
+    ::unlinkat(dir_fd_, temp_name_.c_str(), 0);
+    temp_name_.clear();
   }
 }
 }  // namespace cnc_bridge

@@ -2,9 +2,14 @@
 // boundaries, so "/programs2" is not inside "/programs".
 #include "cnc_bridge/common/program_dir.h"
 
+#include <fcntl.h>
 #include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
 #include <climits>
 #include <cstdlib>
+#include <cstring>
 
 #include "cnc_bridge/common/error.h"
 
@@ -22,7 +27,93 @@ bool canonical(const std::string& path, std::string& out)
   out = buffer;
   return true;
 }
+
+/// Refuses what is at \p path if it exists and is not a regular file.
+void checkRegular(const std::string& path, const std::string& name)
+{
+  struct stat info;
+  if (::stat(path.c_str(), &info) == 0 && !S_ISREG(info.st_mode))
+    throw ConfigError("'" + name + "' is " + fileKind(info.st_mode) + ", not a program file: refused");
+}
 }  // namespace
+
+std::string fileKind(mode_t mode)
+{
+  if (S_ISREG(mode))
+    return "";
+  if (S_ISDIR(mode))
+    return "a directory";
+  if (S_ISFIFO(mode))
+    return "a FIFO";
+  if (S_ISLNK(mode))
+    return "a symbolic link";
+  if (S_ISSOCK(mode))
+    return "a socket";
+  return "a device";
+}
+
+int openRegularFile(int dir_fd, const std::string& name, const std::string& shown)
+{
+  // O_NONBLOCK: opening a FIFO for reading would otherwise wait for a writer.
+  const int fd = ::openat(dir_fd, name.c_str(), O_RDONLY | O_NOFOLLOW | O_NONBLOCK | O_CLOEXEC);
+  if (fd < 0)
+  {
+    const int error = errno;
+    struct stat info;
+    if (error == ENOENT)
+      return -1;
+    if ((error == ELOOP || error == ENXIO) && ::fstatat(dir_fd, name.c_str(), &info, AT_SYMLINK_NOFOLLOW) == 0)
+      throw ConfigError(shown + " is " + fileKind(info.st_mode) + ", not a program file: refused");
+    throw Error("cannot read " + shown + ": " + std::strerror(error));
+  }
+  struct stat info;
+  if (::fstat(fd, &info) != 0 || !S_ISREG(info.st_mode))
+  {
+    const std::string kind = fileKind(info.st_mode);
+    ::close(fd);
+    throw ConfigError(shown + " is " + kind + ", not a program file: refused");
+  }
+  ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK);
+  return fd;
+}
+
+std::string readAll(int fd, const std::string& shown)
+{
+  std::string data;
+  char buffer[65536];
+  for (;;)
+  {
+    const ssize_t n = ::read(fd, buffer, sizeof(buffer));
+    if (n < 0 && errno == EINTR)
+      continue;
+    if (n < 0)
+      throw Error("reading " + shown + ": " + std::strerror(errno));
+    if (n == 0)
+      return data;
+    data.append(buffer, static_cast<size_t>(n));
+  }
+}
+
+std::string readRegularFile(const std::string& path, mode_t* mode)
+{
+  const int fd = openRegularFile(AT_FDCWD, path, path);
+  if (fd < 0)
+    throw ConfigError(path + " does not exist");
+  struct stat info;
+  if (mode != nullptr)
+    *mode = ::fstat(fd, &info) == 0 ? (info.st_mode & 07777) : 0;
+  try
+  {
+    std::string data = readAll(fd, path);
+    ::close(fd);
+    return data;
+  }
+  catch (...)
+  {
+    ::close(fd);
+    throw;
+  }
+}
 
 ProgramDirectory::ProgramDirectory(const std::string& root)
 {
@@ -59,6 +150,7 @@ std::string ProgramDirectory::resolveExisting(const std::string& name) const
   {
     throw ConfigError("'" + name + "' is outside the program directory " + root_ + ": refused");
   }
+  checkRegular(resolved, name);
   return resolved;
 }
 
@@ -90,8 +182,10 @@ std::string ProgramDirectory::resolveForWrite(const std::string& name) const
     {
       throw ConfigError("'" + name + "' is a link that leads outside the program directory " + root_ + ": refused");
     }
+    checkRegular(target, name);
     return target;
   }
+  checkRegular(resolved, name);
   return resolved;
 }
 }  // namespace cnc_bridge

@@ -1,12 +1,16 @@
 // ProgramArchive: one folder per program, vNNNN.nc + vNNNN.meta per version (see archive.h).
 #include "cnc_bridge/programs/archive.h"
 
+#include <fcntl.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <boost/crc.hpp>
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <ctime>
 #include <filesystem>
 #include <fstream>
@@ -15,6 +19,7 @@
 
 #include "cnc_bridge/common/atomic_file.h"
 #include "cnc_bridge/common/error.h"
+#include "cnc_bridge/common/program_dir.h"
 #include "cnc_bridge/programs/program_store.h"
 
 namespace cnc_bridge::programs
@@ -23,11 +28,41 @@ namespace fs = std::filesystem;
 
 namespace
 {
-std::string readAll(const std::string& path)
+/// The kept file \p path, "" if it is no regular file (a link is not followed).
+std::string readKept(const std::string& path)
 {
-  std::ifstream in(path, std::ios::binary);
-  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  try
+  {
+    return readRegularFile(path);
+  }
+  catch (const Error&)
+  {
+    return "";
+  }
 }
+
+/// Whether \p path is a directory itself, not a link to one.
+bool isRealDirectory(const std::string& path)
+{
+  struct stat info;
+  return ::lstat(path.c_str(), &info) == 0 && S_ISDIR(info.st_mode);
+}
+
+/// Closes the folder descriptor it holds.
+struct FolderDescriptor
+{
+  explicit FolderDescriptor(const std::string& path)
+      : fd(::open(path.c_str(), O_RDONLY | O_DIRECTORY | O_NOFOLLOW | O_CLOEXEC))
+  {
+    if (fd < 0)
+      throw Error("cannot open the archive folder " + path +
+                  " (a symbolic link is not followed): " + std::strerror(errno));
+  }
+  ~FolderDescriptor() { ::close(fd); }
+  FolderDescriptor(const FolderDescriptor&) = delete;
+  FolderDescriptor& operator=(const FolderDescriptor&) = delete;
+  int fd;
+};
 
 std::string stem(unsigned number)
 {
@@ -56,7 +91,14 @@ std::string crc32Hex(const std::string& data)
 ProgramArchive::ProgramArchive(std::string root, unsigned keep) : root_(std::move(root)), keep_(std::max(1u, keep))
 {
   std::error_code error;
-  fs::create_directories(root_, error);
+  if (!fs::is_directory(root_))
+  {
+    const fs::path parent = fs::path(root_).parent_path();
+    if (!parent.empty())
+      fs::create_directories(parent, error);
+    if (::mkdir(root_.c_str(), kArchiveFolderMode) != 0 && errno != EEXIST)
+      error = std::error_code(errno, std::generic_category());
+  }
   if (!fs::is_directory(root_))
     throw ConfigError("program archive '" + root_ + "' cannot be created: " + error.message());
 }
@@ -73,6 +115,8 @@ std::vector<ArchiveVersion> ProgramArchive::history(const std::string& name) con
 {
   std::vector<ArchiveVersion> versions;
   const std::string dir = folder(name);
+  if (!isRealDirectory(dir))
+    return versions;  // none kept (or a link planted in its place: not followed)
   std::error_code error;
   for (const auto& item : fs::directory_iterator(dir, error))
   {
@@ -81,7 +125,7 @@ std::vector<ArchiveVersion> ProgramArchive::history(const std::string& name) con
       continue;
     ArchiveVersion v;
     v.number = static_cast<unsigned>(std::strtoul(file.c_str() + 1, nullptr, 10));
-    std::ifstream in(item.path());
+    std::istringstream in(readKept(item.path().string()));
     for (std::string line; std::getline(in, line);)
     {
       const auto equals = line.find(" = ");
@@ -100,8 +144,8 @@ std::vector<ArchiveVersion> ProgramArchive::history(const std::string& name) con
         v.size = std::strtoull(value.c_str(), nullptr, 10);
       else if (key == "crc32")
         v.crc32 = value;
-      else if (key == "file")
-        v.path = dir + "/" + value;
+      else if (key == "file" && value.find('/') == std::string::npos && value != ".." && value != ".")
+        v.path = dir + "/" + value;  // a version's file is in its folder, never elsewhere
     }
     if (v.number > 0 && !v.path.empty())
       versions.push_back(v);
@@ -126,18 +170,20 @@ ArchiveVersion ProgramArchive::version(const std::string& name, unsigned number)
 }
 
 std::optional<ArchiveVersion> ProgramArchive::add(const std::string& name, const std::string& content,
-                                                  const VersionSource& source)
+                                                  const VersionSource& source, unsigned mode)
 {
   const std::string dir = folder(name);
   const std::string crc = crc32Hex(content);
   const auto versions = history(name);
   for (const auto& v : versions)
   {
-    if (v.crc32 == crc && v.size == content.size() && readAll(v.path) == content)
+    if (v.crc32 == crc && v.size == content.size() && readKept(v.path) == content)
       return std::nullopt;  // kept already
   }
   std::error_code error;
-  fs::create_directories(dir, error);
+  if (::mkdir(dir.c_str(), kArchiveFolderMode) != 0 && errno != EEXIST)
+    throw Error("cannot create the archive folder " + dir + ": " + std::strerror(errno));
+  const FolderDescriptor folder_fd(dir);  // refuses a link planted in the folder's place
   ArchiveVersion v;
   v.number = versions.empty() ? 1 : versions.back().number + 1;
   v.time = static_cast<int64_t>(std::time(nullptr));
@@ -146,14 +192,15 @@ std::optional<ArchiveVersion> ProgramArchive::add(const std::string& name, const
   v.crc32 = crc;
   const std::string file = stem(v.number) + extensionOf(name);
   v.path = dir + "/" + file;
-  AtomicFileWriter data(v.path);
+  AtomicFileWriter data(folder_fd.fd, file, v.path, mode);
   data.write(content);
   data.commit();
   std::ostringstream meta;
   meta << "time = " << v.time << "\nnode = " << source.node << "\nmachine = " << source.machine
        << "\ndirection = " << source.direction << "\nsize = " << v.size << "\ncrc32 = " << v.crc32
        << "\nfile = " << file << "\n";
-  AtomicFileWriter meta_file(dir + "/" + stem(v.number) + ".meta");  // last: a version counts once complete
+  // last: a version counts once complete
+  AtomicFileWriter meta_file(folder_fd.fd, stem(v.number) + ".meta", dir + "/" + stem(v.number) + ".meta");
   meta_file.write(meta.str());
   meta_file.commit();
   // The oldest versions beyond keep_ go.
@@ -188,9 +235,13 @@ std::string compareVersions(const ProgramArchive& archive, const std::string& na
     const ArchiveVersion newer = archive.version(name, to);
     return ProgramArchive::diff(older.path, older_label, newer.path, name + " v" + std::to_string(newer.number));
   }
-  if (!fs::exists(current_path))
+  struct stat info;
+  if (::lstat(current_path.c_str(), &info) != 0)
     throw ConfigError("no current file " + current_path + " to compare version " + std::to_string(older.number) +
                       " with");
+  if (!S_ISREG(info.st_mode))  // a link is not followed: it could show a file outside the folder
+    throw ConfigError("the current file " + current_path + " is " + fileKind(info.st_mode) +
+                      ", not a program file: refused");
   return ProgramArchive::diff(older.path, older_label, current_path, current_path);
 }
 

@@ -1,6 +1,7 @@
 // Name checks shared by every store, and the local-directory store (AtomicFileWriter for writes).
 #include "cnc_bridge/programs/program_store.h"
 
+#include <dirent.h>
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -8,20 +9,32 @@
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
-#include <filesystem>
-#include <fstream>
 #include <iterator>
 #include <utility>
 
 #include "cnc_bridge/common/atomic_file.h"
+#include "cnc_bridge/common/log.h"
+#include "cnc_bridge/common/program_dir.h"
 
 namespace cnc_bridge::programs
 {
-namespace fs = std::filesystem;
-
 namespace
 {
 constexpr size_t kChunk = size_t{64} * 1024;
+
+/// Closes the descriptor it holds.
+struct FileDescriptor
+{
+  explicit FileDescriptor(int held) : fd(held) {}
+  ~FileDescriptor()
+  {
+    if (fd >= 0)
+      ::close(fd);
+  }
+  FileDescriptor(const FileDescriptor&) = delete;
+  FileDescriptor& operator=(const FileDescriptor&) = delete;
+  int fd;
+};
 }  // namespace
 
 void throwIfCancelled(const std::atomic<bool>* cancel, const std::string& what)
@@ -70,43 +83,116 @@ std::string temporaryName(const std::string& name, const std::string& tag)
 
 LocalProgramStore::LocalProgramStore(std::string root) : root_(std::move(root))
 {
-  std::error_code error;
-  if (!fs::is_directory(root_, error))
+  const FileDescriptor folder(openRoot());
+  if (folder.fd < 0)
     throw ConfigError("program directory '" + root_ + "' does not exist or is not a directory");
+}
+
+int LocalProgramStore::openRoot() const
+{
+  // The root is the configured folder (it may be a link, or a mount point remounted since): it is
+  // opened by its path each time; nothing below it is followed.
+  return ::open(root_.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
 }
 
 std::string LocalProgramStore::path(const std::string& name) const
 {
-  checkName(name);
   return root_ + "/" + name;
+}
+
+int LocalProgramStore::openFolder(const std::string& name, std::string& base) const
+{
+  checkName(name);
+  int folder = openRoot();
+  size_t start = 0;
+  for (size_t slash = name.find('/'); folder >= 0 && slash != std::string::npos; slash = name.find('/', start))
+  {
+    const std::string part = name.substr(0, slash);
+    const int next =
+        ::openat(folder, name.substr(start, slash - start).c_str(), O_RDONLY | O_DIRECTORY | O_NOFOLLOW | O_CLOEXEC);
+    const int error = errno;
+    ::close(folder);
+    if (next < 0 && error == ENOENT)
+      throw NotFoundError("no program '" + name + "' in " + root_ + " (no folder '" + part + "')");
+    if (next < 0)
+      throw ConfigError("'" + part + "' in " + root_ + " is a symbolic link or not a folder: refused");
+    folder = next;
+    start = slash + 1;
+  }
+  if (folder < 0)
+    throw Error("cannot open " + root_ + ": " + std::strerror(errno));
+  base = name.substr(start);
+  return folder;
+}
+
+int LocalProgramStore::openFile(const std::string& name) const
+{
+  std::string base;
+  const FileDescriptor folder(openFolder(name, base));
+  const int fd = openRegularFile(folder.fd, base, path(name));
+  if (fd < 0)
+    throw NotFoundError("no program '" + name + "' in " + root_);
+  return fd;
+}
+
+void LocalProgramStore::reportSkipped(const std::string& name, const std::string& kind)
+{
+  std::lock_guard<std::mutex> lock(skipped_mutex_);
+  if (skipped_.insert(name).second)
+    CNC_LOG_WARN(path(name) << " is " << kind << ": not listed, read or sent (only regular files are programs)");
 }
 
 std::vector<ProgramEntry> LocalProgramStore::list()
 {
-  std::vector<ProgramEntry> entries;
-  std::error_code error;
-  for (const auto& item : fs::directory_iterator(root_, error))
+  const int root = openRoot();
+  DIR* folder = root < 0 ? nullptr : ::fdopendir(root);
+  if (folder == nullptr)
   {
-    const std::string name = item.path().filename().string();
-    if (!item.is_regular_file(error) || isTemporaryName(name))
-      continue;
-    entries.push_back(stat(name));
+    const int error = errno;
+    if (root >= 0)
+      ::close(root);
+    throw Error("cannot list " + root_ + ": " + std::strerror(error));
   }
-  if (error)
-    throw Error("cannot list " + root_ + ": " + error.message());
+  std::vector<ProgramEntry> entries;
+  for (;;)
+  {
+    errno = 0;
+    const dirent* item = ::readdir(folder);
+    if (item == nullptr)
+      break;
+    const std::string name = item->d_name;
+    struct stat info;
+    if (name == "." || name == ".." || isTemporaryName(name) ||
+        ::fstatat(::dirfd(folder), name.c_str(), &info, AT_SYMLINK_NOFOLLOW) != 0 || S_ISDIR(info.st_mode))
+      continue;  // gone since readdir, or a subfolder
+    if (!S_ISREG(info.st_mode))
+    {
+      reportSkipped(name, fileKind(info.st_mode));
+      continue;
+    }
+    entries.push_back({name, static_cast<uint64_t>(info.st_size), info.st_mtime});
+  }
+  const int error = errno;
+  ::closedir(folder);
+  if (error != 0)
+    throw Error("cannot list " + root_ + ": " + std::strerror(error));
   std::sort(entries.begin(), entries.end(), [](const auto& a, const auto& b) { return a.name < b.name; });
   return entries;
 }
 
 ProgramEntry LocalProgramStore::stat(const std::string& name)
 {
+  std::string base;
+  const FileDescriptor folder(openFolder(name, base));
   struct stat info;
-  if (::stat(path(name).c_str(), &info) != 0)
+  if (::fstatat(folder.fd, base.c_str(), &info, AT_SYMLINK_NOFOLLOW) != 0)
   {
     if (errno == ENOENT)
       throw NotFoundError("no program '" + name + "' in " + root_);
     throw Error("cannot stat " + path(name) + ": " + std::strerror(errno));
   }
+  if (!S_ISREG(info.st_mode))
+    throw ConfigError(path(name) + " is " + fileKind(info.st_mode) + ", not a program file: refused");
   ProgramEntry entry;
   entry.name = name;
   entry.size = static_cast<uint64_t>(info.st_size);
@@ -114,32 +200,45 @@ ProgramEntry LocalProgramStore::stat(const std::string& name)
   return entry;
 }
 
+unsigned LocalProgramStore::copyMode(const std::string& name)
+{
+  const FileDescriptor file(openFile(name));
+  struct stat info;
+  if (::fstat(file.fd, &info) != 0)
+    throw Error("cannot stat " + path(name) + ": " + std::strerror(errno));
+  return info.st_mode & kProgramFileMode;
+}
+
 std::string LocalProgramStore::read(const std::string& name, const StoreProgress& progress,
                                     const std::atomic<bool>* cancel)
 {
-  const uint64_t total = stat(name).size;
-  std::ifstream in(path(name), std::ios::binary);
-  if (!in)
-    throw Error("cannot read " + path(name));
+  const FileDescriptor file(openFile(name));
+  struct stat info;
+  const uint64_t total = ::fstat(file.fd, &info) == 0 ? static_cast<uint64_t>(info.st_size) : 0;
   std::string data;
   std::string chunk(kChunk, '\0');
-  while (in)
+  for (;;)
   {
     throwIfCancelled(cancel, "reading " + name);
-    in.read(chunk.data(), static_cast<std::streamsize>(chunk.size()));
-    data.append(chunk.data(), static_cast<size_t>(in.gcount()));
+    const ssize_t n = ::read(file.fd, chunk.data(), chunk.size());
+    if (n < 0 && errno == EINTR)
+      continue;
+    if (n < 0)
+      throw Error("reading " + path(name) + ": " + std::strerror(errno));
+    data.append(chunk.data(), static_cast<size_t>(n));
     if (progress)
       progress(data.size(), total);
+    if (n == 0)
+      return data;
   }
-  if (in.bad())
-    throw Error("reading " + path(name) + " failed");
-  return data;
 }
 
 void LocalProgramStore::writeFrom(const std::string& name, uint64_t size, const StoreSource& source,
                                   const StoreProgress& progress, const std::atomic<bool>* cancel)
 {
-  AtomicFileWriter writer(path(name));
+  std::string base;
+  const FileDescriptor folder(openFolder(name, base));
+  AtomicFileWriter writer(folder.fd, base, path(name));
   writeChunks(
       name, size, source, kChunk, root_,
       [&writer](std::string_view chunk) { writer.write(reinterpret_cast<const uint8_t*>(chunk.data()), chunk.size()); },
@@ -169,7 +268,10 @@ void writeChunks(const std::string& name, uint64_t size, const StoreSource& sour
 
 void LocalProgramStore::rename(const std::string& from, const std::string& to)
 {
-  if (::rename(path(from).c_str(), path(to).c_str()) != 0)
+  std::string from_base, to_base;
+  const FileDescriptor from_folder(openFolder(from, from_base));
+  const FileDescriptor to_folder(openFolder(to, to_base));
+  if (::renameat(from_folder.fd, from_base.c_str(), to_folder.fd, to_base.c_str()) != 0)
   {
     if (errno == ENOENT)
       throw NotFoundError("no program '" + from + "' in " + root_);
@@ -179,7 +281,10 @@ void LocalProgramStore::rename(const std::string& from, const std::string& to)
 
 void LocalProgramStore::remove(const std::string& name)
 {
-  if (::unlink(path(name).c_str()) != 0)
+  std::string base;
+  const FileDescriptor folder(openFolder(name, base));
+  // unlinkat removes a link itself, never the file it points to.
+  if (::unlinkat(folder.fd, base.c_str(), 0) != 0)
   {
     if (errno == ENOENT)
       throw NotFoundError("no program '" + name + "' in " + root_);
@@ -192,12 +297,27 @@ namespace cnc_bridge::programs
 {
 std::string LocalProgramStore::readHead(const std::string& name, size_t bytes)
 {
-  stat(name);  // NotFoundError
-  std::ifstream in(path(name), std::ios::binary);
+  const FileDescriptor file(openFile(name));
   std::string head(bytes, '\0');
-  in.read(head.data(), static_cast<std::streamsize>(bytes));
-  head.resize(static_cast<size_t>(in.gcount()));
+  size_t got = 0;
+  while (got < bytes)
+  {
+    const ssize_t n = ::read(file.fd, head.data() + got, bytes - got);
+    if (n < 0 && errno == EINTR)
+      continue;
+    if (n < 0)
+      throw Error("reading " + path(name) + ": " + std::strerror(errno));
+    if (n == 0)
+      break;
+    got += static_cast<size_t>(n);
+  }
+  head.resize(got);
   return head;
+}
+
+unsigned ProgramStore::copyMode(const std::string& /*name*/)
+{
+  return kProgramFileMode;
 }
 
 std::vector<ProgramListing> listPrograms(ProgramStore& store, const NamePattern& pattern)
@@ -230,7 +350,9 @@ namespace
 class LocalFileSource
 {
  public:
-  explicit LocalFileSource(const std::string& path) : path_(path), fd_(::open(path.c_str(), O_RDONLY | O_CLOEXEC))
+  // O_NONBLOCK: a FIFO given as the program is refused below instead of waiting for a writer.
+  explicit LocalFileSource(const std::string& path)
+      : path_(path), fd_(::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC))
   {
     struct stat info;
     if (fd_ < 0 || ::fstat(fd_, &info) != 0)
@@ -243,8 +365,9 @@ class LocalFileSource
     if (!S_ISREG(info.st_mode))
     {
       ::close(fd_);
-      throw ConfigError("cannot read " + path + ": not a file");
+      throw ConfigError("cannot read " + path + ": it is " + fileKind(info.st_mode) + ", not a program file");
     }
+    ::fcntl(fd_, F_SETFL, ::fcntl(fd_, F_GETFL) & ~O_NONBLOCK);
     size_ = static_cast<uint64_t>(info.st_size);
   }
   ~LocalFileSource() { ::close(fd_); }
@@ -348,7 +471,7 @@ void ProgramStore::readTo(const std::string& name, const StoreSink& sink, const 
 uint64_t getProgram(ProgramStore& store, const std::string& name, const std::string& local_path,
                     const StoreProgress& progress, const std::atomic<bool>* cancel)
 {
-  AtomicFileWriter writer(local_path);
+  AtomicFileWriter writer(local_path, store.copyMode(name));
   // Each chunk goes to the temporary file as it arrives; the writer starts its writeback at once,
   // so commit()'s fsync has little left to wait for (docs/share_node.md, "cnc_dnc").
   store.readTo(

@@ -1,7 +1,5 @@
 #include "cnc_bridge/programs/program_transfers.h"
 
-#include <fstream>
-#include <iterator>
 #include <utility>
 
 #include "cnc_bridge/common/log.h"
@@ -115,11 +113,11 @@ void ProgramTransfers::keep(const std::string& name, const std::string& path, co
 {
   try
   {
-    std::ifstream in(path, std::ios::binary);
-    const std::string content((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    mode_t mode = 0;
+    const std::string content = readRegularFile(path, &mode);  // a link planted since is not followed
     VersionSource source = source_;
     source.direction = direction;
-    if (const auto kept = archive_.add(name, content, source))
+    if (const auto kept = archive_.add(name, content, source, mode))
       CNC_LOG_INFO("kept " << name << " as version " << kept->number << " in " << archive_.root());
   }
   catch (const Error& e)

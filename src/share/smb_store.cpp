@@ -12,6 +12,7 @@
 #include <fstream>
 
 #include "cnc_bridge/common/log.h"
+#include "cnc_bridge/share/share_settings.h"
 
 namespace cnc_bridge::share
 {
@@ -90,13 +91,15 @@ int checkServer(SMBCCTX* context, SMBCSRV* server)
 }
 }  // namespace
 
-SmbUrl SmbUrl::parse(const std::string& url)
+SmbUrl SmbUrl::parse(const std::string& given)
 {
+  refusePassword(given, "the SMB address");
+  const std::string url = shownAddress(given);  // in messages (a password was refused above)
   const std::string scheme = "smb://";
   const std::string form = " (expected smb://[user@]host[:port]/share[/folder])";
   if (url.compare(0, scheme.size(), scheme) != 0)
     throw ConfigError("'" + url + "' is not an SMB address" + form);
-  std::string rest = url.substr(scheme.size());
+  std::string rest = given.substr(scheme.size());
   SmbUrl result;
   const auto slash = rest.find('/');
   std::string authority = rest.substr(0, slash);
@@ -106,8 +109,8 @@ SmbUrl SmbUrl::parse(const std::string& url)
   {
     result.user = authority.substr(0, at);
     authority = authority.substr(at + 1);
-    if (result.user.empty() || result.user.find(':') != std::string::npos)
-      throw ConfigError("'" + url + "': a password never goes in the address; put it in a credentials file" + form);
+    if (result.user.empty())
+      throw ConfigError("'" + url + "': no user name before '@'" + form);
   }
   const auto colon = authority.rfind(':');
   result.host = authority.substr(0, colon);
@@ -659,6 +662,11 @@ std::unique_ptr<programs::ProgramStore> openStore(const std::string& address, co
     if (!credentials_file.empty())
       credentials = SmbCredentials::fromFile(credentials_file);
     return std::make_unique<SmbProgramStore>(address, credentials, timeout);
+  }
+  if (address.find("://") != std::string::npos)
+  {
+    refusePassword(address, "the address");
+    throw ConfigError("'" + address + "' is neither an smb:// address nor a local folder");
   }
   if (!credentials_file.empty())
     throw ConfigError("a credentials file is for smb:// addresses, not for the local directory " + address);

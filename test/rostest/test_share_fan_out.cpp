@@ -5,7 +5,8 @@
 // share kept in the archive, then removed, each outcome on withdrawals; a bad ~withdraw_at stops
 // the node with the reason. ~withdraw_at: a node whose clock reaches the time of day a few seconds
 // after its start empties its share then, not before. ~serve_dir: the second node's folder is one
-// the PC serves.
+// the PC serves. A ~url with a password stops the node without repeating it (stderr, /rosout, the
+// parameter server).
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <ros/ros.h>
@@ -21,6 +22,8 @@
 #include <filesystem>
 #include <mutex>
 #include <random>
+
+#include <rosgraph_msgs/Log.h>
 
 #include "cnc_bridge/FanOutProgram.h"
 #include "cnc_bridge/ProgramRequestEvent.h"
@@ -281,6 +284,47 @@ TEST_F(ShareFanOutTest, ExactlyOneOfUrlAndServeDir)
   error = refuse("missing", {"_serve_dir:=" + share("missing")});
   EXPECT_NE(error.find(share("missing") + " is not a folder"), std::string::npos) << error;
   EXPECT_FALSE(test::exists(share("missing")));
+}
+
+namespace
+{
+/// The names of the parameters under \p key whose value (a string, at any depth) holds \p text.
+void paramsHolding(const XmlRpc::XmlRpcValue& value, const std::string& key, const std::string& text,
+                   std::vector<std::string>& found)
+{
+  if (value.getType() == XmlRpc::XmlRpcValue::TypeStruct)
+  {
+    for (auto it = value.begin(); it != value.end(); ++it)
+      paramsHolding(it->second, key + "/" + it->first, text, found);
+  }
+  else if (value.getType() == XmlRpc::XmlRpcValue::TypeArray)
+  {
+    for (int i = 0; i < value.size(); ++i)
+      paramsHolding(value[i], key + "/" + std::to_string(i), text, found);
+  }
+  else if (value.getType() == XmlRpc::XmlRpcValue::TypeString &&
+           static_cast<const std::string&>(value).find(text) != std::string::npos)
+  {
+    found.push_back(key);
+  }
+}
+}  // namespace
+
+TEST_F(ShareFanOutTest, APasswordInTheUrlIsRefusedAndRepeatedNowhere)
+{
+  const std::string password = "Pw-7f3e9a";
+  topic_watch::TopicWatch<rosgraph_msgs::Log> rosout("/rosout_agg", 1000, ros::NodeHandle());
+  const std::string error = refuse("leak", {"_url:=smb://cnc:" + password + "@127.0.0.1/memory"});
+  EXPECT_NE(error.find("/cell/leak/share_node/url holds user information with a password"), std::string::npos) << error;
+  EXPECT_NE(error.find("credentials file"), std::string::npos) << error;
+  EXPECT_EQ(error.find(password), std::string::npos) << error;
+  for (const rosgraph_msgs::Log& line : rosout.all())
+    EXPECT_EQ(line.msg.find(password), std::string::npos) << line.name << ": " << line.msg;
+  XmlRpc::XmlRpcValue everything;
+  ASSERT_TRUE(ros::param::get("/", everything));
+  std::vector<std::string> holding;
+  paramsHolding(everything, "", password, holding);
+  EXPECT_EQ(holding, std::vector<std::string>{"/cell/leak/share_node/url"});  // only where the user set it
 }
 
 int main(int argc, char** argv)

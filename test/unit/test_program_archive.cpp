@@ -1,5 +1,10 @@
-// The program archive: versions kept once per distinct content, the keep limit, metadata, diffs.
+// The program archive: versions kept once per distinct content, the keep limit, metadata, diffs;
+// modes, and links planted in the archive not followed.
 #include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <filesystem>
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/programs/archive.h"
@@ -54,4 +59,48 @@ TEST(ProgramArchive, UnifiedDiff)
   EXPECT_NE(diff.find("\n-G0 X1.\n+G0 X1.5\n"), std::string::npos) << diff;
   EXPECT_EQ(ProgramArchive::diff(a->path, "a", a->path, "b"), "");
   EXPECT_THROW(ProgramArchive::diff(dir.file("none"), "a", a->path, "b"), Error);
+}
+
+TEST(ProgramArchive, ALinkPlantedInTheArchiveIsNotFollowed)
+{
+  test::TempDir dir("cnc_archive"), outside("cnc_outside");
+  const std::string victim = outside.write("v0001.nc", "NOT YOURS\n");
+  ProgramArchive archive(dir.file("archive"));
+  const VersionSource sent{"share_node", "vf2", "sent"};
+  // A program's folder planted as a link to a folder outside: nothing is written there.
+  ASSERT_EQ(::symlink(outside.path.c_str(), dir.file("archive/O01234.nc").c_str()), 0);
+  EXPECT_THROW(archive.add("O01234.nc", "%\nO01234\n%\n", sent), Error);
+  EXPECT_TRUE(archive.history("O01234.nc").empty());
+  EXPECT_EQ(test::readFile(victim), "NOT YOURS\n");
+  EXPECT_FALSE(std::filesystem::exists(outside.file("v0001.meta")));
+
+  // A version's file planted as a link: replaced by the version, the file it named unchanged.
+  std::filesystem::create_directories(dir.file("archive/O05555.nc"));
+  ASSERT_EQ(::symlink(victim.c_str(), dir.file("archive/O05555.nc/v0001.nc").c_str()), 0);
+  ASSERT_TRUE(archive.add("O05555.nc", "%\nO05555\n%\n", sent).has_value());
+  EXPECT_EQ(test::readFile(dir.file("archive/O05555.nc/v0001.nc")), "%\nO05555\n%\n");
+  EXPECT_EQ(test::readFile(victim), "NOT YOURS\n");
+
+  // A version whose metadata names a file elsewhere is not shown.
+  test::writeFile(dir.file("archive/O05555.nc/v0002.meta"), "time = 1\nsize = 10\nfile = ../../x/v0001.nc\n");
+  EXPECT_EQ(archive.history("O05555.nc").size(), 1u);
+}
+
+TEST(ProgramArchive, VersionsAreWrittenOwnerAndGroupOnly)
+{
+  test::TempDir dir("cnc_archive");
+  const mode_t umask_before = ::umask(0);
+  ProgramArchive archive(dir.file("archive"));
+  const auto open = archive.add("O01234.nc", "a", {"cnc_dnc", "", "sent"});
+  const auto narrow = archive.add("O01234.nc", "b", {"cnc_dnc", "", "sent"}, 0600);
+  ::umask(umask_before);
+  struct stat info;
+  ASSERT_EQ(::stat(open->path.c_str(), &info), 0);
+  EXPECT_EQ(info.st_mode & 07777, 0640u);
+  ASSERT_EQ(::stat(narrow->path.c_str(), &info), 0);
+  EXPECT_EQ(info.st_mode & 07777, 0600u);
+  ASSERT_EQ(::stat(dir.file("archive").c_str(), &info), 0);
+  EXPECT_EQ(info.st_mode & 07777, 0750u);
+  ASSERT_EQ(::stat(dir.file("archive/O01234.nc").c_str(), &info), 0);
+  EXPECT_EQ(info.st_mode & 07777, 0750u);
 }

@@ -1,10 +1,14 @@
-// Program names and numbers, program heads, the protected range, the local program store,
+// Program names and numbers, program heads, the protected range, the local program store (no link
+// followed, only regular files read),
 // getProgram()'s download written chunk by chunk and putProgram()'s upload read chunk by chunk.
 #include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <filesystem>
 #include <string>
+#include <vector>
 
 #include "cnc_bridge/programs/program_name.h"
 #include "cnc_bridge/programs/program_store.h"
@@ -109,6 +113,59 @@ TEST(LocalProgramStore, WritesAtomicallyAndLists)
   store.remove("O00001.nc");
   EXPECT_EQ(store.list().size(), 0u);
   EXPECT_THROW(store.write("../escape.nc", "x"), ConfigError);
+}
+
+TEST(LocalProgramStore, FollowsNoLinkAndReadsOnlyRegularFiles)
+{
+  test::TempDir dir("cnc_store"), outside("cnc_outside");
+  const std::string secret = outside.write("secret", "SECRET\n");
+  ::chmod(secret.c_str(), 0600);
+  std::filesystem::create_directories(outside.file("folder"));
+  LocalProgramStore store(dir.path);
+  store.write("O00001.nc", "%\nO00001\n%\n");
+  ASSERT_EQ(::symlink(secret.c_str(), dir.file("O01234.nc").c_str()), 0);            // a link out
+  ASSERT_EQ(::symlink("O00001.nc", dir.file("O00002.nc").c_str()), 0);               // a link inside
+  ASSERT_EQ(::symlink(outside.file("folder").c_str(), dir.file("sub").c_str()), 0);  // a folder out
+  ASSERT_EQ(::mkfifo(dir.file("O00003.nc").c_str(), 0600), 0);
+
+  const auto names = [&store]
+  {
+    std::vector<std::string> listed;
+    for (const ProgramEntry& entry : store.list())
+      listed.push_back(entry.name);
+    return listed;
+  };
+  EXPECT_EQ(names(), std::vector<std::string>{"O00001.nc"});
+  EXPECT_EQ(names(), std::vector<std::string>{"O00001.nc"});  // listed again: said once in the log
+  for (const std::string name : {"O01234.nc", "O00002.nc"})
+  {
+    try
+    {
+      store.read(name);
+      ADD_FAILURE() << name << " was read";
+    }
+    catch (const ConfigError& e)
+    {
+      EXPECT_NE(std::string(e.what()).find(dir.file(name) + " is a symbolic link, not a program file"),
+                std::string::npos)
+          << e.what();
+    }
+    EXPECT_THROW(store.readHead(name, 100), ConfigError);
+    EXPECT_THROW(store.stat(name), ConfigError);
+  }
+  EXPECT_THROW(store.read("O00003.nc"), ConfigError);  // at once: a FIFO is not waited on
+  EXPECT_THROW(store.read("sub/secret"), ConfigError);
+  EXPECT_THROW(store.write("sub/O05555.nc", "into the folder outside"), ConfigError);
+  EXPECT_TRUE(std::filesystem::is_empty(outside.file("folder")));
+
+  store.write("O01234.nc", "%\nO01234\n%\n");  // replaces the link itself
+  EXPECT_EQ(store.read("O01234.nc"), "%\nO01234\n%\n");
+  store.remove("O00002.nc");  // the link, not the file it names
+  EXPECT_EQ(store.read("O00001.nc"), "%\nO00001\n%\n");
+  EXPECT_EQ(test::readFile(secret), "SECRET\n");
+  struct stat info;
+  ASSERT_EQ(::stat(secret.c_str(), &info), 0);
+  EXPECT_EQ(info.st_mode & 07777, 0600u);
 }
 
 namespace

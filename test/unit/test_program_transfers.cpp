@@ -1,11 +1,16 @@
 // ProgramTransfers (what share_node's ~send_program, ~receive_program and ~transfer do) between
 // local folders: both directions byte for byte, each kept in the archive; a protected program, a
 // missing one and a second transfer while one runs refused and counted so; a cancelled send
-// leaves the previous version; the checks' counts.
+// leaves the previous version; the checks' counts. Links out of the share, directories and FIFOs
+// where a program belongs refused; the modes of copies and kept versions.
 #include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include <filesystem>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "cnc_bridge/programs/program_transfers.h"
 #include "temp_dir.h"
@@ -132,4 +137,92 @@ TEST_F(ProgramTransfersTest, ChecksCountedAndANewErrorSaidOnce)
   EXPECT_EQ(counts.checks, 3u);
   EXPECT_EQ(counts.check_failures, 2u);
   EXPECT_DOUBLE_EQ(counts.round_trip, 0.5);
+}
+
+namespace
+{
+/// A file outside every folder of the test, readable by its owner only (a root-only file).
+struct OutsideFile
+{
+  OutsideFile() : path(dir.write("secret", "root:SECRET:0:0\n")) { ::chmod(path.c_str(), 0600); }
+  TempDir dir{"cnc_outside"};
+  std::string path;
+};
+
+unsigned modeOf(const std::string& path)
+{
+  struct stat info;
+  return ::lstat(path.c_str(), &info) == 0 ? (info.st_mode & 07777) : 0;
+}
+}  // namespace
+
+TEST_F(ProgramTransfersTest, ALinkOutOfTheShareIsNotListedReadCopiedOrArchived)
+{
+  const OutsideFile secret;
+  ASSERT_EQ(::symlink(secret.path.c_str(), dir_.file("share/O01234.nc").c_str()), 0);
+  dir_.write("share/O00001.nc", "%\nO00001\n%\n");
+  const auto listing = listPrograms(share_, NamePattern());  // the listing itself does not fail
+  ASSERT_EQ(listing.size(), 1u);
+  EXPECT_EQ(listing[0].entry.name, "O00001.nc");
+
+  const TransferOutcome outcome = transfers_.run(ProgramTransfers::Direction::kReceive, "O01234.nc");
+  EXPECT_FALSE(outcome.success);
+  EXPECT_TRUE(outcome.refused);
+  EXPECT_NE(outcome.message.find("is a symbolic link, not a program file"), std::string::npos) << outcome.message;
+  EXPECT_FALSE(std::filesystem::exists(dir_.file("programs/O01234.nc")));
+  EXPECT_TRUE(archive_.history("O01234.nc").empty());
+  EXPECT_EQ(readFile(secret.path), "root:SECRET:0:0\n");
+  EXPECT_EQ(modeOf(secret.path), 0600u);
+}
+
+TEST_F(ProgramTransfersTest, ADirectoryOrFifoWhereAProgramBelongsIsRefusedByName)
+{
+  std::filesystem::create_directories(dir_.file("share/O02222.nc"));
+  ASSERT_EQ(::mkfifo(dir_.file("share/O03333.nc").c_str(), 0600), 0);
+  ASSERT_EQ(::mkfifo(dir_.file("programs/O03333.nc").c_str(), 0600), 0);
+  std::filesystem::create_directories(dir_.file("programs/O02222.nc"));
+  EXPECT_TRUE(share_.list().empty());
+
+  const std::vector<std::pair<ProgramTransfers::Direction, std::string>> refusals = {
+      {ProgramTransfers::Direction::kReceive, "O02222.nc"},  // a directory on the share and here
+      {ProgramTransfers::Direction::kReceive, "O03333.nc"},  // a FIFO on the share (and here)
+      {ProgramTransfers::Direction::kSend, "O02222.nc"},
+      {ProgramTransfers::Direction::kSend, "O03333.nc"}};
+  for (const auto& [direction, file] : refusals)
+  {
+    const TransferOutcome outcome = transfers_.run(direction, file);
+    EXPECT_TRUE(outcome.refused) << file << ": " << outcome.message;
+    const std::string kind = file == "O02222.nc" ? "a directory" : "a FIFO";
+    EXPECT_NE(outcome.message.find(kind + ", not a program file"), std::string::npos) << outcome.message;
+  }
+  EXPECT_TRUE(std::filesystem::is_directory(dir_.file("share/O02222.nc")));
+  EXPECT_TRUE(std::filesystem::is_fifo(dir_.file("programs/O03333.nc")));
+  EXPECT_TRUE(archive_.history("O02222.nc").empty());
+  EXPECT_TRUE(archive_.history("O03333.nc").empty());
+}
+
+TEST_F(ProgramTransfersTest, CopiesAndVersionsAreNoMoreReadableThanTheProgram)
+{
+  const mode_t umask_before = ::umask(022);
+  dir_.write("share/O01111.nc", "%\nO01111 (OPEN)\n%\n");
+  ::chmod(dir_.file("share/O01111.nc").c_str(), 0644);
+  dir_.write("share/O02222.nc", "%\nO02222 (OWNER ONLY)\n%\n");
+  ::chmod(dir_.file("share/O02222.nc").c_str(), 0600);
+  for (const std::string file : {"O01111.nc", "O02222.nc"})
+  {
+    const TransferOutcome outcome = transfers_.run(ProgramTransfers::Direction::kReceive, file);
+    ASSERT_TRUE(outcome.success) << outcome.message;
+  }
+  dir_.write("programs/O03333.nc", "%\nO03333\n%\n");
+  ::chmod(dir_.file("programs/O03333.nc").c_str(), 0644);
+  ASSERT_TRUE(transfers_.run(ProgramTransfers::Direction::kSend, "O03333.nc").success);
+  ::umask(umask_before);
+
+  EXPECT_EQ(modeOf(dir_.file("programs/O01111.nc")), 0640u);  // kProgramFileMode, not 0644
+  EXPECT_EQ(modeOf(dir_.file("programs/O02222.nc")), 0600u);  // the program's own, narrower
+  EXPECT_EQ(modeOf(dir_.file("share/O03333.nc")), 0640u);
+  EXPECT_EQ(modeOf(archive_.history("O01111.nc").at(0).path), 0640u);
+  EXPECT_EQ(modeOf(archive_.history("O02222.nc").at(0).path), 0600u);
+  EXPECT_EQ(modeOf(archive_.history("O03333.nc").at(0).path), 0640u);
+  EXPECT_EQ(modeOf(dir_.file("archive/O01111.nc")) & 0007, 0u);  // the program's folder: nothing for others
 }

@@ -1,10 +1,11 @@
 // cnc_dnc send/receive --share and cnc_dnc list as a user runs them, against a real smbd
 // (samba_server.h): exit 0 and progress lines for a complete transfer, one error line and exit 1
 // for a wrong password, a missing share or file, a protected program (the share then holds
-// nothing new), exit 2 for a bad command line.
+// nothing new), exit 2 for a bad command line; a password in the address refused and never printed.
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <filesystem>
 #include <random>
@@ -112,6 +113,9 @@ TEST_F(ShareCliTest, SendReceiveAndListThroughTheShare)
                                    "O01234.nc", local_.file("back.nc")});
   ASSERT_EQ(received.status, 0) << received.err;
   EXPECT_EQ(readFile(local_.file("back.nc")), program);
+  struct stat info;
+  ASSERT_EQ(::stat(local_.file("back.nc").c_str(), &info), 0);
+  EXPECT_EQ(info.st_mode & 0007, 0u);  // nothing for others (0640 or narrower)
 
   writeFile(server_->folder("secure") + "/O00077.nc", "%\nO77 (DEBURR)\n%\n");
   const ToolRun listed = cncDnc({"list", "--share", server_->url("secure"), "--credentials", credentials});
@@ -152,6 +156,34 @@ TEST_F(ShareCliTest, FailuresExitOneWithOneClearLine)
 
   EXPECT_EQ(cncDnc({"send", "--share"}).status, 2);
   EXPECT_EQ(cncDnc({"receive", "--share", server_->url("guest"), "O1.nc"}).status, 2);
+}
+
+TEST_F(ShareCliTest, APasswordInTheShareAddressIsRefusedAndNeverPrinted)
+{
+  const std::string source = local_.write("O01001.nc", "%\nO01001\nM30\n%\n");
+  const std::string url =
+      "smb://" + server_->user + ":" + server_->password + "@127.0.0.1:" + std::to_string(server_->port) + "/secure";
+  const auto files = [this]
+  {
+    std::vector<std::string> names;
+    for (const auto& item : std::filesystem::directory_iterator(server_->folder("secure")))
+      names.push_back(item.path().filename().string());
+    std::sort(names.begin(), names.end());
+    return names;
+  };
+  const std::vector<std::string> before = files();
+  for (const std::vector<std::string>& args :
+       {std::vector<std::string>{"send", "--share", url, source},
+        std::vector<std::string>{"receive", "--share", url, "O01001.nc", local_.file("x.nc")},
+        std::vector<std::string>{"list", "--share", url}})
+  {
+    const ToolRun run = cncDnc(args);
+    expectOneErrorLine(run, args[0], "--share holds user information with a password");
+    EXPECT_NE(run.err.find("credentials file"), std::string::npos) << run.err;
+    EXPECT_EQ((run.out + run.err).find(server_->password), std::string::npos) << run.out << run.err;
+  }
+  EXPECT_EQ(files(), before);  // nothing reached the share
+  EXPECT_FALSE(exists(local_.file("x.nc")));
 }
 
 // cnc_dnc history and diff read the archive the nodes keep beside their program directory.

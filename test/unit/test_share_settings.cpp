@@ -1,9 +1,11 @@
 // share_node's settings checked without ROS (share_settings.h): exactly one of ~url and
 // ~serve_dir, a served folder that must exist and be local, the requests folder a plain name in
-// the share, the archive beside the program folder unless given, at least one version kept.
+// the share, the archive beside the program folder unless given, at least one version kept; a
+// password in an address refused without repeating it.
 #include <gtest/gtest.h>
 
 #include <string>
+#include <tuple>
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/share/share_settings.h"
@@ -52,6 +54,27 @@ TEST(ShareAddress, AUrlIsTakenAsGiven)
   // A local ~url need not exist yet: the store says so at its first call.
   EXPECT_EQ(addressError("/no/such/folder", "", &address), "");
   EXPECT_EQ(address, "/no/such/folder");
+}
+
+TEST(ShareAddress, APasswordInTheAddressIsRefusedAndNotRepeated)
+{
+  const std::string password = "Pw-31c4e";
+  for (const auto& [url, serve_dir, named] :
+       {std::tuple<std::string, std::string, std::string>{"smb://cnc:" + password + "@vf2/memory", "", "url"},
+        {"smb://WORKGROUP;cnc:" + password + "@vf2:445/memory/programs", "", "url"},
+        {"", "smb://cnc:" + password + "@vf2/memory", "serve_dir"}})
+  {
+    const std::string error = addressError(url, serve_dir);
+    EXPECT_EQ(
+        error.rfind("/vf2/share/" + named + " holds user information with a password (user:password@): refused", 0), 0u)
+        << error;
+    EXPECT_NE(error.find("credentials file in smbclient's format"), std::string::npos) << error;
+    EXPECT_EQ(error.find(password), std::string::npos) << error;
+  }
+  EXPECT_EQ(shownAddress("smb://cnc:" + password + "@vf2/memory"), "smb://***@vf2/memory");
+  EXPECT_EQ(shownAddress("smb://cnc@vf2/memory"), "smb://cnc@vf2/memory");
+  EXPECT_EQ(shownAddress("/srv/a:b@c"), "/srv/a:b@c");      // a local folder has no user information
+  EXPECT_EQ(addressError("smb://cnc@vf2/memory", ""), "");  // a user without a password is fine
 }
 
 TEST(ShareAddress, AServedFolderIsAnExistingLocalFolder)

@@ -107,6 +107,25 @@ TEST_F(SmbStoreTest, UserShareWithCredentialsFile)
   EXPECT_EQ(readFile(server_->folder("secure") + "/O01234.nc"), program);
   EXPECT_EQ(getProgram(store, "O01234.nc", local.file("back.nc")), program.size());
   EXPECT_EQ(readFile(local.file("back.nc")), program);
+  struct stat info;
+  ASSERT_EQ(::stat(local.file("back.nc").c_str(), &info), 0);
+  EXPECT_EQ(info.st_mode & 0137, 0u);  // a download is written kProgramFileMode (0640) or narrower
+}
+
+TEST_F(SmbStoreTest, ALinkOutOfTheSharedFolderIsNotRead)
+{
+  // smbd itself keeps a client inside the share ("wide links = no", its default): the store
+  // cannot list or fetch a file a link in the shared folder points to.
+  TempDir outside("cnc_outside"), local;
+  const std::string secret = outside.write("secret", "SECRET\n");
+  ::chmod(secret.c_str(), 0600);
+  ASSERT_EQ(::symlink(secret.c_str(), (server_->folder("guest") + "/O01234.nc").c_str()), 0);
+  SmbProgramStore store = guest();
+  for (const ProgramEntry& entry : store.list())
+    EXPECT_NE(entry.name, "O01234.nc");
+  EXPECT_THROW(getProgram(store, "O01234.nc", local.file("O01234.nc")), Error);
+  EXPECT_FALSE(std::filesystem::exists(local.file("O01234.nc")));
+  EXPECT_EQ(readFile(secret), "SECRET\n");
 }
 
 TEST_F(SmbStoreTest, WrongPasswordSaysSoAndWritesNothing)
@@ -540,7 +559,16 @@ TEST(SmbUrl, Parses)
   EXPECT_EQ(url.share, "memory");
   EXPECT_EQ(url.folder, "user/programs");
   EXPECT_EQ(SmbUrl::parse("smb://haas/share").port, 445u);
-  EXPECT_THROW(SmbUrl::parse("smb://u:secret@host/share"), ConfigError);
+  try
+  {
+    SmbUrl::parse("smb://u:s3cret-pw@host/share");
+    ADD_FAILURE() << "a password in the address was taken";
+  }
+  catch (const ConfigError& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("holds user information with a password"), std::string::npos) << e.what();
+    EXPECT_EQ(std::string(e.what()).find("s3cret-pw"), std::string::npos) << e.what();
+  }
   EXPECT_THROW(SmbUrl::parse("smb://host"), ConfigError);
   EXPECT_THROW(SmbUrl::parse("smb://host:0/s"), ConfigError);
   EXPECT_THROW(SmbUrl::parse("smb://host/s/../etc"), ConfigError);

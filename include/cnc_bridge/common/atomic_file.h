@@ -1,7 +1,15 @@
 // Files that appear complete or not at all. A received NC program is written to a temporary file
 // in the destination directory, flushed to disk, and renamed over the destination only when the
 // transfer has been verified. A failed or cancelled transfer leaves the destination as it was.
+//
+// The temporary file is created under the destination folder's descriptor with O_CREAT | O_EXCL |
+// O_NOFOLLOW: a link or file planted at its name is never opened or followed (the name is random and
+// another is tried). The rename replaces a link at the destination itself, never the file it points
+// to. Files are created with kProgramFileMode (0640: owner read/write, group read, nothing for
+// others; the process umask can only narrow it), or a narrower mode the caller gives.
 #pragma once
+
+#include <sys/types.h>
 
 #include <cstddef>
 #include <cstdint>
@@ -9,13 +17,20 @@
 
 namespace cnc_bridge
 {
+/// \brief The mode of every program, copy and archived version the bridge writes (before the umask).
+constexpr mode_t kProgramFileMode = 0640;
+
 /// \brief Writes one file atomically. Not thread-safe (one writer per object).
 class AtomicFileWriter
 {
  public:
-  /// \brief Creates `<dir>/.<name>.XXXXXX` next to \p path.
+  /// \brief Creates `<dir>/.<name>.partial.XXXXXX` next to \p path, with \p mode (bits beyond
+  /// kProgramFileMode are dropped).
   /// \throws ConfigError if the directory does not exist or cannot be written.
-  explicit AtomicFileWriter(std::string path);
+  explicit AtomicFileWriter(std::string path, mode_t mode = kProgramFileMode);
+  /// \brief As above, \p name in the folder open as \p dir_fd (not taken over; it must stay open
+  /// until commit() or discard()); \p shown is how messages name the file.
+  AtomicFileWriter(int dir_fd, const std::string& name, std::string shown, mode_t mode = kProgramFileMode);
   /// Discards the temporary file unless commit() succeeded.
   ~AtomicFileWriter();
   AtomicFileWriter(const AtomicFileWriter&) = delete;
@@ -39,9 +54,14 @@ class AtomicFileWriter
   /// Bytes written before the disk is asked to start writing them (startWriteback()).
   static constexpr size_t kWritebackStep = size_t{1024} * 1024;
   void startWriteback();
+  void create(const std::string& name, mode_t mode);
+  std::string tempShown() const;
 
-  std::string path_;
-  std::string temp_path_;
+  std::string path_;       ///< as shown in messages
+  std::string name_;       ///< the destination's name in the folder
+  std::string temp_name_;  ///< the temporary file's name in the folder ("" once removed)
+  int dir_fd_ = -1;
+  bool own_dir_fd_ = false;
   int fd_ = -1;
   size_t bytes_written_ = 0;
   size_t writeback_from_ = 0;  ///< the first byte whose writeback has not been started

@@ -6,7 +6,9 @@
 //     <archive>/O01234.nc/v0001.meta    time, node, machine, direction, size, crc32 (key = value)
 //
 // A version identical to one already kept is not stored again; the oldest versions beyond `keep`
-// are removed. Files are written atomically (AtomicFileWriter).
+// are removed. Files are written atomically (AtomicFileWriter), 0640 or narrower (a version is
+// never more readable than the program it keeps), in folders created 0750; no symbolic link in
+// the archive is followed (a link planted as a program's folder or a version is refused or skipped).
 #pragma once
 
 #include <cstdint>
@@ -14,8 +16,13 @@
 #include <string>
 #include <vector>
 
+#include "cnc_bridge/common/atomic_file.h"
+
 namespace cnc_bridge::programs
 {
+/// \brief The mode of the archive's folders (before the umask).
+constexpr unsigned kArchiveFolderMode = 0750;
+
 /// \brief Where a version came from.
 struct VersionSource
 {
@@ -43,10 +50,12 @@ class ProgramArchive
   /// \throws ConfigError if it cannot be created.
   ProgramArchive(std::string root, unsigned keep = 20);
 
-  /// \brief Keeps \p content as the next version of \p name unless a kept version is identical.
+  /// \brief Keeps \p content as the next version of \p name unless a kept version is identical,
+  /// with \p mode (the kept program's permission bits; no more than kProgramFileMode is given).
   /// \returns the new version, or nothing if the content was kept already.
   /// \throws ConfigError for a bad name, Error if it cannot be written.
-  std::optional<ArchiveVersion> add(const std::string& name, const std::string& content, const VersionSource& source);
+  std::optional<ArchiveVersion> add(const std::string& name, const std::string& content, const VersionSource& source,
+                                    unsigned mode = kProgramFileMode);
   /// \brief The kept versions of \p name, oldest first (empty if none).
   std::vector<ArchiveVersion> history(const std::string& name) const;
   /// \brief Version \p number of \p name. \throws ConfigError naming the versions there are.

@@ -12,7 +12,9 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <mutex>
 #include <optional>
+#include <set>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -69,6 +71,9 @@ class ProgramStore
                       const std::atomic<bool>* cancel = nullptr);
   /// \brief At most the first \p bytes of the file (for listings). \throws as read().
   virtual std::string readHead(const std::string& name, size_t bytes) = 0;
+  /// \brief The mode a local copy of \p name gets (getProgram()): kProgramFileMode (0640) unless
+  /// the store knows the file's own mode is narrower. Asks the store nothing by default.
+  virtual unsigned copyMode(const std::string& name);
   /// \brief Replaces (or creates) \p name with the \p size bytes \p source gives, atomically (see
   /// the file comment), each chunk sent as it comes: an upload of a local file holds one chunk in
   /// memory, not the whole program (putProgram()).
@@ -106,7 +111,13 @@ bool isTemporaryName(const std::string& name);
 /// \brief A temporary name beside \p name: `.<name>.<tag>.partial` in the same folder.
 std::string temporaryName(const std::string& name, const std::string& tag);
 
-/// \brief A local directory (the `~program_dir` of the nodes).
+/// \brief A local directory (a folder share_node serves, `~serve_dir`, or a `~url` that is a
+/// folder). Only regular files are programs, and no symbolic link is followed below \p root, not
+/// even one whose target is inside: every name is opened under the folder's descriptor with
+/// O_NOFOLLOW (each subfolder too), so a link planted in the folder cannot make the store read,
+/// list, copy or replace a file elsewhere. list() skips links, FIFOs, sockets and devices (each
+/// named once in the log) and subfolders; read(), readHead() and stat() refuse them by name
+/// (ConfigError). Writes create kProgramFileMode (0640) files.
 class LocalProgramStore : public ProgramStore
 {
  public:
@@ -118,14 +129,26 @@ class LocalProgramStore : public ProgramStore
   std::string read(const std::string& name, const StoreProgress& progress = nullptr,
                    const std::atomic<bool>* cancel = nullptr) override;
   std::string readHead(const std::string& name, size_t bytes) override;
+  unsigned copyMode(const std::string& name) override;
   void writeFrom(const std::string& name, uint64_t size, const StoreSource& source,
                  const StoreProgress& progress = nullptr, const std::atomic<bool>* cancel = nullptr) override;
   void rename(const std::string& from, const std::string& to) override;
   void remove(const std::string& name) override;
 
  private:
+  /// The root folder as a new descriptor (-1 and errno if it cannot be opened).
+  int openRoot() const;
+  /// The folder of \p name (the root, or a subfolder reached without following links) as a new
+  /// descriptor the caller closes, and \p base the name in it. \throws NotFoundError, ConfigError.
+  int openFolder(const std::string& name, std::string& base) const;
+  /// The open regular file \p name (the caller closes it). \throws NotFoundError, ConfigError, Error.
+  int openFile(const std::string& name) const;
+  /// Logs once per name that list() left \p name out, being \p kind.
+  void reportSkipped(const std::string& name, const std::string& kind);
   std::string path(const std::string& name) const;
   std::string root_;
+  std::mutex skipped_mutex_;
+  std::set<std::string> skipped_;  ///< names list() has reported leaving out
 };
 
 /// \brief A program as a listing shows it: the file, and its O number and first comment.

@@ -53,9 +53,20 @@ struct NodeSettings
   double check_period = 5;                         ///< s
 };
 
+/// \brief Refuses an address (\p given_as names it: "~url", "--share") whose user information holds
+/// a password (`smb://user:secret@host/...`): credentials come only from the credentials file. The
+/// error names the parameter, never the address or the password.
+/// \throws ConfigError.
+void refusePassword(const std::string& address, const std::string& given_as);
+
+/// \brief \p address for messages: its user information (between `://` and `@`) replaced by `***`
+/// when it holds a ':' (a password), otherwise as given.
+std::string shownAddress(const std::string& address);
+
 /// \brief The share's address from ~url and ~serve_dir, of which exactly one is given (\p url_name
 /// and \p serve_dir_name are how the user sets them, named in the errors). A served folder is
-/// written like a local ~url; it must be an existing folder, not an smb:// address.
+/// written like a local ~url; it must be an existing folder, not an smb:// address. An address with
+/// a password in it is refused (refusePassword()).
 /// \throws ConfigError naming what is wrong.
 std::string shareAddress(const std::string& url, const std::string& serve_dir, const std::string& url_name,
                          const std::string& serve_dir_name);
