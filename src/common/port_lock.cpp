@@ -85,7 +85,7 @@ std::string lockDirectory(const std::string& requested)
   const std::string why = makeLockDir(requested, 0755);
   if (why.empty())
     return requested;
-  const std::string fallback = "/tmp/cnc_bridge-" + std::to_string(::geteuid());
+  std::string fallback = "/tmp/cnc_bridge-" + std::to_string(::geteuid());
   const std::string fallback_why = makeLockDir(fallback, 0700);
   if (!fallback_why.empty())
   {

@@ -30,11 +30,11 @@ std::string fileKind(unsigned mode)
   return "not a regular file";
 }
 
-RegularFile::RegularFile(const std::string& path) : path_(path)
+// O_NONBLOCK: opening a FIFO for reading would otherwise wait for a writer. It changes nothing for
+// the regular file that is read afterwards.
+RegularFile::RegularFile(const std::string& path)
+    : path_(path), fd_(::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC | O_NOCTTY))
 {
-  // O_NONBLOCK: opening a FIFO for reading would otherwise wait for a writer. It changes nothing
-  // for the regular file that is read afterwards.
-  fd_ = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC | O_NOCTTY);
   if (fd_ < 0)
     throw ConfigError("cannot read " + path + ": " + std::strerror(errno));
   struct stat info;
@@ -91,7 +91,7 @@ std::string RegularFile::readAll(uint64_t max_bytes, const std::string& limit_na
   }
   std::string contents;
   char buffer[65536];
-  for (size_t n; (n = read(buffer, sizeof buffer)) > 0;)
+  for (size_t n = read(buffer, sizeof buffer); n > 0; n = read(buffer, sizeof buffer))
   {
     if (contents.size() + n > max_bytes)  // it grew since it was opened
       throw ConfigError("refused: " + path_ + " grew past " + limit_name + " (" + std::to_string(max_bytes) +

@@ -271,8 +271,13 @@ ProgramHeader readHeaderOfFile(const std::string& path)
   RegularFile file(path);
   HeaderScanner scanner;
   char buffer[16384];
-  for (size_t n; !scanner.done() && (n = file.read(buffer, sizeof buffer)) > 0;)
+  while (!scanner.done())
+  {
+    const size_t n = file.read(buffer, sizeof buffer);
+    if (n == 0)
+      break;
     scanner.feed(buffer, n);
+  }
   scanner.finish();
   return scanner.header();
 }

@@ -24,6 +24,7 @@
 #include <algorithm>
 #include <cmath>
 #include <sstream>
+#include <utility>
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/log.h"
@@ -131,7 +132,7 @@ constexpr Milliseconds kDoubleReplyQuiet{1};
 constexpr Milliseconds kDoubledByteQuiet{1};
 
 Sender::Sender(Transport& link, Mode mode, Config config, const std::atomic<bool>* cancel)
-    : link_(link), input_(link, kReplyReadSize), mode_(mode), config_(config), cancel_(cancel)
+    : link_(link), input_(link, kReplyReadSize), mode_(mode), config_(std::move(config)), cancel_(cancel)
 {
 }
 
@@ -389,7 +390,7 @@ Receiver::Receiver(Transport& link, Mode mode, Config config, const std::atomic<
     : link_(link),
       input_(link, packetSize(kBlockSize1K, CheckType::kCrc16)),
       mode_(mode),
-      config_(config),
+      config_(std::move(config)),
       cancel_(cancel)
 {
 }

@@ -54,7 +54,7 @@ TEST(ProgramHeader, NumberAndFirstComment)
 }
 
 // The number is read where a control takes it: after '%', leader and blank blocks, and blocks
-// that hold only comments (issue 26: a comment block before O09010 sent a protected program).
+// that hold only comments (a comment block before O09010 used to send a protected program).
 TEST(ProgramHeader, NumberIsReadWhereTheControlTakesIt)
 {
   auto h = readHeader("%\n(WIPS CALIBRATION)\nO09010 (PROBE)\nM99\n%\n");
