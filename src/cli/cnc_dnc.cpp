@@ -167,7 +167,10 @@ void addTransferOptions(po::options_description& options, const std::string& def
       "retries", po::value<unsigned>()->default_value(10), "errors in a row on one block before giving up")(
       "wait-chars", po::value<unsigned>()->default_value(30),
       "gap inside a packet, and silence before a NAK, in character times of the line")(
-      "wait-floor", po::value<unsigned>()->default_value(30), "milliseconds: the least of those two waits");
+      "wait-floor", po::value<unsigned>()->default_value(30), "milliseconds: the least of those two waits")(
+      "max-bytes", po::value<uint64_t>()->default_value(xmodem::kDefaultMaxProgramBytes),
+      "the longest program moved: a sender that goes past it is cancelled and nothing is stored; a larger "
+      "file is not sent (XModem has no length field)");
 }
 
 xmodem::Config transferConfig(const po::variables_map& vm)
@@ -180,6 +183,10 @@ xmodem::Config transferConfig(const po::variables_map& vm)
   config.max_retries = config.eot_retries = vm["retries"].as<unsigned>();
   config.wait_characters = vm["wait-chars"].as<unsigned>();
   config.wait_floor = Milliseconds(vm["wait-floor"].as<unsigned>());
+  config.max_bytes = vm["max-bytes"].as<uint64_t>();
+  if (config.max_bytes == 0)
+    throw UsageError("--max-bytes must be at least 1");
+  config.max_bytes_name = "--max-bytes";
   xmodem::fitToLine(config, serialSettings(vm).charactersPerSecond());
   return config;
 }
@@ -230,12 +237,16 @@ int runSend(const std::vector<std::string>& args)
   config.eot_retries = std::min(config.eot_retries, 3u);
   const std::string file = vm["file"].as<std::string>();
   cli::checkProtected(vm, file);  // before the port is opened: the control receives nothing
+  // ...and again on the bytes read for sending (the file is opened once): a file saved over since
+  // is not sent.
+  const xmodem::ContentCheck check = [&vm, &file](const std::string& contents)
+  { cli::checkProtectedContents(vm, file, contents); };
   return withPort(vm,
                   [&](Transport& port, std::atomic<bool>& cancel)
                   {
                     cli::ProgressLine progress("send " + file);
                     const xmodem::FileResult result =
-                        xmodem::sendFile(port, file, mode, config, text, showOn(progress), &cancel);
+                        xmodem::sendFile(port, file, mode, config, text, showOn(progress), &cancel, nullptr, check);
                     progress.finish();
                     return result.message + blockRate(result.stats);
                   });

@@ -35,5 +35,13 @@ inline void checkProtected(const boost::program_options::variables_map& vm, cons
   programs::checkProtectedFile(protectedRange(vm), programs::NamePattern(vm["name-pattern"].as<std::string>()), path,
                                sent_name);
 }
+/// \throws DisabledError if \p contents, read from \p path to be sent, are a protected program.
+inline void checkProtectedContents(const boost::program_options::variables_map& vm, const std::string& path,
+                                   const std::string& contents)
+{
+  const std::string name = path.substr(path.find_last_of('/') + 1);
+  protectedRange(vm).checkHeader(path, programs::NamePattern(vm["name-pattern"].as<std::string>()).number(name),
+                                 programs::readHeader(contents));
+}
 }  // namespace cli
 }  // namespace cnc_bridge

@@ -1,9 +1,11 @@
-// PortLock: flock(2) on /tmp/cnc_bridge-<device path with '/' replaced>.lock, and on the same name
-// with ".want" appended while a transfer waits.
+// PortLock: flock(2) on <lock dir>/cnc_bridge-<device path with '/' replaced>.lock, and on the same
+// name with ".want" appended while a transfer waits. The lock directory defaults to
+// /run/lock/cnc_bridge (port_lock.h, lockDirectory()).
 #include "cnc_bridge/common/port_lock.h"
 
 #include <fcntl.h>
 #include <sys/file.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -13,6 +15,8 @@
 #include <thread>
 
 #include "cnc_bridge/common/error.h"
+#include "cnc_bridge/common/log.h"
+#include "cnc_bridge/common/regular_file.h"
 
 namespace cnc_bridge
 {
@@ -20,17 +24,82 @@ namespace
 {
 int openLockFile(const std::string& path)
 {
-  const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0666);
+  // No O_TRUNC and no following links: a link planted at this path (to a file the node's user may
+  // write) must not be truncated or written through. O_NONBLOCK: a FIFO there must not block.
+  const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_NOFOLLOW | O_NONBLOCK | O_NOCTTY | O_CLOEXEC, 0640);
   if (fd < 0)
   {
+    if (errno == ELOOP)
+    {
+      throw LinkError("refused lock file " + path +
+                      ": it is a symbolic link, which is never followed; remove it (and check who put it there)");
+    }
     throw LinkError("cannot open lock file " + path + ": " + std::strerror(errno));
+  }
+  struct stat info;
+  const bool known = ::fstat(fd, &info) == 0;
+  if (!known || !S_ISREG(info.st_mode))
+  {
+    const std::string what = known ? "it is " + fileKind(info.st_mode) + ", not a regular file" : std::strerror(errno);
+    ::close(fd);
+    throw LinkError("refused lock file " + path + ": " + what + "; remove it");
   }
   return fd;
 }
+
+/// Why \p dir cannot hold the locks ("" if it can): it must be a directory itself (not a link), of
+/// this user or root, and no other user may write to it (unless sticky, as /run/lock is).
+std::string unsafeLockDir(const std::string& dir)
+{
+  struct stat info;
+  if (::lstat(dir.c_str(), &info) != 0)
+    return std::strerror(errno);
+  if (!S_ISDIR(info.st_mode))
+    return "it is " + fileKind(info.st_mode) + ", not a directory";
+  if (info.st_uid != ::geteuid() && info.st_uid != 0)
+    return "it belongs to another user (uid " + std::to_string(info.st_uid) + ")";
+  if ((info.st_mode & S_IWOTH) && !(info.st_mode & S_ISVTX))
+    return "every user may write to it";
+  return "";
+}
+
+/// Creates \p dir with \p mode unless it exists; \returns why it cannot be used ("" if it can).
+std::string makeLockDir(const std::string& dir, mode_t mode)
+{
+  if (::mkdir(dir.c_str(), mode) == 0)
+  {
+    ::chmod(dir.c_str(), mode);  // exactly, whatever the umask
+  }
+  else if (errno != EEXIST)
+  {
+    return std::string("cannot create it: ") + std::strerror(errno);
+  }
+  return unsafeLockDir(dir);
+}
 }  // namespace
 
-PortLock::PortLock(const std::string& device, const std::string& lock_dir)
+std::string lockDirectory(const std::string& requested)
 {
+  if (requested != kDefaultLockDir)
+    return requested;
+  const std::string why = makeLockDir(requested, 0755);
+  if (why.empty())
+    return requested;
+  std::string fallback = "/tmp/cnc_bridge-" + std::to_string(::geteuid());
+  const std::string fallback_why = makeLockDir(fallback, 0700);
+  if (!fallback_why.empty())
+  {
+    throw ConfigError("no directory for the serial-port lock: " + requested + ": " + why + "; " + fallback + ": " +
+                      fallback_why + "; set ~lock_dir (or fix the directory)");
+  }
+  CNC_LOG_WARN("port lock directory " << requested << " cannot be used (" << why << "); using " << fallback
+                                      << " instead: every node on the line must run as this user or share ~lock_dir");
+  return fallback;
+}
+
+PortLock::PortLock(const std::string& device, const std::string& lock_dir_requested)
+{
+  const std::string lock_dir = lockDirectory(lock_dir_requested);
   char resolved[PATH_MAX];
   std::string name = ::realpath(device.c_str(), resolved) ? resolved : device;
   for (char& c : name)

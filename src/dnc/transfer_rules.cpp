@@ -30,6 +30,13 @@ JobCheck TransferFiles::check(const std::string& file, bool send) const
   return check;
 }
 
+xmodem::ContentCheck TransferFiles::sendCheck(const std::string& file) const
+{
+  const std::string name = file.substr(file.find_last_of('/') + 1);
+  return [this, file, name](const std::string& contents)
+  { protected_.checkHeader(file, names_.number(name), programs::readHeader(contents)); };
+}
+
 std::string TransferFiles::archive(const std::string& path, const programs::VersionSource& source) const
 {
   const std::string name = path.substr(path.find_last_of('/') + 1);
@@ -86,13 +93,13 @@ bool ProgressThrottle::due(double now_s, const xmodem::Progress& progress)
 xmodem::FileResult transferByXmodem(Transport& link, const std::string& path, bool send, const std::string& protocol,
                                     const xmodem::Config& config, const xmodem::TextOptions& text,
                                     const xmodem::ProgressCallback& progress, const std::atomic<bool>& cancel,
-                                    TransferCounters& counters)
+                                    TransferCounters& counters, const xmodem::ContentCheck& check)
 {
   const xmodem::Mode mode = xmodem::parseMode(protocol);
   xmodem::Stats stats;
   try
   {
-    xmodem::FileResult file = send ? xmodem::sendFile(link, path, mode, config, text, progress, &cancel, &stats)
+    xmodem::FileResult file = send ? xmodem::sendFile(link, path, mode, config, text, progress, &cancel, &stats, check)
                                    : xmodem::receiveFile(link, path, mode, config, text, progress, &cancel, &stats);
     counters.xmodemStats(stats.timeouts, 0);
     return file;

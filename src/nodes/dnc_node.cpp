@@ -57,9 +57,9 @@ DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh)
     : nh_(nh),
       pnh_(pnh),
       serial_(params::serialSettings(pnh, 115200)),
-      // ~lock_dir (string, default /tmp): directory of the serial-port lock shared with a status
+      // ~lock_dir (string, default /run/lock/cnc_bridge): directory of the serial-port lock shared with a status
       // poller on the same line (haas_mdc_node ~lock_dir; both must name the same directory).
-      port_lock_(serial_.device, pnh.param<std::string>("lock_dir", "/tmp"))
+      port_lock_(serial_.device, pnh.param<std::string>("lock_dir", kDefaultLockDir))
 {
   // ~program_dir (string, required): the only directory files are read from and written to;
   // created if it does not exist.
@@ -98,6 +98,14 @@ DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   // SUB padding of the last block).
   pnh.param("binary", text_options_.binary, false);
   xmodem_config_ = dnc::xmodemConfig(xmodemWaits(pnh), serial_.charactersPerSecond());
+  // ~max_program_bytes (int, default 16 MiB): the longest program moved by XModem. XModem has no
+  // length field: a control (or anything on the line) that sends more is cancelled with CANs and
+  // nothing is stored; a larger file is not sent.
+  const int max_bytes = pnh.param("max_program_bytes", static_cast<int>(xmodem::kDefaultMaxProgramBytes));
+  if (max_bytes < 1)
+    throw ConfigError("~max_program_bytes must be at least 1 (bytes), not " + std::to_string(max_bytes));
+  xmodem_config_.max_bytes = static_cast<uint64_t>(max_bytes);
+  xmodem_config_.max_bytes_name = "~max_program_bytes";
   // ~feedback_rate (Hz, default 20): action feedback at most this often (and after the last block).
   feedback_period_ = ros::Duration(1.0 / params::positive(pnh, "feedback_rate", 20.0));
 
@@ -361,8 +369,11 @@ TransferResult DncNode::runXmodem(Transport& link, const TransferJob& job,
       feedback(f);
     state_->update([&](MachineState& s) { s.block = p.block; });
   };
-  const xmodem::FileResult file = dnc::transferByXmodem(link, job.path, job.send, job.goal.protocol, xmodem_config_,
-                                                        text_options_, progress, cancel, counters_);
+  // The protected range is checked again on the bytes read for sending (the file is opened once):
+  // a program saved over the file since the request was checked is not sent.
+  const xmodem::FileResult file =
+      dnc::transferByXmodem(link, job.path, job.send, job.goal.protocol, xmodem_config_, text_options_, progress,
+                            cancel, counters_, job.send ? files_->sendCheck(job.goal.file) : nullptr);
   TransferResult result;
   result.success = true;
   result.message = file.message;

@@ -100,7 +100,7 @@ class HaasMdcNode
       hardware_id_ = serial_->describe();
       // ~lock_dir: where the serial-port lock shared with dnc_node lives.
       std::string lock_dir;
-      pnh.param<std::string>("lock_dir", lock_dir, "/tmp");
+      pnh.param<std::string>("lock_dir", lock_dir, kDefaultLockDir);
       port_lock_ = std::make_unique<PortLock>(serial_->device, lock_dir);
     }
     else

@@ -4,9 +4,9 @@
 #include <algorithm>
 #include <cctype>
 #include <cstdio>
-#include <fstream>
 
 #include "cnc_bridge/common/error.h"
+#include "cnc_bridge/common/regular_file.h"
 
 namespace cnc_bridge::programs
 {
@@ -111,52 +111,175 @@ std::optional<uint32_t> NamePattern::number(const std::string& name) const
   return value;
 }
 
-ProgramHeader readHeader(const std::string& all)
+namespace
 {
-  const std::string text = all.substr(0, kHeaderBytes);
-  ProgramHeader header;
-  bool seen_block = false;  // the number only counts in the first block that is not '%' or blank
-  size_t pos = 0;
-  while (pos < text.size())
+constexpr size_t kMaxCommentChars = 256;  // a title; the rest of a longer comment is not kept
+constexpr size_t kFirstBlockChars = 32;   // enough to show what the number block says
+
+bool endOfBlock(char c)
+{
+  return c == '\n' || c == '\r';
+}
+
+/// Characters a control skips before and between blocks: tape leader (NUL, DEL) and blanks.
+bool leader(char c)
+{
+  return c == ' ' || c == '\t' || c == '\0' || c == '\x7f' || c == '\f' || c == '\v';
+}
+}  // namespace
+
+bool HeaderScanner::feed(const char* data, size_t size)
+{
+  for (size_t i = 0; i < size && !done_; ++i)
+    take(data[i]);
+  return done_;
+}
+
+void HeaderScanner::take(char c)
+{
+  ++consumed_;
+  if (first_block_open_ && state_ != State::kBlockStart)
   {
-    size_t end = text.find_first_of("\r\n", pos);
-    if (end == std::string::npos)
-      end = text.size();
-    const std::string line = text.substr(pos, end - pos);
-    pos = end + 1;
-    const std::string block = trimmed(line);
-    if (block.empty() || block == "%")
-      continue;
-    if (!seen_block)
-    {
-      seen_block = true;
-      if (block[0] == 'O' || block[0] == 'o' || block[0] == ':')
-      {
-        size_t count = 0;
-        header.number = digitsAt(block, 1, count);
-      }
-    }
-    const auto open = block.find('(');
-    if (open != std::string::npos)
-    {
-      const auto close = block.find(')', open);
-      header.comment =
-          trimmed(block.substr(open + 1, close == std::string::npos ? std::string::npos : close - open - 1));
-      return header;
-    }
+    if (endOfBlock(c))
+      first_block_open_ = false;
+    else if (header_.first_block.size() < kFirstBlockChars)
+      header_.first_block.push_back(c);
   }
-  return header;
+  switch (state_)
+  {
+    case State::kBlockStart:
+      if (endOfBlock(c) || leader(c))
+        break;
+      if (c == '%')
+        state_ = State::kPercent;
+      else if (c == '(')
+      {
+        state_ = State::kComment;
+        comment_return_ = State::kBlockStart;
+      }
+      else
+      {
+        // The program's first block: it holds the number if it starts with one.
+        header_.first_block.push_back(c);
+        first_block_open_ = true;
+        if (c == 'O' || c == 'o' || c == ':')
+          state_ = State::kNumberLetter;
+        else
+          endNumber(false, false);
+      }
+      break;
+    case State::kPercent:
+      if (endOfBlock(c))
+        state_ = State::kBlockStart;
+      break;
+    case State::kComment:
+      if (c == ')' || endOfBlock(c))  // an unclosed comment ends with its block
+      {
+        endComment();
+        state_ = comment_return_;
+      }
+      else if (comment_.size() < kMaxCommentChars)
+        comment_.push_back(c);
+      break;
+    case State::kNumberLetter:
+      if (std::isdigit(static_cast<unsigned char>(c)))
+      {
+        digits_ = 0;
+        value_ = 0;
+        state_ = State::kNumberDigits;
+        addDigit(c);
+      }
+      else if (c != ' ' && c != '\t')
+      {
+        endNumber(true, false);  // `O` with no digits
+        text(c);
+      }
+      break;
+    case State::kNumberDigits:
+      if (std::isdigit(static_cast<unsigned char>(c)))
+        addDigit(c);
+      else
+      {
+        endNumber(true, digits_ <= kMaxDigits);
+        text(c);
+      }
+      break;
+    case State::kText:
+      text(c);
+      break;
+  }
+  const bool first_block_known = !first_block_open_ || header_.first_block.size() >= kFirstBlockChars;
+  done_ = number_decided_ && first_block_known && (comment_found_ || consumed_ >= kHeaderBytes);
+}
+
+void HeaderScanner::addDigit(char c)
+{
+  if (++digits_ <= kMaxDigits)
+    value_ = value_ * 10 + static_cast<uint32_t>(c - '0');
+}
+
+void HeaderScanner::text(char c)
+{
+  state_ = State::kText;
+  if (c == '(' && !comment_found_)
+  {
+    state_ = State::kComment;
+    comment_return_ = State::kText;
+  }
+}
+
+void HeaderScanner::endNumber(bool numbered, bool valid)
+{
+  number_decided_ = true;
+  state_ = State::kText;
+  if (numbered && valid)
+    header_.number = value_;
+  header_.number_unreadable = numbered && !valid;
+}
+
+void HeaderScanner::endComment()
+{
+  if (!comment_found_)
+  {
+    header_.comment = trimmed(comment_);
+    comment_found_ = true;
+  }
+  comment_.clear();
+}
+
+void HeaderScanner::finish()
+{
+  if (state_ == State::kNumberLetter)
+    endNumber(true, false);
+  else if (state_ == State::kNumberDigits)
+    endNumber(true, digits_ <= kMaxDigits);
+  else if (state_ == State::kComment)
+    endComment();
+  done_ = true;
+}
+
+ProgramHeader readHeader(const std::string& text)
+{
+  HeaderScanner scanner;
+  scanner.feed(text);
+  scanner.finish();
+  return scanner.header();
 }
 
 ProgramHeader readHeaderOfFile(const std::string& path)
 {
-  std::ifstream in(path, std::ios::binary);
-  if (!in)
-    throw Error("cannot read " + path);
-  std::string head(kHeaderBytes, '\0');
-  in.read(head.data(), static_cast<std::streamsize>(head.size()));
-  head.resize(static_cast<size_t>(in.gcount()));
-  return readHeader(head);
+  RegularFile file(path);
+  HeaderScanner scanner;
+  char buffer[16384];
+  while (!scanner.done())
+  {
+    const size_t n = file.read(buffer, sizeof buffer);
+    if (n == 0)
+      break;
+    scanner.feed(buffer, n);
+  }
+  scanner.finish();
+  return scanner.header();
 }
 
 std::string programLabel(uint32_t number)
@@ -214,6 +337,18 @@ void ProtectedRange::check(const std::string& what, const std::optional<uint32_t
   }
 }
 
+void ProtectedRange::checkHeader(const std::string& what, const std::optional<uint32_t>& name_number,
+                                 const ProgramHeader& header) const
+{
+  check(what, name_number, header.number);
+  if (allowed_ || empty_ || !header.number_unreadable)
+    return;
+  throw DisabledError("refused: the program number of " + what + " cannot be read from its first block '" +
+                      header.first_block + "' (O or : and 1 to 8 digits), so it cannot be checked against the " +
+                      "protected range " + describe() + "; check the program's first block, or set " + switch_name_ +
+                      " to send it anyway");
+}
+
 void checkProtectedFile(const ProtectedRange& range, const NamePattern& pattern, const std::string& path,
                         const std::string& sent_name)
 {
@@ -221,6 +356,6 @@ void checkProtectedFile(const ProtectedRange& range, const NamePattern& pattern,
   const auto slash = name.find_last_of('/');
   if (slash != std::string::npos)
     name = name.substr(slash + 1);
-  range.check(path, pattern.number(name), readHeaderOfFile(path).number);
+  range.checkHeader(path, pattern.number(name), readHeaderOfFile(path));
 }
 }  // namespace cnc_bridge::programs

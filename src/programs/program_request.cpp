@@ -13,8 +13,6 @@ namespace cnc_bridge::programs
 {
 namespace
 {
-constexpr size_t kLookAt = 4096;
-
 std::string upper(const std::string& text)
 {
   std::string out = text;
@@ -121,7 +119,7 @@ std::string RequestWords::describe() const
 
 std::optional<ProgramRequest> recogniseRequest(const std::string& all, bool bare_line, const RequestWords& words)
 {
-  const std::string text = upper(all.substr(0, kLookAt));
+  const std::string text = upper(all.substr(0, kRequestHeadBytes));
   for (size_t open = text.find('('); open != std::string::npos; open = text.find('(', open + 1))
   {
     const size_t close = text.find_first_of(")\r\n", open + 1);

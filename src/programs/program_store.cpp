@@ -376,12 +376,22 @@ class LocalFileSource
 
   uint64_t size() const { return size_; }
 
-  /// The start of the program, where its number and first comment are.
-  const std::string& head()
+  /// The program's number and first comment, read up to its first block however far that is.
+  const ProgramHeader& header()
   {
-    head_.resize(static_cast<size_t>(std::min<uint64_t>(kHeaderBytes, size_)));
-    head_.resize(readAt(0, head_.data(), head_.size()));
-    return head_;
+    HeaderScanner scanner;
+    char piece[16384];
+    for (uint64_t at = 0; !scanner.done() && at < size_;)
+    {
+      const size_t got = readAt(at, piece, static_cast<size_t>(std::min<uint64_t>(sizeof piece, size_ - at)));
+      if (got == 0)
+        break;
+      scanner.feed(piece, got);
+      at += got;
+    }
+    scanner.finish();
+    checked_ = scanner.header();
+    return checked_;
   }
 
   /// The next \p max bytes (fewer only at the end of the size it had when opened).
@@ -397,9 +407,17 @@ class LocalFileSource
                   std::to_string(size_) + " bytes); nothing was replaced");
     }
     const std::string_view chunk(buffer_.data(), got);
-    if (offset_ == 0 && chunk.substr(0, head_.size()) != std::string_view(head_).substr(0, got))
-      throw Error(path_ + " changed while it was sent (its start is not the one checked); nothing was replaced");
     offset_ += got;
+    // The bytes sent are read again as they go: their number must be the one checked.
+    if (!sent_.done())
+    {
+      sent_.feed(chunk.data(), chunk.size());
+      if (offset_ == size_)
+        sent_.finish();
+      if (sent_.done() &&
+          (sent_.header().number != checked_.number || sent_.header().number_unreadable != checked_.number_unreadable))
+        throw Error(path_ + " changed while it was sent (its start is not the one checked); nothing was replaced");
+    }
     return chunk;
   }
 
@@ -426,7 +444,8 @@ class LocalFileSource
   uint64_t size_ = 0;
   uint64_t offset_ = 0;
   std::vector<char> buffer_;  // one chunk, reused
-  std::string head_;          // as checked
+  ProgramHeader checked_;     // as checked
+  HeaderScanner sent_;        // the header of the bytes sent so far
 };
 }  // namespace
 
@@ -440,7 +459,7 @@ uint64_t putProgram(ProgramStore& store, const std::string& local_path, std::str
   }
   checkName(name);
   LocalFileSource file(local_path);
-  range.check(local_path + " (as " + name + ")", pattern.number(name), readHeader(file.head()).number);
+  range.checkHeader(local_path + " (as " + name + ")", pattern.number(name), file.header());
   store.writeFrom(
       name, file.size(), [&file](size_t max) { return file.next(max); }, progress, cancel);
   return file.size();

@@ -52,7 +52,8 @@ void RequestServer::serveRequestFiles()
     std::string text;
     try
     {
-      text = folder_->read(file.name);
+      // Only its head can hold the request: a large file is not read whole into memory.
+      text = folder_->readHead(file.name, kRequestHeadBytes);
       folder_->remove(file.name);  // served once, whatever it held
     }
     catch (const Error& e)

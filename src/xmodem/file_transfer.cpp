@@ -1,13 +1,9 @@
 // File-level XModem transfers: end-of-block conversion, padding, atomic writes (file_transfer.h).
 #include "cnc_bridge/xmodem/file_transfer.h"
 
-#include <cerrno>
-#include <cstring>
-#include <fstream>
-#include <iterator>
-
 #include "cnc_bridge/common/atomic_file.h"
 #include "cnc_bridge/common/error.h"
+#include "cnc_bridge/common/regular_file.h"
 
 namespace cnc_bridge
 {
@@ -31,18 +27,11 @@ std::string fromWire(std::vector<uint8_t> payload, const TextOptions& options)
 
 FileResult sendFile(Transport& link, const std::string& path, Mode mode, const Config& config,
                     const TextOptions& options, const ProgressCallback& progress, const std::atomic<bool>* cancel,
-                    Stats* stats)
+                    Stats* stats, const ContentCheck& check)
 {
-  std::ifstream in(path, std::ios::binary);
-  if (!in)
-  {
-    throw ConfigError("cannot read " + path + ": " + std::strerror(errno));
-  }
-  const std::string contents((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  if (in.bad())
-  {
-    throw ConfigError("cannot read " + path + ": read error");
-  }
+  const std::string contents = RegularFile(path).readAll(config.max_bytes, config.max_bytes_name);
+  if (check)
+    check(contents);
   Sender sender(link, mode, config, cancel);
   FileResult result;
   try

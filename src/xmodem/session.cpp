@@ -24,6 +24,7 @@
 #include <algorithm>
 #include <cmath>
 #include <sstream>
+#include <utility>
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/log.h"
@@ -131,7 +132,7 @@ constexpr Milliseconds kDoubleReplyQuiet{1};
 constexpr Milliseconds kDoubledByteQuiet{1};
 
 Sender::Sender(Transport& link, Mode mode, Config config, const std::atomic<bool>* cancel)
-    : link_(link), input_(link, kReplyReadSize), mode_(mode), config_(config), cancel_(cancel)
+    : link_(link), input_(link, kReplyReadSize), mode_(mode), config_(std::move(config)), cancel_(cancel)
 {
 }
 
@@ -185,7 +186,7 @@ uint8_t Sender::waitForStart()
   }
 }
 
-Sender::Reply Sender::waitForReply(bool first_block, Milliseconds timeout)
+Sender::Reply Sender::waitForReply(bool first_block, Milliseconds timeout, bool after_eot)
 {
   const auto deadline = Clock::now() + timeout;
   for (;;)
@@ -199,9 +200,12 @@ Sender::Reply Sender::waitForReply(bool first_block, Milliseconds timeout)
     }
     if (c == kAck)
     {
-      // While part of our packet is still in the port's output queue the receiver cannot have
-      // taken it all: this ACK answers an earlier packet (doubled on the line).
-      if (link_.pendingOutput() > 0)
+      // While part of a data packet is still in the port's output queue the receiver cannot have
+      // taken it all: this ACK answers an earlier packet (doubled on the line). Not after EOT: every
+      // block was ACKed and what was queued behind the last ACK dropped, so an ACK now answers the EOT,
+      // even while the port still counts that one byte as pending (a pty whose reader has just
+      // read it and left: lrzsz rx ACKs EOT and exits). Dropping it failed complete transfers.
+      if (!after_eot && link_.pendingOutput() > 0)
         continue;
       return Reply::kAck;
     }
@@ -343,7 +347,7 @@ Stats Sender::send(const std::vector<uint8_t>& payload, const ProgressCallback& 
     {
       checkCancel();
       link_.writeByte(kEot);
-      const Reply reply = waitForReply(false, config_.eot_timeout);
+      const Reply reply = waitForReply(false, config_.eot_timeout, true);
       if (reply == Reply::kAck)
         break;
       if (reply == Reply::kCancel)
@@ -386,7 +390,7 @@ Receiver::Receiver(Transport& link, Mode mode, Config config, const std::atomic<
     : link_(link),
       input_(link, packetSize(kBlockSize1K, CheckType::kCrc16)),
       mode_(mode),
-      config_(config),
+      config_(std::move(config)),
       cancel_(cancel)
 {
 }
@@ -542,6 +546,14 @@ std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
         block_to_resend = false;
         if (packet.block == expected)
         {
+          if (data.size() + packet.data_size > config_.max_bytes)
+          {
+            // XModem has no length field: only the cap stops a peer that keeps sending.
+            abort("the program is longer than " + config_.max_bytes_name + " (" + std::to_string(config_.max_bytes) +
+                      " bytes) allows; transfer cancelled, nothing stored (raise " + config_.max_bytes_name +
+                      " for a longer program)",
+                  true, false);
+          }
           if (!started)
             first_block_start = packet_start;
           started = true;

@@ -5,11 +5,13 @@
 #include <actionlib/client/simple_action_client.h>
 #include <dirent.h>
 #include <gtest/gtest.h>
+
 #include <poll.h>
 #include <ros/ros.h>
 #include <sys/inotify.h>
 #include <sys/stat.h>
 #include <unistd.h>
+#include <filesystem>
 
 #include <algorithm>
 #include <fstream>
@@ -324,6 +326,37 @@ TEST_F(DncNodeTest, ProtectedProgramsAreRefusedAndTheControlReceivesNothing)
     }
   }
   EXPECT_FALSE(exists(control_dir_ + "/O09002.nc"));  // the service returns after the transfer would have ended
+}
+
+// The number is read where the control takes it: a comment block and blank lines before O09010
+// used to hide it (only the first block was looked at) and the program was sent. Refused now, by
+// the service and the action, and the simulated Haas stores nothing.
+TEST_F(DncNodeTest, AProtectedNumberAfterACommentBlockIsRefusedAndTheControlReceivesNothing)
+{
+  std::string contents = readFile(param("program"));
+  contents.replace(contents.find("O05555"), 6, "O09010");
+  contents.replace(contents.find('%'), 1, "%\n(SETUP SHEET)\n\n   \n");
+  writeProgram("setup.nc", contents);
+  auto stored = [this]
+  {
+    std::vector<std::string> names;
+    std::error_code error;
+    for (const auto& entry : std::filesystem::directory_iterator(control_dir_, error))
+      names.push_back(entry.path().filename().string());
+    std::sort(names.begin(), names.end());
+    return names;
+  };
+  const std::vector<std::string> before = stored();
+  cnc_bridge::SendProgram srv;
+  srv.request.file = "setup.nc";
+  ASSERT_TRUE(send_.call(srv));
+  EXPECT_FALSE(srv.response.success);
+  EXPECT_EQ(srv.response.message.rfind("refused", 0), 0u) << srv.response.message;
+  EXPECT_NE(srv.response.message.find("O09010"), std::string::npos) << srv.response.message;
+  EXPECT_NE(srv.response.message.find("~allow_protected_programs"), std::string::npos) << srv.response.message;
+  EXPECT_EQ(srv.response.bytes, 0u);
+  EXPECT_FALSE(exists(control_dir_ + "/O09010.nc"));
+  EXPECT_EQ(stored(), before);  // the control stored nothing
 }
 
 int main(int argc, char** argv)

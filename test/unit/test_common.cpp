@@ -10,6 +10,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <future>
+#include <iterator>
 #include <optional>
 #include <sstream>
 #include <thread>
@@ -382,4 +383,81 @@ TEST(JobHold, AResumeDoesNotShortenADwell)
   hold.wake();
   ASSERT_EQ(waiting.wait_for(kPatience), std::future_status::ready);
   EXPECT_FALSE(waiting.get());  // cancelled, not elapsed
+}
+
+// ------------------------------------------------------------------------- PortLock files
+// A symbolic link planted at the lock's path is never followed: the file it points to keeps its
+// contents (the lock used to truncate it and write the generation into it) and the lock is refused
+// with a message that says what is there.
+TEST(PortLock, ALinkPlantedAtTheLockPathIsRefusedAndItsTargetUnchanged)
+{
+  const std::string dir = lockDir();
+  const std::string victim = dir + "/victim.conf";
+  {
+    std::ofstream out(victim);
+    out << "precious contents\n";
+  }
+  PortLock probe("/dev/ttyS_test_cnc_bridge", dir);
+  ASSERT_EQ(::symlink(victim.c_str(), probe.lockFile().c_str()), 0);
+  PortLock dnc("/dev/ttyS_test_cnc_bridge", dir);
+  try
+  {
+    dnc.lockForTransfer(std::chrono::milliseconds(100));
+    FAIL() << "the lock followed a planted link";
+  }
+  catch (const LinkError& e)
+  {
+    const std::string what = e.what();
+    EXPECT_NE(what.find(dnc.lockFile()), std::string::npos) << what;
+    EXPECT_NE(what.find("symbolic link"), std::string::npos) << what;
+  }
+  std::ifstream in(victim);
+  const std::string contents((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(contents, "precious contents\n");
+
+  // A FIFO (or anything but a regular file) there is refused too, without blocking.
+  ::unlink(dnc.lockFile().c_str());
+  ASSERT_EQ(::mkfifo(dnc.lockFile().c_str(), 0600), 0);
+  try
+  {
+    PortLock("/dev/ttyS_test_cnc_bridge", dir).tryLock();
+    FAIL();
+  }
+  catch (const LinkError& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("is a FIFO, not a regular file"), std::string::npos) << e.what();
+  }
+}
+
+TEST(PortLock, LockFilesAreCreatedOwnerWritableOnly)
+{
+  const std::string dir = lockDir();
+  PortLock lock("/dev/ttyS_test_cnc_bridge", dir);
+  ASSERT_TRUE(lock.tryLock());
+  struct stat info;
+  ASSERT_EQ(::lstat(lock.lockFile().c_str(), &info), 0);
+  EXPECT_TRUE(S_ISREG(info.st_mode));
+  EXPECT_EQ(info.st_mode & 0777 & ~0640, 0u);  // at most rw-r-----
+}
+
+// The default lock directory is /run/lock/cnc_bridge, not the world-writable /tmp: created if
+// missing, a directory of this user (or root) that no other user may write to.
+TEST(PortLock, TheDefaultLockDirectoryIsUnderRunLock)
+{
+  EXPECT_STREQ(kDefaultLockDir, "/run/lock/cnc_bridge");
+  PortLock lock("/dev/ttyS_test_cnc_bridge");
+  struct stat run_lock;
+  if (::stat("/run/lock", &run_lock) != 0)
+  {
+    // No /run/lock on this system: the per-user fallback in /tmp is used.
+    EXPECT_EQ(lock.lockFile().rfind("/tmp/cnc_bridge-" + std::to_string(::geteuid()) + "/", 0), 0u) << lock.lockFile();
+    return;
+  }
+  EXPECT_EQ(lock.lockFile().rfind("/run/lock/cnc_bridge/cnc_bridge-", 0), 0u) << lock.lockFile();
+  struct stat info;
+  ASSERT_EQ(::lstat(kDefaultLockDir, &info), 0);
+  EXPECT_TRUE(S_ISDIR(info.st_mode));
+  EXPECT_TRUE(info.st_uid == ::geteuid() || info.st_uid == 0);
+  EXPECT_EQ(info.st_mode & S_IWOTH, 0u);
+  EXPECT_EQ(lockDirectory("/somewhere/else"), "/somewhere/else");  // a directory given is used as given
 }

@@ -10,6 +10,8 @@
 #include <string>
 #include <vector>
 
+#include <sys/stat.h>
+
 #include "cnc_bridge/programs/program_name.h"
 #include "cnc_bridge/programs/program_store.h"
 #include "temp_dir.h"
@@ -53,6 +55,114 @@ TEST(ProgramHeader, NumberAndFirstComment)
   h = readHeader("%\nO12 (UNCLOSED");
   EXPECT_EQ(h.comment, "UNCLOSED");
   EXPECT_FALSE(readHeader("").number.has_value());
+}
+
+// The number is read where a control takes it: after '%', leader and blank blocks, and blocks
+// that hold only comments (a comment block before O09010 used to send a protected program).
+TEST(ProgramHeader, NumberIsReadWhereTheControlTakesIt)
+{
+  auto h = readHeader("%\n(WIPS CALIBRATION)\nO09010 (PROBE)\nM99\n%\n");
+  EXPECT_EQ(h.number, 9010u);
+  EXPECT_EQ(h.comment, "WIPS CALIBRATION");  // the first comment, as before
+  EXPECT_EQ(readHeader("\n\n   \n\r\n\tO09010\nM99\n").number, 9010u);
+  EXPECT_EQ(readHeader(std::string("\0\0\0  \x7f%\n\0\0O09010\n", 17)).number, 9010u);
+  EXPECT_EQ(readHeader("%\n:9010\nM99\n").number, 9010u);
+  EXPECT_EQ(readHeader("%\no9010\nm99\n").number, 9010u);
+  EXPECT_EQ(readHeader("%\nO 9010\n").number, 9010u);
+  EXPECT_EQ(readHeader("(A) (B)\n( C )\nO9010(D)").number, 9010u);
+  EXPECT_EQ(readHeader("%\n(UNCLOSED\nO9010\n").number, 9010u);
+
+  // Far beyond the 4 KB that used to be looked at.
+  std::string comments = "%\n";
+  while (comments.size() < 1024 * 1024)
+    comments += "(PADDING PADDING PADDING PADDING)\n";
+  h = readHeader(comments + "O09010\nM99\n%\n");
+  EXPECT_EQ(h.number, 9010u);
+  EXPECT_EQ(h.comment, "PADDING PADDING PADDING PADDING");
+
+  // A number a control would take but this code cannot read.
+  for (const char* unreadable : {"%\nO\nM99\n", "O(TITLE)\n", "%\nO123456789\n", ":\n", "%\nO"})
+  {
+    h = readHeader(unreadable);
+    EXPECT_TRUE(h.number_unreadable) << unreadable;
+    EXPECT_FALSE(h.number) << unreadable;
+  }
+  EXPECT_EQ(readHeader("%\nO123456789\n").first_block, "O123456789");
+  // No number at all: the program's first block is program text (the control names it).
+  h = readHeader("%\n(NO NUMBER)\nG0 X1\nO09010\n");
+  EXPECT_FALSE(h.number);
+  EXPECT_FALSE(h.number_unreadable);
+}
+
+TEST(ProgramHeader, ScannerTakesTheBytesInAnyPiecesAndStopsAtTheFirstBlock)
+{
+  const std::string program = "%\n(TITLE)\n\nO09010 (PROBE)\nG65 P9023\nM99\n%\n";
+  for (size_t piece = 1; piece <= program.size(); ++piece)
+  {
+    HeaderScanner scanner;
+    for (size_t at = 0; at < program.size() && !scanner.done(); at += piece)
+      scanner.feed(program.substr(at, piece));
+    scanner.finish();
+    EXPECT_EQ(scanner.header().number, 9010u) << piece;
+    EXPECT_EQ(scanner.header().comment, "TITLE") << piece;
+  }
+  HeaderScanner scanner;
+  EXPECT_TRUE(scanner.feed("O01234 (T)\n"));  // the number and a comment: nothing more is needed
+}
+
+TEST(ProgramHeader, FileHeadsAreReadPastFourKilobytesAndOnlyFromRegularFiles)
+{
+  test::TempDir dir;
+  std::string program;
+  while (program.size() < 64 * 1024)
+    program += "(LONG COMMENT BLOCK BEFORE THE NUMBER)\n";
+  program += "O09010\nM99\n";
+  test::writeFile(dir.file("O00001.nc"), program);
+  EXPECT_EQ(readHeaderOfFile(dir.file("O00001.nc")).number, 9010u);
+  const ProtectedRange range("O08000-O09999", false, "~allow_protected_programs");
+  EXPECT_THROW(checkProtectedFile(range, NamePattern(), dir.file("O00001.nc")), DisabledError);
+
+  ASSERT_EQ(::mkfifo(dir.file("fifo.nc").c_str(), 0600), 0);
+  try
+  {
+    readHeaderOfFile(dir.file("fifo.nc"));  // would block in open() or read() if it were opened as a file
+    FAIL();
+  }
+  catch (const ConfigError& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("is a FIFO"), std::string::npos) << e.what();
+  }
+  try
+  {
+    readHeaderOfFile(dir.path);
+    FAIL();
+  }
+  catch (const ConfigError& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("is a directory"), std::string::npos) << e.what();
+  }
+}
+
+TEST(ProtectedRange, AProgramWhoseNumberCannotBeReadIsRefusedUnlessAllowed)
+{
+  const ProtectedRange range("O08000-O09999", false, "~allow_protected_programs");
+  const ProgramHeader unreadable = readHeader("%\nO123456789 (MACRO)\nM99\n");
+  try
+  {
+    range.checkHeader("O00001.nc", 1, unreadable);
+    FAIL();
+  }
+  catch (const DisabledError& e)
+  {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("O00001.nc"), std::string::npos) << what;
+    EXPECT_NE(what.find("'O123456789 (MACRO)'"), std::string::npos) << what;
+    EXPECT_NE(what.find("~allow_protected_programs"), std::string::npos) << what;
+  }
+  EXPECT_NO_THROW(ProtectedRange("O08000-O09999", true, "x").checkHeader("a", 1, unreadable));
+  EXPECT_NO_THROW(ProtectedRange("none", false, "x").checkHeader("a", 1, unreadable));
+  EXPECT_NO_THROW(range.checkHeader("a", 1, readHeader("G0 X1\n")));  // no number: the control names it
+  EXPECT_THROW(range.checkHeader("a", 1, readHeader("(X)\nO9010\n")), DisabledError);
 }
 
 TEST(ProtectedRange, RefusesInsideUnlessAllowed)

@@ -4,6 +4,9 @@
 // requests folder that does not exist yet is looked for again at the next call.
 #include <gtest/gtest.h>
 
+#include <sys/stat.h>
+
+#include <atomic>
 #include <filesystem>
 #include <string>
 #include <utility>
@@ -107,4 +110,49 @@ TEST_F(RequestServerTest, AFolderThatDoesNotExistYetIsLookedForAgain)
   server_.serveRequestFiles();
   ASSERT_EQ(reported_.size(), 1u);
   EXPECT_TRUE(reported_[0].success);
+}
+
+namespace
+{
+/// A local folder that counts the bytes it hands out.
+class CountingStore : public LocalProgramStore
+{
+ public:
+  CountingStore(const std::string& root, uint64_t& bytes_read) : LocalProgramStore(root), bytes_read_(bytes_read) {}
+  std::string read(const std::string& name, const StoreProgress& progress, const std::atomic<bool>* cancel) override
+  {
+    std::string data = LocalProgramStore::read(name, progress, cancel);
+    bytes_read_ += data.size();
+    return data;
+  }
+  std::string readHead(const std::string& name, size_t bytes) override
+  {
+    std::string head = LocalProgramStore::readHead(name, bytes);
+    bytes_read_ += head.size();
+    return head;
+  }
+
+ private:
+  uint64_t& bytes_read_;
+};
+}  // namespace
+
+// Only the head of a request file can hold the request: a large file is not read whole (a 400 MB
+// file took 550 MB of memory), and a FIFO planted in the folder is refused without blocking.
+TEST_F(RequestServerTest, OnlyTheHeadOfARequestFileIsReadAndAFifoIsRefused)
+{
+  std::filesystem::create_directories(dir_.file("requests"));
+  std::string big = "%\nO00001 (LOAD O1234)\n";
+  while (big.size() < 8 * 1024 * 1024)
+    big += "(FILLER FILLER FILLER FILLER FILLER FILLER FILLER FILLER)\n";
+  dir_.write("requests/big.nc", big);
+  ASSERT_EQ(::mkfifo(dir_.file("requests/fifo.nc").c_str(), 0600), 0);
+  uint64_t bytes_read = 0;
+  server_.setRequestFolder(
+      "requests", [this, &bytes_read] { return std::make_unique<CountingStore>(dir_.file("requests"), bytes_read); });
+  server_.serveRequestFiles();  // returns: the FIFO is not opened for a blocking read
+  ASSERT_EQ(transfers_.size(), 1u);
+  EXPECT_EQ(transfers_[0], std::make_pair(RequestDecision::Action::kSend, std::string("O01234.nc")));
+  EXPECT_LE(bytes_read, kRequestHeadBytes);
+  EXPECT_FALSE(std::filesystem::exists(dir_.file("requests/big.nc")));
 }

@@ -8,6 +8,8 @@
 #include <yaml-cpp/yaml.h>
 
 #include <dirent.h>
+
+#include <atomic>
 #include <cstdlib>
 #include <fstream>
 #include <future>
@@ -1183,4 +1185,125 @@ TEST(FaultyTransport, ParsesSettingsAndInjectsReproducibly)
   }
   EXPECT_EQ(outputs[0], outputs[1]);
   EXPECT_NE(outputs[0], Bytes(1000, 0x55));
+}
+
+// The ACK of EOT may arrive while the port still counts output as pending (lrzsz rx on a pty: it
+// read the EOT, ACKed it and left). It answers the EOT (no data packet is outstanding), so the
+// transfer is complete; dropping it as a stale ACK failed complete transfers ("every block was
+// acknowledged but EOT was not").
+TEST(XmodemSender, TheAckOfEotCountsWhileThePortStillReportsOutputPending)
+{
+  class OutputStillQueuedAfterEot : public FakeTransport
+  {
+   public:
+    std::atomic<bool> eot_written{false};
+    size_t pendingOutput() const override { return eot_written ? 1 : 0; }
+  };
+  OutputStillQueuedAfterEot rx;
+  rx.feed(Bytes{kNak});
+  rx.onWrite(
+      [&rx](FakeTransport& t, const Bytes& bytes)
+      {
+        if (bytes.size() == 1 && bytes[0] == kEot)
+          rx.eot_written = true;  // before the ACK is fed: the sender sees output pending with it
+        t.feed(Bytes{kAck});
+      });
+  Config config = fastConfig();
+  config.eot_retries = 3;
+  Sender sender(rx, Mode::kChecksum, config);
+  const Stats stats = sender.send(Bytes(1025, 'A'));
+  EXPECT_EQ(stats.blocks, 9u);
+  EXPECT_EQ(stats.timeouts, 0u);
+  const Bytes written = rx.written();
+  EXPECT_EQ(written.size(), 9 * 132 + 1u);  // one EOT, answered at once
+  EXPECT_EQ(written.back(), kEot);
+}
+
+// XModem has no length field: a sender that goes on past Config::max_bytes is cancelled with CANs,
+// nothing is stored, and the error names the setting.
+TEST(XmodemReceiver, ASenderGoingPastMaxBytesIsCancelledAndNothingIsStored)
+{
+  TempDir dir("test_xmodem");
+  writeFile(dir.path + "/source", ncProgram(64 * 1024, 5));
+  LinkPair pair;
+  Config config = fastConfig();
+  config.max_bytes = 4096;
+  config.max_bytes_name = "~max_program_bytes";
+  Config sender_config = fastConfig();
+  sender_config.max_bytes = 1024 * 1024;
+  auto sent = std::async(std::launch::async,
+                         [&]() -> std::string
+                         {
+                           try
+                           {
+                             sendFile(pair.a, dir.path + "/source", Mode::kChecksum, sender_config, TextOptions());
+                             return "";
+                           }
+                           catch (const Error& e)
+                           {
+                             return e.what();
+                           }
+                         });
+  const std::string target = dir.path + "/in/O01234.nc";
+  ::mkdir((dir.path + "/in").c_str(), 0700);
+  try
+  {
+    receiveFile(pair.b, target, Mode::kChecksum, config, TextOptions());
+    FAIL() << "a 64 KB program was taken with a 4 KB cap";
+  }
+  catch (const ProtocolError& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("~max_program_bytes (4096 bytes)"), std::string::npos) << e.what();
+  }
+  const std::string sender_error = sent.get();
+  EXPECT_NE(sender_error.find("cancelled"), std::string::npos) << sender_error;  // CAN CAN reached it
+  EXPECT_EQ(filesIn(dir.path + "/in"), 0u);                                      // no file, no temporary file
+
+  // A file larger than the cap is not sent: the receiver sees nothing.
+  FakeTransport rx;
+  rx.feed(Bytes{kNak});
+  try
+  {
+    sendFile(rx, dir.path + "/source", Mode::kChecksum, config, TextOptions());
+    FAIL();
+  }
+  catch (const ConfigError& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("~max_program_bytes"), std::string::npos) << e.what();
+  }
+  EXPECT_TRUE(rx.written().empty());
+}
+
+// Only a regular file is sent: a FIFO is refused at once (it would block the open or the read)
+// and nothing goes on the line; the contents check runs on the bytes that are then sent.
+TEST(XmodemFile, OnlyARegularFileIsSentAndTheCheckSeesTheBytesSent)
+{
+  TempDir dir("test_xmodem");
+  ASSERT_EQ(::mkfifo((dir.path + "/fifo.nc").c_str(), 0600), 0);
+  FakeTransport rx;
+  rx.feed(Bytes{kNak});
+  try
+  {
+    sendFile(rx, dir.path + "/fifo.nc", Mode::kChecksum, fastConfig(), TextOptions());
+    FAIL();
+  }
+  catch (const ConfigError& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("is a FIFO"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(sendFile(rx, dir.path, Mode::kChecksum, fastConfig(), TextOptions()), ConfigError);
+  EXPECT_TRUE(rx.written().empty());
+
+  writeFile(dir.path + "/O00001.nc", "%\n(NOTE)\nO09010\nM99\n%\n");
+  std::string checked;
+  EXPECT_THROW(
+      sendFile(rx, dir.path + "/O00001.nc", Mode::kChecksum, fastConfig(), TextOptions(), nullptr, nullptr, nullptr,
+               [&checked](const std::string& contents)
+               {
+                 checked = contents;
+                 throw DisabledError("refused: protected");
+               }),
+      DisabledError);
+  EXPECT_EQ(checked, "%\n(NOTE)\nO09010\nM99\n%\n");
+  EXPECT_TRUE(rx.written().empty());
 }

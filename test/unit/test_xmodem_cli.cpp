@@ -366,6 +366,50 @@ TEST(CncDncCli, ProtectedProgramIsRefusedAndTheControlReceivesNothing)
   EXPECT_EQ(readFile(memory + "/O09001.nc"), text);
 }
 
+// The number is read where the control takes it: a comment block, blank lines or tape leader
+// before O09010 do not hide it (they used to: only the first block was looked at). The simulated
+// Haas stores nothing.
+TEST(CncDncCli, AProtectedNumberAfterCommentsAndLeaderIsRefusedAndTheControlReceivesNothing)
+{
+  TempDir dir("test_xmodem_cli");
+  const std::string memory = dir.path + "/haas";
+  Simulator haas(memory, {});
+  std::string hidden = program(9010, 1500);
+  hidden.replace(0, 2, std::string("%\n(SETUP SHEET: VISE ON TABLE)\n\n\0\0  \n", 37));
+  writeFile(dir.path + "/setup.nc", hidden);
+  expectOneErrorLine(
+      cncDnc({"send", "--port", haas.port(), "--mode", "checksum", "--timeout", "20", dir.path + "/setup.nc"},
+             dir.path),
+      "send", "is program O09010, in the protected range O08000-O09999");
+  // A number the control would take but that cannot be read (nine digits) is refused as well.
+  writeFile(dir.path + "/odd.nc", "%\nO123456789 (MACRO)\nM99\n%\n");
+  expectOneErrorLine(
+      cncDnc({"send", "--port", haas.port(), "--mode", "checksum", "--timeout", "20", dir.path + "/odd.nc"}, dir.path),
+      "send", "cannot be read from its first block");
+  EXPECT_TRUE(!exists(memory) || filesIn(memory).empty());
+}
+
+// receive --max-bytes: a control that sends more is cancelled, nothing is stored, and the error
+// names the option.
+TEST(CncDncCli, ReceiveCancelsAProgramLongerThanMaxBytesAndStoresNothing)
+{
+  TempDir dir("test_xmodem_cli");
+  const std::string source = dir.path + "/O00778.nc";
+  writeFile(source, program(778, 8000));
+  Simulator haas(dir.path + "/haas", {"--program", source});
+  const std::string target = dir.path + "/received.nc";
+  const ToolRun run =
+      cncDnc({"receive", "--port", haas.port(), "--mode", "checksum", "--timeout", "20", "--max-bytes", "2048", target},
+             dir.path);
+  EXPECT_EQ(run.status, 1) << run.err;
+  ASSERT_FALSE(lines(run.err).empty());
+  const std::string error = lines(run.err).back();  // after a progress line of the first block
+  EXPECT_EQ(error.rfind("cnc_dnc receive: error: ", 0), 0u) << run.err;
+  EXPECT_NE(error.find("longer than --max-bytes (2048 bytes)"), std::string::npos) << run.err;
+  EXPECT_FALSE(exists(target));
+  EXPECT_EQ(filesIn(dir.path), (std::vector<std::string>{"O00778.nc", "haas", "tool.err", "tool.out"}));
+}
+
 TEST(CncDncCli, BadCommandLineExitsTwo)
 {
   TempDir dir("test_xmodem_cli");

@@ -15,22 +15,38 @@
 
 namespace cnc_bridge
 {
+/// The default directory of port locks, out of the world-writable /tmp: created by the first node
+/// that needs it, mode 0755 (only its user writes there), so every node of that user on the line
+/// finds the same locks and nobody else can plant a file or a link among them.
+constexpr const char* kDefaultLockDir = "/run/lock/cnc_bridge";
+
+/// \brief The directory to keep port locks in when \p requested is asked for. A directory other than
+/// kDefaultLockDir is used as given (it must exist). The default is created if missing (its parent
+/// /run/lock must exist) and used only if it is a real directory (not a link) owned by this user or
+/// root that no other user can write to; otherwise, or if it cannot be created, the locks go to
+/// `/tmp/cnc_bridge-<uid>` (mode 0700, checked the same way) and a warning says so (every node on
+/// the line falls back alike, as one user). \throws ConfigError if neither can be used.
+std::string lockDirectory(const std::string& requested);
+
 /// \brief An exclusive, inter-process lock on one serial device. Not thread-safe.
 ///
 /// Files: `<lock_dir>/cnc_bridge-<device>.lock` (the lock; holds the transfer generation as text)
-/// and `<...>.lock.want` (held by a transfer waiting for the lock).
+/// and `<...>.lock.want` (held by a transfer waiting for the lock). They are created mode 0640 and
+/// opened without following symbolic links and without truncating: a link, a FIFO or anything but a
+/// regular file at their path is refused with an error, never written through.
 class PortLock
 {
  public:
   /// \param device the serial device (symbolic links are resolved so both nodes agree).
-  /// \param lock_dir where lock files live (default /tmp); every node on the line must use the same.
-  explicit PortLock(const std::string& device, const std::string& lock_dir = "/tmp");
+  /// \param lock_dir where lock files live (lockDirectory(): the default is created); every node on
+  /// the line must use the same. \throws ConfigError if the default cannot be set up.
+  explicit PortLock(const std::string& device, const std::string& lock_dir = kDefaultLockDir);
   ~PortLock();
   PortLock(const PortLock&) = delete;
   PortLock& operator=(const PortLock&) = delete;
 
   /// \returns true if the lock was taken (or is already held by this object).
-  /// \throws LinkError if the lock file cannot be opened.
+  /// \throws LinkError if the lock file cannot be opened or is not a regular file (a planted link).
   bool tryLock();
   void unlock();
   bool held() const { return held_; }

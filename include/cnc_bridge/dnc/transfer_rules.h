@@ -45,6 +45,10 @@ class TransferFiles
   /// \brief Resolves \p file for sending (it must exist and not be protected) or receiving.
   JobCheck check(const std::string& file, bool send) const;
 
+  /// \brief The protected-range check of the contents actually sent as \p file (the name a request
+  /// gave): run by xmodem::sendFile() on the bytes it read, so a file swapped since check() is caught.
+  xmodem::ContentCheck sendCheck(const std::string& file) const;
+
   /// \brief Keeps the program at \p path in the archive, from \p source (node, machine, "sent"...).
   /// \returns "kept O01234.nc as version 3 in <archive>", or "" when that content was kept already.
   /// \throws Error if the file or the archive cannot be read or written.
@@ -107,11 +111,12 @@ class TransferCounters;
 /// \brief Sends the file at \p path by XModem, or receives it there; \p protocol is xmodem,
 /// xmodem-crc or xmodem-1k. The timeouts, and the retries of a failed transfer (a successful one
 /// reports its own), are added to \p counters.
+/// \param check run on the contents of a file to send before its first byte goes (TransferFiles::sendCheck()).
 /// \throws the errors of xmodem::sendFile() and xmodem::receiveFile().
 xmodem::FileResult transferByXmodem(Transport& link, const std::string& path, bool send, const std::string& protocol,
                                     const xmodem::Config& config, const xmodem::TextOptions& text,
                                     const xmodem::ProgressCallback& progress, const std::atomic<bool>& cancel,
-                                    TransferCounters& counters);
+                                    TransferCounters& counters, const xmodem::ContentCheck& check = nullptr);
 
 /// \brief Counts transfers and their outcomes. Thread-safe.
 class TransferCounters

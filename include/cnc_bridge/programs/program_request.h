@@ -45,8 +45,11 @@ struct RequestWords
 };
 
 /// \brief Finds a request in \p text: the first `(WORD O1234)` comment in it, or, when
-/// \p bare_line is set, a line that is just `WORD O1234` (a DPRNT line). Only the first 4 KB are
-/// looked at. Never throws.
+/// \p bare_line is set, a line that is just `WORD O1234` (a DPRNT line). Only the first
+/// kRequestHeadBytes are looked at. Never throws.
+/// How much of a request (a request file, a punch) is looked at: read no more than this of a file.
+constexpr size_t kRequestHeadBytes = 4096;
+
 std::optional<ProgramRequest> recogniseRequest(const std::string& text, bool bare_line = false,
                                                const RequestWords& words = RequestWords());
 

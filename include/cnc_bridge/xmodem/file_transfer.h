@@ -4,6 +4,7 @@
 #pragma once
 
 #include <atomic>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -39,12 +40,19 @@ std::vector<uint8_t> toWire(const std::string& file_contents, const TextOptions&
 /// \brief The file contents for a received payload. Text: padding stripped, EOB rewritten.
 std::string fromWire(std::vector<uint8_t> payload, const TextOptions& options);
 
-/// \brief Reads \p path and sends it.
+/// \brief A check of the contents about to be sent (the protected range); throws to refuse them.
+using ContentCheck = std::function<void(const std::string& contents)>;
+
+/// \brief Reads \p path (opened once, a regular file of at most Config::max_bytes) and sends it.
 /// \param stats if given, receives the counters, also when the transfer fails.
-/// \throws ConfigError if the file cannot be read; the errors of Sender::send().
+/// \param check if given, is run on the contents read, before the first byte is written: the bytes
+/// sent are the bytes checked, whatever happens to the file meanwhile.
+/// \throws ConfigError if the file cannot be read, is not a regular file or is larger than the cap;
+/// what \p check throws; the errors of Sender::send().
 FileResult sendFile(Transport& link, const std::string& path, Mode mode, const Config& config,
                     const TextOptions& options, const ProgressCallback& progress = nullptr,
-                    const std::atomic<bool>* cancel = nullptr, Stats* stats = nullptr);
+                    const std::atomic<bool>* cancel = nullptr, Stats* stats = nullptr,
+                    const ContentCheck& check = nullptr);
 
 /// \brief Receives into \p path atomically: on any failure the destination is left as it was.
 /// \throws ConfigError if the directory cannot be written; the errors of Receiver::receive().

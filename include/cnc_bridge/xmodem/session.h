@@ -30,6 +30,9 @@ Mode parseMode(const std::string& text);
 
 /// \brief Timeouts and limits (docs/protocols/xmodem.md#timeouts-and-limits). Defaults are the protocol's; tests
 /// shorten them.
+/// The default cap of a program moved by XModem: 16 MiB, far above a control's program memory.
+constexpr uint64_t kDefaultMaxProgramBytes = 16ull * 1024 * 1024;
+
 struct Config
 {
   /// Receiver: NAK (or 'C') again after this long without the first packet.
@@ -88,6 +91,12 @@ struct Config
   /// must not pass for success (the receiver stored nothing). Off: any CANs after EOT fail the
   /// transfer. On by default because the Haas path (dnc_node, cnc_dnc send --mode checksum) needs it.
   bool eot_can_completes = true;
+  /// Receiver: the most payload taken; a sender that goes past it is cancelled (CAN CAN) and the
+  /// transfer fails naming max_bytes_name. sendFile() refuses a larger file the same way. XModem
+  /// has no length field, so without a cap a peer that keeps sending fills memory.
+  uint64_t max_bytes = kDefaultMaxProgramBytes;
+  /// How the user sets max_bytes, named in the error ("~max_program_bytes", "--max-bytes").
+  std::string max_bytes_name = "max_program_bytes";
 };
 
 /// \brief Fits the waits to a line moving \p characters_per_second: char_timeout and purge_quiet
@@ -150,7 +159,8 @@ class Sender
     kTimeout
   };
   uint8_t waitForStart();
-  Reply waitForReply(bool first_block, Milliseconds timeout);
+  /// \param after_eot the reply to EOT is awaited (no data packet outstanding).
+  Reply waitForReply(bool first_block, Milliseconds timeout, bool after_eot = false);
   /// Reads what follows a CAN CAN until the line is quiet; \returns the further CANs among it.
   size_t countCans();
   void checkCancel();
