@@ -270,14 +270,19 @@ class HostileInput(unittest.TestCase):
             services.append((service, get_service_class(rosservice.get_service_type(service))))
         return services
 
+    # The other fields of a row's request, so that the hostile value reaches the node's checks of
+    # it (a variable that may be written, an axis that exists, a tool).
+    BASE = {"write_variable": {"variable": 100}, "jog": {"axis": "x"}, "tool_change": {"tool": 1}}
+
     def hostile_service_rows(self, node):
         for service, cls in self.services_of(node):
             proxy = rospy.ServiceProxy(service, cls)
             request_class = cls._request_class
+            base = self.BASE.get(service.rsplit("/", 1)[1], {})
             rows = 0
             for slot, slot_type in zip(request_class.__slots__, request_class._slot_types):
                 for label, value in hostile_values(slot_type, self.sandbox):
-                    request = request_class()
+                    request = request_class(**base)
                     setattr(request, slot, value)
                     self.check_row(node, "%s %s=%s" % (service, slot, label), lambda: proxy(request))
                     rows += 1
