@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Hostile peers (test/rostest/hostile_peers.test): each TCP protocol's node (ethernut_node,
-at_controller_node, haas_mdc_node, dprnt_node) connects to a fake peer played by this test that
+at_controller_node, haas_mdc_node, dprnt_node), and slave_bus_node over a pty, connects to a fake peer played by this test that
 floods it with garbage, sends one oversize frame, sends malformed frames, closes in the middle of a
 frame and accepts without ever answering. After each: the node is alive, its resident memory (read
 from /proc) stays below RSS_BOUND_MB, and its state's link says the link is not up once the peer has
@@ -11,6 +11,7 @@ import socket
 import sys
 import threading
 import time
+import tty
 import unittest
 import xmlrpc.client
 
@@ -56,6 +57,58 @@ class Peer:
         return conn
 
 
+class PtyConnection:
+    """The master side of a pty, used like a socket by the cases: what the node writes is read and
+    dropped (so that its writes never block), what is sent goes to the node."""
+
+    def __init__(self, master, slave):
+        self.master, self.slave = master, slave
+        os.set_blocking(master, False)
+
+    def drain(self):
+        try:
+            while os.read(self.master, 65536):
+                pass
+        except (BlockingIOError, OSError):
+            pass
+
+    def send(self, data):
+        self.drain()
+        end = time.monotonic() + 5.0
+        while True:
+            try:
+                return os.write(self.master, data)
+            except BlockingIOError:  # the node is not reading: wait for it as a socket would
+                if time.monotonic() > end:
+                    raise socket.timeout()
+                time.sleep(0.01)
+                self.drain()
+
+    def sendall(self, data):
+        while data:
+            data = data[self.send(data):]
+
+    def close(self):
+        os.close(self.master)
+        os.close(self.slave)
+
+
+class PtyPeer:
+    """A serial peer: a new pty for each case, its device linked at the path the node opens."""
+
+    def __init__(self, link, wait_up):
+        self.link, self.wait_up = link, wait_up
+
+    def accept(self):
+        master, slave = os.openpty()
+        tty.setraw(slave)
+        tmp = self.link + ".new"
+        os.symlink(os.ttyname(slave), tmp)
+        os.replace(tmp, self.link)
+        self.wait_up()  # the node reopens the link by itself (it retries after a backoff)
+        return PtyConnection(master, slave)
+
+
 def send_for(conn, seconds, make_chunk):
     """Sends chunks for `seconds` (or until the node stops reading: a full send buffer times out)."""
     end = time.monotonic() + seconds
@@ -84,7 +137,8 @@ class HostilePeers(unittest.TestCase):
 
         self.subs.append(rospy.Subscriber("%s/state" % self.machine(node), MachineState, keep))
 
-    MACHINES = {"ethernut_node": "router", "at_controller_node": "at", "haas_mdc_node": "mdc", "dprnt_node": "dprnt"}
+    MACHINES = {"ethernut_node": "router", "at_controller_node": "at", "haas_mdc_node": "mdc", "dprnt_node": "dprnt",
+                "slave_bus_node": "laser"}
 
     def machine(self, node):
         """The namespace of `node` (each has its own: the state topic is <namespace>/state)."""
@@ -114,7 +168,7 @@ class HostilePeers(unittest.TestCase):
         self.wait_for("%s's link to leave UP after %s" % (node, after),
                       lambda: self.state(node) is not None and self.state(node).link != MachineState.LINK_UP)
 
-    def run_peer(self, node, port, frame, extra_ports=()):
+    def run_peer(self, node, port, frame, extra_ports=(), pty_link=None, oversize_bytes=OVERSIZE_BYTES):
         """The five hostile peers in turn against `node`; `frame` is one well-formed-looking frame of
         its protocol (for the malformed and mid-frame cases). The port listens only while a case
         runs, so that between cases the node's reconnects are refused and its link shows it."""
@@ -127,9 +181,14 @@ class HostilePeers(unittest.TestCase):
         rng = random.Random(26)
 
         def case(what, act, link_goes_down=True):
-            peer = Peer(port)
-            conn = peer.accept()
-            peer.server.close()
+            if pty_link:
+                conn = PtyPeer(pty_link, lambda: self.wait_for(
+                    node + "'s link up", lambda: self.state(node) is not None and
+                    self.state(node).link == MachineState.LINK_UP)).accept()
+            else:
+                peer = Peer(port)
+                conn = peer.accept()
+                peer.server.close()
             detail = act(conn)
             conn.close()
             self.assert_well(node, pid, what + detail)
@@ -143,7 +202,7 @@ class HostilePeers(unittest.TestCase):
 
         def oversize(conn):
             total = 0
-            while total < OVERSIZE_BYTES:
+            while total < oversize_bytes:
                 try:
                     total += conn.send(b"A" * 65536)
                 except (socket.timeout, BrokenPipeError, ConnectionResetError):
@@ -194,6 +253,11 @@ class HostilePeers(unittest.TestCase):
 
     def test_dprnt_node(self):
         self.run_peer("dprnt_node", 23293, b"X0.1234 Y-0.5678 Z0.0012\r\n")
+
+    def test_slave_bus_node(self):
+        # Serial: the peer is the master side of a pty (the uplink of the slave-bus master).
+        self.run_peer("slave_bus_node", None, b"\x7e\x01\x04\xd2\x00\x55\x7e",
+                      pty_link=rospy.get_param("~slave_link"), oversize_bytes=1024 * 1024)  # a pty moves ~200 KB/s
 
 
 if __name__ == "__main__":
