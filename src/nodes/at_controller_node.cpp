@@ -7,6 +7,7 @@
 
 #include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/ros/params.h"
+#include "cnc_bridge/ros/request_boundary.h"
 
 namespace cnc_bridge
 {
@@ -93,13 +94,13 @@ AtControllerNode::AtControllerNode(ros::NodeHandle nh, ros::NodeHandle pnh)
       *session_, ap::GoalRunner::Names{pnh.resolveName("resume"), pnh.resolveName("set_motion_enabled"),
                                        pnh.resolveName("optional_stop")});
 
-  set_auto_srv_ = pnh.advertiseService("set_auto", &AtControllerNode::setAuto, this);
-  jog_srv_ = pnh.advertiseService("jog", &AtControllerNode::jog, this);
-  spindle_srv_ = pnh.advertiseService("spindle", &AtControllerNode::spindle, this);
-  coolant_srv_ = pnh.advertiseService("coolant", &AtControllerNode::coolant, this);
-  tool_srv_ = pnh.advertiseService("tool_change", &AtControllerNode::toolChange, this);
-  home_srv_ = pnh.advertiseService("home", &AtControllerNode::home, this);
-  resume_srv_ = pnh.advertiseService("resume", &AtControllerNode::resume, this);
+  set_auto_srv_ = advertiseGuardedService(pnh, "set_auto", &AtControllerNode::setAuto, this);
+  jog_srv_ = advertiseGuardedService(pnh, "jog", &AtControllerNode::jog, this);
+  spindle_srv_ = advertiseGuardedService(pnh, "spindle", &AtControllerNode::spindle, this);
+  coolant_srv_ = advertiseGuardedService(pnh, "coolant", &AtControllerNode::coolant, this);
+  tool_srv_ = advertiseGuardedService(pnh, "tool_change", &AtControllerNode::toolChange, this);
+  home_srv_ = advertiseGuardedService(pnh, "home", &AtControllerNode::home, this);
+  resume_srv_ = advertiseGuardedService(pnh, "resume", &AtControllerNode::resume, this);
   follow_path_.start();
 }
 

@@ -17,6 +17,7 @@
 #include "cnc_bridge/dnc/dnc_codes.h"
 #include "cnc_bridge/dnc/drip_feed.h"
 #include "cnc_bridge/ros/params.h"
+#include "cnc_bridge/ros/request_boundary.h"
 
 namespace cnc_bridge
 {
@@ -153,9 +154,9 @@ class DripHandlers
   void advertise(ros::NodeHandle pnh, const ProgramDirectory& programs)
   {
     programs_ = &programs;
-    pause_srv_ = pnh.advertiseService("pause", &DripHandlers::onPause, this);
-    resume_srv_ = pnh.advertiseService("resume", &DripHandlers::onResume, this);
-    plan_srv_ = pnh.advertiseService("plan_drip", &DripHandlers::onPlan, this);
+    pause_srv_ = advertiseGuardedService(pnh, "pause", &DripHandlers::onPause, this);
+    resume_srv_ = advertiseGuardedService(pnh, "resume", &DripHandlers::onResume, this);
+    plan_srv_ = advertiseGuardedService(pnh, "plan_drip", &DripHandlers::onPlan, this);
   }
 
   TransferResult drip(Transport& link, const TransferJob& job,

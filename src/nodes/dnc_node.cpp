@@ -6,12 +6,16 @@
 // the protocol itself the core library cnc_bridge_xmodem.
 #include "dnc_node.h"
 
+#include <boost/scope_exit.hpp>
+
 #include <chrono>
+#include <exception>
 #include <filesystem>
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/ros/params.h"
+#include "cnc_bridge/ros/request_boundary.h"
 #include "dnc_drip_handlers.h"
 
 namespace cnc_bridge
@@ -142,8 +146,8 @@ DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh)
     }
   }
 
-  send_srv_ = pnh.advertiseService("send_program", &DncNode::onSend, this);
-  receive_srv_ = pnh.advertiseService("receive_program", &DncNode::onReceive, this);
+  send_srv_ = advertiseGuardedService(pnh, "send_program", &DncNode::onSend, this);
+  receive_srv_ = advertiseGuardedService(pnh, "receive_program", &DncNode::onReceive, this);
   // ~transfer: an ActionServer (not a SimpleActionServer, whose new goal preempts the running
   // one): a goal arriving while a transfer runs is rejected with the reason, the running one goes
   // on. Accepted goals run in worker_.
@@ -227,10 +231,13 @@ TransferResult DncNode::run(TransferGoal goal, const Feedback& feedback)
     result.message = busyMessage();
     return result;
   }
+  // Released however the transfer ends.
+  BOOST_SCOPE_EXIT_ALL(this)
+  {
+    gate_.release();
+  };
   bool cancelled = false;
-  TransferResult result = runReserved(std::move(goal), feedback, cancelled);
-  gate_.release();
-  return result;
+  return runReserved(std::move(goal), feedback, cancelled);
 }
 
 TransferResult DncNode::runReserved(TransferGoal goal, const Feedback& feedback, bool& cancelled)
@@ -276,8 +283,33 @@ TransferResult DncNode::runReserved(TransferGoal goal, const Feedback& feedback,
         s.message = transfer_message;
       });
   ROS_INFO("%s %s by %s", job.send ? "sending" : "receiving", job.path.c_str(), goal.protocol.c_str());
+  // Left by an unexpected error (answered at the request boundary): counted, and the state does
+  // not stay active.
+  const int exceptions = std::uncaught_exceptions();
+  BOOST_SCOPE_EXIT_ALL(this, exceptions, &goal)
+  {
+    if (std::uncaught_exceptions() <= exceptions)
+      return;
+    const std::string message = "the transfer of " + goal.file + " ended by an unexpected error";
+    counters_.finished(false, false, 0, 0, 0, message);
+    state_->update(
+        [&](MachineState& s)
+        {
+          s.execution = MachineState::EXECUTION_STOPPED;
+          s.message = message;
+        });
+  };
 
   gate_.waitForListenerToLeave();
+  // The port lock and (unless ~keep_open) the port are released however the transfer ends; at
+  // once after it (reset() below), before the archive is written.
+  const auto release_port = [this](PortLock* lock)
+  {
+    if (!keep_open_)
+      closeLink();
+    lock->unlock();
+  };
+  std::unique_ptr<PortLock, decltype(release_port)> port_held(&port_lock_, release_port);
   try
   {
     // A status poller on the same line (haas_mdc_node) skips its polls while this is held. It
@@ -309,9 +341,7 @@ TransferResult DncNode::runReserved(TransferGoal goal, const Feedback& feedback,
     result.success = false;
     result.message = e.what();
   }
-  if (!keep_open_)
-    closeLink();
-  port_lock_.unlock();
+  port_held.reset();
 
   counters_.finished(result.success, cancelled, result.blocks, result.retries, result.bytes, result.message);
   state_->update(

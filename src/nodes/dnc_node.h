@@ -84,6 +84,8 @@ class DncNode
   using GoalHandle = actionlib::ServerGoalHandle<TransferAction>;
   void onGoal(GoalHandle goal);
   void onCancel(GoalHandle goal);
+  /// Runs an accepted goal (the node reserved for it); an exception becomes the failed result.
+  TransferResult runGoal(GoalHandle& goal, bool& cancelled);
   /// The thread that runs accepted ~transfer goals, one at a time.
   void actionWorker();
   void cancelRunning();

@@ -4,6 +4,10 @@
 // run one at a time in the node's worker thread; a service call runs its transfer to the end.
 #include "dnc_node.h"
 
+#include <boost/scope_exit.hpp>
+
+#include "cnc_bridge/ros/request_boundary.h"
+
 namespace cnc_bridge
 {
 void DncNode::onGoal(GoalHandle goal)
@@ -48,28 +52,54 @@ void DncNode::actionWorker()
     }
     bool cancelled = false;
     TransferResult result;
-    if (gate_.cancelFlag())
     {
-      cancelled = true;  // cancelled before it started
-      result.message = "cancelled before it started";
+      // Free however the transfer ends, and before the result goes out: a client may send its
+      // next goal as soon as it has it.
+      BOOST_SCOPE_EXIT_ALL(this)
+      {
+        {
+          std::lock_guard<std::mutex> lock(goal_mutex_);
+          current_goal_.reset();
+        }
+        gate_.release();
+      };
+      if (gate_.cancelFlag())
+      {
+        cancelled = true;  // cancelled before it started
+        result.message = "cancelled before it started";
+      }
+      else
+      {
+        result = runGoal(goal, cancelled);
+      }
     }
-    else
-    {
-      result = runReserved(
-          *goal.getGoal(), [&goal](const TransferFeedback& f) { goal.publishFeedback(f); }, cancelled);
-    }
-    {
-      std::lock_guard<std::mutex> lock(goal_mutex_);
-      current_goal_.reset();
-    }
-    // Free before the result goes out: a client may send its next goal as soon as it has it.
-    gate_.release();
     if (result.success)
       goal.setSucceeded(result, result.message);
     else if (cancelled || !ros::ok())
       goal.setCanceled(result, result.message);
     else
       goal.setAborted(result, result.message);
+  }
+}
+
+// The request boundary of a goal (request_boundary.h): an unexpected error aborts it with the
+// error's message; the worker goes on with the next goal.
+TransferResult DncNode::runGoal(GoalHandle& goal, bool& cancelled)
+{
+  const auto& g = *goal.getGoal();
+  try
+  {
+    return runReserved(
+        g, [&goal](const TransferFeedback& f) { goal.publishFeedback(f); }, cancelled);
+  }
+  catch (...)
+  {
+    TransferResult result;
+    result.message = boundary::failure(
+        pnh_.resolveName("transfer") + " goal " + goal.getGoalID().id + " (" + g.direction + " " + g.file + ")",
+        boundary::currentExceptionText());
+    ROS_ERROR_STREAM(result.message);
+    return result;
   }
 }
 

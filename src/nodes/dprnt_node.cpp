@@ -25,6 +25,7 @@
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/ros/params.h"
+#include "cnc_bridge/ros/request_boundary.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/transport/tcp.h"
 
@@ -189,7 +190,7 @@ DprntNode::DprntNode(ros::NodeHandle nh, ros::NodeHandle pnh)
     }
     rule_pubs_.push_back(pubs);
   }
-  clear_srv_ = pnh.advertiseService("clear", &DprntNode::clear, this);
+  clear_srv_ = advertiseGuardedService(pnh, "clear", &DprntNode::clear, this);
   ROS_INFO("DPRNT from %s, %zu rules%s%s", input_->describe().c_str(), rules_.rules().size(),
            rules_file_.empty() ? "" : " from ", rules_file_.c_str());
   input_->start([this](const uint8_t* data, size_t size) { onBytes(data, size); },

@@ -11,6 +11,7 @@
 #include "cnc_bridge/ros/gcode_params.h"
 #include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/ros/params.h"
+#include "cnc_bridge/ros/request_boundary.h"
 
 namespace cnc_bridge
 {
@@ -109,11 +110,11 @@ EthernutNode::EthernutNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   state_->diagnostics().add("ethernut protocol", this, &EthernutNode::protocolDiagnostics);
   path_pub_ = nh_.advertise<nav_msgs::Path>("job/path", 1, true);
   markers_pub_ = nh_.advertise<visualization_msgs::MarkerArray>("job/markers", 1, true);
-  pause_srv_ = pnh_.advertiseService("pause", &EthernutNode::onPause, this);
-  resume_srv_ = pnh_.advertiseService("resume", &EthernutNode::onResume, this);
-  reset_srv_ = pnh_.advertiseService("reset", &EthernutNode::onReset, this);
-  kill_srv_ = pnh_.advertiseService("kill", &EthernutNode::onKill, this);
-  mode_srv_ = pnh_.advertiseService("set_mode", &EthernutNode::onSetMode, this);
+  pause_srv_ = advertiseGuardedService(pnh_, "pause", &EthernutNode::onPause, this);
+  resume_srv_ = advertiseGuardedService(pnh_, "resume", &EthernutNode::onResume, this);
+  reset_srv_ = advertiseGuardedService(pnh_, "reset", &EthernutNode::onReset, this);
+  kill_srv_ = advertiseGuardedService(pnh_, "kill", &EthernutNode::onKill, this);
+  mode_srv_ = advertiseGuardedService(pnh_, "set_mode", &EthernutNode::onSetMode, this);
   action_.start();
   startLink();
 }

@@ -23,6 +23,7 @@
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/ros/params.h"
+#include "cnc_bridge/ros/request_boundary.h"
 #include "cnc_bridge/transport/backoff.h"
 #include "cnc_bridge/transport/reconnecting_link.h"
 #include "cnc_bridge/transport/serial_port.h"
@@ -171,9 +172,9 @@ class HaasMdcNode
     }
     poller_->setListener([this](const mdc::MachineStatus& s, const std::vector<mdc::CycleEventData>& events)
                          { onStatus(s, events); });
-    read_srv_ = pnh.advertiseService("read_variable", &HaasMdcNode::readVariable, this);
-    write_srv_ = pnh.advertiseService("write_variable", &HaasMdcNode::writeVariable, this);
-    query_srv_ = pnh.advertiseService("query", &HaasMdcNode::query, this);
+    read_srv_ = advertiseGuardedService(pnh, "read_variable", &HaasMdcNode::readVariable, this);
+    write_srv_ = advertiseGuardedService(pnh, "write_variable", &HaasMdcNode::writeVariable, this);
+    query_srv_ = advertiseGuardedService(pnh, "query", &HaasMdcNode::query, this);
 
     link_ = std::make_unique<ReconnectingLink>("haas_mdc " + hardware_id_, [this] { return open(); });
     auto on_state = [this](LinkState link, const std::string& why)

@@ -10,6 +10,7 @@
 #include "cnc_bridge/ReceiveProgram.h"
 #include "cnc_bridge/SendProgram.h"
 #include "cnc_bridge/ros/node_main.h"
+#include "cnc_bridge/ros/request_boundary.h"
 #include "cnc_bridge/share/share_service.h"
 #include "cnc_bridge/share/smb_store.h"
 
@@ -84,8 +85,8 @@ template <class Service>
 ros::ServiceServer ShareNode::advertiseTransfer(ros::NodeHandle& pnh, const std::string& name,
                                                 const std::string& direction)
 {
-  return pnh.advertiseService<typename Service::Request, typename Service::Response>(
-      name,
+  return advertiseGuardedService<Service>(
+      pnh, name,
       [this, direction](typename Service::Request& request, typename Service::Response& response)
       {
         const TransferResult result = run(direction, request.protocol, request.file, nullptr);
@@ -105,13 +106,13 @@ void ShareNode::advertise(ros::NodeHandle& pnh)
   action_->start();
   send_srv_ = advertiseTransfer<SendProgram>(pnh, "send_program", TransferGoal::DIRECTION_SEND);
   receive_srv_ = advertiseTransfer<ReceiveProgram>(pnh, "receive_program", TransferGoal::DIRECTION_RECEIVE);
-  list_srv_ = pnh.advertiseService("list_programs", &ShareNode::onList, this);
-  remove_srv_ = pnh.advertiseService("remove_program", &ShareNode::onRemove, this);
-  history_srv_ = pnh.advertiseService("program_history", &ShareNode::onHistory, this);
-  compare_srv_ = pnh.advertiseService("compare_programs", &ShareNode::onCompare, this);
-  withdraw_srv_ = pnh.advertiseService("withdraw_program", &ShareNode::onWithdraw, this);
-  publish_srv_ = pnh.advertiseService("publish_to_machines", &ShareNode::onPublishToMachines, this);
-  withdraw_all_srv_ = pnh.advertiseService("withdraw_all", &ShareNode::onWithdrawAll, this);
+  list_srv_ = advertiseGuardedService(pnh, "list_programs", &ShareNode::onList, this);
+  remove_srv_ = advertiseGuardedService(pnh, "remove_program", &ShareNode::onRemove, this);
+  history_srv_ = advertiseGuardedService(pnh, "program_history", &ShareNode::onHistory, this);
+  compare_srv_ = advertiseGuardedService(pnh, "compare_programs", &ShareNode::onCompare, this);
+  withdraw_srv_ = advertiseGuardedService(pnh, "withdraw_program", &ShareNode::onWithdraw, this);
+  publish_srv_ = advertiseGuardedService(pnh, "publish_to_machines", &ShareNode::onPublishToMachines, this);
+  withdraw_all_srv_ = advertiseGuardedService(pnh, "withdraw_all", &ShareNode::onWithdrawAll, this);
 }
 
 void ShareNode::linkResult(const std::string& error)

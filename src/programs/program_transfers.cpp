@@ -1,5 +1,7 @@
 #include "cnc_bridge/programs/program_transfers.h"
 
+#include <boost/scope_exit.hpp>
+
 #include <utility>
 
 #include "cnc_bridge/common/log.h"
@@ -40,6 +42,12 @@ TransferOutcome ProgramTransfers::run(Direction direction, const std::string& fi
     busy_ = true;
     cancel_ = false;
   }
+  // Free however the transfer ends: an unexpected error goes on to the node's request boundary.
+  BOOST_SCOPE_EXIT_ALL(this)
+  {
+    std::lock_guard<std::mutex> lock(busy_mutex_);
+    busy_ = false;
+  };
   {
     std::lock_guard<std::mutex> lock(counts_mutex_);
     ++counts_.transfers;
@@ -59,8 +67,6 @@ TransferOutcome ProgramTransfers::run(Direction direction, const std::string& fi
     CNC_LOG_INFO(outcome.message);
   else
     CNC_LOG_ERROR(outcome.message);
-  std::lock_guard<std::mutex> lock(busy_mutex_);
-  busy_ = false;
   return outcome;
 }
 

@@ -14,6 +14,8 @@
 #include <mutex>
 #include <string>
 
+#include "cnc_bridge/ros/request_boundary.h"
+
 namespace cnc_bridge
 {
 /// \brief One on/off gate: ~<parameter> at start-up, ~<service> (std_srvs/SetBool) at run time.
@@ -38,7 +40,7 @@ class RuntimeSwitch
     pnh.param(parameter, initial, false);
     enabled_ = initial;
     last_change_ = std::string("start-up value of ") + parameter_;
-    service_ = pnh.advertiseService(service, &RuntimeSwitch::onSet, this);
+    service_ = advertiseGuardedService(pnh, service, &RuntimeSwitch::onSet, this);
   }
 
   /// \brief Sets the value as a change by \p caller would (e.g. a value read from a settings file).

@@ -16,6 +16,8 @@
 #include <string>
 #include <thread>
 
+#include "cnc_bridge/ros/request_boundary.h"
+
 namespace cnc_bridge
 {
 /// \brief An action server that runs one goal at a time on its own thread and rejects a goal that
@@ -30,7 +32,9 @@ class SingleGoalActionServer
  public:
   ACTION_DEFINITION(ActionSpec);
   using GoalHandle = actionlib::ServerGoalHandle<ActionSpec>;
-  /// Runs one accepted goal to its end; must end it with setSucceeded/setAborted/setCanceled.
+  /// Runs one accepted goal to its end; must end it with setSucceeded/setAborted/setCanceled. An
+  /// exception it throws aborts the goal with a message that names the goal and the error
+  /// (request_boundary.h); the server then takes the next goal.
   using Execute = std::function<void(const GoalConstPtr&)>;
   /// Says in a few words what a goal does ("job part.nc"), for the rejection of another.
   using Describe = std::function<std::string(const Goal&)>;
@@ -152,6 +156,8 @@ class SingleGoalActionServer
     for (;;)
     {
       GoalConstPtr goal;
+      std::unique_ptr<GoalHandle> running;  // the goal run here (current_ may be the next one by its end)
+      std::string what;                     // "goal <id> (<what it does>)", for an error's message
       {
         std::unique_lock<std::mutex> lock(mutex_);
         cv_.wait(lock, [this] { return pending_ || stopping_; });
@@ -159,6 +165,8 @@ class SingleGoalActionServer
           return;
         pending_ = false;
         goal = current_->getGoal();
+        running = std::make_unique<GoalHandle>(*current_);
+        what = name_ + " goal " + current_->getGoalID().id + " (" + running_what_ + ")";
         if (stopping_)
         {
           lock.unlock();
@@ -168,11 +176,40 @@ class SingleGoalActionServer
           return;
         }
       }
-      execute_(goal);
+      executeGuarded(goal, *running, what);
       Result result;
       result.message = "the goal ended without a result (a bug in the node)";
-      finish(result, result.message, kAborted);  // no effect if execute_ ended it
+      finishIfRunning(*running, result, kAborted);  // no effect if execute_ ended it
     }
+  }
+
+  // The request boundary of a goal: an exception from execute_ aborts the goal with its message.
+  void executeGuarded(const GoalConstPtr& goal, const GoalHandle& running, const std::string& what)
+  {
+    try
+    {
+      execute_(goal);
+    }
+    catch (...)
+    {
+      Result result;
+      result.success = false;
+      result.message = boundary::failure(what, boundary::currentExceptionText());
+      ROS_ERROR_STREAM(result.message);
+      finishIfRunning(running, result, kAborted);  // no effect if execute_ ended the goal before it threw
+    }
+  }
+
+  // Ends \p running unless it has ended: a client that had its result may have sent the next goal,
+  // which is current_ now and must not be ended here.
+  void finishIfRunning(const GoalHandle& running, const Result& result, Outcome outcome)
+  {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (!current_ || !(*current_ == running))
+        return;
+    }
+    finish(result, result.message, outcome);
   }
 
   // Frees the server before the result goes out: a client may send its next goal as soon as it
