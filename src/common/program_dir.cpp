@@ -37,21 +37,6 @@ void checkRegular(const std::string& path, const std::string& name)
 }
 }  // namespace
 
-std::string fileKind(mode_t mode)
-{
-  if (S_ISREG(mode))
-    return "";
-  if (S_ISDIR(mode))
-    return "a directory";
-  if (S_ISFIFO(mode))
-    return "a FIFO";
-  if (S_ISLNK(mode))
-    return "a symbolic link";
-  if (S_ISSOCK(mode))
-    return "a socket";
-  return "a device";
-}
-
 int openRegularFile(int dir_fd, const std::string& name, const std::string& shown)
 {
   // O_NONBLOCK: opening a FIFO for reading would otherwise wait for a writer.

@@ -21,6 +21,8 @@ std::string fileKind(unsigned mode)
     return "a directory";
   if (S_ISFIFO(mode))
     return "a FIFO";
+  if (S_ISLNK(mode))
+    return "a symbolic link";
   if (S_ISCHR(mode))
     return "a character device";
   if (S_ISBLK(mode))

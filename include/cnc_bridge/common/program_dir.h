@@ -9,6 +9,8 @@
 
 #include <string>
 
+#include "cnc_bridge/common/regular_file.h"  // fileKind()
+
 namespace cnc_bridge
 {
 /// \brief A directory that requested file names must stay inside. Thread-safe (immutable).
@@ -38,10 +40,6 @@ class ProgramDirectory
 
   std::string root_;  // canonical, no trailing slash
 };
-
-/// \brief What \p mode is when it is not a regular file: "a directory", "a FIFO", "a symbolic
-/// link", "a socket", "a device"; "" for a regular file.
-std::string fileKind(mode_t mode);
 
 /// \brief Opens \p name in the folder open as \p dir_fd (AT_FDCWD: relative to the current one) for
 /// reading, without following a link at it and without waiting on a FIFO. \p shown names it in
