@@ -323,6 +323,27 @@ TEST(EthernutJob, KillIsRefusedByDefault)
       << "the board received a kill the node refused";
 }
 
+// The whole job is checked before its first set: a points goal whose third point a float cannot
+// carry is refused naming the point, and the board receives none of its sets (not the first two).
+TEST(EthernutJob, AJobWithOnePointTheBoardCannotTakeIsRefusedWithNothingSent)
+{
+  ASSERT_TRUE(boardReady());
+  auto client = actionClient();
+  const size_t messages_before = simMessages().size();
+  const size_t before = simLog().size();
+  client->sendGoal(pointsGoal({{0.001, 0.002, 0.003}, {0.002, 0.002, 0.003}, {1e39, 0.0, 0.0}}));
+  ASSERT_TRUE(client->waitForResult(ros::Duration(20.0)));
+  EXPECT_EQ(client->getState(), actionlib::SimpleClientGoalState::ABORTED);
+  const std::string text = client->getResult()->message;
+  EXPECT_EQ(text.rfind("job refused: point 2: X ", 0), 0u) << text;
+  EXPECT_NE(text.find("cannot be sent: the board takes float coordinates"), std::string::npos) << text;
+  // An alive request that arrives after the refusal was sent after it.
+  ASSERT_TRUE(waitForSimMessage("alive-request", simMessages().size()));
+  EXPECT_EQ(simMessagesNamed("coordinates", messages_before), 0);
+  EXPECT_EQ(simMessagesNamed("READYTOSEND", messages_before), 0);
+  EXPECT_EQ(simLog().size(), before);
+}
+
 TEST(EthernutJob, QcncStyleProgramStreamsEveryCoordinateInOrderDespiteResends)
 {
   ASSERT_TRUE(boardReady());
