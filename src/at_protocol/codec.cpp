@@ -2,6 +2,7 @@
 #include "cnc_bridge/at_protocol/codec.h"
 
 #include <charconv>
+#include <cmath>
 #include <cstdio>
 #include <limits>
 
@@ -195,6 +196,40 @@ Axis axisFromChar(char c)
     default:
       throw ProtocolError("'@'-protocol: " + quote(std::string_view(&c, 1)) + " is not an axis (X, Y or Z)");
   }
+}
+
+int scaledValue(double value, double full_scale, const std::string& what)
+{
+  if (!std::isfinite(value) || !(value >= 0.0) || !(value <= full_scale))
+  {
+    char text[80];
+    std::snprintf(text, sizeof text, "%.17g is outside 0..%g", value, full_scale);
+    throw ProtocolError(what + " " + text);
+  }
+  return static_cast<int>(std::lround(value / full_scale * kMaxFeed));
+}
+
+ToolChange toolChangeFor(int64_t tool, double length_m)
+{
+  checkRange(tool, 0, kMaxTool, "tool number");
+  const double length_mm = length_m * 1000.0;
+  const auto refuse = [&](const char* why)
+  {
+    char text[120];
+    std::snprintf(text, sizeof text, "'@'-protocol: tool length %.17g m %s", length_m, why);
+    throw ProtocolError(text);
+  };
+  if (!std::isfinite(length_mm) || length_mm < 0.0 || length_mm > double(kMaxToolLengthMm))
+  {
+    refuse("is outside 0..10 m");
+  }
+  const double whole = std::round(length_mm);
+  // A metre value of whole millimetres may be off by the binary fraction (0.05 * 1000): 1 nm slack.
+  if (std::fabs(length_mm - whole) > 1e-6)
+  {
+    refuse("is not a whole millimetre (the tool change carries whole millimetres)");
+  }
+  return ToolChange{static_cast<int>(tool), static_cast<int>(whole)};
 }
 
 void appendSetpoint(const Setpoint& setpoint, std::string& out)

@@ -394,6 +394,10 @@ Answer ControllerSession::send(const std::vector<Command>& commands)
   Answer answer;
   try
   {
+    for (const auto& command : commands)
+    {
+      encode(command);  // a value out of range refuses the whole request before any of it is queued
+    }
     std::vector<std::future<void>> written;
     written.reserve(commands.size());
     for (const auto& command : commands)
@@ -447,14 +451,10 @@ Answer ControllerSession::jog(const std::string& axis_name, double feed_m_s)
     const Axis axis = axisFromChar(axis_name[0]);
     const double max_speed = options_.limits.max_speed[static_cast<int>(axis)];  // mm/s
     // m/s to the F value: a fraction of the axis' top speed, 0..255.
-    const long feed = std::lround(feed_m_s * 1000.0 / max_speed * kMaxFeed);
-    if (!(feed_m_s >= 0.0) || feed > kMaxFeed)
-    {
-      throw ProtocolError("jog feed_rate " + std::to_string(feed_m_s) + " m/s is outside 0.." +
-                          std::to_string(max_speed / 1000.0) + " m/s (~max_speed_" +
-                          static_cast<char>(std::tolower(toChar(axis))) + ")");
-    }
-    answer = send({JogMode{axis}, JogFeed{static_cast<int>(feed)}});
+    const int feed = scaledValue(
+        feed_m_s * 1000.0, max_speed,
+        std::string("jog feed_rate (mm/s, ~max_speed_") + static_cast<char>(std::tolower(toChar(axis))) + ")");
+    answer = send({JogMode{axis}, JogFeed{feed}});
     if (answer.success && feed > 0)
     {
       jog_deadman_.renew(Deadman::Clock::now());
@@ -512,11 +512,14 @@ Answer ControllerSession::spindle(double rpm, double* sent_rpm)
 {
   Answer answer;
   // rev/min to the S value 0..255 (clockwise only).
-  const long value = std::lround(rpm / options_.spindle_max_rpm * kMaxFeed);
-  if (!(rpm >= 0.0) || value > kMaxFeed)
+  int value = 0;
+  try
   {
-    answer.message = "spindle speed " + std::to_string(rpm) + " rev/min is outside 0.." +
-                     std::to_string(options_.spindle_max_rpm) + " (~spindle_max_rpm; clockwise only)";
+    value = scaledValue(rpm, options_.spindle_max_rpm, "spindle speed (rev/min, ~spindle_max_rpm; clockwise only)");
+  }
+  catch (const ProtocolError& e)
+  {
+    answer.message = e.what();
     return answer;
   }
   if (value > 0)  // stopping the spindle is always allowed
@@ -527,7 +530,7 @@ Answer ControllerSession::spindle(double rpm, double* sent_rpm)
       return answer;
     }
   }
-  answer = send({Spindle{static_cast<int>(value)}});
+  answer = send({Spindle{value}});
   if (sent_rpm)
   {
     *sent_rpm = static_cast<double>(value) * options_.spindle_max_rpm / kMaxFeed;
@@ -542,9 +545,14 @@ Answer ControllerSession::toolChange(int32_t tool, double length_m)
   {
     return answer;
   }
-  // The protocol sends the tool length in whole millimetres.
-  const long length_mm = std::lround(length_m * 1000.0);
-  return send({ToolChange{tool, static_cast<int>(length_mm)}});
+  try
+  {
+    return send({toolChangeFor(tool, length_m)});  // refuses what the wire cannot carry exactly
+  }
+  catch (const ProtocolError& e)
+  {
+    return Answer{false, e.what()};
+  }
 }
 
 Answer ControllerSession::home()
@@ -560,6 +568,13 @@ std::vector<OperationPlan> ControllerSession::planGoal(const GoalRequest& goal, 
                                                        const std::string& program_commands_setting) const
 {
   const Vec3 start_pulses{double(start[0]), double(start[1]), double(start[2])};
+  if (!std::isfinite(goal.feed_rate) || goal.feed_rate < 0.0 || !std::isfinite(goal.spindle_speed) ||
+      goal.spindle_speed < 0.0)
+  {
+    throw ConfigError("goal refused before anything was sent: feed_rate (" + std::to_string(goal.feed_rate) +
+                      " m/s) and spindle_speed (" + std::to_string(goal.spindle_speed) +
+                      " rev/min) must be finite and not negative");
+  }
   const bool coolant = goal.coolant == 1 || (goal.coolant == -1 && coolant_);
   const double goal_feed = goal.feed_rate * 1000.0;  // m/s to mm/s
   const double fallback_feed = goal_feed > 0.0 ? goal_feed : options_.default_feed * 1000.0;
@@ -587,6 +602,8 @@ std::vector<OperationPlan> ControllerSession::planGoal(const GoalRequest& goal, 
     options.coolant = coolant;
     options.program_commands = program_commands;
     options.program_commands_setting = program_commands_setting;
+    options.spindle_max_rpm = options_.spindle_max_rpm;
+    options.soft_limits = options_.soft_limits;
     plans = planProgram(in, options_.gcode, options, start_pulses);
   }
   else
@@ -596,6 +613,13 @@ std::vector<OperationPlan> ControllerSession::planGoal(const GoalRequest& goal, 
     plan.coolant = coolant;
     for (const Vec3& p : goal.path_m)
     {
+      // Every point is checked before anything is sent.
+      const std::string outside = options_.soft_limits.violation({p[0], p[1], p[2]});
+      if (!outside.empty())
+      {
+        throw ConfigError("goal refused before anything was sent: point " + std::to_string(plan.points.size() - 1) +
+                          ": " + outside);
+      }
       // Metres to pulses, rounded so that the end point is a whole pulse.
       plan.points.push_back(
           {std::round(p[0] * kPulsesPerMetre), std::round(p[1] * kPulsesPerMetre), std::round(p[2] * kPulsesPerMetre)});
@@ -618,28 +642,56 @@ std::vector<OperationPlan> ControllerSession::planGoal(const GoalRequest& goal, 
   {
     plans.front().tool = goal.tool;
   }
+  checkPlans(plans, goal.tool, goal.tool_length);
   return plans;
+}
+
+// The whole goal is checked before its first byte goes out: a value of a later operation the wire
+// cannot carry would otherwise fail the goal after the earlier operations moved the machine.
+void ControllerSession::checkPlans(const std::vector<OperationPlan>& plans, int32_t goal_tool,
+                                   double goal_tool_length) const
+{
+  for (size_t i = 0; i < plans.size(); ++i)
+  {
+    try
+    {
+      operationCommands(plans[i], goal_tool, goal_tool_length);
+    }
+    catch (const ProtocolError& e)
+    {
+      throw ConfigError("goal refused before anything was sent: operation " + std::to_string(i + 1) + " of " +
+                        std::to_string(plans.size()) + ": " + e.what());
+    }
+  }
+}
+
+void ControllerSession::operationCommands(const OperationPlan& plan, int32_t goal_tool, double goal_tool_length,
+                                          Operation* operation) const
+{
+  Operation commands;
+  if (plan.tool >= 0)
+  {
+    // The goal's tool length goes with its own tool; a program's tool change carries none.
+    const double length = plan.tool == goal_tool ? goal_tool_length : 0.0;
+    commands.tool = toolChangeFor(plan.tool, length);
+  }
+  if (plan.spindle_rpm > 0.0)
+  {
+    commands.spindle =
+        scaledValue(plan.spindle_rpm, options_.spindle_max_rpm, "spindle speed (rev/min, ~spindle_max_rpm)");
+  }
+  if (operation)
+  {
+    operation->tool = commands.tool;
+    operation->spindle = commands.spindle;
+  }
 }
 
 Operation ControllerSession::operationFor(const OperationPlan& plan, int32_t goal_tool, double goal_tool_length) const
 {
   Operation operation;
   operation.coolant = plan.coolant;
-  if (plan.tool >= 0)
-  {
-    // The goal's tool length goes with its own tool; a program's tool change carries none.
-    const double length = plan.tool == goal_tool ? goal_tool_length : 0.0;
-    operation.tool = ToolChange{plan.tool, static_cast<int>(std::lround(length * 1000.0))};
-  }
-  if (plan.spindle_rpm > 0.0)
-  {
-    const long value = std::lround(plan.spindle_rpm / options_.spindle_max_rpm * kMaxFeed);
-    if (value > kMaxFeed)
-    {
-      throw ConfigError("spindle speed " + std::to_string(plan.spindle_rpm) + " rev/min is above ~spindle_max_rpm");
-    }
-    operation.spindle = static_cast<int>(value);
-  }
+  operationCommands(plan, goal_tool, goal_tool_length, &operation);
   operation.trajectory = std::make_shared<Trajectory>(plan.points, plan.feeds, options_.limits);
   return operation;
 }

@@ -41,6 +41,7 @@ GoalOutcome GoalRunner::run(const std::vector<OperationPlan>& plans, int32_t goa
   Run run{goal_tool, goal_tool_length, listener, [&listener] { return listener.cancelRequested(); }, {}, {}};
   try
   {
+    session_.checkPlans(plans, goal_tool, goal_tool_length);  // the whole goal, before its first byte
     for (const OperationPlan& plan : plans)
     {
       if (plan.moves() && !runPlan(run, plan))

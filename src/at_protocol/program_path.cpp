@@ -47,6 +47,12 @@ class OperationPlanner
                             ": the controller turns the spindle clockwise only");
         }
         spindle_rpm_ = step.spindle == gcode::Spindle::kClockwise ? step.spindle_rpm : 0.0;
+        if (options_.spindle_max_rpm > 0.0 && !(spindle_rpm_ <= options_.spindle_max_rpm))
+        {
+          throw ConfigError("program refused: line " + std::to_string(step.line) + ": " + step.describe() +
+                            ": spindle speed above ~spindle_max_rpm (" + std::to_string(options_.spindle_max_rpm) +
+                            " rev/min)");
+        }
         break;
       case Kind::kCoolant:
         coolant_ = step.coolant;
@@ -70,8 +76,30 @@ class OperationPlanner
   std::vector<OperationPlan> take() { return std::move(plans_); }
 
  private:
+  // The whole program is checked while it is planned, before anything is sent: every move's end
+  // in the protocol's range (int32 pulses) and inside the soft limits.
+  void checkMove(const gcode::Move& move) const
+  {
+    const std::string where = "program refused: line " + std::to_string(move.line) + ": ";
+    for (const double mm : {move.end.x, move.end.y, move.end.z})
+    {
+      if (!(std::fabs(mm * kPulsesPerMm) < 2147483647.0))
+      {
+        throw ConfigError(where + "a coordinate " + std::to_string(mm) +
+                          " mm is outside the protocol's range (+-2147 m in whole pulses)");
+      }
+    }
+    const std::string outside =
+        options_.soft_limits.violation({move.end.x / 1000.0, move.end.y / 1000.0, move.end.z / 1000.0});
+    if (!outside.empty())
+    {
+      throw ConfigError(where + outside);
+    }
+  }
+
   void addMove(const gcode::Move& move)
   {
+    checkMove(move);
     OperationPlan& plan = plans_.back();
     plan.points.push_back({move.end.x * kPulsesPerMm, move.end.y * kPulsesPerMm, move.end.z * kPulsesPerMm});
     double feed = options_.goal_feed > 0.0 ? options_.goal_feed : options_.fallback_feed;

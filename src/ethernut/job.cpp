@@ -1,6 +1,8 @@
 #include "cnc_bridge/ethernut/job.h"
 
 #include <algorithm>
+#include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <utility>
 
@@ -107,9 +109,43 @@ void Preview::add(double x_mm, double y_mm, double z_mm, bool rapid)
   }
 }
 
+// ------------------------------------------------------------------------- coordinates
+namespace
+{
+// Rounding to float may move a coordinate this far, mm (float carries 1 um up to about 16 m).
+constexpr double kFloatSlackMm = 0.001;
+
+float boardFloat(double mm, char axis, const std::string& where)
+{
+  const auto as_float = static_cast<float>(mm);
+  if (!std::isfinite(mm) || !std::isfinite(as_float) || std::fabs(static_cast<double>(as_float) - mm) > kFloatSlackMm)
+  {
+    char text[160];
+    std::snprintf(text, sizeof text,
+                  ": %c %.17g mm cannot be sent: the board takes float coordinates (finite, to 0.001 mm)", axis, mm);
+    throw ConfigError(where + text);
+  }
+  return as_float;
+}
+}  // namespace
+
+Coordinate boardCoordinate(double x_mm, double y_mm, double z_mm, const SoftLimits& limits, const std::string& where)
+{
+  Coordinate c;
+  c.x = boardFloat(x_mm, 'X', where);
+  c.y = boardFloat(y_mm, 'Y', where);
+  c.z = boardFloat(z_mm, 'Z', where);
+  const std::string outside = limits.violation({x_mm / 1000.0, y_mm / 1000.0, z_mm / 1000.0});
+  if (!outside.empty())
+  {
+    throw ConfigError(where + ": " + outside);
+  }
+  return c;
+}
+
 // ------------------------------------------------------------------------- Job
 std::unique_ptr<Job> Job::fromProgram(const std::string& path, const gcode::ParserOptions& options,
-                                      const G53Policy& g53, size_t max_preview_points)
+                                      const G53Policy& g53, size_t max_preview_points, const SoftLimits& limits)
 {
   std::unique_ptr<Job> job(new Job(max_preview_points));
   // The first pass: every move up to the program's end (M02/M30), what comes after it is never sent.
@@ -131,6 +167,8 @@ std::unique_ptr<Job> Job::fromProgram(const std::string& path, const gcode::Pars
       job->preview_.add(move.start.x, move.start.y, move.start.z, true);
       first_move = false;
     }
+    // The whole program is checked here, before its first set is sent.
+    boardCoordinate(move.end.x, move.end.y, move.end.z, limits, "G-code line " + std::to_string(move.line));
     job->preview_.add(move.end.x, move.end.y, move.end.z, move.motion == gcode::Motion::kRapid);
     ++job->count_;
   }

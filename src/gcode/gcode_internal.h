@@ -194,8 +194,10 @@ struct Parser::Step
   bool comp_changed = false;  // G40/G41/G42 in this block
   bool q_used = false;        // Q taken by this block's G64 (LinuxCNC naive CAM tolerance)
   bool l_used = false;        // L taken by this block's canned cycle or subprogram call
-  uint8_t groups_seen = 0;    // bit per ModalGroup
-  int comp_code = 0;          // tenths: 400, 410, 420 when G40/G41/G42 is in this block
+  uint32_t used = 0;          // bit per Word: P, E, H, D taken by a code of this block (finishBlock)
+  void use(Word w) { used |= 1u << w; }
+  uint8_t groups_seen = 0;  // bit per ModalGroup
+  int comp_code = 0;        // tenths: 400, 410, 420 when G40/G41/G42 is in this block
   uint32_t comp_column = 0;
 
   double scale() const { return next.units == Units::kInches ? kMmPerInch : 1.0; }

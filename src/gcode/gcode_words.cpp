@@ -211,6 +211,7 @@ bool applyPathModeCode(const Scan& scan, Step& st, int code, uint32_t column)
       claimGroup(st, ModalGroup::kPathMode, column);
       next.path_mode = PathMode::kBlend;
       next.path_tolerance_mm = scan.has(kP) ? scan.value[kP] : 0.0;  // scaled with the units later
+      st.use(kP);
       // LinuxCNC G64 P- Q-: Q is the naive CAM detector's tolerance (CAM posts write it).
       next.naive_cam_tolerance_mm = scan.has(kQ) ? scan.value[kQ] : 0.0;
       st.q_used = scan.has(kQ);
@@ -221,10 +222,13 @@ bool applyPathModeCode(const Scan& scan, Step& st, int code, uint32_t column)
       next.path_mode = PathMode::kBlend;
       next.smoothing_level = scan.has(kP) ? static_cast<int32_t>(scan.value[kP]) : 0;
       next.path_tolerance_mm = scan.has(kE) ? scan.value[kE] : 0.0;
+      st.use(kP);
+      st.use(kE);
       return true;
     case 1030:
       // Haas G103: limit look-ahead to P blocks (P0 or none: the control's maximum).
       next.lookahead_blocks = scan.has(kP) ? static_cast<int32_t>(scan.value[kP]) : 0;
+      st.use(kP);
       return true;
     default:
       return false;
@@ -280,6 +284,10 @@ void applyGCodes(const Scan& scan, Step& st, Dialect dialect)
     if (!known)
     {
       throw ParseError(st.line, column, gName(code) + " is not supported");
+    }
+    if (code == 430)
+    {
+      st.use(kH);  // G43 H: the offset number (its value is in the control)
     }
   }
   // The tolerances of G64/G187 are in the block's units, which its G20/G21 may have just set.
@@ -340,6 +348,7 @@ void callSubprogram(const Scan& scan, Step& st, bool local, uint32_t column, Dia
         st.line, column,
         std::string(local ? "M97 needs P, the N number" : "M98 needs P, the O number") + " of the subprogram to call");
   }
+  st.use(kP);
   auto p = static_cast<int64_t>(scan.value[kP]);
   uint32_t repeats = 1;
   // Fanuc: M98 P00021000 runs O1000 twice (the digits before the last four count the runs).
@@ -411,7 +420,11 @@ void applyMCode(const Scan& scan, Step& st, uint16_t code, uint32_t column, Dial
       block.subprogram_end = true;
       break;
     default:
-      break;  // machine-specific: reported in m_codes
+      // Machine-specific: reported in m_codes; its P and E words are its own (LinuxCNC M62-M68,
+      // Haas M59 P), as the control reads them.
+      st.use(kP);
+      st.use(kE);
+      break;
   }
 }
 
@@ -468,6 +481,7 @@ void selectCutterComp(const Scan& scan, Step& st, const ParserOptions& options)
     st.comp_changed = true;
     return;
   }
+  st.use(kD);  // G41/G42 D: the offset whose radius to use
   if (!options.tool_table)
   {
     throw ParseError(st.line, st.comp_column,
@@ -578,6 +592,32 @@ Vec3 axisTarget(const Scan& scan, const Step& st)
   return target;
 }
 
+// A word no code of its block uses is an error, as in LinuxCNC's rs274 ("E word with no G70, G76,
+// M66, M67 or M68 to use it"): a typo (X1E39) must stop the program, not change where the tool goes.
+// X Y Z I J K R L Q are checked where motion and cycles read them; F S T always set their values.
+void refuseUnusedWords(const Scan& scan, const Step& st)
+{
+  static const struct
+  {
+    Word word;
+    const char* message;
+  } kUsers[] = {
+      {kE, "E word with no code in its block to use it (Haas G187, a machine-specific M code)"},
+      {kP,
+       "P word with no code in its block to use it (G04, G64, a canned cycle, G103, G187, M97, M98, a "
+       "machine-specific M code)"},
+      {kH, "H word with no G43 in its block to use it"},
+      {kD, "D word with no G41 or G42 in its block to use it"},
+  };
+  for (const auto& user : kUsers)
+  {
+    if (scan.has(user.word) && !(st.used & (1u << user.word)))
+    {
+      throw ParseError(st.line, scan.column[user.word], user.message);
+    }
+  }
+}
+
 // I/J/K/R in a block without axis words: an error either way, worded for what is missing.
 [[noreturn]] void refuseCentreWithoutTarget(const Scan& scan, const Step& st)
 {
@@ -623,6 +663,7 @@ void Parser::applyDwell(const Scan& scan, Step& st) const
                               : (options_.dialect == Dialect::kFanuc ? "milliseconds, or X in seconds)" : "seconds)")));
   }
   st.block.dwell_s = dwellSeconds(scan, fanuc_x ? kX : kP);
+  st.use(kP);
   if (scan.has(kY) || scan.has(kZ) || (scan.has(kX) && !fanuc_x))
   {
     throw ParseError(st.line, st.non_modal_column, "G04 with axis words: put the move in its own block");
@@ -653,6 +694,7 @@ void Parser::applyMotion(const Scan& scan, Step& st)
     }
     runCycle(scan, st);
     st.l_used = true;
+    st.use(kP);  // the dwell at the bottom
   }
   else if (has_axis)
   {
@@ -708,6 +750,7 @@ void Parser::finishBlock(const Scan& scan, Step& st)
   {
     throw ParseError(st.line, scan.column[kQ], "Q without a canned cycle");
   }
+  refuseUnusedWords(scan, st);
   if (st.block.program_end && st.next.cutter_comp != CutterComp::kOff)
   {
     // Ending with compensation on would leave the last offset move unfinished.

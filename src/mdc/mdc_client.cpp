@@ -120,11 +120,7 @@ double MdcClient::readVariable(int variable, Milliseconds timeout)
 
 void MdcClient::writeVariable(int variable, double value, Milliseconds timeout)
 {
-  Query query;
-  query.letter = 'E';
-  query.code = variable;
-  query.argument = value;
-  requestValue(query, timeout);
+  requestValue(writeQuery(variable, value), timeout);
 }
 
 void MdcClient::drainForeign(Milliseconds timeout)

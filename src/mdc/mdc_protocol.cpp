@@ -6,6 +6,7 @@
 #include <charconv>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 
 #include "cnc_bridge/common/error.h"
 
@@ -170,21 +171,38 @@ std::optional<Query> queryNamed(const std::string& text)
   return query;
 }
 
+// The most a number on the wire carries: whole numbers below 1e15 (15 digits), fractions to 6
+// decimals. A value outside that is refused (formatNumber), never cut to fit.
+constexpr double kMaxWireMagnitude = 1e15;
+constexpr int kWireDecimals = 6;
+
+// A number as the control reads it: whole numbers without a point, others with up to 6 decimals and
+// no trailing zeros. \throws ProtocolError if the text would not read back as exactly \p value.
 std::string formatNumber(double value)
 {
-  // Macro numbers are integers; values keep up to 6 decimals without trailing zeros.
-  char buffer[64];
-  if (value == std::floor(value) && std::fabs(value) < 1e15)
-    std::snprintf(buffer, sizeof buffer, "%.0f", value);
-  else
+  const auto refuse = [&](const std::string& why) -> std::string
   {
-    std::snprintf(buffer, sizeof buffer, "%.6f", value);
-    std::string text = buffer;
-    while (!text.empty() && text.back() == '0')
-      text.pop_back();
-    return text;
+    char shown[40];
+    std::snprintf(shown, sizeof shown, "%.17g", value);
+    throw ProtocolError(std::string("value ") + shown + " cannot be written exactly: " + why);
+  };
+  if (!std::isfinite(value))
+    return refuse("MDC numbers are finite");
+  if (!(std::fabs(value) < kMaxWireMagnitude))
+    return refuse("MDC numbers carry at most 15 digits before the point (magnitude below 1e15)");
+  char buffer[64];
+  if (value == std::floor(value))
+  {
+    std::snprintf(buffer, sizeof buffer, "%.0f", value);
+    return buffer;
   }
-  return buffer;
+  std::snprintf(buffer, sizeof buffer, "%.*f", kWireDecimals, value);
+  std::string text = buffer;
+  while (!text.empty() && text.back() == '0')
+    text.pop_back();
+  if (std::strtod(text.c_str(), nullptr) != value)
+    return refuse("MDC numbers carry at most 6 decimals (it would arrive as " + text + ")");
+  return text;
 }
 
 // A Q500 status as sent, upper case, without the full stop the manual writes after "STATUS, BUSY.".
@@ -222,6 +240,16 @@ std::string Query::text() const
 bool Query::operator==(const Query& other) const
 {
   return letter == other.letter && code == other.code && argument == other.argument;
+}
+
+Query writeQuery(int variable, double value)
+{
+  Query query;
+  query.letter = 'E';
+  query.code = variable;
+  query.argument = value;
+  formatNumber(value);  // refuses what the wire cannot carry before anything is sent
+  return query;
 }
 
 Query q(int code)

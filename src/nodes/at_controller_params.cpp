@@ -77,6 +77,9 @@ ap::ControllerSession::Options sessionOptions(const ros::NodeHandle& pnh)
   params::gcodeOptions(pnh, options.gcode);
   // ~spindle_max_rpm: rev/min that the spindle value 255 stands for.
   options.spindle_max_rpm = params::positive(pnh, "spindle_max_rpm", 24000.0);
+  // ~soft_limits ({x: [min, max], ...} m, machine frame): every point of a goal and every move of
+  // a program is checked against them before anything is sent; not set: no soft limits.
+  options.soft_limits = params::softLimits(pnh);
   // ~coolant: whether operations use coolant (P1@) unless a goal says otherwise; ~coolant service.
   options.coolant = pnh.param("coolant", false);
   // ~realtime_priority: SCHED_FIFO priority of the 1 ms sender thread (with locked memory), 50 by

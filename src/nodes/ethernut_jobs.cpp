@@ -97,8 +97,9 @@ std::shared_ptr<ethernut::Job> EthernutNode::loadProgram(const RunJobGoal& goal,
   }
   try
   {
-    std::shared_ptr<ethernut::Job> job = ethernut::Job::fromProgram(
-        program_dir_->resolveExisting(goal.file), parser_options_, g53_, static_cast<size_t>(max_preview_points_));
+    std::shared_ptr<ethernut::Job> job =
+        ethernut::Job::fromProgram(program_dir_->resolveExisting(goal.file), parser_options_, g53_,
+                                   static_cast<size_t>(max_preview_points_), soft_limits_);
     if (!job->skippedSummary().empty())
     {
       ROS_WARN_STREAM("run_job: " << goal.file << ": " << job->skippedSummary() << " (" << g53_.setting << ": skip)");
@@ -134,16 +135,17 @@ std::shared_ptr<ethernut::Job> EthernutNode::loadPoints(const RunJobGoal& goal, 
   for (const auto& given : goal.points)
   {
     const geometry_msgs::Point p = ToMachineFrame::apply(transform, given);
-    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+    try
     {
-      refusal = "job refused: point " + std::to_string(points.size()) + " is not finite";
+      // Every point is checked before the first is sent.
+      points.push_back(ethernut::boardCoordinate(p.x / kMetresPerMm, p.y / kMetresPerMm, p.z / kMetresPerMm,
+                                                 soft_limits_, "point " + std::to_string(points.size())));
+    }
+    catch (const Error& e)
+    {
+      refusal = std::string("job refused: ") + e.what();
       return nullptr;
     }
-    ethernut::Coordinate c;
-    c.x = static_cast<float>(p.x / kMetresPerMm);
-    c.y = static_cast<float>(p.y / kMetresPerMm);
-    c.z = static_cast<float>(p.z / kMetresPerMm);
-    points.push_back(c);
   }
   return ethernut::Job::fromPoints(std::move(points), static_cast<size_t>(max_preview_points_));
 }

@@ -232,6 +232,9 @@ void EthernutNode::readJobParameters()
   to_machine_ = std::make_unique<ToMachineFrame>(params::positive(pnh_, "transform_timeout", 0.5));
   // ~max_preview_points (int, 100000): job/path is thinned to at most this many poses.
   max_preview_points_ = std::max(pnh_.param("max_preview_points", 100000), 2);
+  // ~soft_limits ({x: [min, max], ...} m, machine frame): every coordinate of a job is checked
+  // against them before the job's first set is sent; not set: no soft limits.
+  soft_limits_ = params::softLimits(pnh_);
 }
 
 // ------------------------------------------------------------------------- link

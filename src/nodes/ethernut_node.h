@@ -152,6 +152,7 @@ class EthernutNode : public ethernut::ClientListener
   gcode::ParserOptions parser_options_;
   ethernut::G53Policy g53_;
   int max_preview_points_ = 100000;
+  SoftLimits soft_limits_;  // ~soft_limits
 
   std::unique_ptr<MachineStatePublisher> state_;
   ros::Publisher path_pub_;

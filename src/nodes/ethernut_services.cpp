@@ -240,8 +240,16 @@ void EthernutNode::onMotionSwitched(bool enabled, const std::string& caller)
   }
 }
 
+// ~reset: the board's reset opcode (99, 0) also drives the axes to 0/0/0, so it is motion.
 bool EthernutNode::onReset(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigger::Response& res)
 {
+  std::lock_guard<std::mutex> gate(motion_mutex_);
+  if (!motion_->enabled())
+  {
+    res.success = false;
+    res.message = motion_->refusal("reset");
+    return true;
+  }
   return command(res, "reset: job cancelled, board cleared to 0/0/0", [](ethernut::Client& c) { c.reset(); });
 }
 
@@ -263,6 +271,15 @@ bool EthernutNode::onSetMode(EthernutSetMode::Request& req, EthernutSetMode::Res
   {
     res.success = false;
     res.message = "unknown mode '" + req.mode + "' (file, gui-control or standalone)";
+    return true;
+  }
+  // A mode change changes what drives the machine (standalone: the board runs on its own), and the
+  // mode is also the one selected on every reconnection: gated like motion, nothing changed if refused.
+  std::lock_guard<std::mutex> gate(motion_mutex_);
+  if (!motion_->enabled())
+  {
+    res.success = false;
+    res.message = motion_->refusal("set_mode");
     return true;
   }
   if (leaveStandalone(mode, res))

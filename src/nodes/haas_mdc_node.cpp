@@ -24,6 +24,7 @@
 #include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/ros/params.h"
 #include "cnc_bridge/ros/request_boundary.h"
+#include "cnc_bridge/ros/runtime_switch.h"
 #include "cnc_bridge/transport/backoff.h"
 #include "cnc_bridge/transport/reconnecting_link.h"
 #include "cnc_bridge/transport/serial_port.h"
@@ -172,6 +173,10 @@ class HaasMdcNode
     }
     poller_->setListener([this](const mdc::MachineStatus& s, const std::vector<mdc::CycleEventData>& events)
                          { onStatus(s, events); });
+    // ~enable_motion (start-up value) and ~set_motion_enabled (at run time): a macro variable write
+    // changes what the machine does (offsets, the program's flow), so it is gated like motion on the
+    // other nodes, on top of the ~writable_variables allow-list.
+    motion_ = std::make_unique<RuntimeSwitch>(pnh, "motion", "enable_motion", "set_motion_enabled");
     read_srv_ = advertiseGuardedService(pnh, "read_variable", &HaasMdcNode::readVariable, this);
     write_srv_ = advertiseGuardedService(pnh, "write_variable", &HaasMdcNode::writeVariable, this);
     query_srv_ = advertiseGuardedService(pnh, "query", &HaasMdcNode::query, this);
@@ -311,8 +316,9 @@ class HaasMdcNode
     try
     {
       policy_->check(req.variable);
-      if (!std::isfinite(req.value))
-        throw ConfigError("the value must be a finite number");
+      if (!motion_->enabled())
+        throw ConfigError(motion_->refusal("write_variable"));
+      mdc::writeQuery(req.variable, req.value);  // refuses a value the wire cannot carry exactly
       poller_->withClient([&](mdc::MdcClient& c) { c.writeVariable(req.variable, req.value, reply_timeout_); });
       res.success = true;
       res.message = "#" + std::to_string(req.variable) + " set";
@@ -380,6 +386,7 @@ class HaasMdcNode
     status.add("polls skipped for a DNC transfer", poller_->skippedForPortLock());
     status.add("port regained after a DNC transfer", poller_->portRegained());
     status.add("reconnects", link_ ? link_->reconnects() : 0u);
+    motion_->addTo(status);
     if (s.last_cycle_s)
       status.add("last cycle (s)", *s.last_cycle_s);
     if (s.m30_counter1)
@@ -400,6 +407,7 @@ class HaasMdcNode
   Milliseconds connect_timeout_{3000}, reply_timeout_{1000};
   mdc::PollVariables vars_;
   std::unique_ptr<mdc::WritePolicy> policy_;
+  std::unique_ptr<RuntimeSwitch> motion_;      // gates ~write_variable
   std::unique_ptr<mdc::VariableWatch> watch_;  // update() and linkLost() under watch_mutex_
   std::mutex watch_mutex_;
   std::unique_ptr<PortLock> port_lock_;

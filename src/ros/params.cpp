@@ -3,6 +3,8 @@
 
 #include <cmath>
 
+#include "cnc_bridge/common/error.h"
+
 namespace cnc_bridge
 {
 namespace params
@@ -17,6 +19,63 @@ double positive(const ros::NodeHandle& pnh, const std::string& name, double fall
     value = fallback;
   }
   return value;
+}
+
+namespace
+{
+double limitNumber(const XmlRpc::XmlRpcValue& value, const std::string& where)
+{
+  if (value.getType() == XmlRpc::XmlRpcValue::TypeInt)
+  {
+    return static_cast<int>(const_cast<XmlRpc::XmlRpcValue&>(value));
+  }
+  if (value.getType() == XmlRpc::XmlRpcValue::TypeDouble)
+  {
+    const double number = static_cast<double>(const_cast<XmlRpc::XmlRpcValue&>(value));
+    if (std::isfinite(number))
+    {
+      return number;
+    }
+  }
+  throw ConfigError(where + ": a bound must be a finite number of metres");
+}
+}  // namespace
+
+SoftLimits softLimits(const ros::NodeHandle& pnh, const std::string& name)
+{
+  SoftLimits limits;
+  limits.setting = pnh.resolveName(name);
+  XmlRpc::XmlRpcValue table;
+  if (!pnh.getParam(name, table))
+  {
+    return limits;  // not set: no soft limits
+  }
+  const std::string form = " (give {x: [min, max], y: [min, max], z: [min, max]} in m; an axis may be left out)";
+  if (table.getType() != XmlRpc::XmlRpcValue::TypeStruct)
+  {
+    throw ConfigError(limits.setting + " is not a dictionary" + form);
+  }
+  for (auto& [key, range] : table)
+  {
+    const std::string where = limits.setting + "/" + key;
+    const int axis = key == "x" ? 0 : (key == "y" ? 1 : (key == "z" ? 2 : -1));
+    if (axis < 0)
+    {
+      throw ConfigError(where + ": unknown axis (x, y or z)" + form);
+    }
+    if (range.getType() != XmlRpc::XmlRpcValue::TypeArray || range.size() != 2)
+    {
+      throw ConfigError(where + " is not [min, max]" + form);
+    }
+    const double low = limitNumber(range[0], where);
+    const double high = limitNumber(range[1], where);
+    if (!(low <= high))
+    {
+      throw ConfigError(where + ": min " + std::to_string(low) + " is above max " + std::to_string(high));
+    }
+    limits.axes[static_cast<size_t>(axis)] = std::make_pair(low, high);
+  }
+  return limits;
 }
 
 SerialSettings serialSettings(const ros::NodeHandle& pnh, unsigned default_baud)

@@ -127,12 +127,21 @@ std::vector<uint8_t> SlaveTable::commandPayload(size_t index, const std::vector<
     {
       throw ProtocolError("an axis takes one value, its position in m");
     }
-    // m -> device units (steps, pulses, 1/100 mm...: whatever the scale says per metre).
-    const double device = std::round(values[0] * slave.scale);
+    // m -> device units (steps, pulses, 1/100 mm...: whatever the scale says per metre). Exact or
+    // refused: a position between two device units is not rounded to one of them.
+    const double units = values[0] * slave.scale;
+    const double device = std::round(units);
     if (!std::isfinite(device) || device < minValue(slave.encoding) || device > maxValue(slave.encoding))
     {
-      throw ProtocolError("position " + std::to_string(values[0]) + " m is " + std::to_string(device) +
+      throw ProtocolError("position " + std::to_string(values[0]) + " m is " + std::to_string(units) +
                           " device units, outside what " + toString(slave.encoding) + " carries");
+    }
+    // 1e-6 of a unit: the binary fraction of a metre value of whole units (0.0123 m * 1000).
+    if (std::fabs(units - device) > 1e-6)
+    {
+      throw ProtocolError("position " + std::to_string(values[0]) + " m is " + std::to_string(units) +
+                          " device units, not a whole unit (scale " + std::to_string(slave.scale) +
+                          " per m): give a multiple of " + std::to_string(1.0 / slave.scale) + " m");
     }
     encoded.push_back(static_cast<int32_t>(device));
   }

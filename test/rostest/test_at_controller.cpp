@@ -487,6 +487,52 @@ TEST_F(AtController, AProgramWithMachineCommandsIsRefusedWithoutProgramCommands)
   EXPECT_EQ(received.linesUntil(mark, "A"), std::vector<std::string>{"A"});
 }
 
+// Exact or refused: a tool length, spindle speed or jog feed the wire cannot carry (NaN, infinite,
+// 1e300, negative, not whole millimetres) is refused with the reason, and nothing of it reaches the
+// controller (not a wrapped or zeroed value); a goal whose tool length cannot be sent is refused
+// before its first byte.
+TEST_F(AtController, ValuesTheWireCannotCarryAreRefusedWithNothingSent)
+{
+  CommandLog received{command_log};
+  const size_t mark = received.lines().size();
+  for (const double length : {std::nan(""), HUGE_VAL, 1e300, -1.0, 0.0505})
+  {
+    cnc_bridge::AtToolChange::Request tool;
+    tool.tool = 2;
+    tool.length = length;
+    const auto change = call<cnc_bridge::AtToolChange>(node + "/tool_change", tool);
+    EXPECT_FALSE(change.success) << length;
+    EXPECT_NE(change.message.find("tool length"), std::string::npos) << change.message;
+  }
+  for (const double rpm : {std::nan(""), HUGE_VAL, 1e300, -1.0})
+  {
+    cnc_bridge::AtSpindle::Request spin;
+    spin.speed = rpm;
+    const auto spindle = call<cnc_bridge::AtSpindle>(node + "/spindle", spin);
+    EXPECT_FALSE(spindle.success) << rpm;
+    EXPECT_NE(spindle.message.find("spindle speed"), std::string::npos) << spindle.message;
+  }
+  for (const double feed : {std::nan(""), HUGE_VAL, 1e300, -0.01})
+  {
+    const auto jog = call<cnc_bridge::AtJog>(node + "/jog", jogRequest("x", feed));
+    EXPECT_FALSE(jog.success) << feed;
+    EXPECT_NE(jog.message.find("jog feed_rate"), std::string::npos) << jog.message;
+  }
+  const auto start = state.last().position;
+  auto goal = lineGoal(start.x + 0.002, start.y, start.z, 0.02, "");
+  goal.tool = 3;
+  goal.tool_length = std::nan("");
+  client.sendGoal(goal);
+  ASSERT_TRUE(client.waitForResult(ros::Duration(20.0)));
+  EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::ABORTED);
+  EXPECT_NE(client.getResult()->message.find("goal refused before anything was sent: operation 1 of 1"),
+            std::string::npos)
+      << client.getResult()->message;
+  // A later command is the barrier: nothing of the refused requests reached the controller before it.
+  EXPECT_TRUE(call<std_srvs::Trigger>(node + "/set_auto").success);
+  EXPECT_EQ(received.linesUntil(mark, "A"), std::vector<std::string>{"A"});
+}
+
 // A path goal in another frame (world, where the test launch places machine zero at (0.1, 0.2, 0))
 // is transformed into the machine frame with tf2: the machine ends where the world point is. A
 // frame with no transform is refused with tf2's reason and nothing reaches the controller.

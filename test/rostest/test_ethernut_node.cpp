@@ -24,6 +24,7 @@
 #include <thread>
 #include <vector>
 
+#include "cnc_bridge/EthernutSetMode.h"
 #include "cnc_bridge/MachineState.h"
 #include "cnc_bridge/RunJobAction.h"
 #include "cnc_bridge/gcode/gcode.h"
@@ -320,6 +321,27 @@ TEST(EthernutJob, KillIsRefusedByDefault)
   const auto later = simMessages();
   EXPECT_EQ(std::count(later.begin() + static_cast<long>(again), later.end(), "kill"), 0)
       << "the board received a kill the node refused";
+}
+
+// The whole job is checked before its first set: a points goal whose third point a float cannot
+// carry is refused naming the point, and the board receives none of its sets (not the first two).
+TEST(EthernutJob, AJobWithOnePointTheBoardCannotTakeIsRefusedWithNothingSent)
+{
+  ASSERT_TRUE(boardReady());
+  auto client = actionClient();
+  const size_t messages_before = simMessages().size();
+  const size_t before = simLog().size();
+  client->sendGoal(pointsGoal({{0.001, 0.002, 0.003}, {0.002, 0.002, 0.003}, {1e39, 0.0, 0.0}}));
+  ASSERT_TRUE(client->waitForResult(ros::Duration(20.0)));
+  EXPECT_EQ(client->getState(), actionlib::SimpleClientGoalState::ABORTED);
+  const std::string text = client->getResult()->message;
+  EXPECT_EQ(text.rfind("job refused: point 2: X ", 0), 0u) << text;
+  EXPECT_NE(text.find("cannot be sent: the board takes float coordinates"), std::string::npos) << text;
+  // An alive request that arrives after the refusal was sent after it.
+  ASSERT_TRUE(waitForSimMessage("alive-request", simMessages().size()));
+  EXPECT_EQ(simMessagesNamed("coordinates", messages_before), 0);
+  EXPECT_EQ(simMessagesNamed("READYTOSEND", messages_before), 0);
+  EXPECT_EQ(simLog().size(), before);
 }
 
 TEST(EthernutJob, QcncStyleProgramStreamsEveryCoordinateInOrderDespiteResends)
@@ -864,6 +886,41 @@ TEST(EthernutJob, DiagnosticsReportRoundTripsResendsAndKeepalives)
   // Coordinate -> NEXT includes the move (0.2 m at 2 m/s in the jobs above): longer than the link's.
   EXPECT_GT(diag("coordinate round trip max (ms)"), 50.0);
   EXPECT_GT(diag("coordinate round trip max (ms)"), diag("link round trip max (ms)"));
+}
+
+// While motion is off (the launch file's default), ~reset (its opcode drives the axes to 0/0/0)
+// and ~set_mode (standalone: the board runs on its own) are refused naming the switch, and the
+// board receives neither: no reset and no mode message arrives before an alive request the node
+// sent after the refusals.
+TEST(EthernutLink, ResetAndSetModeAreRefusedWhileMotionIsDisabled)
+{
+  ASSERT_TRUE(boardReady());
+  const size_t before = simMessages().size();
+  std_srvs::Trigger::Response reset;
+  ASSERT_TRUE(call("reset", reset));
+  EXPECT_FALSE(reset.success);
+  EXPECT_EQ(reset.message, "reset refused: motion is disabled; enable it with " + ns +
+                               "/ethernut_node/set_motion_enabled (std_srvs/SetBool, data: true), or start the node "
+                               "with the parameter " +
+                               ns + "/ethernut_node/enable_motion true");
+  for (const std::string mode : {"standalone", "gui-control", "file"})
+  {
+    cnc_bridge::EthernutSetMode set;
+    set.request.mode = mode;
+    ASSERT_TRUE(ros::service::call(ns + "/ethernut_node/set_mode", set));
+    EXPECT_FALSE(set.response.success) << mode;
+    EXPECT_EQ(
+        set.response.message.rfind(
+            "set_mode refused: motion is disabled; enable it with " + ns + "/ethernut_node/set_motion_enabled", 0),
+        0u)
+        << set.response.message;
+  }
+  ASSERT_TRUE(waitForSimMessage("alive-request", simMessages().size()));
+  for (const char* name : {"reset", "standalone-mode", "gui-control-mode", "file-mode"})
+  {
+    EXPECT_EQ(simMessagesNamed(name, before), 0) << "the board received " << name << " while motion was disabled";
+  }
+  EXPECT_TRUE(boardReady(5.0));  // standalone would have dropped the link
 }
 
 // Motion is off unless configured on (the launch file's default): a job is refused naming

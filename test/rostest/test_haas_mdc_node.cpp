@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 #include <ros/ros.h>
 #include <sensor_msgs/JointState.h>
+#include <std_srvs/SetBool.h>
 
 #include <diagnostic_msgs/DiagnosticArray.h>
 
@@ -357,8 +358,37 @@ TEST(HaasMdcNode, WritesOutsideTheAllowListAreRefused)
   EXPECT_EQ(writesReceivedSince(classic_queries, classic_mark), std::vector<std::string>{})
       << "a refused write reached the Classic control";
 
-  // An allowed one goes through and reads back.
+  // An allow-listed variable, but motion (which gates writes) is off by default: refused naming the
+  // switch, and nothing reaches the control.
+  const size_t disabled_mark = queriesReceived(ngc_queries).size();
   write.request.variable = 100;
+  write.request.value = 42.5;
+  ASSERT_TRUE(call(kNgc + "/haas_mdc_node/write_variable", write));
+  EXPECT_FALSE(write.response.success);
+  EXPECT_EQ(write.response.message, "write_variable refused: motion is disabled; enable it with " + kNgc +
+                                        "/haas_mdc_node/set_motion_enabled (std_srvs/SetBool, data: true), or start "
+                                        "the node with the parameter " +
+                                        kNgc + "/haas_mdc_node/enable_motion true");
+  EXPECT_EQ(writesReceivedSince(ngc_queries, disabled_mark), std::vector<std::string>{})
+      << "a write reached the NGC while motion was disabled";
+  std_srvs::SetBool enable;
+  enable.request.data = true;
+  ASSERT_TRUE(call(kNgc + "/haas_mdc_node/set_motion_enabled", enable));
+  EXPECT_TRUE(enable.response.success);
+
+  // Values the write cannot carry exactly are refused with the reason, not cut, rounded or zeroed.
+  const size_t exact_mark = queriesReceived(ngc_queries).size();
+  for (const double value : {1e300, 1e-7, 1.23456789, std::nan(""), HUGE_VAL, -HUGE_VAL})
+  {
+    write.request.value = value;
+    ASSERT_TRUE(call(kNgc + "/haas_mdc_node/write_variable", write));
+    EXPECT_FALSE(write.response.success) << value;
+    EXPECT_NE(write.response.message.find("cannot be written exactly"), std::string::npos) << write.response.message;
+  }
+  EXPECT_EQ(writesReceivedSince(ngc_queries, exact_mark), std::vector<std::string>{})
+      << "a value the write cannot carry reached the NGC";
+
+  // An allowed one goes through and reads back.
   write.request.value = 42.5;
   EXPECT_TRUE(callWhenUp(kNgc + "/haas_mdc_node/write_variable", write)) << write.response.message;
   cnc_bridge::MdcReadVariable read;

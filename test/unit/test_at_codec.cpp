@@ -3,6 +3,7 @@
 // "45334 34623 54934"), stream reassembly over split and merged reads, and malformed input.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <string>
 
 #include "cnc_bridge/at_protocol/codec.h"
@@ -84,6 +85,48 @@ TEST(AtCodec, OutOfRangeValuesNeverLeave)
   EXPECT_THROW(encode(Setpoint{{0, 0, -256}, {0, 0, 0}}), ProtocolError);
   EXPECT_THROW(encode(ToolChange{-1, 10}), ProtocolError);
   EXPECT_THROW(encode(ToolChange{1, -10}), ProtocolError);
+}
+
+// Exact or refused: NaN, infinities, huge and negative values, lengths that are not whole
+// millimetres are refused with the reason, never wrapped, clamped or zeroed.
+TEST(AtCodec, ValuesAreScaledOrRefusedNeverWrapped)
+{
+  EXPECT_EQ(scaledValue(0.0, 24000.0, "spindle"), 0);
+  EXPECT_EQ(scaledValue(24000.0, 24000.0, "spindle"), 255);
+  EXPECT_EQ(scaledValue(12000.0, 24000.0, "spindle"), 128);
+  for (const double bad : {std::nan(""), HUGE_VAL, -HUGE_VAL, 1e300, -1.0, 24000.001, 2147483648.0})
+  {
+    EXPECT_THROW(scaledValue(bad, 24000.0, "spindle"), ProtocolError) << bad;
+  }
+  try
+  {
+    scaledValue(1e300, 24000.0, "spindle speed");
+    FAIL() << "1e300 was scaled";
+  }
+  catch (const ProtocolError& e)
+  {
+    EXPECT_EQ(std::string(e.what()), "spindle speed 1.0000000000000001e+300 is outside 0..24000");
+  }
+  EXPECT_EQ(toolChangeFor(3, 0.05).length_mm, 50);
+  EXPECT_EQ(toolChangeFor(3, 0.05).tool, 3);
+  EXPECT_EQ(toolChangeFor(9999, 10.0).length_mm, 10000);
+  for (const double bad : {std::nan(""), HUGE_VAL, -HUGE_VAL, 1e300, -0.001, 1e-7, 0.0505, 10.001, 2147483.648})
+  {
+    EXPECT_THROW(toolChangeFor(1, bad), ProtocolError) << bad;
+  }
+  EXPECT_THROW(toolChangeFor(-1, 0.05), ProtocolError);
+  EXPECT_THROW(toolChangeFor(2147483648LL, 0.05), ProtocolError);
+  try
+  {
+    toolChangeFor(1, 0.0505);
+    FAIL() << "0.0505 m was rounded";
+  }
+  catch (const ProtocolError& e)
+  {
+    EXPECT_EQ(std::string(e.what()),
+              "'@'-protocol: tool length 0.050500000000000003 m is not a whole millimetre (the "
+              "tool change carries whole millimetres)");
+  }
 }
 
 TEST(AtCodec, MalformedCommandsAreRefusedWithTheReason)

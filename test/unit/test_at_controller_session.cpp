@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <condition_variable>
 #include <future>
 #include <mutex>
@@ -452,6 +453,65 @@ std::vector<OperationPlan> twoOperations(const gcode::ProgramStep& after)
   return plans;
 }
 }  // namespace
+
+// The whole goal is checked before its first byte: a second operation whose spindle speed is
+// above ~spindle_max_rpm, or a tool length the wire cannot carry, fails the goal with nothing sent
+// (not after the first operation moved the machine).
+TEST_F(AtControllerSession, AGoalWhoseLaterOperationCannotBeSentIsRefusedBeforeAnythingIsSent)
+{
+  start(options(true));
+  report("E0\n0 0 0\n", 2);
+  GoalRunner runner(*session, GoalRunner::Names{"/m/resume", "/m/set_motion_enabled", "/m/optional_stop"});
+  GoalRecorder goal;
+  auto plans = twoOperations(programStep(gcode::ProgramStep::Kind::kDwell, 7, 0));
+  plans[1].spindle_rpm = 30000;  // ~spindle_max_rpm is 24000
+  GoalOutcome outcome = runner.run(plans, -1, 0.0, goal);
+  EXPECT_EQ(outcome.end, GoalOutcome::End::kAborted);
+  EXPECT_EQ(outcome.message,
+            "goal refused before anything was sent: operation 2 of 2: spindle speed (rev/min, ~spindle_max_rpm) 30000 "
+            "is outside 0..24000");
+  plans[1].spindle_rpm = 0;
+  plans[1].tool = 3;
+  for (const double length : {std::nan(""), 1e300, -0.001, 0.0505})
+  {
+    outcome = runner.run(plans, 3, length, goal);
+    EXPECT_EQ(outcome.end, GoalOutcome::End::kAborted) << length;
+    EXPECT_NE(outcome.message.find("operation 2 of 2: '@'-protocol: tool length"), std::string::npos)
+        << outcome.message;
+  }
+  EXPECT_EQ(received(), "");
+}
+
+// Exact or refused: a tool length that is not a whole millimetre, NaN or huge, a spindle speed or
+// jog feed that is NaN, infinite or out of range is refused with the reason; nothing is sent (not
+// wrapped to an integer, clamped or zeroed).
+TEST_F(AtControllerSession, ValuesTheWireCannotCarryAreRefusedNotWrappedOrZeroed)
+{
+  start(options(true));
+  report("E0\n", 1);
+  for (const double length : {std::nan(""), HUGE_VAL, 1e300, -1.0, 2147483.648, 0.0505})
+  {
+    const Answer answer = session->toolChange(2, length);
+    EXPECT_FALSE(answer.success) << length;
+    EXPECT_NE(answer.message.find("tool length"), std::string::npos) << answer.message;
+  }
+  EXPECT_FALSE(session->toolChange(2147483647, 0.05).success);
+  for (const double rpm : {std::nan(""), HUGE_VAL, -HUGE_VAL, 1e300, -1.0, 24000.5})
+  {
+    const Answer answer = session->spindle(rpm);
+    EXPECT_FALSE(answer.success) << rpm;
+    EXPECT_NE(answer.message.find("spindle speed"), std::string::npos) << answer.message;
+  }
+  for (const double feed : {std::nan(""), HUGE_VAL, 1e300, -0.001, 1.0})
+  {
+    const Answer answer = session->jog("x", feed);
+    EXPECT_FALSE(answer.success) << feed;
+    EXPECT_NE(answer.message.find("jog feed_rate"), std::string::npos) << answer.message;
+  }
+  EXPECT_EQ(received(), "");
+  EXPECT_EQ(session->toolChange(2, 0.05).message, "sent T2 50@");  // 0.05 m: whole millimetres
+  EXPECT_EQ(session->spindle(24000).message, "sent S255@");
+}
 
 TEST_F(AtControllerSession, AProgramStopHoldsTheGoalUntilResumeWhichIsRefusedWhileMotionIsDisabled)
 {

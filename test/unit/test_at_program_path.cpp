@@ -107,6 +107,43 @@ TEST(ProgramPath, ACounterClockwiseSpindleIsRefused)
   EXPECT_NE(text.find("clockwise only"), std::string::npos) << text;
 }
 
+// The whole program is checked while it is planned, before anything is sent: a spindle speed above
+// ~spindle_max_rpm in a later operation, a coordinate outside the protocol's range or the soft
+// limits, each refused naming its line.
+TEST(ProgramPath, TheWholeProgramIsCheckedNamingTheLine)
+{
+  const auto refusedWith = [](const std::string& program, const cnc_bridge::SoftLimits& limits)
+  {
+    std::istringstream in(program);
+    ap::ProgramPlanOptions options;
+    options.fallback_feed = 10.0;
+    options.program_commands = true;
+    options.spindle_max_rpm = 24000;
+    options.soft_limits = limits;
+    try
+    {
+      ap::planProgram(in, cnc_bridge::gcode::ParserOptions(), options, {0, 0, 0});
+    }
+    catch (const cnc_bridge::Error& e)
+    {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  const cnc_bridge::SoftLimits none;
+  const std::string spindle = refusedWith("G21 G90\nM03 S1000\nG1 X10 F600\nM03 S30000\nG1 X20\n", none);
+  EXPECT_EQ(spindle.rfind("program refused: line 4: ", 0), 0u) << spindle;
+  EXPECT_NE(spindle.find("spindle speed above ~spindle_max_rpm (24000"), std::string::npos) << spindle;
+  EXPECT_NE(refusedWith("G21 G90\nG1 X10 F600\nG1 X3000000\n", none).find("program refused: line 3: a coordinate"),
+            std::string::npos);
+  cnc_bridge::SoftLimits limits;
+  limits.setting = "/mill/soft_limits";
+  limits.axes[2] = std::make_pair(-0.1, 0.0);
+  EXPECT_EQ(refusedWith("G21 G90\nG1 X10 F600\nG1 Z-50\nG0 Z5\n", limits),
+            "program refused: line 4: Z 0.005 m is outside the soft limits -0.1..0 m (/mill/soft_limits)");
+  EXPECT_EQ(refusedWith("G21 G90\nG1 X10 F600\nG1 Z-50\n", limits), "accepted");
+}
+
 TEST(ProgramPath, RoundToPulsesMakesWholePulsesAndRefusesPointsOutOfRange)
 {
   ap::OperationPlan p;

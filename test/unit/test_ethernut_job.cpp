@@ -5,6 +5,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <future>
 #include <sstream>
 
@@ -12,10 +13,12 @@
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/ethernut/job.h"
 #include "cnc_bridge/ethernut/motion_hold.h"
+#include "temp_dir.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::ethernut;
 using Kind = gcode::ProgramStep::Kind;
+using cnc_bridge::test::TempDir;
 
 namespace
 {
@@ -182,6 +185,66 @@ TEST(EthernutJob, TheProgramPreviewStartsWithARapidFromTheFirstMovesStart)
   {
     EXPECT_FALSE(points[i].rapid);  // G01
     EXPECT_DOUBLE_EQ(points[i].x, 10.0 * static_cast<double>(i - 1));
+  }
+}
+
+// The whole program is checked before the job exists (before its first set is sent): a coordinate a
+// float cannot carry, or one outside the soft limits, refuses the job naming its line and the limit.
+TEST(EthernutJob, AProgramWithOneCoordinateTheBoardCannotTakeIsRefusedWhole)
+{
+  const TempDir dir;
+  const std::string huge = dir.write("huge.nc", "G21 G90\nG0 X1 Y1\nG1 X2 F100\nG1 X1E39\n");
+  const std::string far =
+      dir.write("far.nc", "G21 G90\nG0 X1 Y1\nG1 X2 F100\nG1 Y1000000000000000000000000000000000000000\nG1 Y600\n");
+  const auto refusal = [](const std::string& path, const SoftLimits& limits)
+  {
+    try
+    {
+      Job::fromProgram(path, gcode::ParserOptions(), G53Policy(), 100, limits);
+    }
+    catch (const Error& e)
+    {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  EXPECT_NE(refusal(huge, SoftLimits()).find("line 4"), std::string::npos);  // E: a word no code uses
+  const std::string too_far = refusal(far, SoftLimits());
+  EXPECT_EQ(too_far.rfind("G-code line 4: Y ", 0), 0u) << too_far;
+  EXPECT_NE(too_far.find(" mm cannot be sent: the board takes float coordinates (finite, to 0.001 mm)"),
+            std::string::npos)
+      << too_far;
+  const std::string within = dir.write("within.nc", "G21 G90\nG0 X1 Y1\nG1 X2 F100\nG1 Y600\n");
+  SoftLimits limits;
+  limits.setting = "/router/ethernut_node/soft_limits";
+  limits.axes[1] = std::make_pair(0.0, 0.5);
+  EXPECT_EQ(refusal(within, SoftLimits()), "accepted");
+  EXPECT_EQ(refusal(within, limits),
+            "G-code line 4: Y 0.6 m is outside the soft limits 0..0.5 m (/router/ethernut_node/soft_limits)");
+}
+
+TEST(EthernutJob, BoardCoordinatesAreExactToTheBoardsFloatOrRefused)
+{
+  const Coordinate c = boardCoordinate(1.5, -2.25, 100.125, SoftLimits(), "point 0");
+  EXPECT_EQ(c.x, 1.5f);
+  EXPECT_EQ(c.y, -2.25f);
+  EXPECT_EQ(c.z, 100.125f);
+  for (const double bad : {std::nan(""), HUGE_VAL, -HUGE_VAL, 1e300, 1e39, 1e12})
+  {
+    EXPECT_THROW(boardCoordinate(bad, 0, 0, SoftLimits(), "point 3"), ConfigError) << bad;
+    EXPECT_THROW(boardCoordinate(0, 0, bad, SoftLimits(), "point 3"), ConfigError) << bad;
+  }
+  SoftLimits limits;
+  limits.axes[0] = std::make_pair(-0.1, 0.1);
+  EXPECT_NO_THROW(boardCoordinate(100.0, 5000.0, 0, limits, "point 1"));  // Y and Z: no limit
+  try
+  {
+    boardCoordinate(100.5, 0, 0, limits, "point 7");
+    FAIL() << "a point outside the soft limits was taken";
+  }
+  catch (const ConfigError& e)
+  {
+    EXPECT_EQ(std::string(e.what()), "point 7: X 0.1005 m is outside the soft limits -0.1..0.1 m (soft_limits)");
   }
 }
 

@@ -323,6 +323,49 @@ TEST(GcodeErrors, MalformedLinesGiveLineAndColumn)
   }
 }
 
+// A word no code of its block uses is an error naming the line and the word, as LinuxCNC's rs274
+// refuses it (each case checked with `rs274 -g`): X1E39 must not run as a move to X1.
+TEST(GcodeErrors, AWordNoCodeOfItsBlockUsesIsAnError)
+{
+  struct Case
+  {
+    const char* program;
+    uint32_t line;
+    uint32_t column;
+    const char* reason_part;
+  };
+  const Case cases[] = {
+      {"G0 X1 Y0\nG1 X1E39 F100\n", 2, 6, "E word with no code in its block to use it"},
+      {"G0 X1 P5\n", 1, 7, "P word with no code in its block to use it"},
+      {"M3 S100 P2\n", 1, 9, "P word with no code"},
+      {"G0 X1 D1\n", 1, 7, "D word with no G41 or G42"},
+      {"G40 D1\n", 1, 5, "D word with no G41 or G42"},
+      {"G0 X1 H1\n", 1, 7, "H word with no G43"},
+      {"G4 P1 H2\n", 1, 7, "H word with no G43"},
+  };
+  for (const Case& c : cases)
+  {
+    SCOPED_TRACE(c.program);
+    const ParseError e = parseError(c.program);
+    EXPECT_EQ(e.line(), c.line);
+    EXPECT_EQ(e.column(), c.column);
+    EXPECT_NE(e.reason().find(c.reason_part), std::string::npos) << e.reason();
+  }
+  // The codes that use them take them (rs274 accepts these too).
+  Parser p;
+  EXPECT_NO_THROW(p.parseLine("G43 H1"));
+  EXPECT_NO_THROW(p.parseLine("G64 P0.01"));
+  EXPECT_NO_THROW(p.parseLine("G4 P1"));
+  EXPECT_NO_THROW(p.parseLine("G0 X0 Y0 Z2"));
+  EXPECT_NO_THROW(p.parseLine("G82 X1 Y1 Z-1 R1 P1 F100"));
+  ParserOptions haas_options;
+  haas_options.dialect = Dialect::kHaas;
+  Parser haas(haas_options);
+  EXPECT_NO_THROW(haas.parseLine("M59 P1103"));  // a machine-specific M code takes its own P
+  EXPECT_NO_THROW(p.parseLine("M62 P0"));
+  EXPECT_NO_THROW(haas.parseLine("G187 P1 E0.01"));
+}
+
 TEST(GcodeErrors, AnErrorLeavesTheStateAsItWas)
 {
   Parser p;

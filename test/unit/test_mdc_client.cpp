@@ -123,6 +123,11 @@ TEST(MdcClient, WriteUsesTheECommand)
   client.writeVariable(100, 2.5, 1000ms);
   EXPECT_EQ(text(fake.written()), "?E100 2.5\r\n");
   EXPECT_THROW(client.writeVariable(5021, 1, 1000ms), ProtocolError);
+  // A value the wire cannot carry exactly is refused before anything is written.
+  const size_t written = fake.written().size();
+  EXPECT_THROW(client.writeVariable(100, 1e-7, 1000ms), ProtocolError);
+  EXPECT_THROW(client.writeVariable(100, 1e300, 1000ms), ProtocolError);
+  EXPECT_EQ(fake.written().size(), written);
 }
 
 TEST(MdcWritePolicy, RefusalNamesTheParameter)

@@ -38,6 +38,42 @@ TEST(MdcQuery, TextIsWhatTheControlExpects)
   EXPECT_EQ(write.text(), "?E100 3");
 }
 
+// Exact or refused: a value the write cannot carry exactly is refused with the reason, never cut
+// to the wire's digits (1e300), rounded to its decimals (1e-7 to 0) or sent as NaN.
+TEST(MdcQuery, AWriteTheWireCannotCarryExactlyIsRefused)
+{
+  EXPECT_EQ(writeQuery(100, 42.5).text(), "?E100 42.5");
+  EXPECT_EQ(writeQuery(100, -1).text(), "?E100 -1");
+  EXPECT_EQ(writeQuery(100, 0.000001).text(), "?E100 0.000001");
+  EXPECT_EQ(writeQuery(100, 2147483648.0).text(), "?E100 2147483648");  // INT_MAX + 1: a macro value
+  EXPECT_EQ(writeQuery(100, 999999999999999.0).text(), "?E100 999999999999999");
+  EXPECT_EQ(writeQuery(100, 0.1).text(), "?E100 0.1");
+  const auto reason = [](double value)
+  {
+    try
+    {
+      writeQuery(100, value);
+    }
+    catch (const ProtocolError& e)
+    {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  EXPECT_EQ(reason(1e300),
+            "value 1.0000000000000001e+300 cannot be written exactly: MDC numbers carry at most 15 "
+            "digits before the point (magnitude below 1e15)");
+  EXPECT_EQ(reason(1e-7),
+            "value 9.9999999999999995e-08 cannot be written exactly: MDC numbers carry at most 6 "
+            "decimals (it would arrive as 0.)");
+  EXPECT_NE(reason(1.23456789).find("at most 6 decimals (it would arrive as 1.234568)"), std::string::npos);
+  EXPECT_NE(reason(std::nan("")).find("cannot be written exactly: MDC numbers are finite"), std::string::npos);
+  EXPECT_NE(reason(HUGE_VAL).find("MDC numbers are finite"), std::string::npos);
+  EXPECT_NE(reason(-HUGE_VAL).find("MDC numbers are finite"), std::string::npos);
+  EXPECT_NE(reason(1e15).find("magnitude below 1e15"), std::string::npos);
+  EXPECT_NE(reason(-1e15).find("magnitude below 1e15"), std::string::npos);
+}
+
 TEST(MdcParser, RecognisesEveryDocumentedReply)
 {
   const std::pair<const char*, ReplyKind> cases[] = {

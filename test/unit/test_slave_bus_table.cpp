@@ -1,6 +1,8 @@
 // The slave table, the step queue and the bus counters of slave_bus_node, without ROS or a port.
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include <string>
 #include <thread>
 #include <vector>
@@ -79,9 +81,21 @@ TEST(SlaveTable, AxesAndToolsAndUnknownAddressesStartMotionGenericSlavesDoNot)
 TEST(SlaveTable, CommandPayloadsScaleAxesAndCheckRanges)
 {
   const sb::SlaveTable t = table();
-  // -0.0125 m on x: -12.5 mm -> -13 device units (rounded half away from zero), big-endian signed.
-  EXPECT_EQ(t.commandPayload(0, {-0.0125}, {}), (std::vector<uint8_t>{0xFF, 0xF3}));
-  EXPECT_EQ(t.commandPayload(1, {1.2345}, {}), (std::vector<uint8_t>{1, 23}));  // 123 = 1*100 + 23
+  // -0.013 m on x: -13 device units of 1 mm, big-endian signed.
+  EXPECT_EQ(t.commandPayload(0, {-0.013}, {}), (std::vector<uint8_t>{0xFF, 0xF3}));
+  EXPECT_EQ(t.commandPayload(1, {1.23}, {}), (std::vector<uint8_t>{1, 23}));  // 123 = 1*100 + 23
+  // Exact or refused: between two device units, NaN, infinite or beyond the encoding: never rounded,
+  // wrapped or zeroed.
+  for (const double bad : {-0.0125, 1e-7, std::nan(""), HUGE_VAL, -HUGE_VAL, 1e300, 2147483.648})
+  {
+    EXPECT_THROW(t.commandPayload(0, {bad}, {}), ProtocolError) << bad;
+  }
+  EXPECT_THROW(t.commandPayload(1, {1.2345}, {}), ProtocolError);
+  EXPECT_THROW(t.commandPayload(1, {-0.01}, {}), ProtocolError);  // hundreds: unsigned
+  for (const double bad : {std::nan(""), HUGE_VAL, 1e300, -1.0, 256.0, 2147483648.0, 0.5})
+  {
+    EXPECT_THROW(t.commandPayload(2, {bad}, {}), ProtocolError) << bad;  // bytes: 0..255 whole
+  }
   EXPECT_EQ(t.commandPayload(2, {}, {9, 8}), (std::vector<uint8_t>{9, 8}));
   EXPECT_THROW(t.commandPayload(0, {40.0}, {}), ProtocolError);  // 40000 mm: beyond be16s
   EXPECT_THROW(t.commandPayload(0, {0.1, 0.2}, {}), ProtocolError);

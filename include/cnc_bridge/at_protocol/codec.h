@@ -92,6 +92,19 @@ struct EndOperation
 using Command = std::variant<AutoMode, JogMode, Machining, StartOperation, Spindle, JogFeed, ToolChange, Home, Setpoint,
                              EndOperation>;
 
+/// \brief The 0..255 value of \p value on a scale whose 255 stands for \p full_scale (spindle
+/// rev/min over ~spindle_max_rpm, jog mm/s over the axis' top speed), rounded to the nearest step
+/// of full_scale / 255 (the protocol's resolution; the caller reports the value sent).
+/// \throws ProtocolError naming \p what and the range if \p value is not finite or outside
+/// 0..full_scale: never clamped, wrapped or zeroed.
+int scaledValue(double value, double full_scale, const std::string& what);
+
+/// \brief The tool change `T<tool> <length>@` for a length in metres.
+/// \throws ProtocolError naming the reason if the tool is outside 0..9999 or the length is not
+/// finite, outside 0..10 m or not a whole millimetre (the wire carries whole millimetres; a length
+/// is never rounded or wrapped to fit).
+ToolChange toolChangeFor(int64_t tool, double length_m);
+
 /// \brief The wire text of a command, '@' included, e.g. "S150@", "12 3400 -5 100 0 0@".
 /// \throws ProtocolError if a value is out of range (so nothing out of range ever leaves).
 std::string encode(const Command& command);

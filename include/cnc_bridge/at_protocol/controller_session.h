@@ -22,6 +22,7 @@
 #include "cnc_bridge/at_protocol/program_path.h"
 #include "cnc_bridge/at_protocol/sender.h"
 #include "cnc_bridge/common/program_dir.h"
+#include "cnc_bridge/common/soft_limits.h"
 #include "cnc_bridge/gcode/gcode.h"
 #include "cnc_bridge/transport/reconnecting_link.h"
 
@@ -163,6 +164,7 @@ class ControllerSession
     SetpointSender::Options sender;    ///< on_link_error is the session's own
     PlannerLimits limits;              ///< mm, mm/s, ... (planner units)
     double spindle_max_rpm = 24000.0;  ///< rev/min that S255 stands for
+    SoftLimits soft_limits;            ///< every point of a goal must lie inside (m, machine frame)
     double default_feed = 0.01;        ///< m/s when neither goal nor program gives one
     double jog_timeout = 0.5;          ///< s, the jog deadman (0: off)
     bool motion_enabled = false;       ///< the motion switch's start value
@@ -236,12 +238,17 @@ class ControllerSession
   /// \brief The goal as operations in pulses, the first from \p start: one for a path; for a
   /// program, one per stretch of moves between its own steps (planProgram).
   /// \param program_commands, program_commands_setting see ProgramPlanOptions.
-  /// \throws Error (ConfigError, gcode::ParseError) with the reason.
+  /// Every operation's tool change and spindle speed are checked here, before anything is sent.
+  /// \throws Error (ConfigError, gcode::ParseError) with the reason (a value the wire cannot carry:
+  /// the operation and the value).
   std::vector<OperationPlan> planGoal(const GoalRequest& goal, const std::array<int32_t, 3>& start,
                                       bool program_commands, const std::string& program_commands_setting) const;
+  /// \brief Checks every operation's tool change and spindle value before the first is sent.
+  /// \throws ConfigError naming the operation and the value if the wire cannot carry one.
+  void checkPlans(const std::vector<OperationPlan>& plans, int32_t goal_tool, double goal_tool_length) const;
   /// \brief What the sender sends for \p plan: P@, T@ (with the goal's tool length if it is the
   /// goal's tool), S@ in the protocol's units, and the trajectory.
-  /// \throws ConfigError if the spindle speed is above spindle_max_rpm.
+  /// \throws ProtocolError if the spindle speed or the tool change cannot be sent exactly.
   Operation operationFor(const OperationPlan& plan, int32_t goal_tool, double goal_tool_length) const;
 
   /// What runOperation() asks its caller while the operation runs (on the caller's thread).
@@ -258,6 +265,10 @@ class ControllerSession
   OperationResult runOperation(const OperationPlan& plan, const Operation& operation, const OperationWatch& watch);
 
  private:
+  /// \brief The tool change and spindle value of \p plan into \p operation (if given).
+  /// \throws ProtocolError if one cannot be sent exactly (toolChangeFor, scaledValue).
+  void operationCommands(const OperationPlan& plan, int32_t goal_tool, double goal_tool_length,
+                         Operation* operation = nullptr) const;
   std::unique_ptr<Transport> openCommandLink();
   void commandSession();
   void reportSession(Transport& link);

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "cnc_bridge/at_protocol/planner.h"
+#include "cnc_bridge/common/soft_limits.h"
 #include "cnc_bridge/gcode/gcode.h"
 #include "cnc_bridge/gcode/program_steps.h"
 
@@ -45,6 +46,10 @@ struct ProgramPlanOptions
   /// not, a program with one is refused naming its line and \c program_commands_setting.
   bool program_commands = false;
   std::string program_commands_setting = "program_commands";
+  /// rev/min of the spindle's top speed: an S word above it is refused naming its line (0: unchecked).
+  double spindle_max_rpm = 0.0;
+  /// Every move's end must lie inside these (metres, machine frame); refused naming the line.
+  SoftLimits soft_limits;
 };
 
 /// \brief Plans the program in \p in from \p start (pulses) as operations: one for a program

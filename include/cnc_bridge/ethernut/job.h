@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "cnc_bridge/common/soft_limits.h"
 #include "cnc_bridge/ethernut/client.h"
 #include "cnc_bridge/gcode/gcode.h"
 #include "cnc_bridge/gcode/program_steps.h"
@@ -69,6 +70,12 @@ class GcodeJob
   std::vector<uint32_t> skipped_lines_;
 };
 
+/// \brief The board's coordinate (mm, float) of a point given in mm, checked before any set of the
+/// job is sent. Exact or refused: a value a float cannot carry (not finite, beyond its range, or
+/// moved by more than 1 um by its rounding) or a point outside \p limits (metres) is refused.
+/// \throws ConfigError naming \p where ("G-code line 12", "point 3"), the value and the limit.
+Coordinate boardCoordinate(double x_mm, double y_mm, double z_mm, const SoftLimits& limits, const std::string& where);
+
 /// \brief Opens a program file for GcodeJob. \throws ConfigError if it cannot be read.
 std::unique_ptr<std::istream> openProgram(const std::string& path);
 
@@ -110,9 +117,13 @@ class Job
  public:
   /// \brief Loads a G-code program: counts its moves up to its end and builds the preview (the
   /// start of the first move, then the end of every move).
-  /// \throws ConfigError (an unreadable file, a G53 move to refuse), ParseError.
+  /// Every move's end is checked (boardCoordinate()) before the job exists, so a program with one
+  /// coordinate the board cannot take is refused whole, with nothing sent.
+  /// \throws ConfigError (an unreadable file, a G53 move to refuse, a coordinate a float cannot
+  /// carry or outside \p limits), ParseError.
   static std::unique_ptr<Job> fromProgram(const std::string& path, const gcode::ParserOptions& options,
-                                          const G53Policy& g53, size_t max_preview_points);
+                                          const G53Policy& g53, size_t max_preview_points,
+                                          const SoftLimits& limits = SoftLimits());
   /// \brief A job of points (mm, machine frame), streamed in one segment.
   static std::unique_ptr<Job> fromPoints(std::vector<Coordinate> points, size_t max_preview_points);
 

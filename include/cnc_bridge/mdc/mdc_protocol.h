@@ -26,6 +26,7 @@ struct Query
   std::optional<double> argument;
 
   /// \brief "?Q500", "?Q600 5021", "?E100 1.5": the text sent, without the line end.
+  /// \throws ProtocolError if the argument cannot be carried exactly (see writeQuery()).
   std::string text() const;
   bool operator==(const Query& other) const;
 };
@@ -33,6 +34,10 @@ struct Query
 /// \brief Common queries.
 Query q(int code);
 Query macroQuery(int variable);  ///< ?Q600 <variable>
+/// \brief `?E<variable> <value>`: a macro variable write.
+/// \throws ProtocolError naming the value and the reason if the wire cannot carry it exactly: not
+/// finite, magnitude 1e15 or more, or more than 6 decimals (1e-7 would arrive as 0). Never rounded.
+Query writeQuery(int variable, double value);
 
 /// \brief What a reply line is about, recognised from its first field.
 enum class ReplyKind

@@ -7,6 +7,7 @@
 #include <initializer_list>
 #include <string>
 
+#include "cnc_bridge/common/soft_limits.h"
 #include "cnc_bridge/transport/serial_port.h"
 
 namespace cnc_bridge
@@ -47,6 +48,12 @@ uint16_t tcpPort(const ros::NodeHandle& pnh, const std::string& name, int fallba
 /// \throws ConfigError naming the parameter, the choices and the value given.
 std::string choice(const ros::NodeHandle& pnh, const std::string& name, const std::string& fallback,
                    std::initializer_list<const char*> choices);
+
+/// \brief ~soft_limits: `{x: [min, max], y: [min, max], z: [min, max]}` in metres, any axis may be
+/// left out (no limit on it); not set: no soft limits.
+/// \throws ConfigError naming the parameter if it is not such a dictionary, a bound is not a finite
+/// number or min is above max.
+SoftLimits softLimits(const ros::NodeHandle& pnh, const std::string& name = "soft_limits");
 
 /// \brief Milliseconds from a parameter given in seconds (float), e.g. ~timeout: 1.5.
 Milliseconds seconds(const ros::NodeHandle& pnh, const std::string& name, double fallback_seconds);
