@@ -97,6 +97,12 @@ std::string Stats::summary() const
   {
     out << "; the receiver answered EOT with CAN after the last block was acknowledged (as a Haas does)";
   }
+  if (eot_unanswered > 0)
+  {
+    out << "; every block was acknowledged but the end was not (EOT sent " << eot_unanswered
+        << " times, no answer): the receiver holds the whole program, check that it stored it (a receiver that "
+           "leaves as it gets the EOT, as lrzsz rx does, loses its last acknowledgement)";
+  }
   return out.str();
 }
 
@@ -343,6 +349,7 @@ Stats Sender::send(const std::vector<uint8_t>& payload, const ProgressCallback& 
         progress(state);
     }
 
+    bool eot_met_only_silence = true;
     for (unsigned attempt = 1;; ++attempt)
     {
       checkCancel();
@@ -370,8 +377,19 @@ Stats Sender::send(const std::vector<uint8_t>& payload, const ProgressCallback& 
         ++stats_.timeouts;
       else
         input_.purge(config_.turnaround, config_.turnaround * 10);
+      eot_met_only_silence = eot_met_only_silence && reply == Reply::kTimeout;
       if (attempt >= config_.eot_retries)
       {
+        // Every block was ACKed, so the receiver holds the whole payload; only the end went
+        // unconfirmed. Silence is what a receiver that has left leaves behind; anything else
+        // (NAKs, garbage) is a receiver that is still there and did not take the EOT.
+        if (config_.eot_silence_completes && eot_met_only_silence)
+        {
+          stats_.eot_unanswered = attempt;
+          CNC_LOG_WARN("xmodem: " << link_.describe() << ": every block was acknowledged, the end (EOT, sent "
+                                  << attempt << " times) was not: taken as complete");
+          break;
+        }
         abort("every block was acknowledged but EOT was not (sent " + std::to_string(attempt) + " times)", false, true);
       }
     }

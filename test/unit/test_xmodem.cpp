@@ -1219,6 +1219,50 @@ TEST(XmodemSender, TheAckOfEotCountsWhileThePortStillReportsOutputPending)
   EXPECT_EQ(written.back(), kEot);
 }
 
+// A receiver that ACKs every block and then leaves (lrzsz rx flushing its tty as it exits loses
+// its ACK of EOT): the payload is all there, so the transfer completes, and its summary says the
+// end went unconfirmed. A receiver still there that NAKs the EOT, or the option off, still fails.
+TEST(XmodemSender, SilenceAfterEveryBlockWasAckedCompletesWithTheEndUnconfirmed)
+{
+  const auto receiver = [](Bytes answer_to_eot)
+  {
+    auto rx = std::make_unique<FakeTransport>();
+    rx->feed(Bytes{kNak});
+    rx->onWrite(
+        [answer_to_eot](FakeTransport& t, const Bytes& bytes)
+        {
+          if (bytes.size() == 1 && bytes[0] == kEot)
+            t.feed(answer_to_eot);  // nothing: the receiver has left
+          else
+            t.feed(Bytes{kAck});
+        });
+    return rx;
+  };
+  Config config = fastConfig();
+  config.eot_retries = 3;
+  config.eot_timeout = Milliseconds(100);
+  auto gone = receiver({});
+  Sender sender(*gone, Mode::kChecksum, config);
+  const Stats stats = sender.send(Bytes(1025, 'A'));
+  EXPECT_EQ(stats.blocks, 9u);
+  EXPECT_EQ(stats.eot_unanswered, 3u);
+  EXPECT_NE(stats.summary().find("every block was acknowledged but the end was not (EOT sent 3 times, no answer)"),
+            std::string::npos)
+      << stats.summary();
+  const Bytes written = gone->written();
+  EXPECT_EQ(written.size(), 9 * 132 + 3u);
+  EXPECT_EQ(written.back(), kEot);
+
+  auto naks = receiver(Bytes{kNak});
+  Sender refused(*naks, Mode::kChecksum, config);
+  EXPECT_THROW(refused.send(Bytes(1025, 'A')), TimeoutError);
+
+  config.eot_silence_completes = false;
+  auto gone_again = receiver({});
+  Sender strict(*gone_again, Mode::kChecksum, config);
+  EXPECT_THROW(strict.send(Bytes(1025, 'A')), TimeoutError);
+}
+
 // XModem has no length field: a sender that goes on past Config::max_bytes is cancelled with CANs,
 // nothing is stored, and the error names the setting.
 TEST(XmodemReceiver, ASenderGoingPastMaxBytesIsCancelledAndNothingIsStored)

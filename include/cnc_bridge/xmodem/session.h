@@ -91,6 +91,12 @@ struct Config
   /// must not pass for success (the receiver stored nothing). Off: any CANs after EOT fail the
   /// transfer. On by default because the Haas path (dnc_node, cnc_dnc send --mode checksum) needs it.
   bool eot_can_completes = true;
+  /// Sender: take silence after every EOT, once every block was ACKed, as a completed transfer
+  /// whose end went unconfirmed (Stats::eot_unanswered; the summary says so). The receiver holds
+  /// every block; a receiver that leaves as soon as it has the EOT loses its last ACK (lrzsz rx
+  /// flushes its tty as it exits). A NAK or anything else in answer to EOT still fails. Off:
+  /// an unanswered EOT fails the transfer.
+  bool eot_silence_completes = true;
   /// Receiver: the most payload taken; a sender that goes past it is cancelled (CAN CAN) and the
   /// transfer fails naming max_bytes_name. sendFile() refuses a larger file the same way. XModem
   /// has no length field, so without a cap a peer that keeps sending fills memory.
@@ -127,6 +133,9 @@ struct Stats
   bool used_1k = false;                    ///< at least one 1024-byte block went across
   /// The peer answered our EOT with CANs after every block was ACKed (a Haas does): complete.
   bool eot_answered_with_can = false;
+  /// EOTs sent without any answer after every block was ACKed (Config::eot_silence_completes): the
+  /// end of the transfer is unconfirmed; 0 when the receiver answered.
+  uint32_t eot_unanswered = 0;
   /// From the first block (sent, or its first byte received) to the last block's ACK: the time
   /// the data took, without the start handshake and the EOT exchange.
   std::chrono::microseconds block_time{0};
