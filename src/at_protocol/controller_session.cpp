@@ -1,6 +1,7 @@
 // The session with one '@' controller (controller_session.h).
 #include "cnc_bridge/at_protocol/controller_session.h"
 
+#include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <fstream>
@@ -574,6 +575,21 @@ std::vector<OperationPlan> ControllerSession::planGoal(const GoalRequest& goal, 
     throw ConfigError("goal refused before anything was sent: feed_rate (" + std::to_string(goal.feed_rate) +
                       " m/s) and spindle_speed (" + std::to_string(goal.spindle_speed) +
                       " rev/min) must be finite and not negative");
+  }
+  // Within the machine's limits, or refused naming them: a feed no axis can reach is a mistake in
+  // the goal, not a request for the top speed.
+  const Vec3& max_speed = options_.limits.max_speed;  // mm/s
+  const double top_speed = *std::max_element(max_speed.begin(), max_speed.end());
+  if (goal.feed_rate * 1000.0 > top_speed)
+  {
+    throw ConfigError("goal refused before anything was sent: feed_rate " + std::to_string(goal.feed_rate) +
+                      " m/s is above the fastest axis' " + std::to_string(top_speed / 1000.0) +
+                      " m/s (~max_speed_x, _y, _z)");
+  }
+  if (goal.spindle_speed > options_.spindle_max_rpm)
+  {
+    throw ConfigError("goal refused before anything was sent: spindle_speed " + std::to_string(goal.spindle_speed) +
+                      " rev/min is above ~spindle_max_rpm (" + std::to_string(options_.spindle_max_rpm) + ")");
   }
   const bool coolant = goal.coolant == 1 || (goal.coolant == -1 && coolant_);
   const double goal_feed = goal.feed_rate * 1000.0;  // m/s to mm/s

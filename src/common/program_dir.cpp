@@ -8,6 +8,8 @@
 
 #include <cerrno>
 #include <climits>
+#include <cstdint>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 
@@ -109,12 +111,94 @@ ProgramDirectory::ProgramDirectory(const std::string& root)
   }
 }
 
-std::string ProgramDirectory::absolute(const std::string& name) const
+namespace
+{
+constexpr size_t kMaxNameBytes = 1024;
+constexpr size_t kMaxPartBytes = 255;  // NAME_MAX of Linux file systems
+constexpr size_t kShownCharacters = 80;
+
+/// Whether \p text is well-formed UTF-8 (no overlong forms, no surrogates, at most U+10FFFF).
+bool isUtf8(const std::string& text)
+{
+  size_t i = 0;
+  while (i < text.size())
+  {
+    const auto byte = [&](size_t k) { return static_cast<unsigned char>(text[k]); };
+    const unsigned char lead = byte(i);
+    size_t length = 0;
+    uint32_t code = 0, minimum = 0;
+    if (lead < 0x80)
+      length = 1, code = lead;
+    else if ((lead & 0xe0) == 0xc0)
+      length = 2, code = lead & 0x1f, minimum = 0x80;
+    else if ((lead & 0xf0) == 0xe0)
+      length = 3, code = lead & 0x0f, minimum = 0x800;
+    else if ((lead & 0xf8) == 0xf0)
+      length = 4, code = lead & 0x07, minimum = 0x10000;
+    else
+      return false;
+    if (i + length > text.size())
+      return false;
+    for (size_t k = 1; k < length; ++k)
+    {
+      if ((byte(i + k) & 0xc0) != 0x80)
+        return false;
+      code = (code << 6) | (byte(i + k) & 0x3f);
+    }
+    if (code < minimum || code > 0x10ffff || (code >= 0xd800 && code <= 0xdfff))
+      return false;
+    i += length;
+  }
+  return true;
+}
+}  // namespace
+
+std::string printableName(const std::string& name)
+{
+  std::string shown;
+  for (size_t i = 0; i < name.size() && i < kShownCharacters; ++i)
+  {
+    const auto c = static_cast<unsigned char>(name[i]);
+    if (c >= 0x20 && c < 0x7f)
+    {
+      shown += static_cast<char>(c);
+      continue;
+    }
+    char escaped[8];
+    std::snprintf(escaped, sizeof escaped, "\\x%02x", c);
+    shown += escaped;
+  }
+  return name.size() > kShownCharacters ? shown + "..." : shown;
+}
+
+void checkRequestedName(const std::string& name)
 {
   if (name.empty())
+    throw ConfigError("empty file name: name the program file");
+  const std::string shown = "'" + printableName(name) + "'";
+  if (name.size() > kMaxNameBytes)
+    throw ConfigError("file name " + shown + " is " + std::to_string(name.size()) + " bytes long, more than " +
+                      std::to_string(kMaxNameBytes) + ": refused");
+  size_t part_start = 0;
+  for (size_t i = 0; i <= name.size(); ++i)
   {
-    throw ConfigError("empty file name");
+    if (i < name.size() && name[i] != '/')
+      continue;
+    if (i - part_start > kMaxPartBytes)
+      throw ConfigError("file name " + shown + " has a part longer than " + std::to_string(kMaxPartBytes) +
+                        " bytes, the file system's limit: refused");
+    part_start = i + 1;
   }
+  for (const char c : name)
+    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f)
+      throw ConfigError("file name " + shown + " holds a control character: refused");
+  if (!isUtf8(name))
+    throw ConfigError("file name " + shown + " is not UTF-8 text: refused");
+}
+
+std::string ProgramDirectory::absolute(const std::string& name) const
+{
+  checkRequestedName(name);
   return name[0] == '/' ? name : root_ + "/" + name;
 }
 

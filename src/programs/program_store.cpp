@@ -45,7 +45,8 @@ void throwIfCancelled(const std::atomic<bool>* cancel, const std::string& what)
 
 void checkName(const std::string& name)
 {
-  if (name.empty() || name[0] == '/')
+  checkRequestedName(name);
+  if (name[0] == '/')
     throw ConfigError("program name '" + name + "' must be a relative name inside the program folder");
   size_t start = 0;
   while (start <= name.size())

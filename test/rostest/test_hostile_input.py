@@ -3,10 +3,11 @@
 every goal sent with adversarial values, table-driven from the services the nodes advertise.
 
 For each call: an answer (or a failed call) within CALL_BOUND seconds, the node alive afterwards,
-nothing outside the program folder changed, and, for a call the node refused ("refused" in its
-answer), nothing new on the simulator's side. After a node's rows, a valid request to it succeeds.
-The values some nodes still accept (to be refused by the validation of whole requests) are printed
-at the end as "accepted" rows; they must still be answered in time with the node alive."""
+nothing outside the program folder changed, and, for a call that was not carried out (a failed
+answer, a goal that did not succeed), nothing new on the simulator's side. A number no wire carries
+exactly (NaN, +/-inf, 1e300) and a file name no file system takes (64 KB, not UTF-8) are never
+accepted. After a node's rows, a valid request to it succeeds. The rows a node accepted are printed
+at the end."""
 import hashlib
 import math
 import os
@@ -166,10 +167,21 @@ def answer_text(value):
     return getattr(value, "message", "") or ""
 
 
-def refused(value):
+def failed(value):
+    """The call was not carried out: a failed call, an answer with success false, a goal that did
+    not succeed."""
     if isinstance(value, Exception):
-        return False
-    return getattr(value, "success", True) is False and "refused" in answer_text(value).lower()
+        return True
+    if isinstance(value, GoalOutcome):
+        return value.state != GoalStatus.SUCCEEDED or not value.success
+    return getattr(value, "success", True) is False
+
+
+# Values no wire carries exactly (issue 26, "exact or refused"): a row with one of these in a number
+# field must not succeed.
+NOT_REPRESENTABLE = ("NaN", "+inf", "-inf", "1e300")
+# Names no file system takes: a row with one of these as a file name must not succeed.
+NOT_A_FILE_NAME = ("64 KB", "bytes not UTF-8")
 
 
 class HostileInput(unittest.TestCase):
@@ -249,9 +261,14 @@ class HostileInput(unittest.TestCase):
         ping = rosnode.rosnode_ping("%s/%s" % (self.ns, node), max_count=1, verbose=False)
         self.assertTrue(ping, "%s: %s is not alive after the call (%s)" % (row, node, answer_text(value)))
         self.assertEqual(self.outside(), before_outside, "%s: a file outside the program folder changed" % row)
-        if peer and refused(value):
-            self.assertEqual(peer.news(before_peer), [], "%s: refused (%s) but the peer received something"
+        # A call that was not carried out puts nothing on the wire, whatever its answer says.
+        if peer and failed(value):
+            self.assertEqual(peer.news(before_peer), [], "%s: failed (%s) but the peer received something"
                              % (row, answer_text(value)[:200]))
+        label = row.rsplit("=", 1)[-1].split(" (")[0]
+        if label in NOT_REPRESENTABLE or (label in NOT_A_FILE_NAME and ("file" in row or "name" in row)):
+            self.assertTrue(failed(value), "%s: accepted (%s): a value the wire cannot carry exactly must be "
+                            "refused" % (row, answer_text(value)[:200]))
         if not isinstance(value, Exception) and getattr(value, "success", False):
             self.accepted.append("%s (%.1f s): %s" % (row, took, answer_text(value)[:160]))
         return value

@@ -141,6 +141,39 @@ TEST_F(ProgramDir, ResolvesNamesInsideAndRefusesEscapes)
   }
 }
 
+// A requested name no control or file system takes is refused before it is used or repeated: a
+// 64 KB name, a part over NAME_MAX, control characters, bytes that are not UTF-8. The refusal
+// shows the name shortened and escaped, never whole.
+TEST_F(ProgramDir, NamesNoFileSystemTakesAreRefusedAndShownShortened)
+{
+  ::mkdir((dir_ + "/programs").c_str(), 0755);
+  writeFile(dir_ + "/programs/O1.nc", "%\n");
+  const ProgramDirectory programs(dir_ + "/programs");
+  const auto refusal = [&](const std::string& name)
+  {
+    try
+    {
+      programs.resolveForWrite(name);
+    }
+    catch (const ConfigError& e)
+    {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  const std::string huge = refusal(std::string(65536, 'x'));
+  EXPECT_NE(huge.find("is 65536 bytes long, more than 1024: refused"), std::string::npos) << huge;
+  EXPECT_LT(huge.size(), 200u) << "the name is repeated whole";
+  EXPECT_NE(refusal(std::string(256, 'y') + ".nc").find("longer than 255 bytes"), std::string::npos);
+  EXPECT_NE(refusal("O1\n.nc").find("holds a control character"), std::string::npos);
+  const std::string latin1 = refusal("\xff\xfe\x80O1.nc");
+  EXPECT_NE(latin1.find("'\\xff\\xfe\\x80O1.nc' is not UTF-8 text: refused"), std::string::npos) << latin1;
+  EXPECT_NE(refusal("\xc0\xaf.nc").find("not UTF-8"), std::string::npos) << "an overlong '/' passed";
+  EXPECT_EQ(refusal("Ö1234 Pièce.nc"), "accepted");
+  EXPECT_EQ(refusal(std::string(255, 'z')), "accepted");
+  EXPECT_EQ(printableName(std::string(100, 'a')), std::string(80, 'a') + "...");
+}
+
 TEST_F(ProgramDir, RootMustExist)
 {
   EXPECT_THROW(ProgramDirectory(dir_ + "/nope"), ConfigError);

@@ -13,6 +13,16 @@
 
 namespace cnc_bridge
 {
+/// \brief Refuses a requested file name no control or file system takes, before it is used or
+/// repeated anywhere: empty, longer than 1024 bytes or with a part longer than 255 (NAME_MAX), a
+/// control character, or bytes that are not UTF-8. \throws ConfigError showing the name shortened
+/// and escaped (printableName()).
+void checkRequestedName(const std::string& name);
+
+/// \brief \p name as it may be shown in a message or a log line: at most 80 characters, bytes
+/// outside printable ASCII as \xNN, "..." where it was cut.
+std::string printableName(const std::string& name);
+
 /// \brief A directory that requested file names must stay inside. Thread-safe (immutable).
 class ProgramDirectory
 {
