@@ -60,21 +60,26 @@ RegularFile::~RegularFile()
   ::close(fd_);
 }
 
-size_t RegularFile::readAt(uint64_t offset, char* data, size_t size) const
+size_t readFully(int fd, uint64_t offset, char* data, size_t size, const std::string& path)
 {
   size_t got = 0;
   while (got < size)
   {
-    const ssize_t n = ::pread(fd_, data + got, size - got, static_cast<off_t>(offset + got));
+    const ssize_t n = ::pread(fd, data + got, size - got, static_cast<off_t>(offset + got));
     if (n < 0 && errno == EINTR)
       continue;
     if (n < 0)
-      throw Error("reading " + path_ + ": " + std::strerror(errno));
+      throw Error("reading " + path + ": " + std::strerror(errno));
     if (n == 0)
       break;
     got += static_cast<size_t>(n);
   }
   return got;
+}
+
+size_t RegularFile::readAt(uint64_t offset, char* data, size_t size) const
+{
+  return readFully(fd_, offset, data, size, path_);
 }
 
 size_t RegularFile::read(char* data, size_t size)

@@ -15,6 +15,7 @@
 #include "cnc_bridge/common/atomic_file.h"
 #include "cnc_bridge/common/log.h"
 #include "cnc_bridge/common/program_dir.h"
+#include "cnc_bridge/common/regular_file.h"
 
 namespace cnc_bridge::programs
 {
@@ -423,22 +424,7 @@ class LocalFileSource
   }
 
  private:
-  size_t readAt(uint64_t offset, char* data, size_t size) const
-  {
-    size_t got = 0;
-    while (got < size)
-    {
-      const ssize_t n = ::pread(fd_, data + got, size - got, static_cast<off_t>(offset + got));
-      if (n < 0 && errno == EINTR)
-        continue;
-      if (n < 0)
-        throw Error("reading " + path_ + ": " + std::strerror(errno));
-      if (n == 0)
-        break;
-      got += static_cast<size_t>(n);
-    }
-    return got;
-  }
+  size_t readAt(uint64_t offset, char* data, size_t size) const { return readFully(fd_, offset, data, size, path_); }
 
   std::string path_;
   int fd_;

@@ -8,6 +8,7 @@
 #include <fstream>
 #include <map>
 #include <sstream>
+#include <vector>
 
 #include "cnc_bridge/gcode/gcode.h"
 
@@ -279,16 +280,31 @@ TEST(GcodeArc, PlanesG18AndG19AndHelix)
   EXPECT_DOUBLE_EQ(helix.back().end.z, -3);
 }
 
+// A program the parser refuses, and where and why it must say so.
+struct ErrorCase
+{
+  const char* program;
+  uint32_t line;
+  uint32_t column;
+  const char* reason_part;
+};
+
+void expectErrors(const std::vector<ErrorCase>& cases)
+{
+  for (const ErrorCase& c : cases)
+  {
+    SCOPED_TRACE(c.program);
+    const ParseError e = parseError(c.program);
+    EXPECT_EQ(e.line(), c.line);
+    EXPECT_EQ(e.column(), c.column);
+    EXPECT_NE(e.reason().find(c.reason_part), std::string::npos) << e.reason();
+    EXPECT_NE(std::string(e.what()).find("line " + std::to_string(c.line)), std::string::npos);
+  }
+}
+
 TEST(GcodeErrors, MalformedLinesGiveLineAndColumn)
 {
-  struct Case
-  {
-    const char* program;
-    uint32_t line;
-    uint32_t column;
-    const char* reason_part;
-  };
-  const Case cases[] = {
+  expectErrors({
       {"G1 X1\nG1 X1 (oops\n", 2, 7, "not closed"},
       {"G1 X\n", 1, 4, "no number"},
       {"G1 X1 X2\n", 1, 7, "twice"},
@@ -311,30 +327,14 @@ TEST(GcodeErrors, MalformedLinesGiveLineAndColumn)
       {"G80\nX1\n", 2, 1, "without a motion mode"},
       {"G1 X1..2\n", 1, 7, "unexpected character '.'"},
       {"G1 X1\xff\n", 1, 6, "0xff"},
-  };
-  for (const Case& c : cases)
-  {
-    SCOPED_TRACE(c.program);
-    const ParseError e = parseError(c.program);
-    EXPECT_EQ(e.line(), c.line);
-    EXPECT_EQ(e.column(), c.column);
-    EXPECT_NE(e.reason().find(c.reason_part), std::string::npos) << e.reason();
-    EXPECT_NE(std::string(e.what()).find("line " + std::to_string(c.line)), std::string::npos);
-  }
+  });
 }
 
 // A word no code of its block uses is an error naming the line and the word, as LinuxCNC's rs274
 // refuses it (each case checked with `rs274 -g`): X1E39 must not run as a move to X1.
 TEST(GcodeErrors, AWordNoCodeOfItsBlockUsesIsAnError)
 {
-  struct Case
-  {
-    const char* program;
-    uint32_t line;
-    uint32_t column;
-    const char* reason_part;
-  };
-  const Case cases[] = {
+  expectErrors({
       {"G0 X1 Y0\nG1 X1E39 F100\n", 2, 6, "E word with no code in its block to use it"},
       {"G0 X1 P5\n", 1, 7, "P word with no code in its block to use it"},
       {"M3 S100 P2\n", 1, 9, "P word with no code"},
@@ -342,15 +342,7 @@ TEST(GcodeErrors, AWordNoCodeOfItsBlockUsesIsAnError)
       {"G40 D1\n", 1, 5, "D word with no G41 or G42"},
       {"G0 X1 H1\n", 1, 7, "H word with no G43"},
       {"G4 P1 H2\n", 1, 7, "H word with no G43"},
-  };
-  for (const Case& c : cases)
-  {
-    SCOPED_TRACE(c.program);
-    const ParseError e = parseError(c.program);
-    EXPECT_EQ(e.line(), c.line);
-    EXPECT_EQ(e.column(), c.column);
-    EXPECT_NE(e.reason().find(c.reason_part), std::string::npos) << e.reason();
-  }
+  });
   // The codes that use them take them (rs274 accepts these too).
   Parser p;
   EXPECT_NO_THROW(p.parseLine("G43 H1"));

@@ -39,6 +39,10 @@ class RegularFile
   uint64_t offset_ = 0;
 };
 
+/// \brief Reads up to \p size bytes at \p offset of the open file \p fd (fewer only at its end),
+/// retrying short reads and interruptions. \throws Error naming \p path.
+size_t readFully(int fd, uint64_t offset, char* data, size_t size, const std::string& path);
+
 /// \brief What kind of file \p mode (a stat st_mode) is, in words: "a directory", "a FIFO"...
 std::string fileKind(unsigned mode);
 }  // namespace cnc_bridge
