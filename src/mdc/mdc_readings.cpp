@@ -34,6 +34,16 @@ UnitSetting parseUnitSetting(const std::string& text, const std::string& paramet
   throw ConfigError(parameter + " must be auto, inch or mm, not " + text);
 }
 
+std::string unitNote(UnitSetting setting, Units reported)
+{
+  const double metres = metresPerUnit(setting, reported);
+  const std::string lengths = metres == 0.0254  ? "inch (G20; x 0.0254 for metres)"
+                              : metres == 0.001 ? "mm (G21; x 0.001 for metres)"
+                                                : "the control's unit, not known yet (#4006 not read; ~units sets it)";
+  return "as the control reports it: a length (a position, an offset) in " + lengths +
+         ", any other variable in its own unit (rev/min, counts, seconds)";
+}
+
 double metresPerUnit(UnitSetting setting, Units reported)
 {
   if (setting == UnitSetting::kInch)

@@ -6,10 +6,12 @@
 #include <ros/ros.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <memory>
 #include <mutex>
+#include <sstream>
 
 #include "cnc_bridge/CycleEvent.h"
 #include "cnc_bridge/MacroVariables.h"
@@ -227,6 +229,8 @@ class HaasMdcNode
   {
     const ros::Time now = ros::Time::now();
     const mdc::Readings readings = mdc::readingsFrom(s, vars_);
+    if (s.units != mdc::Units::kUnknown)
+      units_ = s.units;
     state_->update(
         [&](MachineState& m)
         {
@@ -302,6 +306,9 @@ class HaasMdcNode
         throw ConfigError("variable numbers are not negative");
       poller_->withClient([&](mdc::MdcClient& c) { res.value = c.readVariable(req.variable, reply_timeout_); });
       res.success = true;
+      std::ostringstream answer;
+      answer << "#" << req.variable << " = " << res.value << ", " << mdc::unitNote(vars_.units, units_.load());
+      res.message = answer.str();
     }
     catch (const Error& e)
     {
@@ -406,6 +413,7 @@ class HaasMdcNode
   std::string hardware_id_;
   Milliseconds connect_timeout_{3000}, reply_timeout_{1000};
   mdc::PollVariables vars_;
+  std::atomic<mdc::Units> units_{mdc::Units::kUnknown};  ///< the control's G20/G21 as last polled (#4006)
   std::unique_ptr<mdc::WritePolicy> policy_;
   std::unique_ptr<RuntimeSwitch> motion_;      // gates ~write_variable
   std::unique_ptr<mdc::VariableWatch> watch_;  // update() and linkLost() under watch_mutex_

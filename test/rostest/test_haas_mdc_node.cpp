@@ -395,6 +395,12 @@ TEST(HaasMdcNode, WritesOutsideTheAllowListAreRefused)
   read.request.variable = 100;
   ASSERT_TRUE(callWhenUp(kNgc + "/haas_mdc_node/read_variable", read)) << read.response.message;
   EXPECT_DOUBLE_EQ(read.response.value, 42.5);
+  // The answer says what unit the value is in (a length: the control's G20/G21, as polled).
+  EXPECT_EQ(read.response.message.find("#100 = 42.5, as the control reports it: a length"), 0u)
+      << read.response.message;
+  EXPECT_TRUE(read.response.message.find("in inch (G20") != std::string::npos ||
+              read.response.message.find("in mm (G21") != std::string::npos)
+      << "the control's unit is polled (#4006): " << read.response.message;
   EXPECT_EQ(writesReceivedSince(ngc_queries, ngc_mark), std::vector<std::string>{"?E100 42.5"});
 }
 

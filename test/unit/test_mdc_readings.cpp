@@ -176,3 +176,17 @@ TEST(MdcReadings, QueryPeriodsInMillisecondsAtLeastOne)
     EXPECT_EQ(std::string(e.what()).rfind("~query_periods: ", 0), 0u) << e.what();
   }
 }
+
+// An answer of ~read_variable says what unit the value is in: a length in the control's G20/G21
+// (as last polled, or as ~units fixes it), or that the unit is not known yet.
+TEST(MdcReadings, TheUnitNoteNamesTheControlsUnitOrSaysItIsNotKnown)
+{
+  using mdc::Units;
+  using mdc::UnitSetting;
+  EXPECT_NE(mdc::unitNote(UnitSetting::kAuto, Units::kInch).find("a length (a position, an offset) in inch (G20"),
+            std::string::npos);
+  EXPECT_NE(mdc::unitNote(UnitSetting::kAuto, Units::kMillimetre).find("in mm (G21"), std::string::npos);
+  EXPECT_NE(mdc::unitNote(UnitSetting::kAuto, Units::kUnknown).find("not known yet"), std::string::npos);
+  EXPECT_NE(mdc::unitNote(UnitSetting::kMillimetre, Units::kUnknown).find("in mm (G21"), std::string::npos)
+      << "~units fixes the unit";
+}

@@ -31,6 +31,11 @@ UnitSetting parseUnitSetting(const std::string& text, const std::string& paramet
 /// wrong one).
 double metresPerUnit(UnitSetting setting, Units reported);
 
+/// \brief What unit a value read from the control (?Q600) is in, in words for an answer: a length is
+/// in the control's unit ("inch (G20)", "mm (G21)", or that it is not known yet), other variables
+/// in their own (rev/min, counts, ...).
+std::string unitNote(UnitSetting setting, Units reported);
+
 /// \brief The emergency stop as far as Q500 tells it.
 enum class Estop
 {
