@@ -1,12 +1,14 @@
 #!/usr/bin/env python3
 """Hostile peers (test/rostest/hostile_peers.test): each TCP protocol's node (ethernut_node,
-at_controller_node, haas_mdc_node, dprnt_node), and slave_bus_node over a pty, connects to a fake peer played by this test that
+at_controller_node, haas_mdc_node, dprnt_node), and slave_bus_node, a Classic's haas_mdc_node and
+dprnt_node over a pty, connects to a fake peer played by this test that
 floods it with garbage, sends one oversize frame, sends malformed frames, closes in the middle of a
 frame and accepts without ever answering. After each: the node is alive, its resident memory (read
 from /proc) stays below RSS_BOUND_MB, and its state's link says the link is not up once the peer has
 gone, with a message."""
 import os
 import random
+import select
 import socket
 import sys
 import threading
@@ -105,7 +107,13 @@ class PtyPeer:
         tmp = self.link + ".new"
         os.symlink(os.ttyname(slave), tmp)
         os.replace(tmp, self.link)
-        self.wait_up()  # the node reopens the link by itself (it retries after a backoff)
+        if self.wait_up:
+            self.wait_up()  # the node reopens the link by itself (it retries after a backoff)
+        else:
+            # A polling node (a Classic's MDC) has the port open once its first query arrives.
+            ready, _, _ = select.select([master], [], [], 30.0)
+            if not ready:
+                raise AssertionError("the node did not open %s and query within 30 s" % self.link)
         return PtyConnection(master, slave)
 
 
@@ -137,12 +145,19 @@ class HostilePeers(unittest.TestCase):
 
         self.subs.append(rospy.Subscriber("%s/state" % self.machine(node), MachineState, keep))
 
-    MACHINES = {"ethernut_node": "router", "at_controller_node": "at", "haas_mdc_node": "mdc", "dprnt_node": "dprnt",
-                "slave_bus_node": "laser"}
+    # Each case's node: its machine's namespace (the state topic is <namespace>/state) and its name.
+    MACHINES = {"ethernut_node": ("router", "ethernut_node"), "at_controller_node": ("at", "at_controller_node"),
+                "haas_mdc_node": ("mdc", "haas_mdc_node"), "dprnt_node": ("dprnt", "dprnt_node"),
+                "slave_bus_node": ("laser", "slave_bus_node"),
+                "haas_mdc_node (serial)": ("classic", "haas_mdc_node"),
+                "dprnt_node (serial)": ("dprnt_serial", "dprnt_node")}
 
     def machine(self, node):
         """The namespace of `node` (each has its own: the state topic is <namespace>/state)."""
-        return "%s/%s" % (self.ns, self.MACHINES[node])
+        return "%s/%s" % (self.ns, self.MACHINES[node][0])
+
+    def full_name(self, node):
+        return "%s/%s" % (self.machine(node), self.MACHINES[node][1])
 
     def state(self, node):
         with self.lock:
@@ -157,7 +172,7 @@ class HostilePeers(unittest.TestCase):
         self.fail("timed out waiting for " + what)
 
     def assert_well(self, node, pid, after):
-        self.assertTrue(rosnode.rosnode_ping("%s/%s" % (self.machine(node), node), max_count=1, verbose=False),
+        self.assertTrue(rosnode.rosnode_ping(self.full_name(node), max_count=1, verbose=False),
                         "%s died after %s" % (node, after))
         self.assertTrue(os.path.exists("/proc/%d" % pid), "%s died after %s" % (node, after))
         rss = rss_mb(pid)
@@ -168,7 +183,7 @@ class HostilePeers(unittest.TestCase):
         self.wait_for("%s's link to leave UP after %s" % (node, after),
                       lambda: self.state(node) is not None and self.state(node).link != MachineState.LINK_UP)
 
-    def run_peer(self, node, port, frame, extra_ports=(), pty_link=None, oversize_bytes=OVERSIZE_BYTES):
+    def run_peer(self, node, port, frame, extra_ports=(), pty_link=None, oversize_bytes=OVERSIZE_BYTES, polling=False):
         """The five hostile peers in turn against `node`; `frame` is one well-formed-looking frame of
         its protocol (for the malformed and mid-frame cases). The port listens only while a case
         runs, so that between cases the node's reconnects are refused and its link shows it."""
@@ -177,14 +192,16 @@ class HostilePeers(unittest.TestCase):
         held = []
         for p in extra:
             threading.Thread(target=lambda p=p: held.append(p.accept(60)), daemon=True).start()
-        pid = node_pid("%s/%s" % (self.machine(node), node))
+        pid = node_pid(self.full_name(node))
         rng = random.Random(26)
+
+        def link_up():
+            self.wait_for(node + "'s link up",
+                          lambda: self.state(node) is not None and self.state(node).link == MachineState.LINK_UP)
 
         def case(what, act, link_goes_down=True):
             if pty_link:
-                conn = PtyPeer(pty_link, lambda: self.wait_for(
-                    node + "'s link up", lambda: self.state(node) is not None and
-                    self.state(node).link == MachineState.LINK_UP)).accept()
+                conn = PtyPeer(pty_link, None if polling else link_up).accept()
             else:
                 peer = Peer(port)
                 conn = peer.accept()
@@ -258,6 +275,16 @@ class HostilePeers(unittest.TestCase):
         # Serial: the peer is the master side of a pty (the uplink of the slave-bus master).
         self.run_peer("slave_bus_node", None, b"\x7e\x01\x04\xd2\x00\x55\x7e",
                       pty_link=rospy.get_param("~slave_link"), oversize_bytes=1024 * 1024)  # a pty moves ~200 KB/s
+
+    def test_haas_mdc_node_serial(self):
+        # A Classic's MDC over RS-232: the node polls, so a case starts once its first query arrives
+        # (its link is up only after an answer, which a hostile peer never gives).
+        self.run_peer("haas_mdc_node (serial)", None, b"\x02PROGRAM, O00110, IDLE, PARTS, 4523\x17\r\n",
+                      pty_link=rospy.get_param("~mdc_link"), oversize_bytes=1024 * 1024, polling=True)
+
+    def test_dprnt_node_serial(self):
+        self.run_peer("dprnt_node (serial)", None, b"X0.1234 Y-0.5678 Z0.0012\r\n",
+                      pty_link=rospy.get_param("~dprnt_link"), oversize_bytes=1024 * 1024)
 
 
 if __name__ == "__main__":
