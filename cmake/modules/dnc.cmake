@@ -7,6 +7,7 @@ cnc_core_module(cnc_bridge_drip
   src/dnc/drip_feed.cpp
   src/dnc/backup.cpp)
 target_link_libraries(cnc_bridge_drip PUBLIC cnc_bridge_gcode)  # the block lexer of nc_program.cpp
+target_link_libraries(cnc_bridge_drip PUBLIC cnc_bridge_programs)  # the program header the feed checks
 
 # The simulated control, shared by sim_haas_serial and the unit tests that run it in-process.
 add_library(cnc_bridge_dnc_sim STATIC

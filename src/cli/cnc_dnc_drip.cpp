@@ -201,6 +201,10 @@ int runDrip(const std::vector<std::string>& args)
   if (hold_action != "fail" && hold_action != "resume")
     throw ConfigError("--hold-action must be fail or resume");
   drip.on_hold_timeout = hold_action == "resume" ? dnc::HoldTimeoutAction::kResume : dnc::HoldTimeoutAction::kFail;
+  // Checked again on the head the feed reads to send (one open file): a protected program saved
+  // over the file since the check above is not sent.
+  const std::string file = vm["file"].as<std::string>();
+  drip.check_head = [&vm, file](const std::string& head) { checkProtectedContents(vm, file, head); };
 
   dnc::RestartPoint restart;
   restart.line = vm["start-line"].as<uint64_t>();
@@ -215,7 +219,6 @@ int runDrip(const std::vector<std::string>& args)
     text << in.rdbuf();
     preamble = text.str();
   }
-  const std::string file = vm["file"].as<std::string>();
   const dnc::DripPlan plan = dnc::planDrip(file, drip, restart, preamble);
   for (const auto& warning : plan.scan.warnings)
     std::cerr << "cnc_dnc drip: warning: " << warning << "\n";

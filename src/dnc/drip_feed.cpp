@@ -8,12 +8,14 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <deque>
 #include <sstream>
 #include <thread>
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/log.h"
 #include "cnc_bridge/dnc/dnc_codes.h"
+#include "cnc_bridge/programs/program_name.h"
 
 namespace cnc_bridge
 {
@@ -385,6 +387,29 @@ void DripSender::emit(const char* data, size_t size)
   }
 }
 
+std::deque<std::pair<uint64_t, std::string>> DripSender::readAndCheckHead(LineReader& reader) const
+{
+  std::deque<std::pair<uint64_t, std::string>> lines;
+  if (!options_.check_head)
+    return lines;
+  programs::HeaderScanner scanner;
+  std::string head, line;
+  while (!scanner.done() && reader.next(line))
+  {
+    line += '\n';
+    if (head.size() + line.size() > kMaxDripHeadBytes)
+      throw ConfigError("the program holds more than " + std::to_string(kMaxDripHeadBytes) +
+                        " bytes before its first program block: refused");
+    scanner.feed(line);
+    head += line;
+    line.pop_back();
+    lines.emplace_back(reader.lineNumber(), line);
+  }
+  scanner.finish();
+  options_.check_head(head);
+  return lines;
+}
+
 DripResult DripSender::send(const DripPlan& plan, const ProgressCallback& progress, const LineCallback& line_sent)
 {
   const RealtimeScope realtime(options_.realtime_priority);
@@ -404,6 +429,23 @@ DripResult DripSender::send(const DripPlan& plan, const ProgressCallback& progre
   std::string last_block;
   try
   {
+    // One open file for the check and the feed: the head checked is the head sent.
+    LineReader reader(plan.path, options_.max_line_length);
+    std::deque<std::pair<uint64_t, std::string>> head = readAndCheckHead(reader);
+    const auto next_line = [&](uint64_t& number, std::string& text)
+    {
+      if (!head.empty())
+      {
+        number = head.front().first;
+        text = std::move(head.front().second);
+        head.pop_front();
+        return true;
+      }
+      if (!reader.next(text))
+        return false;
+      number = reader.lineNumber();
+      return true;
+    };
     const char dc2 = static_cast<char>(kDc2);
     const char dc4 = static_cast<char>(kDc4);
     if (options_.dc_codes)
@@ -422,12 +464,11 @@ DripResult DripSender::send(const DripPlan& plan, const ProgressCallback& progre
       line += options_.eob;
       emit(line.data(), line.size());
     }
-    LineReader reader(plan.path, options_.max_line_length);
     std::string line;
     std::string sequence;
-    while (reader.next(line))
+    uint64_t n = 0;
+    while (next_line(n, line))
     {
-      const uint64_t n = reader.lineNumber();
       if (n < plan.scan.start_line)
       {
         continue;

@@ -169,6 +169,7 @@ class DripHandlers
     restart.block = job.goal.start_block;
     dnc::DripOptions options = drip_;
     options.cancel = &cancel;
+    options.check_head = job.check_contents;  // the protected range, on the head the feed sends
     const dnc::DripPlan plan = dnc::planDrip(job.path, options, restart, job.goal.restart_preamble);
     if (restart.active())
     {

@@ -272,6 +272,8 @@ TransferResult DncNode::runReserved(TransferGoal goal, const Feedback& feedback,
     return result;
   }
   job.path = check.path;
+  if (job.send)
+    job.check_contents = files_->sendCheck(goal.file);
   counters_.started();
   const std::string transfer_message = (job.send ? "sending " : "receiving ") + goal.file + " (" + goal.protocol + ")";
   state_->update(
@@ -401,9 +403,8 @@ TransferResult DncNode::runXmodem(Transport& link, const TransferJob& job,
   };
   // The protected range is checked again on the bytes read for sending (the file is opened once):
   // a program saved over the file since the request was checked is not sent.
-  const xmodem::FileResult file =
-      dnc::transferByXmodem(link, job.path, job.send, job.goal.protocol, xmodem_config_, text_options_, progress,
-                            cancel, counters_, job.send ? files_->sendCheck(job.goal.file) : nullptr);
+  const xmodem::FileResult file = dnc::transferByXmodem(link, job.path, job.send, job.goal.protocol, xmodem_config_,
+                                                        text_options_, progress, cancel, counters_, job.check_contents);
   TransferResult result;
   result.success = true;
   result.message = file.message;

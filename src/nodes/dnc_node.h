@@ -45,6 +45,8 @@ struct TransferJob
   TransferGoal goal;  ///< as requested (protocol already defaulted to ~xmodem_mode)
   std::string path;   ///< goal.file resolved inside ~program_dir
   bool send = true;   ///< direction == send
+  /// For a send: checks the bytes read to be sent (the protected range), before the first goes out.
+  std::function<void(const std::string& contents)> check_contents;
 };
 
 /// \brief Moves one file over \p link. Reports progress through \p feedback (throttled by the

@@ -123,6 +123,41 @@ TEST(DripSender, SendsFramingLeaderDcCodesAndConvertsEob)
   EXPECT_EQ(2u, result.stopped_at_line);
 }
 
+// The protected range is checked on the head the feed reads to send, from the one file it sends
+// from: a program saved over the file after the plan (here: after planDrip, a protected number
+// behind a comment block) is refused with nothing on the wire; the head handed to the check runs
+// through the first program block; a program that passes is sent whole.
+TEST(DripSender, TheHeadIsCheckedOnTheBytesSentAndARefusalSendsNothing)
+{
+  TempDir dir("test_drip_feed");
+  const auto path = dir.write("O01234.nc", "%\n(PART)\n\nO01234 (OK)\nG0 X1\nM30\n%\n");
+  DripOptions options = fastOptions();
+  options.dc_codes = true;
+  std::string checked;
+  options.check_head = [&](const std::string& head)
+  {
+    checked = head;
+    if (head.find("O09010") != std::string::npos)
+      throw ConfigError("refused: O09010 is in the protected range");
+  };
+  const auto plan = planDrip(path, options);
+  {
+    FakeTransport link;
+    DripSender sender(link, options);
+    const auto result = sender.send(plan);
+    ASSERT_TRUE(result.completed()) << result.message;
+    EXPECT_EQ(checked, "%\n(PART)\n\nO01234 (OK)\n");
+    EXPECT_NE(text(link.written()).find("O01234 (OK)\nG0 X1\nM30\n"), std::string::npos) << text(link.written());
+  }
+  dir.write("O01234.nc", "%\n(PART)\n\nO09010 (PROTECTED)\nG0 X1\nM30\n%\n");  // saved over it since
+  FakeTransport link;
+  DripSender sender(link, options);
+  const auto result = sender.send(plan);
+  EXPECT_FALSE(result.completed());
+  EXPECT_NE(result.message.find("O09010 is in the protected range"), std::string::npos) << result.message;
+  EXPECT_TRUE(link.written().empty()) << "sent before the check: " << text(link.written());
+}
+
 TEST(DripSender, ParityMaskedXoffStopsWithinOneChunkAndXonResumes)
 {
   TempDir dir("test_drip_feed");

@@ -8,8 +8,10 @@
 #include <atomic>
 #include <chrono>
 #include <cstdint>
+#include <deque>
 #include <functional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "cnc_bridge/dnc/nc_program.h"
@@ -68,12 +70,21 @@ struct DripOptions
   Milliseconds start_timeout{0};        ///< how long to wait for that DC1; 0 = forever
   Milliseconds progress_interval{100};  ///< progress callback at most this often (and at the end)
   size_t max_line_length = 4096;
+  /// Called with the program's head as it is about to be sent (the lines before its first program
+  /// block and that block, read from the file the feed sends from), before the first character
+  /// goes out; an exception refuses the feed with nothing sent. The protected range is checked
+  /// here, so the bytes sent are the bytes checked. The head is read up to kMaxDripHeadBytes.
+  std::function<void(const std::string& head)> check_head;
   /// Optional flag another thread sets to cancel (a ROS action preempt); cancel() works as well.
   const std::atomic<bool>* cancel = nullptr;
 
   /// \throws ConfigError for an empty EOB, a chunk of 0 or above the allowance, a negative rate.
   void validate() const;
 };
+
+/// \brief The most a program's head (DripOptions::check_head) may hold: a file with more than this
+/// before its first program block is refused.
+constexpr size_t kMaxDripHeadBytes = 1024 * 1024;
 
 /// \brief Characters the paced line still carries when the next write goes out (see
 /// DripOptions::xoff_allowance); 0 when the chunk leaves no room.
@@ -177,6 +188,9 @@ class DripSender
  private:
   class Stopped;  // thrown inside send() to unwind on cancel
   void emit(const char* data, size_t size);
+  /// The lines before the program's first block and that block, read and handed to
+  /// DripOptions::check_head (nothing when it is not set). \throws what the check throws.
+  std::deque<std::pair<uint64_t, std::string>> readAndCheckHead(LineReader& reader) const;
   void gate();
   bool cancelRequested() const { return cancelled_ || (options_.cancel != nullptr && *options_.cancel); }
   void pollInput(Milliseconds timeout);
