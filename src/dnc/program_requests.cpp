@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <chrono>
 #include <sstream>
+#include <utility>
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/dnc/backup.h"
@@ -48,7 +49,10 @@ RequestWire parseRequestWire(const std::string& text)
   throw ConfigError("request mode '" + text + "' is not one of xmodem, drip");
 }
 
-RequestListener::RequestListener(Transport& link, RequestListenerOptions options) : link_(link), options_(options) {}
+RequestListener::RequestListener(Transport& link, RequestListenerOptions options)
+    : link_(link), options_(std::move(options))
+{
+}
 
 std::optional<Punch> RequestListener::listen(const std::atomic<bool>& stop, const StartCallback& may_start,
                                              Milliseconds start_timeout, const std::atomic<bool>* cancel)

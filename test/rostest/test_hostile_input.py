@@ -177,7 +177,7 @@ def failed(value):
     return getattr(value, "success", True) is False
 
 
-# Values no wire carries exactly (issue 26, "exact or refused"): a row with one of these in a number
+# Values no wire carries exactly ("exact or refused", docs/SAFETY.md): a row with one of these in a number
 # field must not succeed.
 NOT_REPRESENTABLE = ("NaN", "+inf", "-inf", "1e300")
 # Names no file system takes: a row with one of these as a file name must not succeed.
@@ -343,7 +343,7 @@ class HostileInput(unittest.TestCase):
     # --- the tests --------------------------------------------------------------------------------
 
     def test_a_directory_named_as_the_program_fails_and_frees_the_node(self):
-        """Issue 26, finding 1: the read of a directory threw past the transfer; through the service
+        """A directory named as the program: its read once threw past the transfer; through the service
         the transfer slot, the port and the port lock stayed held, through the action the node died.
         Now the call fails naming the file, the node lives, and a valid transfer runs at once."""
         for node, peer_file in (("dnc_node", os.path.join(self.sandbox, "control", "O05555.nc")),

@@ -83,7 +83,7 @@ class PtyConnection:
             except BlockingIOError:  # the node is not reading: wait for it as a socket would
                 if time.monotonic() > end:
                     raise socket.timeout()
-                time.sleep(0.01)
+                time.sleep(0.01)  # poll: a full pty buffer has no event to wait on here
                 self.drain()
 
     def sendall(self, data):
@@ -168,7 +168,7 @@ class HostilePeers(unittest.TestCase):
         while time.monotonic() < end:
             if predicate():
                 return
-            rospy.sleep(0.05)
+            rospy.sleep(0.05)  # poll: the condition reads states another thread records
         self.fail("timed out waiting for " + what)
 
     def assert_well(self, node, pid, after):
@@ -244,7 +244,7 @@ class HostilePeers(unittest.TestCase):
             return ""
 
         def silent(conn):
-            rospy.sleep(3.0)
+            rospy.sleep(3.0)  # under test: a peer that never answers, for a span of time
             return ""
 
         case("a flooding peer", flood)

@@ -84,7 +84,7 @@ struct DripOptions
 
 /// \brief The most a program's head (DripOptions::check_head) may hold: a file with more than this
 /// before its first program block is refused.
-constexpr size_t kMaxDripHeadBytes = 1024 * 1024;
+constexpr size_t kMaxDripHeadBytes = size_t{1024} * 1024;
 
 /// \brief Characters the paced line still carries when the next write goes out (see
 /// DripOptions::xoff_allowance); 0 when the chunk leaves no room.
