@@ -86,6 +86,9 @@ DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh)
       std::make_unique<programs::ProgramArchive>(pnh.param<std::string>("archive_dir", programs_->root() + ".archive"),
                                                  static_cast<unsigned>(std::max(1, pnh.param("archive_keep", 20))));
   files_ = std::make_unique<dnc::TransferFiles>(*programs_, *protected_, *name_pattern_, *archive_);
+  // ~enable_motion (bool, default false) and ~set_motion_enabled: a drip-feed (a goal or a
+  // control's request answered by drip) runs the program on the control as it arrives.
+  motion_ = std::make_unique<RuntimeSwitch>(pnh, "motion", "enable_motion", "set_motion_enabled");
   // ~xmodem_mode (string, default "xmodem"): protocol when a request leaves it empty. A Haas
   // speaks XModem checksum only (xmodem); xmodem-crc and xmodem-1k suit PC-based controls.
   pnh.param<std::string>("xmodem_mode", default_protocol_, "xmodem");
@@ -272,6 +275,13 @@ TransferResult DncNode::runReserved(TransferGoal goal, const Feedback& feedback,
     return result;
   }
   job.path = check.path;
+  // A drip-feed runs the program on the control as it arrives (in DNC mode the control executes
+  // each block it receives): the motion switch gates it, as it gates every node's motion.
+  if (job.send && goal.protocol == "drip" && !motion_->enabled())
+  {
+    result.message = "refused: " + motion_->refusal("a drip-feed (the control runs it as it arrives)");
+    return result;
+  }
   if (job.send)
     job.check_contents = files_->sendCheck(goal.file);
   counters_.started();

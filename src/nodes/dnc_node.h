@@ -34,6 +34,7 @@
 #include "cnc_bridge/programs/program_name.h"
 #include "cnc_bridge/programs/program_request.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
+#include "cnc_bridge/ros/runtime_switch.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
 
@@ -123,6 +124,7 @@ class DncNode
   ros::NodeHandle pnh_;
   SerialSettings serial_;
   std::unique_ptr<ProgramDirectory> programs_;
+  std::unique_ptr<RuntimeSwitch> motion_;                ///< gates drip-feeds (~enable_motion)
   std::unique_ptr<programs::ProtectedRange> protected_;  ///< refused on send unless allowed
   std::unique_ptr<programs::NamePattern> name_pattern_;
   std::unique_ptr<programs::ProgramArchive> archive_;  ///< every program sent or received, versioned

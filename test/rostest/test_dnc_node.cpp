@@ -359,6 +359,34 @@ TEST_F(DncNodeTest, AProtectedNumberAfterACommentBlockIsRefusedAndTheControlRece
   EXPECT_EQ(stored(), before);  // the control stored nothing
 }
 
+// A drip-feed runs the program on the control as it arrives: with ~enable_motion at its default
+// (false) it is refused, naming the switch and the parameter, before the port is opened, and the
+// control stores nothing; an XModem send (no motion) goes through at once afterwards.
+TEST_F(DncNodeTest, ADripFeedIsRefusedWhileMotionIsDisabledAndTheControlReceivesNothing)
+{
+  std::string contents = readFile(param("program"));
+  contents.replace(contents.find("O05555"), 6, "O05556");
+  writeProgram("O05556.nc", contents);
+  cnc_bridge::SendProgram drip;
+  drip.request.file = "O05556.nc";
+  drip.request.protocol = "drip";
+  ASSERT_TRUE(send_.call(drip));
+  EXPECT_FALSE(drip.response.success);
+  EXPECT_EQ(drip.response.message.rfind("refused: a drip-feed", 0), 0u) << drip.response.message;
+  EXPECT_NE(drip.response.message.find("dnc_node/set_motion_enabled"), std::string::npos) << drip.response.message;
+  EXPECT_NE(drip.response.message.find("dnc_node/enable_motion"), std::string::npos) << drip.response.message;
+  EXPECT_EQ(drip.response.bytes, 0u);
+  EXPECT_FALSE(exists(control_dir_ + "/O05556.nc"));
+  // The port is free and the control in step: an XModem send (no motion) stores the program whole,
+  // with nothing of the refused feed before it.
+  cnc_bridge::SendProgram xmodem;
+  xmodem.request.file = "O05556.nc";
+  ASSERT_TRUE(send_.call(xmodem));
+  EXPECT_TRUE(xmodem.response.success) << xmodem.response.message;
+  ASSERT_TRUE(waitForFile(control_dir_ + "/O05556.nc", 10));
+  EXPECT_EQ(readFile(control_dir_ + "/O05556.nc"), contents);
+}
+
 int main(int argc, char** argv)
 {
   ::testing::InitGoogleTest(&argc, argv);
