@@ -56,6 +56,14 @@ std::string busyRefusal(const std::string& device, const std::string& running, c
                : "; a service call runs to its end: wait for it");
 }
 
+void setMaxProgramBytes(xmodem::Config& config, long long max_bytes, const std::string& parameter)
+{
+  if (max_bytes < 1)
+    throw ConfigError(parameter + " must be at least 1 (bytes), not " + std::to_string(max_bytes));
+  config.max_bytes = static_cast<uint64_t>(max_bytes);
+  config.max_bytes_name = parameter;
+}
+
 xmodem::Config xmodemConfig(const XmodemWaits& waits, double characters_per_second)
 {
   xmodem::Config config;

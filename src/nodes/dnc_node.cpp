@@ -105,14 +105,10 @@ DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   // SUB padding of the last block).
   pnh.param("binary", text_options_.binary, false);
   xmodem_config_ = dnc::xmodemConfig(xmodemWaits(pnh), serial_.charactersPerSecond());
-  // ~max_program_bytes (int, default 16 MiB): the longest program moved by XModem. XModem has no
-  // length field: a control (or anything on the line) that sends more is cancelled with CANs and
-  // nothing is stored; a larger file is not sent.
-  const int max_bytes = pnh.param("max_program_bytes", static_cast<int>(xmodem::kDefaultMaxProgramBytes));
-  if (max_bytes < 1)
-    throw ConfigError("~max_program_bytes must be at least 1 (bytes), not " + std::to_string(max_bytes));
-  xmodem_config_.max_bytes = static_cast<uint64_t>(max_bytes);
-  xmodem_config_.max_bytes_name = "~max_program_bytes";
+  // ~max_program_bytes (int, default 16 MiB): the longest program moved by XModem.
+  dnc::setMaxProgramBytes(xmodem_config_,
+                          pnh.param("max_program_bytes", static_cast<int>(xmodem::kDefaultMaxProgramBytes)),
+                          "~max_program_bytes");
   // ~feedback_rate (Hz, default 20): action feedback at most this often (and after the last block).
   feedback_period_ = ros::Duration(1.0 / params::positive(pnh, "feedback_rate", 20.0));
 

@@ -232,3 +232,22 @@ TEST(TransferGate, StopEndsTheListener)
   gate.pauseListener(std::chrono::seconds(10));  // stopped: no pause
   EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(5));
 }
+
+// ~max_program_bytes / --max-bytes: the cap and the name its errors give; less than a byte refused.
+TEST(TransferRules, MaxProgramBytesIsSetWithItsNameAndAtLeastOneByte)
+{
+  xmodem::Config config;
+  dnc::setMaxProgramBytes(config, 4096, "~max_program_bytes");
+  EXPECT_EQ(config.max_bytes, 4096u);
+  EXPECT_EQ(config.max_bytes_name, "~max_program_bytes");
+  try
+  {
+    dnc::setMaxProgramBytes(config, 0, "~max_program_bytes");
+    ADD_FAILURE() << "0 bytes accepted";
+  }
+  catch (const ConfigError& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("~max_program_bytes must be at least 1 (bytes), not 0"), std::string::npos);
+  }
+  EXPECT_EQ(config.max_bytes, 4096u) << "a refused value changed the cap";
+}

@@ -79,6 +79,11 @@ struct XmodemWaits
 /// \brief The session configuration for \p waits on a line moving \p characters_per_second.
 xmodem::Config xmodemConfig(const XmodemWaits& waits, double characters_per_second);
 
+/// \brief Caps \p config at \p max_bytes of program (XModem has no length field: a peer that sends
+/// more is cancelled, nothing stored; a larger file is not sent); errors name \p parameter.
+/// \throws ConfigError for fewer than 1 byte.
+void setMaxProgramBytes(xmodem::Config& config, long long max_bytes, const std::string& parameter);
+
 /// \brief Progress reports at most every period, and always the last one (the end of the file).
 class ProgressThrottle
 {
