@@ -75,6 +75,7 @@ DEBIAN_OF_KEY = {
     "python3-matplotlib": ["python3-matplotlib"],
     "python3-yaml": ["python3-yaml"],
     "lrzsz": ["lrzsz"],
+    "ser2net": ["ser2net"],
     "socat": ["socat"],
     "python3-xmodem": ["python3-xmodem"],
     "rt-tests": ["rt-tests"],
@@ -136,6 +137,7 @@ ROSDEP_SYSTEM_KEYS = {
 # Keys without a rosdep rule, with what a user does instead (docs/INSTALL.md says the same).
 ROSDEP_EXCEPTIONS = {
     "lrzsz": "test peer (sx/rx); no rosdep key: apt-get install lrzsz",
+    "ser2net": "test peer (a serial device server); no rosdep key: apt-get install ser2net",
     "python3-xmodem": "test peer; no rosdep key: apt-get install python3-xmodem",
     "libsmbclient-dev": "Samba's client library (the SMB program store); no rosdep key: apt-get install libsmbclient-dev",
     "samba": "test peer (smbd, smbpasswd); no rosdep key: apt-get install samba",
@@ -183,6 +185,7 @@ PROGRAM_PACKAGES = {
     "convert": ["imagemagick"],
     "socat": ["socat"],
     "sx": ["lrzsz"], "rx": ["lrzsz"],
+    "ser2net": ["ser2net"],
     "cyclictest": ["rt-tests"],
     "ip": ["iproute2"],  # the two-host test's network namespaces
     "pgrep": ["procps"],

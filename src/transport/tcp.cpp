@@ -2,6 +2,13 @@
 #include "cnc_bridge/transport/tcp.h"
 #include "cnc_bridge/transport/port_doctor.h"
 
+#include <linux/sockios.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <sys/ioctl.h>
+#include <sys/socket.h>
+
+#include <algorithm>
 #include <boost/asio/connect.hpp>
 
 namespace cnc_bridge
@@ -82,6 +89,35 @@ void TcpConnection::shutdownSend()
 {
   boost::system::error_code ignored;
   stream_.shutdown(tcp::socket::shutdown_send, ignored);
+}
+
+void TcpConnection::failUnansweredWithin(std::chrono::seconds within)
+{
+  // Idle: the first probe after a third of the time, then two more a sixth apart; sending:
+  // unacknowledged data for the whole time. Options the kernel refuses leave the defaults.
+  const int fd = stream_.native_handle();
+  const int seconds = static_cast<int>(within.count());
+  const int on = 1;
+  const int idle = std::max(1, seconds / 3);
+  const int interval = std::max(1, seconds / 6);
+  const int probes = 3;
+  const unsigned user_timeout_ms = static_cast<unsigned>(seconds) * 1000;
+  ::setsockopt(fd, SOL_SOCKET, SO_KEEPALIVE, &on, sizeof on);
+  ::setsockopt(fd, IPPROTO_TCP, TCP_KEEPIDLE, &idle, sizeof idle);
+  ::setsockopt(fd, IPPROTO_TCP, TCP_KEEPINTVL, &interval, sizeof interval);
+  ::setsockopt(fd, IPPROTO_TCP, TCP_KEEPCNT, &probes, sizeof probes);
+  ::setsockopt(fd, IPPROTO_TCP, TCP_USER_TIMEOUT, &user_timeout_ms, sizeof user_timeout_ms);
+}
+
+size_t TcpConnection::unacknowledged() const
+{
+  int queued = 0;
+  auto& socket = const_cast<tcp::socket&>(stream_);
+  if (!socket.is_open() || ::ioctl(socket.native_handle(), SIOCOUTQ, &queued) != 0 || queued < 0)
+  {
+    return 0;
+  }
+  return static_cast<size_t>(queued);
 }
 
 TcpServer::TcpServer(uint16_t port, const std::string& address) : acceptor_(io_), address_(address)

@@ -44,8 +44,9 @@ bool runWithTimeout(boost::asio::io_context& io, Milliseconds timeout, Start sta
 }  // namespace detail
 
 /// \brief Transport over a Boost.Asio stream. Thread-safe only for interrupt().
-template <class Stream>
-class AsioStreamTransport : public Transport
+/// \tparam Base Transport or an interface derived from it (SerialLine).
+template <class Stream, class Base = Transport>
+class AsioStreamTransport : public Base
 {
  public:
   using Transport::write;
@@ -111,7 +112,7 @@ class AsioStreamTransport : public Transport
     throwIfInterrupted();
     if (!completed)
     {
-      throw TimeoutError(describe() + ": the link did not take " + std::to_string(size) + " bytes within " +
+      throw TimeoutError(this->describe() + ": the link did not take " + std::to_string(size) + " bytes within " +
                          std::to_string(timeout.count()) + " ms (flow control holding?)");
     }
     if (error)
@@ -143,9 +144,9 @@ class AsioStreamTransport : public Transport
     close();
     if (error == boost::asio::error::eof)
     {
-      throw LinkError(describe() + ": the peer closed the connection");
+      throw LinkError(this->describe() + ": the peer closed the connection");
     }
-    throw LinkError(describe() + ": " + error.message());
+    throw LinkError(this->describe() + ": " + error.message());
   }
 
   void cancelStream()
@@ -158,7 +159,7 @@ class AsioStreamTransport : public Transport
   {
     if (!stream_.is_open())
     {
-      throw LinkError(describe() + ": not open");
+      throw LinkError(this->describe() + ": not open");
     }
   }
 
@@ -166,7 +167,7 @@ class AsioStreamTransport : public Transport
   {
     if (interrupted_.exchange(false))
     {
-      throw CancelledError(describe() + ": cancelled");
+      throw CancelledError(this->describe() + ": cancelled");
     }
   }
 

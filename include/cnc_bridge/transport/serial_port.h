@@ -1,5 +1,5 @@
-// RS-232 serial port in raw mode with every line option the controls need: Haas settings 11 (baud),
-// 12 (parity), 13 (stop bits), 37 (data bits) and the flow control of DNC drip-feed.
+// A local RS-232 port (or a pty) in raw mode with every line option the controls need
+// (serial_settings.h). Nodes open it through openSerialLine(), which also reaches device servers.
 #pragma once
 
 #include <sys/types.h>
@@ -9,59 +9,13 @@
 #include <string>
 
 #include "cnc_bridge/transport/asio_stream.h"
+#include "cnc_bridge/transport/serial_line.h"
+#include "cnc_bridge/transport/serial_settings.h"
 
 namespace cnc_bridge
 {
-enum class Parity
-{
-  kNone,
-  kEven,
-  kOdd
-};
-
-enum class FlowControl
-{
-  kNone,
-  kXonXoff,  ///< handled by the kernel (IXON/IXOFF); drip-feed may handle DC1/DC3 itself instead
-  kRtsCts
-};
-
-/// \brief Bits on the wire per character: start + data + parity + stop.
-unsigned bitsPerCharacter(unsigned data_bits, bool parity, unsigned stop_bits);
-
-/// \brief Line settings of a serial port. Defaults: 9600 8N1, no flow control.
-struct SerialSettings
-{
-  std::string device;
-  unsigned baud = 9600;
-  unsigned data_bits = 8;  ///< 5..8; 7 with even parity is the ISO tape code of older controls
-  Parity parity = Parity::kNone;
-  unsigned stop_bits = 1;  ///< 1 or 2
-  FlowControl flow_control = FlowControl::kNone;
-
-  /// \brief "/dev/ttyUSB0@9600 8N1" for messages.
-  std::string describe() const;
-  /// \throws ConfigError if a value is out of range.
-  void validate() const;
-  /// \brief Characters the line carries per second: baud over start, data, parity and stop bits.
-  double charactersPerSecond() const;
-};
-
-Parity parseParity(const std::string& text);            ///< none|even|odd; \throws ConfigError
-FlowControl parseFlowControl(const std::string& text);  ///< none|xonxoff|rtscts; \throws ConfigError
-const char* toString(Parity parity);
-const char* toString(FlowControl flow);
-
-/// \brief What SerialPort does with the bytes the driver holds when the port is opened.
-enum class InputOnOpen
-{
-  kDiscard,  ///< drop them: a poller's stale replies belong to no query of this port
-  kKeep,     ///< keep them: a control's request sent before the open (an XModem receiver's NAK or
-             ///< 'C', a DC3, the start of a punch) is meant for whoever opens the port next
-};
-
 /// \brief A serial port (or pty slave) opened raw. Thread-safe only for interrupt().
-class SerialPort : public AsioStreamTransport<boost::asio::serial_port>
+class SerialPort : public AsioStreamTransport<boost::asio::serial_port, SerialLine>
 {
  public:
   /// \brief Opens and configures the port.
@@ -84,16 +38,18 @@ class SerialPort : public AsioStreamTransport<boost::asio::serial_port>
   size_t pendingOutput() const override;
   void discardInput() override;
   std::string describe() const override { return settings_.describe(); }
-  const SerialSettings& settings() const { return settings_; }
-  /// \brief Sets the line settings on the device again: another program that shares the line (a
-  /// DNC transfer between two status polls) may have changed them, and they belong to the device,
-  /// not to this open port. \throws LinkError.
-  void applySettings();
+  const SerialSettings& settings() const override { return settings_; }
+  /// \brief Sets the line settings on the device again (termios). \throws LinkError.
+  void applySettings() override;
+  /// \brief XON/XOFF in the kernel (IXON/IXOFF), RTS/CTS (CRTSCTS) or none. \throws LinkError.
+  void setFlowControl(FlowControl flow) override;
 
   /// \brief Native file descriptor, for ioctls the interface does not cover (modem lines).
   int nativeHandle() { return stream_.native_handle(); }
 
  private:
+  void configure(FlowControl flow);
+
   SerialSettings settings_;
   dev_t device_number_ = 0;  ///< of the device opened
   std::chrono::steady_clock::time_point next_device_check_;

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <boost/asio/ip/tcp.hpp>
+#include <chrono>
 #include <memory>
 #include <string>
 
@@ -25,6 +26,12 @@ class TcpConnection : public AsioStreamTransport<boost::asio::ip::tcp::socket>
   std::string describe() const override { return description_; }
   /// \brief Half-closes our sending side (the peer reads end of stream).
   void shutdownSend();
+  /// \brief Makes a peer that stops answering fail the connection within about \p within: keepalive
+  /// probes while idle, a limit on unacknowledged data while sending (TCP_USER_TIMEOUT). Without
+  /// them a cable pulled on the peer's side leaves reads waiting for hours.
+  void failUnansweredWithin(std::chrono::seconds within);
+  /// \returns bytes written that the peer has not acknowledged yet (SIOCOUTQ); 0 if unknown.
+  size_t unacknowledged() const;
 
  private:
   friend class TcpServer;
