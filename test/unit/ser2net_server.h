@@ -19,8 +19,6 @@
 #include <string>
 #include <thread>
 
-#include "cnc_bridge/transport/tcp.h"
-
 namespace cnc_bridge::test
 {
 class Ser2netServer
@@ -29,7 +27,7 @@ class Ser2netServer
   /// Writes the configuration for \p device with the server's own line settings \p line (ser2net's
   /// notation, "9600n81"); starts the server.
   Ser2netServer(const std::string& dir, const std::string& device, const std::string& line = "9600n81")
-    : dir_(dir), device_(device), line_(line)
+      : dir_(dir), device_(device), line_(line)
   {
     raw_port = freePort();
     rfc2217_port = freePort();
@@ -115,17 +113,25 @@ class Ser2netServer
         << "  connector: serialdev," << device_ << "," << line_ << ",local\n";
   }
 
+  /// Whether something listens on 127.0.0.1:\p port, read from /proc/net/tcp rather than by
+  /// connecting: a connection would make ser2net open the device, and a client connecting while it
+  /// still closes that one is turned away as a second client.
   static bool accepts(unsigned port)
   {
-    try
+    std::ifstream table("/proc/net/tcp");
+    std::string line;
+    std::getline(table, line);  // the header
+    char wanted[32];
+    std::snprintf(wanted, sizeof wanted, "0100007F:%04X", port);
+    while (std::getline(table, line))
     {
-      TcpConnection::connect("127.0.0.1", static_cast<uint16_t>(port), std::chrono::milliseconds(200));
-      return true;
+      std::istringstream fields(line);
+      std::string slot, local, remote, state;
+      fields >> slot >> local >> remote >> state;
+      if (local == wanted && state == "0A")  // TCP_LISTEN
+        return true;
     }
-    catch (const std::exception&)
-    {
-      return false;
-    }
+    return false;
   }
 
   static unsigned freePort()
