@@ -18,6 +18,26 @@ namespace dprnt
 {
 namespace
 {
+/// "state: position | commanded_position": the point is also the machine's position in the node's
+/// state (and tf), which is in the machine frame.
+StateField parseStateField(const YAML::Node& node, const std::string& frame, const std::string& where)
+{
+  if (!node)
+    return StateField::kNone;
+  const std::string text = node.as<std::string>();
+  StateField field;
+  if (text == "position")
+    field = StateField::kPosition;
+  else if (text == "commanded_position")
+    field = StateField::kCommandedPosition;
+  else
+    throw ConfigError(where + ": \"state\" must be position or commanded_position, not \"" + text + "\"");
+  if (frame != "machine")
+    throw ConfigError(where + ": \"state: " + text + "\" needs \"frame: machine\" (the state's positions are in " +
+                      "the machine frame; a work-frame point would need the work offset)");
+  return field;
+}
+
 ValueSource parseSource(const YAML::Node& node, const std::string& where)
 {
   ValueSource source;
@@ -199,6 +219,8 @@ RuleSet RuleSet::fromYaml(const std::string& text, const std::string& default_un
           throw ConfigError(where + R"(: "program" must be a capture group ("$1"))");
         rule.program_group = program.group;
       }
+      if (rule.type != OutputType::kPoint && node["state"])
+        throw ConfigError(where + ": \"state\" is for point rules (a position)");
       switch (rule.type)
       {
         case OutputType::kPoint:
@@ -213,6 +235,7 @@ RuleSet RuleSet::fromYaml(const std::string& text, const std::string& default_un
           rule.frame = node["frame"] ? node["frame"].as<std::string>() : "work";
           if (rule.frame.empty())
             throw ConfigError(where + ": \"frame\" is empty");
+          rule.state = parseStateField(node["state"], rule.frame, where);
           break;
         case OutputType::kFloat64:
           // A plain number is not necessarily a length: scaled only when units are given.

@@ -293,6 +293,12 @@ void DprntNode::publishRule(const dprnt::RuleOutput& output, const std::string& 
       point.point.z = output.z;
       pubs.live.publish(point);
       pubs.last.publish(point);
+      // The state's positions are what the control printed, no more: valid from the first such
+      // line on, in the machine frame (the rule says which of the two it is).
+      if (rule.state == dprnt::StateField::kPosition)
+        state_->setPosition(output.x, output.y, output.z);
+      else if (rule.state == dprnt::StateField::kCommandedPosition)
+        state_->setCommandedPosition(output.x, output.y, output.z);
       break;
     }
     case dprnt::OutputType::kFloat64:

@@ -93,6 +93,17 @@ class TestDprntNode(unittest.TestCase):
         self.assertAlmostEqual(msg.point.y, -3.25 * INCH, delta=1e-12)
         self.assertAlmostEqual(msg.point.z, 0.0035 * INCH, delta=1e-12)
 
+    def test_machine_position_rule_sets_the_reported_position_in_state(self):
+        # The shipped rule marks the MACHINE line as the position the control reported (state:
+        # position): the node's state carries it, valid, and commands nothing.
+        msg = self.state.wait(lambda m: m.position_valid)
+        self.assertIsNotNone(msg, "no state with a valid position after the MACHINE line")
+        self.assertAlmostEqual(msg.position.x, -12.5 * INCH, delta=1e-12)
+        self.assertAlmostEqual(msg.position.y, -3.25 * INCH, delta=1e-12)
+        self.assertAlmostEqual(msg.position.z, 0.0035 * INCH, delta=1e-12)
+        self.assertFalse(msg.commanded_valid)
+        self.assertEqual(msg.header.frame_id, self.prefix + "machine")
+
     def test_z_offset_is_the_last_cell_in_metres(self):
         msg = self.offsets.wait(lambda m: True)
         self.assertIsNotNone(msg)

@@ -349,6 +349,27 @@ TEST(DprntRules, PointInInchesBecomesMetres)
   EXPECT_TRUE(run(rules, "X1 Y2 Z3").empty());
 }
 
+TEST(DprntRules, AMachinePositionRuleSaysWhichStatePositionItIs)
+{
+  const RuleSet rules = RuleSet::fromYaml(R"(
+rules:
+  - {name: reported, type: point, regex: '^MACHINE', frame: machine, state: position}
+  - {name: commanded, type: point, regex: '^BLOCK END', frame: machine, state: commanded_position}
+  - {name: probe, type: point, regex: '^PROBE'}
+)",
+                                          "mm");
+  ASSERT_EQ(rules.rules().size(), 3u);
+  EXPECT_EQ(rules.rules()[0].state, StateField::kPosition);
+  EXPECT_EQ(rules.rules()[1].state, StateField::kCommandedPosition);
+  EXPECT_EQ(rules.rules()[2].state, StateField::kNone);
+  // The shipped rules: the MACHINE line of config/dprnt/grid_probe.nc is the reported position.
+  const RuleSet shipped = RuleSet::fromFile(std::string(CONFIG_DIR) + "/dprnt_rules.yaml", "inch");
+  const auto machine = std::find_if(shipped.rules().begin(), shipped.rules().end(),
+                                    [](const Rule& r) { return r.name == "machine_position"; });
+  ASSERT_NE(machine, shipped.rules().end());
+  EXPECT_EQ(machine->state, StateField::kPosition);
+}
+
 TEST(DprntRules, RegexGroupsAndLabelSets)
 {
   const RuleSet rules = RuleSet::fromYaml(kRules);
@@ -421,6 +442,13 @@ TEST(DprntRules, InvalidRulesAreRejectedWithTheirName)
             std::string::npos);
   EXPECT_NE(message("rules: [{name: a, type: float64, labels: [X], topic: /abs}]").find("relative"), std::string::npos);
   EXPECT_NE(message("rules: {{{").find("YAML"), std::string::npos);
+  EXPECT_NE(message("rules: [{name: a, type: point, labels: [X], state: position}]").find("needs \"frame: machine\""),
+            std::string::npos);
+  EXPECT_NE(message("rules: [{name: a, type: point, labels: [X], frame: machine, state: spindle}]")
+                .find("position or commanded_position"),
+            std::string::npos);
+  EXPECT_NE(message("rules: [{name: a, type: float64, labels: [X], state: position}]").find("point rules"),
+            std::string::npos);
   EXPECT_THROW(RuleSet::fromFile("/nonexistent/rules.yaml"), ConfigError);
   EXPECT_TRUE(RuleSet::fromYaml("rules:").rules().empty());
 }

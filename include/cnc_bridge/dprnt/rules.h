@@ -33,6 +33,14 @@ enum class CycleEventKind : uint8_t
   kAlarm = 5
 };
 
+/// \brief What a point rule's point also is in the node's MachineState.
+enum class StateField
+{
+  kNone,               ///< nothing: the point is only published on the rule's topics
+  kPosition,           ///< the tool position the control reported (#5021.. machine position)
+  kCommandedPosition,  ///< the position the program commanded (#5001.. block end position)
+};
+
 /// \brief Where a rule takes a value from: a label of the parsed line, or a capture group of its
 /// regular expression (written "$1" in YAML). Empty: the first value of the line.
 struct ValueSource
@@ -48,8 +56,9 @@ struct Rule
 {
   std::string name;  ///< unique; also names the latched topic dprnt/last/<name>
   OutputType type = OutputType::kFloat64;
-  std::string topic;  ///< relative topic name; default "dprnt/<name>"
-  std::string frame;  ///< points: "machine", "work" (tf_prefix added by the node) or any frame id
+  std::string topic;                     ///< relative topic name; default "dprnt/<name>"
+  std::string frame;                     ///< points: "machine", "work" (tf_prefix added by the node) or any frame id
+  StateField state = StateField::kNone;  ///< points in the machine frame only
   std::string regex_text;
   bool has_regex = false;
   std::regex regex;
