@@ -112,7 +112,10 @@ EthernutNode::EthernutNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   markers_pub_ = nh_.advertise<visualization_msgs::MarkerArray>("job/markers", 1, true);
   pause_srv_ = advertiseGuardedService(pnh_, "pause", &EthernutNode::onPause, this);
   resume_srv_ = advertiseGuardedService(pnh_, "resume", &EthernutNode::onResume, this);
+  clear_srv_ = advertiseGuardedService(pnh_, "clear", &EthernutNode::onClear, this);
   reset_srv_ = advertiseGuardedService(pnh_, "reset", &EthernutNode::onReset, this);
+  sync_oled_srv_ = advertiseGuardedService(pnh_, "sync_oled", &EthernutNode::onSyncOled, this);
+  board_command_srv_ = advertiseGuardedService(pnh_, "board_command", &EthernutNode::onBoardCommand, this);
   kill_srv_ = advertiseGuardedService(pnh_, "kill", &EthernutNode::onKill, this);
   mode_srv_ = advertiseGuardedService(pnh_, "set_mode", &EthernutNode::onSetMode, this);
   action_.start();
@@ -276,6 +279,12 @@ void EthernutNode::runSession()
 {
   const Session s = session();
   s.client->run();
+  if (reset_requested_.exchange(false))
+  {
+    // The end of the session closes the connection, as the qCNC's reset does; the link comes back
+    // with the backoff, and the state says why it went.
+    throw LinkError("reset: the connection was closed as ~reset does (the board cleared to 0/0/0); reconnecting");
+  }
   if (s.client->state() == ethernut::SessionState::kStandalone)
   {
     std::lock_guard<std::mutex> lock(mutex_);

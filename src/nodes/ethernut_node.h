@@ -12,12 +12,14 @@
 #include <ros/ros.h>
 #include <std_srvs/Trigger.h>
 
+#include <atomic>
 #include <condition_variable>
 #include <memory>
 #include <mutex>
 #include <optional>
 #include <string>
 
+#include "cnc_bridge/EthernutCoordinates.h"
 #include "cnc_bridge/EthernutSetMode.h"
 #include "cnc_bridge/RunJobAction.h"
 #include "cnc_bridge/common/job_hold.h"
@@ -113,7 +115,10 @@ class EthernutNode : public ethernut::ClientListener
   bool onResume(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   std::string releaseHolds();
   void onMotionSwitched(bool enabled, const std::string& caller);
+  bool onClear(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   bool onReset(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
+  bool onSyncOled(EthernutCoordinates::Request& req, EthernutCoordinates::Response& res);
+  bool onBoardCommand(EthernutCoordinates::Request& req, EthernutCoordinates::Response& res);
   bool onKill(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   bool onSetMode(EthernutSetMode::Request& req, EthernutSetMode::Response& res);
   bool leaveStandalone(ethernut::BoardMode mode, EthernutSetMode::Response& res);
@@ -157,7 +162,10 @@ class EthernutNode : public ethernut::ClientListener
   std::unique_ptr<MachineStatePublisher> state_;
   ros::Publisher path_pub_;
   ros::Publisher markers_pub_;
-  ros::ServiceServer pause_srv_, resume_srv_, reset_srv_, kill_srv_, mode_srv_;
+  ros::ServiceServer pause_srv_, resume_srv_, clear_srv_, reset_srv_, kill_srv_, mode_srv_, sync_oled_srv_,
+      board_command_srv_;
+  /// ~reset asked for the connection to be closed: the session's end is that, not a failure.
+  std::atomic<bool> reset_requested_{false};
   SingleGoalActionServer<RunJobAction> action_;
 
   std::mutex mutex_;  // session_, standalone_, stopping_, options_.initial_mode

@@ -1,6 +1,10 @@
 // ethernut_node (src/nodes/ethernut_node.h): the client's events as state, and the
-// services (pause, resume, reset, kill, set_mode, and the motion switch's effect on a running job).
+// services (pause, resume, clear, reset, sync_oled, board_command, kill, set_mode, and the motion
+// switch's effect on a running job).
 #include "ethernut_node.h"
+
+#include <cmath>
+#include <limits>
 
 namespace cnc_bridge
 {
@@ -241,6 +245,22 @@ void EthernutNode::onMotionSwitched(bool enabled, const std::string& caller)
 }
 
 // ~reset: the board's reset opcode (99, 0) also drives the axes to 0/0/0, so it is motion.
+// ~clear and ~reset send the same opcode (row 8: the job cancelled, memory cleared, the axes to
+// 0/0/0); "Reset also terminates all active connections" (qCNC): ~reset then closes the
+// connection and the link reconnects. Both move the axes, so both are behind the motion switch.
+bool EthernutNode::onClear(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigger::Response& res)
+{
+  std::lock_guard<std::mutex> gate(motion_mutex_);
+  if (!motion_->enabled())
+  {
+    res.success = false;
+    res.message = motion_->refusal("clear");
+    return true;
+  }
+  return command(res, "clear: job cancelled, board cleared to 0/0/0; the connection kept",
+                 [](ethernut::Client& c) { c.reset(); });
+}
+
 bool EthernutNode::onReset(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigger::Response& res)
 {
   std::lock_guard<std::mutex> gate(motion_mutex_);
@@ -250,7 +270,60 @@ bool EthernutNode::onReset(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigge
     res.message = motion_->refusal("reset");
     return true;
   }
-  return command(res, "reset: job cancelled, board cleared to 0/0/0", [](ethernut::Client& c) { c.reset(); });
+  return command(res, "reset: job cancelled, board cleared to 0/0/0; the connection closed, reconnecting",
+                 [this](ethernut::Client& c)
+                 {
+                   c.reset();
+                   reset_requested_ = true;
+                   c.stop();  // the session ends and its connection closes
+                 });
+}
+
+namespace
+{
+/// The three values of rows 2 and 3 as the board's float32, or a refusal naming the first that
+/// does not fit (NaN, infinite, beyond float32): a value is sent exactly or not at all.
+std::string floatRefusal(const char* service, const EthernutCoordinates::Request& req)
+{
+  const std::pair<const char*, double> values[] = {{"x", req.x}, {"y", req.y}, {"z", req.z}};
+  for (const auto& [name, value] : values)
+  {
+    if (!std::isfinite(value) || std::fabs(value) > std::numeric_limits<float>::max())
+      return std::string(service) + " refused: " + name + " = " + std::to_string(value) +
+             " is not a finite number the board's float32 can carry";
+  }
+  return "";
+}
+}  // namespace
+
+// ~sync_oled (row 2): coordinates for the board's display; nothing moves.
+bool EthernutNode::onSyncOled(EthernutCoordinates::Request& req, EthernutCoordinates::Response& res)
+{
+  res.message = floatRefusal("sync_oled", req);
+  if (!res.message.empty())
+    return true;
+  return command(res, "sync_oled: sent and acknowledged",
+                 [&](ethernut::Client& c)
+                 { c.syncOled(static_cast<float>(req.x), static_cast<float>(req.y), static_cast<float>(req.z)); });
+}
+
+// ~board_command (row 3): the board's own command, whose effect this node cannot know: behind the
+// motion switch, as anything that may move the machine is.
+bool EthernutNode::onBoardCommand(EthernutCoordinates::Request& req, EthernutCoordinates::Response& res)
+{
+  std::lock_guard<std::mutex> gate(motion_mutex_);
+  if (!motion_->enabled())
+  {
+    res.success = false;
+    res.message = motion_->refusal("board_command");
+    return true;
+  }
+  res.message = floatRefusal("board_command", req);
+  if (!res.message.empty())
+    return true;
+  return command(res, "board_command: sent and acknowledged",
+                 [&](ethernut::Client& c)
+                 { c.sendCommand(static_cast<float>(req.x), static_cast<float>(req.y), static_cast<float>(req.z)); });
 }
 
 bool EthernutNode::onKill(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigger::Response& res)

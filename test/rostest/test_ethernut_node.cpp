@@ -24,6 +24,7 @@
 #include <thread>
 #include <vector>
 
+#include "cnc_bridge/EthernutCoordinates.h"
 #include "cnc_bridge/EthernutSetMode.h"
 #include "cnc_bridge/MachineState.h"
 #include "cnc_bridge/RunJobAction.h"
@@ -47,6 +48,7 @@ struct Watch : topic_watch::Record
   MachineState state;
   bool have_state = false;
   std::vector<std::pair<ros::WallTime, uint8_t>> links;  // every link value, with arrival time
+  std::vector<std::string> messages;                     // every state message, in arrival order
   nav_msgs::Path path;
   uint64_t path_seq = 0;  // event counter value when the path arrived
   visualization_msgs::MarkerArray markers;
@@ -73,6 +75,10 @@ void onState(const MachineState::ConstPtr& m)
         if (!watch->have_state || watch->state.link != m->link)
         {
           watch->links.push_back({ros::WallTime::now(), m->link});
+        }
+        if (watch->messages.empty() || watch->messages.back() != m->message)
+        {
+          watch->messages.push_back(m->message);
         }
         watch->state = *m;
         watch->have_state = true;
@@ -903,6 +909,10 @@ TEST(EthernutLink, ResetAndSetModeAreRefusedWhileMotionIsDisabled)
                                "/ethernut_node/set_motion_enabled (std_srvs/SetBool, data: true), or start the node "
                                "with the parameter " +
                                ns + "/ethernut_node/enable_motion true");
+  std_srvs::Trigger::Response clear;
+  ASSERT_TRUE(call("clear", clear));
+  EXPECT_FALSE(clear.success);
+  EXPECT_EQ(clear.message.rfind("clear refused: motion is disabled", 0), 0u) << clear.message;
   for (const std::string mode : {"standalone", "gui-control", "file"})
   {
     cnc_bridge::EthernutSetMode set;
@@ -1075,6 +1085,95 @@ TEST(EthernutLink, DroppedConnectionAbortsTheJobAndTheNodeReconnects)
   ASSERT_TRUE(watch->waitFor([] { return diag("reconnects") >= 2; }, 10.0));
   std::lock_guard<std::mutex> lock(watch->mutex);
   EXPECT_GE(diag("keepalive misses"), 1);
+}
+
+bool callCoordinates(const std::string& service, double x, double y, double z,
+                     cnc_bridge::EthernutCoordinates::Response& res)
+{
+  cnc_bridge::EthernutCoordinates srv;
+  srv.request.x = x;
+  srv.request.y = y;
+  srv.request.z = z;
+  const bool ok = ros::service::call(ns + "/ethernut_node/" + service, srv);
+  res = srv.response;
+  return ok;
+}
+
+// Reset and clear share one opcode (row 8); "Reset also terminates all active connections"
+// (qCNC): ~clear keeps the connection (no new handshake), ~reset closes it, the link says why and
+// comes back with a new handshake.
+TEST(EthernutLink, ClearKeepsTheConnectionAndResetClosesItAndReconnects)
+{
+  ASSERT_TRUE(boardReady());
+  std_srvs::SetBool::Response motion;
+  ASSERT_TRUE(setMotion(true, motion));
+  ASSERT_TRUE(motion.success) << motion.message;
+  const size_t before_clear = simMessages().size();
+  std_srvs::Trigger::Response clear;
+  ASSERT_TRUE(call("clear", clear));
+  EXPECT_TRUE(clear.success) << clear.message;
+  ASSERT_TRUE(waitForSimMessage("reset", before_clear));
+  const size_t after_clear = simMessages().size();
+  ASSERT_TRUE(waitForSimMessage("alive-request", after_clear));  // the same connection goes on
+  EXPECT_EQ(simMessagesNamed("init-request", before_clear), 0) << "clear reconnected";
+
+  size_t messages_before;
+  {
+    std::lock_guard<std::mutex> lock(watch->mutex);
+    messages_before = watch->messages.size();
+  }
+  const size_t before_reset = simMessages().size();
+  std_srvs::Trigger::Response reset;
+  ASSERT_TRUE(call("reset", reset));
+  EXPECT_TRUE(reset.success) << reset.message;
+  ASSERT_TRUE(waitForSimMessage("reset", before_reset));
+  ASSERT_TRUE(waitForSimMessage("init-request", before_reset));  // a new connection's handshake
+  ASSERT_TRUE(watch->waitFor(
+      [&]
+      {
+        for (size_t i = messages_before; i < watch->messages.size(); ++i)
+        {
+          if (watch->messages[i].find("reset: the connection was closed as ~reset does") != std::string::npos)
+            return true;
+        }
+        return false;
+      }));
+  EXPECT_TRUE(boardReady(20.0));
+  ASSERT_TRUE(setMotion(false, motion));
+}
+
+// Rows 2 and 3: ~sync_oled reaches the board (a display: nothing moves); ~board_command, whose
+// effect the node cannot know, is behind the motion switch, and neither takes a value the board's
+// float32 cannot carry.
+TEST(EthernutLink, SyncOledReachesTheBoardAndBoardCommandWaitsForTheMotionSwitch)
+{
+  ASSERT_TRUE(boardReady());
+  std_srvs::SetBool::Response motion;
+  ASSERT_TRUE(setMotion(false, motion));
+  const size_t before = simMessages().size();
+  cnc_bridge::EthernutCoordinates::Response res;
+  ASSERT_TRUE(callCoordinates("board_command", 1, 2, 3, res));
+  EXPECT_FALSE(res.success);
+  EXPECT_EQ(res.message.rfind("board_command refused: motion is disabled", 0), 0u) << res.message;
+  for (const double bad : {std::nan(""), 1e300, -std::numeric_limits<double>::infinity()})
+  {
+    ASSERT_TRUE(callCoordinates("sync_oled", 1, bad, 3, res));
+    EXPECT_FALSE(res.success);
+    EXPECT_NE(res.message.find("sync_oled refused: y = "), std::string::npos) << res.message;
+  }
+  ASSERT_TRUE(callCoordinates("sync_oled", 12.5, -3.25, 0.5, res));
+  EXPECT_TRUE(res.success) << res.message;
+  ASSERT_TRUE(waitForSimMessage("sync-oled", before));
+  ASSERT_TRUE(waitForSimMessage("alive-request", simMessages().size()));
+  EXPECT_EQ(simMessagesNamed("command", before), 0) << "the board received a command while motion was disabled";
+  EXPECT_EQ(simMessagesNamed("sync-oled", before), 1) << "a refused value reached the board";
+
+  ASSERT_TRUE(setMotion(true, motion));
+  const size_t enabled = simMessages().size();
+  ASSERT_TRUE(callCoordinates("board_command", 1, 2, 3, res));
+  EXPECT_TRUE(res.success) << res.message;
+  EXPECT_TRUE(waitForSimMessage("command", enabled));
+  ASSERT_TRUE(setMotion(false, motion));
 }
 
 // The state the test last received (a copy, taken under the lock).
