@@ -25,17 +25,13 @@ StateField parseStateField(const YAML::Node& node, const std::string& frame, con
   if (!node)
     return StateField::kNone;
   const std::string text = node.as<std::string>();
-  StateField field;
-  if (text == "position")
-    field = StateField::kPosition;
-  else if (text == "commanded_position")
-    field = StateField::kCommandedPosition;
-  else
-    throw ConfigError(where + ": \"state\" must be position or commanded_position, not \"" + text + "\"");
+  if (text != "position" && text != "commanded_position")
+    throw ConfigError(where + R"(: "state" must be position or commanded_position, not ")" + text + "\"");
   if (frame != "machine")
-    throw ConfigError(where + ": \"state: " + text + "\" needs \"frame: machine\" (the state's positions are in " +
-                      "the machine frame; a work-frame point would need the work offset)");
-  return field;
+    throw ConfigError(where + R"(: "state: )" + text +
+                      R"(" needs "frame: machine" (the state's positions are in the machine frame; a work-frame )"
+                      "point would need the work offset)");
+  return text == "position" ? StateField::kPosition : StateField::kCommandedPosition;
 }
 
 ValueSource parseSource(const YAML::Node& node, const std::string& where)
