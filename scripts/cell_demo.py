@@ -216,7 +216,9 @@ def follow_path(machine, args):
     if not result.success:
         raise RuntimeError(result.message)
     p = result.final_position
-    say("%s: path followed: %d setpoints at 1 kHz, %d late, in %.1f s; ends at (%.3f, %.3f, %.3f) mm" % (
+    # final_position: the controller's report of the end point, which ended the goal.
+    say("%s: path followed: %d setpoints at 1 kHz, %d late, in %.1f s; ends at (%.3f, %.3f, %.3f) mm "
+        "as the controller reported it" % (
         machine.name, result.setpoints, result.underruns, time.time() - started, p.x * 1e3, p.y * 1e3, p.z * 1e3))
 
 
