@@ -7,8 +7,10 @@ under /<cell>/<machine>, with the machine's simulators (when `simulate` is true)
 the production launch file launch/<node>.launch with the args given in the YAML, and the machine's
 control profile as params_file), its model (launch/machine_model.launch) placed in the cell frame,
 the cell frame placed in the root frame (`root_frame`, default `world`), and rviz and rosbag when
-asked. The rviz configuration shows the cell's own machines: each model, tool trail, job path,
-planned path and probe cloud its nodes publish.
+asked. The rviz configuration shows the cell's own machines: each model with its name above it
+(the label marker of launch/machine_model.launch), tool trail, job path, planned path and probe
+cloud its nodes publish, with line widths and point sizes for the size of the cell, and opens with
+the Displays panel.
 
   scripts/cell_launch.py config/cell.yaml -o launch/cell.launch --rviz rviz/cell.rviz
 """
@@ -81,6 +83,7 @@ def machine_group(cell, machine, simulate_all):
         lines.append(f"      <arg name=\"x\" value={attr(place[0])}/>")
         lines.append(f"      <arg name=\"y\" value={attr(place[1])}/>")
         lines.append(f"      <arg name=\"yaw\" value={attr(place[2] if len(place) > 2 else 0.0)}/>")
+        lines.append(f"      <arg name=\"label\" value={attr(name)}/>")
         lines.append("    </include>")
     lines.append("  </group>")
     return lines
@@ -124,13 +127,16 @@ NODE_DISPLAYS = {
 }
 
 
-def rviz_display(kind, name, topic, color=None):
+def rviz_display(kind, name, topic, color=None, width=0.02):
+    """One display; width: m, a path's line width or the size of a cloud's points."""
     if kind == "model":
         return ["    - Class: rviz/RobotModel", f"      Name: {name}", "      Enabled: true",
                 f"      Robot Description: {topic}", '      TF Prefix: ""', "      Visual Enabled: true",
                 "      Collision Enabled: false", "      Alpha: 1", "      Value: true"]
+    if kind == "label":
+        return ["    - Class: rviz/Marker", f"      Name: {name}", "      Enabled: true", f"      Marker Topic: {topic}",
+                "      Value: true"]
     if kind == "path":
-        width = "0.008" if name.endswith("tool path") else "0.02"
         return ["    - Class: rviz/Path", f"      Name: {name}", "      Enabled: true", f"      Topic: {topic}",
                 f"      Color: {color}", "      Line Style: Billboards", f"      Line Width: {width}", "      Value: true"]
     if kind == "markers":
@@ -138,7 +144,7 @@ def rviz_display(kind, name, topic, color=None):
                 f"      Marker Topic: {topic}", "      Value: true"]
     if kind == "cloud":
         return ["    - Class: rviz/PointCloud2", f"      Name: {name}", "      Enabled: true", f"      Topic: {topic}",
-                "      Style: Spheres", "      Size (m): 0.02", "      Color Transformer: AxisColor", "      Axis: Z",
+                "      Style: Boxes", f"      Size (m): {width}", "      Color Transformer: AxisColor", "      Axis: Z",
                 "      Autocompute Value Bounds: true", "      Value: true"]
     raise ValueError(kind)
 
@@ -148,24 +154,33 @@ def generate_rviz(description):
     planned paths and probe clouds of its nodes, seen from the front of the row of machines."""
     cell = description.get("cell", "cell")
     machines = description.get("machines", [])
-    models, extras, trails, clouds = [], [], [], []
+    xs = [float(m.get("position", [0.0])[0]) for m in machines] or [0.0]
+    centre, span = (min(xs) + max(xs)) / 2, max(xs) - min(xs)
+    # Widths for the cell's scale: the view spans the row of machines plus one machine (1.5 m), and
+    # a line a third of a percent of that is some 4 pixels wide on a full-HD screen.
+    seen = span + 1.5
+    width = round(max(0.006, seen / 300), 3)
+    models, labels, extras, trails, clouds = [], [], [], [], []
     for machine in machines:
         name = machine["name"]
         space = f"/{cell}/{name}"
         if machine.get("model", True):
             models += rviz_display("model", name, f"{cell}/{name}/robot_description")
-            trails += rviz_display("path", f"{name} tool path", f"{space}/tool_path", "255; 40; 200")
+            labels += rviz_display("label", f"{name} label", f"{space}/label")
+            trails += rviz_display("path", f"{name} tool path", f"{space}/tool_path", "255; 40; 200", width)
         for node in machine.get("nodes", []):
             for kind, topic, label, color in NODE_DISPLAYS.get(node["launch"], []):
-                display = rviz_display(kind, f"{name} {label}", f"{space}/{topic}", color)
+                # A probe grid is a few centimetres wide: its points drawn large enough to be seen.
+                size = width
+                display = rviz_display(kind, f"{name} {label}", f"{space}/{topic}", color, size)
                 (clouds if kind == "cloud" else extras).extend(display)
-    xs = [float(m.get("position", [0.0])[0]) for m in machines] or [0.0]
-    centre, span = (min(xs) + max(xs)) / 2, max(xs) - min(xs)
-    lines = ["Panels: []", "Visualization Manager:", '  Class: ""', "  Displays:",
+    lines = ["Panels:", "  - Class: rviz/Displays", "    Name: Displays", "    Property Tree Widget:",
+             "      Expanded: ~", "    Splitter Ratio: 0.6", "    Tree Height: 700",
+             "Visualization Manager:", '  Class: ""', "  Displays:",
              "    - Class: rviz/Grid", "      Name: Grid", "      Enabled: true", "      Cell Size: 0.5",
              "      Plane Cell Count: 40", "      Reference Frame: <Fixed Frame>", "      Color: 160; 160; 164",
              "      Alpha: 0.5", "      Value: true"]
-    lines += models
+    lines += models + labels
     lines += ["    - Class: rviz/TF", "      Name: TF", "      Enabled: true", "      Show Arrows: false",
               "      Show Axes: true", "      Show Names: false", "      Marker Scale: 0.4", "      Frame Timeout: 15",
               "      Frames:", "        All Enabled: false", "      Value: true"]
@@ -174,11 +189,11 @@ def generate_rviz(description):
               f"    Fixed Frame: {description.get('root_frame', 'world')}", "    Frame Rate: 30", "  Name: root",
               "  Tools:", "    - Class: rviz/Interact", "    - Class: rviz/MoveCamera", "    - Class: rviz/Select",
               "  Value: true", "  Views:", "    Current:", "      Class: rviz/Orbit",
-              f"      Distance: {max(4.0, round(span * 1.2, 2))}", "      Focal Point:", f"        X: {round(centre, 3)}",
-              "        Y: 0.1", "        Z: 0.5", "      Pitch: 0.6", "      Yaw: 4.5", "      Name: Current View",
+              f"      Distance: {max(4.0, round(span * 1.45, 2))}", "      Focal Point:", f"        X: {round(centre, 3)}",
+              "        Y: 0.2", "        Z: 0.45", "      Pitch: 0.75", "      Yaw: 4.55", "      Name: Current View",
               "      Target Frame: <Fixed Frame>", "      Value: Orbit (rviz)", "    Saved: ~", "Window Geometry:",
-              "  Height: 850", "  Width: 1260", "  Hide Left Dock: true", "  Hide Right Dock: true", "  Displays:",
-              "    collapsed: true"]
+              "  Height: 860", "  Width: 1260", "  Hide Left Dock: false", "  Hide Right Dock: true", "  Displays:",
+              "    collapsed: false"]
     return "\n".join(lines) + "\n"
 
 

@@ -273,6 +273,7 @@ void ControllerSession::linkChanged(int which, LinkState state, const std::strin
 void ControllerSession::onReport(const Report& report)
 {
   std::unique_lock<std::mutex> lock(snapshot_mutex_);
+  snapshot_cv_.notify_all();  // waiters see the change once the lock is released
   if (const auto* estop = std::get_if<EStopReport>(&report))
   {
     snapshot_.estop = estop->active ? EStop::kOn : EStop::kOff;
@@ -304,6 +305,7 @@ void ControllerSession::onReport(const Report& report)
     }
     snapshot_.position = position->position;
     snapshot_.position_valid = true;
+    snapshot_.position_at = std::chrono::steady_clock::now();
     lock.unlock();
     notifyReport(ReportEvent::Kind::kPosition, "");
   }
@@ -326,6 +328,26 @@ void ControllerSession::notifyReport(ReportEvent::Kind kind, const std::string& 
 ControllerSnapshot ControllerSession::snapshot() const
 {
   std::lock_guard<std::mutex> lock(snapshot_mutex_);
+  return snapshot_;
+}
+
+ControllerSnapshot ControllerSession::waitForReport(const std::function<bool(const ControllerSnapshot&)>& done,
+                                                    std::chrono::steady_clock::time_point deadline,
+                                                    const std::function<bool()>& cancelled) const
+{
+  std::unique_lock<std::mutex> lock(snapshot_mutex_);
+  while (!done(snapshot_) && std::chrono::steady_clock::now() < deadline)
+  {
+    lock.unlock();
+    if (cancelled && cancelled())
+    {
+      return snapshot();
+    }
+    lock.lock();
+    // Woken by a report; at the latest after 100 ms to ask cancelled() again.
+    const auto poll = std::chrono::steady_clock::now() + std::chrono::milliseconds(100);
+    snapshot_cv_.wait_until(lock, std::min(poll, deadline), [&] { return done(snapshot_); });
+  }
   return snapshot_;
 }
 

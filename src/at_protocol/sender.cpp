@@ -202,6 +202,8 @@ void Job::publish(const Setpoint& setpoint, uint64_t sent, uint64_t total, doubl
     feed_[i].store(setpoint.feed[i], std::memory_order_relaxed);
   }
   total_.store(total, std::memory_order_relaxed);
+  // Published after the write: a report that arrives later came after the controller had it.
+  last_setpoint_at_.store(std::chrono::steady_clock::now().time_since_epoch().count(), std::memory_order_relaxed);
   sent_.store(sent, std::memory_order_release);
 }
 

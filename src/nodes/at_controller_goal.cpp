@@ -50,6 +50,16 @@ class AtControllerNode::GoalView : public ap::GoalListener
     }
   }
   void operationEnded(const ap::OperationResult& result) override { node_.showEnded(*result.job); }
+  void awaitingEnd(const ap::GoalFeedback& feedback) override
+  {
+    // All setpoints sent: the reported position is what changes while the axes settle.
+    feedback_.reported = at_controller::toPoint(node_.session_->snapshot().position);
+    feedback_.following_error.x = feedback_.commanded.x - feedback_.reported.x;
+    feedback_.following_error.y = feedback_.commanded.y - feedback_.reported.y;
+    feedback_.following_error.z = feedback_.commanded.z - feedback_.reported.z;
+    feedback_.stopping = false;
+    publish(feedback);
+  }
   void dwelling(const ap::GoalFeedback& feedback) override
   {
     node_.state_->update([&](MachineState& s) { s.message = feedback.event; });
@@ -175,10 +185,10 @@ void AtControllerNode::followPath(const AtFollowPathGoalConstPtr& goal)
   switch (outcome.end)
   {
     case ap::GoalOutcome::End::kSucceeded:
-      if (outcome.program_end)
-      {
-        state_->update([&](MachineState& s) { s.message = "follow_path: " + outcome.message; });
-      }
+      // The end point confirmed (or the program ended): said after the last operation's "succeeded".
+      state_->update(
+          [&](MachineState& s)
+          { s.message = (outcome.program_end ? "follow_path: " : "follow_path succeeded: ") + outcome.message; });
       return follow_path_.setSucceeded(result, result.message);
     case ap::GoalOutcome::End::kCancelled:
       if (outcome.held_when_cancelled)
@@ -194,6 +204,11 @@ void AtControllerNode::followPath(const AtFollowPathGoalConstPtr& goal)
       return follow_path_.setPreempted(result, result.message);
     case ap::GoalOutcome::End::kAborted:
       ROS_WARN_STREAM("at_controller_node: follow_path: " << result.message);
+      if (outcome.setpoints > 0)
+      {
+        // Also when the operation's last setpoint went out but its end point was never reported.
+        state_->update([&](MachineState& s) { s.message = "follow_path aborted: " + result.message; });
+      }
       return follow_path_.setAborted(result, result.message);
   }
 }

@@ -53,6 +53,7 @@ AtControllerNode::AtControllerNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   const ap::TcpLinkSettings link = at_controller::linkSettings(pnh);
   report_mode_ = link.report_server ? "server" : "client";
   ap::ControllerSession::Options options = at_controller::sessionOptions(pnh);
+  const ap::EndCheck end_check = at_controller::endCheck(pnh);
   // ~transform_timeout: s a path goal in another frame waits for its transform into the machine frame.
   to_machine_ = std::make_unique<ToMachineFrame>(params::positive(pnh, "transform_timeout", 0.5));
   if (options.jog_timeout == 0.0)
@@ -91,8 +92,11 @@ AtControllerNode::AtControllerNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   monitor_ = std::make_unique<ap::SessionMonitor>(*session_);  // before start(): a link change updates diagnostics
   session_->start();
   goal_runner_ = std::make_unique<ap::GoalRunner>(
-      *session_, ap::GoalRunner::Names{pnh.resolveName("resume"), pnh.resolveName("set_motion_enabled"),
-                                       pnh.resolveName("optional_stop")});
+      *session_,
+      ap::GoalRunner::Names{pnh.resolveName("resume"), pnh.resolveName("set_motion_enabled"),
+                            pnh.resolveName("optional_stop"), pnh.resolveName("end_tolerance"),
+                            pnh.resolveName("end_timeout")},
+      end_check);
 
   set_auto_srv_ = advertiseGuardedService(pnh, "set_auto", &AtControllerNode::setAuto, this);
   jog_srv_ = advertiseGuardedService(pnh, "jog", &AtControllerNode::jog, this);

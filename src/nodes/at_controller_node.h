@@ -45,6 +45,10 @@ at_protocol::TcpLinkSettings linkSettings(const ros::NodeHandle& pnh);
 /// \throws ConfigError naming the parameter that is out of range.
 at_protocol::ControllerSession::Options sessionOptions(const ros::NodeHandle& pnh);
 
+/// ~end_tolerance (m, to pulses) and ~end_timeout (s): when a follow_path operation has ended.
+/// \throws ConfigError naming the parameter that is out of range.
+at_protocol::EndCheck endCheck(const ros::NodeHandle& pnh);
+
 /// Pulses of 1/1000 mm to metres.
 geometry_msgs::Point toPoint(const std::array<int32_t, 3>& pulses);
 }  // namespace at_controller

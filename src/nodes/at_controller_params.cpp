@@ -98,5 +98,26 @@ ap::ControllerSession::Options sessionOptions(const ros::NodeHandle& pnh)
   }
   return options;
 }
+
+ap::EndCheck endCheck(const ros::NodeHandle& pnh)
+{
+  ap::EndCheck check;
+  // ~end_tolerance (m): an operation has ended when the controller reports its end point within
+  // this distance; ~end_timeout (s): how long after the last setpoint it has to (the goal fails).
+  const double tolerance = pnh.param("end_tolerance", check.tolerance / ap::kPulsesPerMetre);
+  if (!(tolerance >= 0.0 && tolerance < 1.0))
+  {
+    throw ConfigError(pnh.resolveName("end_tolerance") + " must be a distance in metres from 0 (the end point to the " +
+                      "pulse) to below 1, not " + std::to_string(tolerance));
+  }
+  check.tolerance = tolerance * ap::kPulsesPerMetre;
+  check.timeout = pnh.param("end_timeout", check.timeout);
+  if (!(check.timeout > 0.0 && check.timeout <= 3600.0))
+  {
+    throw ConfigError(pnh.resolveName("end_timeout") + " must be a positive number of seconds (at most 3600), not " +
+                      std::to_string(check.timeout));
+  }
+  return check;
+}
 }  // namespace at_controller
 }  // namespace cnc_bridge

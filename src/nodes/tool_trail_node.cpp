@@ -3,8 +3,11 @@
 // Subscribes to the machine's `state` (position in <tf_prefix>machine, metres) and publishes
 // `tool_path` (latched) in the same frame: a point whenever the tool has moved ~min_distance, at
 // most ~max_points of them (the oldest dropped), published at most ~publish_rate times a second.
+// With ~label it also publishes `label` (visualization_msgs/Marker, latched): the machine's name
+// as text above its model, so a cell of identical models shows which machine is which.
 #include <nav_msgs/Path.h>
 #include <ros/ros.h>
+#include <visualization_msgs/Marker.h>
 
 #include <cmath>
 #include <deque>
@@ -32,9 +35,35 @@ class ToolTrailNode
     pub_ = nh.advertise<nav_msgs::Path>("tool_path", 1, true);
     sub_ = nh.subscribe("state", 10, &ToolTrailNode::onState, this);
     timer_ = nh.createTimer(ros::Duration(1.0 / std::max(rate, 0.1)), &ToolTrailNode::publish, this);
+    // ~label: text shown above the machine (its name); empty: no label. ~label_height: m above
+    // <tf_prefix>base; ~label_size: m, the height of the letters.
+    const std::string label = pnh.param<std::string>("label", "");
+    if (!label.empty())
+    {
+      label_pub_ = nh.advertise<visualization_msgs::Marker>("label", 1, true);
+      label_pub_.publish(
+          labelMarker(label, prefix + "base", pnh.param("label_height", 2.0), pnh.param("label_size", 0.25)));
+    }
   }
 
  private:
+  static visualization_msgs::Marker labelMarker(const std::string& text, const std::string& frame, double height,
+                                                double size)
+  {
+    visualization_msgs::Marker marker;
+    marker.header.frame_id = frame;  // stamp 0: rviz draws it at the latest transform
+    marker.ns = "label";
+    marker.type = visualization_msgs::Marker::TEXT_VIEW_FACING;
+    marker.action = visualization_msgs::Marker::ADD;
+    marker.pose.position.z = height;
+    marker.pose.orientation.w = 1.0;
+    marker.scale.z = size;
+    marker.color.r = marker.color.g = marker.color.b = marker.color.a = 1.0f;
+    marker.text = text;
+    marker.frame_locked = true;
+    return marker;
+  }
+
   void onState(const MachineState& state)
   {
     if (!state.position_valid)
@@ -83,6 +112,7 @@ class ToolTrailNode
   std::deque<geometry_msgs::PoseStamped> poses_;  // callbacks and timer share the one spinner thread
   bool changed_ = false;
   ros::Publisher pub_;
+  ros::Publisher label_pub_;
   ros::Subscriber sub_;
   ros::Timer timer_;
 };

@@ -137,6 +137,11 @@ TEST_F(AtController, FollowsAGcodeProgramToItsEndPoint)
   EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client.getState().getText();
   const auto result = client.getResult();
   EXPECT_TRUE(result->success);
+  // The goal ended on the controller's report of the program's end point X5 Y5 Z-1 (mm), within
+  // ~end_tolerance (5 um), not when the last setpoint left: final_position is that report.
+  EXPECT_TRUE(near(result->final_position, 0.005, 0.005, -0.001, 5e-6)) << result->final_position;
+  EXPECT_NE(result->message.find("the controller reported the end point X5 Y5 Z-1 mm ("), std::string::npos)
+      << result->message;
   EXPECT_GT(result->setpoints, 3000u);  // some 110 mm at 20 mm/s: several seconds of 1 ms steps
   EXPECT_GT(feedback_count.load(), 10);
   // Feedback carries a real following error (the simulated axes lag behind the setpoints), in
@@ -434,8 +439,14 @@ TEST_F(AtController, ProgramStopsHoldTheGoalUntilResumeAndM30EndsIt)
 
   ASSERT_TRUE(client.waitForResult(ros::Duration(30.0)));
   EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client.getState().getText();
-  EXPECT_EQ(client.getResult()->message,
-            "M30 program end at line 14: the program ends here; nothing after it was sent");
+  // The program's end, with the controller's report of the last operation's end point X25 Y5 Z2.
+  EXPECT_EQ(client.getResult()->message.rfind("M30 program end at line 14: the program ends here; nothing after it "
+                                              "was sent; the controller reported the end point X25 Y5 Z2 mm (",
+                                              0),
+            0u)
+      << client.getResult()->message;
+  EXPECT_TRUE(near(client.getResult()->final_position, 0.025, 0.005, 0.002, 5e-6))
+      << client.getResult()->final_position;
   EXPECT_TRUE(state.waitFor([](const auto& s) { return near(s.position, 0.025, 0.005, 0.002, 1.5e-6); }))
       << state.last().position;
   // The controller's side: four operations (to X10, X15, X20, X25), each with its P1@ and S64@;

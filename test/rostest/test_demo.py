@@ -28,7 +28,8 @@ SUMMARY = {
     "xmodem": r"haas_vf2: sent O05555\.nc by XModem: (\d+) bytes, (\d+) blocks, \d+ retries",
     "surface": r"haas_vf2: surface map of (\d+) points: z -?[\d.]+ \.\. -?[\d.]+ mm, flatness ([\d.]+) mm",
     "job": r"ethernut_mill: job ethernut_job\.nc streamed: (\d+)/(\d+) coordinates",
-    "path": r"at_router: path followed: (\d+) setpoints at 1 kHz, \d+ late",
+    "path": r"at_router: path followed: (\d+) setpoints at 1 kHz, \d+ late, in [\d.]+ s; "
+            r"ends at \((-?[\d.]+), (-?[\d.]+), (-?[\d.]+)\) mm as the controller reported it",
     "bus": r"laser: bus stepped x, y, z and the laser around a 150 mm square; (\d+) answers",
     "cycles": r"haas_vf2: (\d+) cycle events seen",
     "done": r"scenario done: (\d+) steps, 0 failed",
@@ -93,6 +94,10 @@ class Demo(unittest.TestCase):
         self.assertEqual(numbers["job"][0], numbers["job"][1])
         self.assertGreater(numbers["job"][0], 0)
         self.assertGreater(numbers["path"][0], 1000)
+        # The end of config/demo/at_path.nc (X10 Y10 Z-1 mm) as the controller confirmed it (within
+        # at_controller_node's ~end_tolerance, 5 um), not where its axes were as the last setpoint left.
+        for got, end in zip(numbers["path"][1:], (10.0, 10.0, -1.0)):
+            self.assertAlmostEqual(got, end, delta=0.005, msg="the path ends at %s mm" % numbers["path"][1:])
         self.assertGreater(numbers["bus"][0], 0)
         self.assertEqual(numbers["done"][0], 5)
 

@@ -131,9 +131,42 @@ std::string valueOf(const SessionMonitor::Values& values, const std::string& key
   return found == values.end() ? "(none)" : found->second;
 }
 
+/// The fake controller's axes: at each operation's end (#@) they report the last setpoint received
+/// plus \p offset, as a controller whose axes arrived there (or stopped short by the offset).
+struct FakeAxes
+{
+  std::atomic<bool> arrive{true};  ///< false: no report at all after an operation
+  std::array<int32_t, 3> offset{0, 0, 0};
+  std::mutex mutex;
+  CommandReassembler commands;  // guarded by mutex
+  Setpoint last{};              // guarded by mutex
+
+  /// \returns the report line after \p bytes written to the controller, "" if none.
+  std::string after(const std::vector<uint8_t>& bytes)
+  {
+    std::lock_guard<std::mutex> lock(mutex);
+    std::string report;
+    for (const std::string& message : commands.feed(bytes.data(), bytes.size()).messages)
+    {
+      const Command command = decodeCommand(message);
+      if (const auto* setpoint = std::get_if<Setpoint>(&command))
+      {
+        last = *setpoint;
+      }
+      else if (std::holds_alternative<EndOperation>(command) && arrive)
+      {
+        report = std::to_string(last.position[0] + offset[0]) + " " + std::to_string(last.position[1] + offset[1]) +
+                 " " + std::to_string(last.position[2] + offset[2]) + "\n";
+      }
+    }
+    return report;
+  }
+};
+
 struct AtControllerSession : ::testing::Test
 {
   Recorder recorder;
+  FakeAxes axes;
   std::unique_ptr<ControllerSession> session;
 
   ControllerSession::Options options(bool motion_enabled)
@@ -148,7 +181,20 @@ struct AtControllerSession : ::testing::Test
   {
     ControllerLinks links;
     links.command_name = "command";
-    links.open_command = [this] { return recorder.open(recorder.command_links, "controller:5000"); };
+    links.open_command = [this]
+    {
+      std::unique_ptr<Transport> link = recorder.open(recorder.command_links, "controller:5000");
+      recorder.lastCommandLink()->onWrite(
+          [this](FakeTransport&, const std::vector<uint8_t>& bytes)
+          {
+            const std::string report = axes.after(bytes);
+            if (!report.empty())
+            {
+              recorder.lastReportLink()->feed(report);
+            }
+          });
+      return link;
+    };
     links.report_name = "report";
     links.open_report = [this] { return recorder.open(recorder.report_links, "controller:5001"); };
     session = std::make_unique<ControllerSession>(links, options, &recorder);
@@ -430,6 +476,28 @@ struct GoalRecorder : GoalListener
     std::unique_lock<std::mutex> lock(mutex);
     return changed.wait_for(lock, kWait, [&] { return holds.size() >= count; });
   }
+
+  std::vector<std::string> awaiting;  // feedback events while waiting for the end point
+  void awaitingEnd(const GoalFeedback& feedback) override
+  {
+    {
+      std::lock_guard<std::mutex> lock(mutex);
+      awaiting.push_back(feedback.event);
+    }
+    changed.notify_all();
+  }
+  /// Waits until an awaitingEnd event contains \p text.
+  bool waitForAwaiting(const std::string& text)
+  {
+    std::unique_lock<std::mutex> lock(mutex);
+    return changed.wait_for(lock, kWait,
+                            [&]
+                            {
+                              return std::any_of(awaiting.begin(), awaiting.end(),
+                                                 [&](const std::string& event)
+                                                 { return event.find(text) != std::string::npos; });
+                            });
+  }
 };
 
 gcode::ProgramStep programStep(gcode::ProgramStep::Kind kind, uint32_t line, uint16_t m_code)
@@ -577,7 +645,13 @@ TEST_F(AtControllerSession, AnOptionalStopPassesWhenTheSwitchIsOffAndTheProgramE
   const GoalOutcome outcome = runner.run(plans, -1, 0.0, goal);
   EXPECT_EQ(outcome.end, GoalOutcome::End::kSucceeded) << outcome.message;
   EXPECT_TRUE(outcome.program_end);
-  EXPECT_EQ(outcome.message, plans[1].after->describe() + ": the program ends here; nothing after it was sent");
+  // The program's end, and where the controller said its last operation ended.
+  EXPECT_EQ(outcome.message.rfind(plans[1].after->describe() +
+                                      ": the program ends here; nothing after it was sent; the controller reported "
+                                      "the end point X2 Y0 Z0 mm (0 um from it) ",
+                                  0),
+            0u)
+      << outcome.message;
   EXPECT_TRUE(goal.holds.empty());
   ASSERT_EQ(goal.passed.size(), 1u);
   EXPECT_EQ(goal.passed[0], plans[0].after->describe() + " passed (/m/optional_stop false)");
@@ -623,4 +697,123 @@ TEST_F(AtControllerSession, ADisableMidOperationPausesTheGoalAndResumeFinishesTh
     }
   }
   EXPECT_EQ(last.position, (std::array<int32_t, 3>{200000, 0, 0}));
+}
+
+// ---- the end of a path: confirmed by the controller's report, not by the last setpoint leaving ------
+
+namespace
+{
+/// One operation from X0 to X1 mm.
+std::vector<OperationPlan> oneMillimetre()
+{
+  std::vector<OperationPlan> plans(1);
+  plans[0].points = {{0, 0, 0}, {1000, 0, 0}};
+  plans[0].feeds = {20.0};
+  return plans;
+}
+}  // namespace
+
+TEST_F(AtControllerSession, AGoalSucceedsWhenTheControllerReportsTheEndPointWithinTheTolerance)
+{
+  start(options(true));
+  report("E0\n0 0 0\n", 2);
+  axes.offset = {3, 0, -2};  // 3.6 um from the end point: within the default 5 um
+  GoalRunner runner(*session, GoalRunner::Names{});
+  GoalRecorder goal;
+  const GoalOutcome outcome = runner.run(oneMillimetre(), -1, 0.0, goal);
+  EXPECT_EQ(outcome.end, GoalOutcome::End::kSucceeded) << outcome.message;
+  ASSERT_TRUE(outcome.final_position.has_value());
+  EXPECT_EQ(*outcome.final_position, (std::array<int32_t, 3>{1003, 0, -2}));  // the report that confirmed it
+  EXPECT_EQ(
+      outcome.message.rfind("path complete: the controller reported the end point X1 Y0 Z0 mm (3.6 um from it) ", 0),
+      0u)
+      << outcome.message;
+}
+
+// The old rule (success as the last setpoint leaves, with whatever position was reported last)
+// ended this goal at once; now it waits while the reports are outside the tolerance.
+TEST_F(AtControllerSession, AGoalWaitsWhileTheReportedPositionIsOutsideTheToleranceAndSucceedsOnceItArrives)
+{
+  start(options(true));
+  report("E0\n0 0 0\n", 2);
+  axes.offset = {0, 49, 0};  // lagging 49 um behind, as the demo's path once "ended"
+  GoalRunner runner(*session, GoalRunner::Names{});
+  GoalRecorder goal;
+  auto run = std::async(std::launch::async, [&] { return runner.run(oneMillimetre(), -1, 0.0, goal); });
+  // The report after the last setpoint was judged: 49 um away, the goal waits.
+  ASSERT_TRUE(goal.waitForAwaiting("its last report is 49 um from it"));
+  {
+    std::lock_guard<std::mutex> lock(goal.mutex);
+    EXPECT_EQ(goal.awaiting.back(),
+              "waiting for the controller to report the end point X1 Y0 Z0 mm (within 5 um): its last report is 49 "
+              "um from it");
+  }
+  EXPECT_EQ(run.wait_for(std::chrono::seconds(0)), std::future_status::timeout);
+  recorder.lastReportLink()->feed("1000 6 0\n");  // still 6 um away: waits on
+  ASSERT_TRUE(goal.waitForAwaiting("its last report is 6 um from it"));
+  EXPECT_EQ(run.wait_for(std::chrono::seconds(0)), std::future_status::timeout);
+  recorder.lastReportLink()->feed("1000 0 0\n");  // arrived
+  ASSERT_EQ(run.wait_for(kWait), std::future_status::ready);
+  const GoalOutcome outcome = run.get();
+  EXPECT_EQ(outcome.end, GoalOutcome::End::kSucceeded) << outcome.message;
+  ASSERT_TRUE(outcome.final_position.has_value());
+  EXPECT_EQ(*outcome.final_position, (std::array<int32_t, 3>{1000, 0, 0}));
+  EXPECT_NE(outcome.message.find("the end point X1 Y0 Z0 mm (0 um from it)"), std::string::npos) << outcome.message;
+}
+
+TEST_F(AtControllerSession, AGoalFailsWhenTheEndPointIsNotReportedWithinTheTimeoutSayingHowFarAndForHowLong)
+{
+  start(options(true));
+  report("E0\n0 0 0\n", 2);
+  axes.offset = {-49, 0, 0};  // the axes stop 49 um short and stay there
+  GoalRunner runner(
+      *session,
+      GoalRunner::Names{"resume", "set_motion_enabled", "optional_stop", "/m/end_tolerance", "/m/end_timeout"},
+      EndCheck{5.0, 0.3});
+  GoalRecorder goal;
+  const auto started = std::chrono::steady_clock::now();
+  const GoalOutcome outcome = runner.run(oneMillimetre(), -1, 0.0, goal);
+  EXPECT_GE(std::chrono::steady_clock::now() - started, std::chrono::milliseconds(300));
+  EXPECT_EQ(outcome.end, GoalOutcome::End::kAborted);
+  EXPECT_EQ(outcome.message,
+            "every setpoint was sent, but the controller did not report the end point X1 Y0 Z0 mm within 5 um "
+            "(/m/end_tolerance) in the 0.3 s (/m/end_timeout) after the last setpoint: its last report, X0.951 Y0 Z0 "
+            "mm, is 49 um from it (the axes stopped short, or lag)");
+  ASSERT_TRUE(outcome.final_position.has_value());
+  EXPECT_EQ(*outcome.final_position, (std::array<int32_t, 3>{951, 0, 0}));
+}
+
+// A report of the end point from before the last setpoint is no confirmation (a path that comes
+// back to where it started would otherwise "end" on its start report): no report after it fails.
+TEST_F(AtControllerSession, AReportFromBeforeTheLastSetpointDoesNotConfirmTheEnd)
+{
+  start(options(true));
+  report("E0\n1000 0 0\n", 2);  // the end point, reported before the goal
+  axes.arrive = false;
+  GoalRunner runner(*session, GoalRunner::Names{}, EndCheck{5.0, 0.2});
+  GoalRecorder goal;
+  const GoalOutcome outcome = runner.run(oneMillimetre(), -1, 0.0, goal);
+  EXPECT_EQ(outcome.end, GoalOutcome::End::kAborted);
+  EXPECT_NE(outcome.message.find("no position report came after the last setpoint (is the report link up?); the one "
+                                 "before, X1 Y0 Z0 mm, is 0 um from it"),
+            std::string::npos)
+      << outcome.message;
+}
+
+TEST_F(AtControllerSession, AnEStopWhileWaitingForTheEndPointAbortsTheGoal)
+{
+  start(options(true));
+  report("E0\n0 0 0\n", 2);
+  axes.offset = {0, 0, 200};
+  GoalRunner runner(*session, GoalRunner::Names{});
+  GoalRecorder goal;
+  auto run = std::async(std::launch::async, [&] { return runner.run(oneMillimetre(), -1, 0.0, goal); });
+  ASSERT_TRUE(goal.waitForAwaiting("its last report is 200 um from it"));
+  recorder.lastReportLink()->feed("E1\n");
+  ASSERT_EQ(run.wait_for(kWait), std::future_status::ready);
+  const GoalOutcome outcome = run.get();
+  EXPECT_EQ(outcome.end, GoalOutcome::End::kAborted);
+  EXPECT_EQ(outcome.message.rfind("emergency stop reported by the controller (E1) before it reported the end point", 0),
+            0u)
+      << outcome.message;
 }

@@ -7,6 +7,7 @@
 
 #include <array>
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <cstdint>
 #include <functional>
@@ -45,7 +46,9 @@ struct ControllerSnapshot
   int jog_axis = -1;                  ///< 0..2 after a J? report; -1 after A (or before any mode report)
   std::array<int32_t, 3> position{};  ///< pulses
   bool position_valid = false;        ///< a position report has arrived
-  bool at_home = false;               ///< H reported, and no move since
+  /// When the last position report arrived (the epoch before the first).
+  std::chrono::steady_clock::time_point position_at{};
+  bool at_home = false;  ///< H reported, and no move since
 };
 
 /// \brief One report as it changed the snapshot, with the words the node shows for it.
@@ -187,6 +190,12 @@ class ControllerSession
   void stop();
 
   ControllerSnapshot snapshot() const;
+  /// \brief Waits until \p done holds for the snapshot (asked at once and after each report, with
+  /// the session's lock held: it must not call the session), \p cancelled() (asked every 100 ms)
+  /// or \p deadline. \returns the snapshot it ended with.
+  ControllerSnapshot waitForReport(const std::function<bool(const ControllerSnapshot&)>& done,
+                                   std::chrono::steady_clock::time_point deadline,
+                                   const std::function<bool()>& cancelled) const;
   uint64_t reportErrors() const { return report_errors_.load(); }
   unsigned commandReconnects() const { return command_link_.reconnects(); }
   unsigned reportReconnects() const { return report_link_.reconnects(); }
@@ -287,7 +296,8 @@ class ControllerSession
   std::atomic<bool> motion_enabled_;
   std::atomic<uint64_t> report_errors_{0};
 
-  mutable std::mutex snapshot_mutex_;  // guards snapshot_, link_states_
+  mutable std::mutex snapshot_mutex_;            // guards snapshot_, link_states_
+  mutable std::condition_variable snapshot_cv_;  // a report changed snapshot_
   ControllerSnapshot snapshot_;
   LinkState link_states_[2] = {LinkState::kDown, LinkState::kDown};  // command, report
   std::mutex link_change_mutex_;                                     // listener's onLink calls one at a time, in order

@@ -2,9 +2,13 @@
 // operations streamed one after the other, the program's own steps between them (M00 and M01 hold
 // the goal until resume, G04 waits, M02/M30 end it), and a disable of motion that pauses the goal
 // (the operation decelerates to a stop and holds; after resume the rest of the path is planned
-// from the stop point). ROS-free: the node maps its listener's calls to feedback and state.
+// from the stop point). An operation has ended when the controller reports its end point, not when
+// its last setpoint leaves (EndConfirmation). ROS-free: the node maps its listener's calls to
+// feedback and state.
 #pragma once
 
+#include <array>
+#include <chrono>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -25,6 +29,51 @@ struct GoalFeedback
   bool paused = false;
 };
 
+/// \brief When an operation counts as ended (docs/at_controller_node.md, ~end_tolerance and ~end_timeout).
+struct EndCheck
+{
+  double tolerance = 5.0;  ///< pulses (1 um): the reported position's greatest distance from the end point
+  double timeout = 2.0;    ///< s after the last setpoint that the controller has to report it
+};
+
+/// \brief The rule that an operation reached its end: the protocol has no end-of-path report, so
+/// the controller's position report, received after the operation's last setpoint was sent (any
+/// report if the operation does not move), within EndCheck::tolerance of the end point, within
+/// EndCheck::timeout of that setpoint. Pure: the goal runner gives it the session's snapshots.
+class EndConfirmation
+{
+ public:
+  using Clock = std::chrono::steady_clock;
+  /// \param end the operation's end point (pulses); \param last_setpoint when its last setpoint
+  /// was written; \param moves whether the operation moves the axes at all.
+  EndConfirmation(const std::array<int32_t, 3>& end, EndCheck check, Clock::time_point last_setpoint, bool moves);
+
+  /// Whether \p now holds a position report that tells where the axes went after the last setpoint.
+  bool fresh(const ControllerSnapshot& now) const;
+  /// Pulses from the reported position to the end point.
+  double distance(const ControllerSnapshot& now) const;
+  bool confirmedBy(const ControllerSnapshot& now) const { return fresh(now) && distance(now) <= check_.tolerance; }
+  Clock::time_point deadline() const;
+
+  /// "waiting for the controller to report the end point X10 Y10 Z-1 mm (within 5 um): its last
+  /// report is 49 um from it" (feedback while it waits).
+  std::string waiting(const ControllerSnapshot& now) const;
+  /// "the controller reported the end point X10 Y10 Z-1 mm (0 um from it) 0.031 s after the last setpoint"
+  std::string confirmed(const ControllerSnapshot& now) const;
+  /// Why the wait failed at the deadline: how far the last report is from the end point, and for
+  /// how long it waited; \p tolerance_setting and \p timeout_setting name the parameters.
+  std::string failure(const ControllerSnapshot& now, const std::string& tolerance_setting,
+                      const std::string& timeout_setting) const;
+
+ private:
+  std::string endPoint() const;
+
+  std::array<int32_t, 3> end_;
+  EndCheck check_;
+  Clock::time_point last_setpoint_;
+  bool moves_;
+};
+
 /// \brief Calls of a running goal, on the goal's thread.
 class GoalListener
 {
@@ -40,6 +89,9 @@ class GoalListener
   virtual void operationProgress(const Job& job, bool stopping, const GoalFeedback& feedback) {}
   /// An operation ended (before the goal goes on, holds or ends).
   virtual void operationEnded(const OperationResult& result) {}
+  /// Its last setpoint sent, the goal waits for the controller to report the operation's end point
+  /// (feedback.event says how far it is): when the wait starts and at each report outside the tolerance.
+  virtual void awaitingEnd(const GoalFeedback& feedback) {}
   /// A G04 dwell starts (feedback.event names it).
   virtual void dwelling(const GoalFeedback& feedback) {}
   /// An M01 passed because optionalStop() said no (feedback.event says so).
@@ -56,7 +108,8 @@ struct GoalOutcome
   {
     kSucceeded,  ///< every operation reached its end (or the program ended it: program_end)
     kCancelled,  ///< cancelled: during an operation (it decelerated to a stop), or while held
-    kAborted     ///< an e-stop, a lost command link, or the e-stop refused the next operation
+    kAborted     ///< an e-stop, a lost command link, the e-stop refused the next operation, or the
+                 ///< controller did not report an operation's end point (EndConfirmation)
   };
   End end = End::kSucceeded;
   std::string message;               ///< the last operation's outcome, or why the goal ended so
@@ -64,7 +117,8 @@ struct GoalOutcome
   bool held_when_cancelled = false;  ///< cancelled while nothing moved: nothing more was sent
   uint64_t setpoints = 0;
   uint64_t underruns = 0;
-  /// The reported position after the last operation (none if no operation ran).
+  /// The reported position after the last operation (none if no operation ran): on success the
+  /// report that confirmed the end point.
   std::optional<std::array<int32_t, 3>> final_position;
 };
 
@@ -79,9 +133,11 @@ class GoalRunner
     std::string resume = "resume";
     std::string set_motion_enabled = "set_motion_enabled";
     std::string optional_stop = "optional_stop";
+    std::string end_tolerance = "end_tolerance";
+    std::string end_timeout = "end_timeout";
   };
 
-  GoalRunner(ControllerSession& session, Names names);
+  GoalRunner(ControllerSession& session, Names names, EndCheck end_check = {});
 
   /// \brief Carries out \p plans (ControllerSession::planGoal) of a goal with tool \p goal_tool
   /// (-1: none) of length \p goal_tool_length (m).
@@ -99,11 +155,13 @@ class GoalRunner
   struct Run;
   bool runPlan(Run& run, const OperationPlan& plan);
   bool runOperation(Run& run, const OperationPlan& plan, std::optional<DisabledStop>& stop);
+  bool confirmEnd(Run& run, const OperationPlan& plan, const Job& job);
   bool carryOut(Run& run, const gcode::ProgramStep& step);
   bool holdUntilResume(Run& run, const std::string& what, const std::string& event, uint32_t line);
 
   ControllerSession& session_;
   const Names names_;
+  const EndCheck end_check_;
   JobHold hold_;
 };
 }  // namespace at_protocol

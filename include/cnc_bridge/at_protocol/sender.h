@@ -7,6 +7,7 @@
 
 #include <array>
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
@@ -89,6 +90,12 @@ class Job
   /// the job was cancelled, where along the path it came to rest.
   double distance() const { return distance_.load(std::memory_order_relaxed); }
   const Operation& operation() const { return operation_; }
+  /// When the last setpoint sent was written (the epoch before the first): a report that arrives
+  /// later can tell where the axes went after it (see EndConfirmation).
+  std::chrono::steady_clock::time_point lastSetpointAt() const
+  {
+    return std::chrono::steady_clock::time_point(std::chrono::steady_clock::duration(last_setpoint_at_.load()));
+  }
 
  private:
   friend class SetpointSender;
@@ -103,6 +110,7 @@ class Job
   std::atomic<uint64_t> sent_{0};
   std::atomic<uint64_t> total_{0};
   std::atomic<double> distance_{0.0};
+  std::atomic<std::chrono::steady_clock::rep> last_setpoint_at_{0};  ///< steady_clock ticks
   std::array<std::atomic<int32_t>, 3> position_{};
   std::array<std::atomic<int>, 3> feed_{};
   mutable std::mutex mutex_;
