@@ -48,8 +48,8 @@ ap::PlannerLimits plannerLimits(const ros::NodeHandle& pnh)
 ap::TcpLinkSettings linkSettings(const ros::NodeHandle& pnh)
 {
   ap::TcpLinkSettings link;
-  // ~host: address of the controller (both sockets in client mode).
-  link.host = pnh.param<std::string>("host", "127.0.0.1");
+  // ~host (required): address of the controller (both sockets in client mode).
+  link.host = params::required<std::string>(pnh, "host");
   // ~tcp_port: the controller's command server (the paper's server_recv).
   link.command_port = params::tcpPort(pnh, "tcp_port", 5000);
   // ~report_mode: "client" connects to the controller's report server (the paper's server_send,

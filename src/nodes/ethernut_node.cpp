@@ -167,8 +167,7 @@ void EthernutNode::readLinkParameters(const ethernut::Settings& settings)
   {
     if (!settings.address)
     {
-      throw ConfigError("Required parameter " + pnh_.resolveName("host") +
-                        " not given (nor INET_ADD in ~settings_file).");
+      throw params::MissingParameter(pnh_, "host", "nor INET_ADD in ~settings_file");
     }
     host_ = *settings.address;
   }

@@ -110,7 +110,11 @@ class HaasMdcNode
     else
     {
       // ~host: address of an NGC control (or sim_haas_mdc).
-      host_ = params::required<std::string>(pnh, "host");
+      host_ = pnh.param<std::string>("host", "");
+      if (host_.empty())
+      {
+        throw params::MissingParameter(pnh, "host", "nor ~port, the serial device of a Classic control");
+      }
       // ~tcp_port: the control's MDC port, Haas setting 143.
       tcp_port_ = params::tcpPort(pnh, "tcp_port", 5051);
       hardware_id_ = host_ + ":" + std::to_string(tcp_port_);

@@ -9,6 +9,13 @@ namespace cnc_bridge
 {
 namespace params
 {
+MissingParameter::MissingParameter(const ros::NodeHandle& pnh, const std::string& name, const std::string& alternative)
+    : ConfigError("Required parameter " + pnh.resolveName(name) + " not given" +
+                  (alternative.empty() ? "" : " (" + alternative + ")") + "."),
+      parameter_(name)
+{
+}
+
 double positive(const ros::NodeHandle& pnh, const std::string& name, double fallback)
 {
   double value = fallback;

@@ -21,6 +21,8 @@ import rosbag
 import rospy
 from nav_msgs.msg import Path
 
+from cnc_bridge.msg import MachineState
+
 MACHINES = ["haas_vf2", "ethernut_mill", "at_router", "laser"]
 
 # One pattern per step of the scenario: what the summary must say, with numbers that must be sane.
@@ -69,11 +71,27 @@ def extent(path):
     return max(max(xs) - min(xs), max(ys) - min(ys))
 
 
+class StateWatch:
+    """The last MachineState of every watched topic that named a program and a part count."""
+
+    def __init__(self, topics):
+        self.last = {}
+        self.lock = threading.Lock()
+        self.subs = [rospy.Subscriber(t, MachineState, self._on_state, callback_args=t) for t in topics]
+
+    def _on_state(self, state, topic):
+        if state.program and state.part_count >= 0:
+            with self.lock:
+                self.last[topic] = state
+
+
 class Demo(unittest.TestCase):
     def test_demo_runs_once(self):
         script = rospy.get_param("~demo")
         out = tempfile.mkdtemp(prefix="cnc_demo_test.")
         watch = PathWatch(["/cell/%s/tool_path" % m for m in MACHINES] + ["/cell/at_router/job/path"])
+        # The VF-2 as its MDC status tells it and as its DPRNT output tells it.
+        haas = StateWatch(["/cell/haas_vf2/state", "/cell/haas_vf2/dprnt/state"])
         env = dict(os.environ, DEMO_ONCE="1", DEMO_OUTPUT=out, GUI="0")
         run = subprocess.run(["bash", script], env=env, capture_output=True, text=True,
                              timeout=rospy.get_param("~timeout", 150))
@@ -134,6 +152,18 @@ class Demo(unittest.TestCase):
             self.assertIsNotNone(trail, "no tool_path from %s" % machine)
             self.assertEqual(trail.header.frame_id, machine + "/machine")
             self.assertGreater(extent(trail), 0.1, "%s's tool_path hardly moved (%d poses)" % (machine, len(trail.poses)))
+
+        # The two simulators of the VF-2 tell one machine: the same program, and the same part
+        # count (each counts on its own clock, so one may have counted the part it ends a moment
+        # before the other).
+        with haas.lock:
+            told = dict(haas.last)
+        self.assertEqual(sorted(told), ["/cell/haas_vf2/dprnt/state", "/cell/haas_vf2/state"],
+                         "no program and part count from both: %s" % told)
+        mdc, dprnt = told["/cell/haas_vf2/state"], told["/cell/haas_vf2/dprnt/state"]
+        self.assertEqual(mdc.program, dprnt.program)
+        self.assertLessEqual(abs(mdc.part_count - dprnt.part_count), 1,
+                             "MDC counts %d parts, DPRNT %d" % (mdc.part_count, dprnt.part_count))
         shutil.rmtree(out, ignore_errors=True)  # kept for a look when something failed
 
 

@@ -1,6 +1,7 @@
 // One main() for every node: ros::init, the core's log routed to rosconsole, the node handle held
 // for the node's whole life, a constructor error reported the same way by every node (one FATAL
-// line "<node>: <what went wrong>", exit status 1), and the callback threads the node needs.
+// line "<node>: <what went wrong>", exit status 1; a missing required parameter also names the
+// launch argument that sets it), and the callback threads the node needs.
 #pragma once
 
 #include <ros/ros.h>
@@ -53,6 +54,15 @@ int runNode(int argc, char** argv, const char* name, Spinning spinning = {})
     }
     ros::waitForShutdown();
     spinner.stop();  // no callback may run on a node being destroyed
+  }
+  catch (const params::MissingParameter& e)
+  {
+    // Each node's launch file (launch/<name>.launch) passes the parameter as the argument of the
+    // same name: say which one to give.
+    ROS_FATAL_STREAM(ros::this_node::getName() << ": " << e.what() << " Give it as the launch argument "
+                                               << e.parameter() << ":=... of " << name << ".launch, in its params_file,"
+                                               << " or as the private parameter _" << e.parameter() << ":=...");
+    return 1;
   }
   catch (const std::exception& e)
   {

@@ -6,7 +6,9 @@
 
 #include <initializer_list>
 #include <string>
+#include <type_traits>
 
+#include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/soft_limits.h"
 #include "cnc_bridge/transport/serial_port.h"
 
@@ -14,14 +16,35 @@ namespace cnc_bridge
 {
 namespace params
 {
-/// \brief Reads a required parameter. \throws ConfigError "Required parameter /ns/node/name not given."
+/// \brief A required parameter that was not given (or given empty): "Required parameter
+/// /ns/node/name not given". runNode() adds the launch-file argument that sets it (each node's
+/// launch file passes the parameter as the argument of the same name).
+class MissingParameter : public ConfigError
+{
+ public:
+  /// \param alternative what else would have done, e.g. "nor INET_ADD in ~settings_file"
+  MissingParameter(const ros::NodeHandle& pnh, const std::string& name, const std::string& alternative = "");
+  /// The parameter's private name (and so the launch argument's), e.g. "port".
+  const std::string& parameter() const { return parameter_; }
+
+ private:
+  std::string parameter_;
+};
+
+/// \brief Reads a required parameter; an empty string counts as not given.
+/// \throws MissingParameter naming the parameter's resolved name.
 template <class T>
 T required(const ros::NodeHandle& pnh, const std::string& name)
 {
   T value;
-  if (!pnh.getParam(name, value))
+  bool given = pnh.getParam(name, value);
+  if constexpr (std::is_same_v<T, std::string>)
   {
-    throw ConfigError("Required parameter " + pnh.resolveName(name) + " not given.");
+    given = given && !value.empty();
+  }
+  if (!given)
+  {
+    throw MissingParameter(pnh, name);
   }
   return value;
 }
