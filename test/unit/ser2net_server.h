@@ -29,7 +29,7 @@ class Ser2netServer
   /// Writes the configuration for \p device with the server's own line settings \p line (ser2net's
   /// notation, "9600n81"); starts the server.
   Ser2netServer(const std::string& dir, const std::string& device, const std::string& line = "9600n81")
-    : dir_(dir), device_(device), line_(line)
+      : dir_(dir), device_(device), line_(line)
   {
     raw_port = freePort();
     rfc2217_port = freePort();
@@ -59,7 +59,7 @@ class Ser2netServer
     }
     ::setpgid(pid_, pid_);
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
-    while (!accepts(raw_port) || !accepts(rfc2217_port))
+    while (!listening(raw_port) || !listening(rfc2217_port))
     {
       int status = 0;
       if (::waitpid(pid_, &status, WNOHANG) == pid_)
@@ -115,17 +115,24 @@ class Ser2netServer
         << "  connector: serialdev," << device_ << "," << line_ << ",local\n";
   }
 
-  static bool accepts(unsigned port)
+  /// True once ser2net listens on \p port (127.0.0.1). Read from /proc/net/tcp rather than by
+  /// connecting: every connection opens the device, and ser2net holds a device whose connection
+  /// has just closed for a few milliseconds, refusing a connection to the other accepter of the
+  /// same device meanwhile ("Port's device already in use").
+  static bool listening(unsigned port)
   {
-    try
+    std::ifstream table("/proc/net/tcp");
+    char wanted[32];
+    std::snprintf(wanted, sizeof wanted, "0100007F:%04X", port);
+    for (std::string line; std::getline(table, line);)
     {
-      TcpConnection::connect("127.0.0.1", static_cast<uint16_t>(port), std::chrono::milliseconds(200));
-      return true;
+      std::istringstream fields(line);
+      std::string slot, local, remote, state;
+      fields >> slot >> local >> remote >> state;
+      if (local == wanted && state == "0A")  // TCP_LISTEN
+        return true;
     }
-    catch (const std::exception&)
-    {
-      return false;
-    }
+    return false;
   }
 
   static unsigned freePort()
