@@ -16,6 +16,8 @@
 //   cnc_dnc doctor  --port DEV [serial options] [--listen S]            (cnc_dnc_doctor.cpp)
 //   cnc_dnc history (--archive DIR | --program-dir DIR) NAME
 //   cnc_dnc diff    (--archive DIR | --program-dir DIR) NAME [V1 [V2]]
+// DEV is a serial device, tcp://host:port (a device server's raw TCP port) or rfc2217://host:port
+// (a device server's RFC 2217 port): serial_line.h.
 #include <unistd.h>
 
 #include <algorithm>
@@ -29,7 +31,7 @@
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/stop_handler.h"
-#include "cnc_bridge/transport/serial_port.h"
+#include "cnc_bridge/transport/serial_line.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
 #include "progress_line.h"
 #include "protected_options.h"
@@ -68,7 +70,8 @@ struct UsageError : std::runtime_error
 po::options_description serialOptions()
 {
   po::options_description options("serial port");
-  options.add_options()("port,p", po::value<std::string>()->required(), "serial device, e.g. /dev/ttyUSB0")(
+  options.add_options()("port,p", po::value<std::string>()->required(),
+                        "serial device (/dev/ttyUSB0) or device server port (tcp://host:port, rfc2217://host:port)")(
       "baud,b", po::value<unsigned>()->default_value(115200), "baud rate (Haas setting 11)")(
       "parity", po::value<std::string>()->default_value("none"), "none|even|odd (Haas setting 12)")(
       "data-bits", po::value<unsigned>()->default_value(8), "7|8 (Haas setting 37)")(
@@ -198,14 +201,14 @@ int withPort(const po::variables_map& vm, const std::function<std::string(Transp
   installStopHandler();
   // A start request the receiver sent before this program opened the port is kept: it is the one
   // the transfer needs (a receiver repeats it only after its NAK interval, 10 s for lrzsz rx).
-  SerialPort port(serialSettings(vm), InputOnOpen::kKeep);
+  const auto port = openSerialLine(serialSettings(vm), InputOnOpen::kKeep);
   onStop(
       [&port]
       {
         cancel = true;
-        port.interrupt();
+        port->interrupt();
       });
-  std::cout << transfer(port, cancel) << std::endl;
+  std::cout << transfer(*port, cancel) << std::endl;
   return 0;
 }
 

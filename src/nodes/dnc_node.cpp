@@ -200,7 +200,7 @@ Transport& DncNode::openLink()
     {
       // What the control sent while the port was closed stays, as it does in a port kept open
       // (~keep_open): a receiving control's NAK, queued before a send starts, is its start request.
-      link_ = std::make_unique<SerialPort>(serial_, InputOnOpen::kKeep);
+      link_ = openSerialLine(serial_, InputOnOpen::kKeep);
       ++link_generation_;
     }
     catch (const Error& e)
