@@ -33,6 +33,7 @@
 #include "cnc_bridge/common/stop_handler.h"
 #include "cnc_bridge/transport/serial_line.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
+#include "cnc_bridge/xmodem/network_waits.h"
 #include "progress_line.h"
 #include "protected_options.h"
 #include "serial_options.h"
@@ -169,8 +170,9 @@ void addTransferOptions(po::options_description& options, const std::string& def
       "timeout,t", po::value<double>()->default_value(60.0), "seconds to wait for the other side to start")(
       "retries", po::value<unsigned>()->default_value(10), "errors in a row on one block before giving up")(
       "wait-chars", po::value<unsigned>()->default_value(30),
-      "gap inside a packet, and silence before a NAK, in character times of the line")(
-      "wait-floor", po::value<unsigned>()->default_value(30), "milliseconds: the least of those two waits")(
+      "gap inside a packet, and silence before a NAK, in character times of the line (140 at a device server)")(
+      "wait-floor", po::value<unsigned>()->default_value(30),
+      "milliseconds: the least of those two waits (200 at a device server)")(
       "max-bytes", po::value<uint64_t>()->default_value(xmodem::kDefaultMaxProgramBytes),
       "the longest program moved: a sender that goes past it is cancelled and nothing is stored; a larger "
       "file is not sent (XModem has no length field)");
@@ -186,6 +188,14 @@ xmodem::Config transferConfig(const po::variables_map& vm)
   config.max_retries = config.eot_retries = vm["retries"].as<unsigned>();
   config.wait_characters = vm["wait-chars"].as<unsigned>();
   config.wait_floor = Milliseconds(vm["wait-floor"].as<unsigned>());
+  if (parseSerialAddress(vm["port"].as<std::string>()).networked())
+  {
+    // A device server sends in chunks and the network adds its delays (xmodem/network_waits.h).
+    if (vm["wait-chars"].defaulted())
+      config.wait_characters = xmodem::kNetworkWaitCharacters;
+    if (vm["wait-floor"].defaulted())
+      config.wait_floor = xmodem::kNetworkWaitFloor;
+  }
   config.max_bytes = vm["max-bytes"].as<uint64_t>();
   if (config.max_bytes == 0)
     throw UsageError("--max-bytes must be at least 1");
