@@ -6,6 +6,7 @@
 # each profile and its worst limit ratio. Builds nothing: uses cnc_plan from BUILD_DIR.
 #   BUILD_DIR=$PWD/.build bench/at_controller/plan_run.sh [lines]
 set -euo pipefail
+source "$(dirname "$(readlink -f "$0")")/../provenance.sh"
 here=$(cd "$(dirname "$0")" && pwd)
 build=${BUILD_DIR:-$(cd "$(dirname "$0")/../.." && pwd)/.build}
 lines=${1:-100000}
@@ -17,8 +18,9 @@ trap 'rm -f "$program"' EXIT
 echo "program: $lines lines; load average: $(cut -d' ' -f1-3 /proc/loadavg)"
 for profile in trapezoid scurve; do
   start=$(date +%s.%N)
-  out=$("$plan" --gcode "$program" --profile "$profile")
+  out=$("$plan" --gcode "$program" --profile "$profile") || { bench_failed "cnc_plan --profile $profile"; continue; }
   end=$(date +%s.%N)
   echo "$out"
   awk -v s="$start" -v e="$end" -v p="$profile" 'BEGIN { printf "%s: wall time of cnc_plan %.2f s\n", p, e - s }'
 done
+bench_done

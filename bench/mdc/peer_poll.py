@@ -7,8 +7,9 @@ import sys
 import time
 
 host, port, seconds = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
+# An NGC answers Q600 with "MACRO, value" (no variable number: docs/protocols/haas_mdc.md).
 queries = [("?Q500", ("PROGRAM", "STATUS")), ("?Q104", ("MODE",))] + \
-    [("?Q600 %d" % n, ("MACRO, %d," % n,)) for n in (5021, 5022, 5023, 5041, 5042, 5043)]
+    [("?Q600 %d" % n, ("MACRO,",)) for n in (5021, 5022, 5023, 5041, 5042, 5043)]
 sock = socket.create_connection((host, port), timeout=1.0)
 sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
 reader = sock.makefile("rb")

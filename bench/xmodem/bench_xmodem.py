@@ -17,11 +17,17 @@ running SENDER_CAP seconds after its receiver exited is killed and the run is ma
 end time is then at least the figure shown): lrzsz rx flushes its tty as it exits, and the ACK of
 EOT it has just written is sometimes thrown away with it, which leaves the sender waiting.
 
+Then the same pairs at line rate: the tap carries 115200 baud (10 bits a character) both ways,
+LINE_RATE_ROUNDS times each (default 3) with a 64 KiB program, beside the stop-and-wait bound of
+that link: every packet's 132 characters (checksum-128) and its one-character ACK, one after the
+other, at 115200 baud. No run can beat it; the ratio to it is the protocol's efficiency on a real
+line, for cnc_dnc and lrzsz alike.
+
 Then the noisy wire: cnc_dnc -> cnc_dnc over the tap carrying 115200 baud (10 bits a character)
 and damaging each direction (a byte in 500 flipped, in 1000 lost, in 2000 doubled, seeded), a
 16 KB program, once per seed, in CRC and in checksum mode.
 
-usage: bench_xmodem.py BIN_DIR TAP KILOBYTES ROUNDS NOISY_SEEDS
+usage: bench_xmodem.py BIN_DIR TAP KILOBYTES ROUNDS NOISY_SEEDS   (LINE_RATE_ROUNDS=N in the environment)
 """
 import os
 import random
@@ -35,6 +41,9 @@ import time
 
 SENDER_CAP = 30.0
 RECEIVER_CAP = 120.0
+LINE_BAUD = 115200
+LINE_KB = 64
+CHECKSUM_PACKET = 132  # SOH, block number, its complement, 128 bytes, checksum
 
 
 def load():
@@ -137,15 +146,69 @@ def run_pair(tap, work, sender, receiver, out, payload, packet_size, baud=0, fau
     return result
 
 
+def run_rounds(tap, work, pairs, payload, rounds, baud=0):
+    """Every pair ROUNDS times, the pairs taking turns; a list of run results per pair."""
+    with open(work + "/payload.bin", "wb") as f:
+        f.write(payload)
+    results = {name: [] for name in pairs}
+    for r in range(rounds):
+        for name, (sender, receiver) in pairs.items():
+            results[name].append(run_pair(tap, work, sender, receiver, work + "/out.bin", payload, CHECKSUM_PACKET,
+                                          baud))
+        print("round %d of %d done, load %s" % (r + 1, rounds, load()), file=sys.stderr)
+    return results
+
+
+def median_of_complete(runs, key):
+    # Medians over complete runs only: a run in which a peer stalled, was killed or left a wrong
+    # file is counted and shown apart, never averaged in.
+    values = [x[key] for x in runs if key in x and x["complete"]]
+    return statistics.median(values) if values else float("nan")
+
+
+def print_pairs(results, title, bound=None):
+    """The table of medians, the ratios to sx -> rx (and to \p bound, seconds, when given), every run."""
+    rounds = len(next(iter(results.values())))
+    print("\n%s, medians of the complete runs of %d per pair (seconds); every pair over the same tap" % (title, rounds))
+    print("%-20s %12s %8s %8s %8s %9s  %s" % ("pair", "end to end", "start", "blocks", "end", "complete",
+                                               "apart: sender killed after its receiver exited / wrong file / exit status"))
+    for name, runs in results.items():
+        med = lambda key: median_of_complete(runs, key)
+        print("%-20s %12.3f %8.3f %8.3f %8.3f %6d/%-2d  %d / %d / %d" % (
+            name, med("total"), med("start"), med("blocks"), med("end"),
+            sum(x["complete"] for x in runs), len(runs), sum(x["capped"] for x in runs),
+            sum(not x["exact"] for x in runs),
+            sum(x["exact"] and not x["capped"] and not x["complete"] for x in runs)))
+    base_total = median_of_complete(results["sx -> rx"], "total")
+    base_blocks = median_of_complete(results["sx -> rx"], "blocks")
+    print("\nratios to sx -> rx (its time / the pair's time: above 1 = faster than sx -> rx)%s"
+          % ("; blocks against the stop-and-wait bound %.3f s (at most 100 %%)" % bound if bound else ""))
+    print("%-20s %12s %12s%s" % ("pair", "end to end", "blocks", " %14s" % "bound/blocks" if bound else ""))
+    for name, runs in results.items():
+        total, blocks = median_of_complete(runs, "total"), median_of_complete(runs, "blocks")
+        print("%-20s %11.2fx %11.2fx%s" % (name, base_total / total, base_blocks / blocks,
+                                           " %13.1f%%" % (100 * bound / blocks) if bound else ""))
+    print("every run, end to end seconds (k = sender killed %.0f s after its receiver exited):" % SENDER_CAP)
+    for name, runs in results.items():
+        print("  %-20s %s" % (name, " ".join("%.2f%s" % (x["total"], "" if x["complete"] else "k" if x["capped"] else "x")
+                                             for x in runs)))
+    print("  (x = incomplete: a wrong file or a non-zero exit status)")
+    return [name for name in results if "cnc_dnc" in name and not all(x["complete"] for x in results[name])]
+
+
+def stop_and_wait_bound(kb, baud):
+    """The blocks phase on a line of \p baud: each packet, then its ACK, nothing overlapping. The
+    phase ends when the receiver writes its last ACK, so that one's character time is not in it."""
+    packets = kb * 1024 // 128
+    return (packets * (CHECKSUM_PACKET + 1) - 1) * 10.0 / baud
+
+
 def main():
     bin_dir, tap, kb, rounds, seeds = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), int(sys.argv[5])
+    line_rounds = int(os.environ.get("LINE_RATE_ROUNDS", "3"))
     dnc = bin_dir + "/cnc_dnc"
     work = tempfile.mkdtemp(prefix="bench_xmodem.")
     try:
-        payload = os.urandom(kb * 1024)
-        with open(work + "/payload.bin", "wb") as f:
-            f.write(payload)
-        out = work + "/out.bin"
         pairs = {
             "cnc_dnc -> cnc_dnc": (lambda a: [dnc, "send", "--port", a, "--mode", "checksum", "--binary", "payload.bin"],
                                    lambda b: [dnc, "receive", "--port", b, "--mode", "checksum", "--binary", "out.bin"]),
@@ -156,42 +219,17 @@ def main():
             "sx -> cnc_dnc": (lambda a: ["sh", "-c", 'exec sx payload.bin <"$0" >"$0"', a],
                               lambda b: [dnc, "receive", "--port", b, "--mode", "checksum", "--binary", "out.bin"]),
         }
+        ours_failed = []
         print("load average at the start: %s" % load())
-        results = {name: [] for name in pairs}
-        for r in range(rounds):
-            for name, (sender, receiver) in pairs.items():
-                results[name].append(run_pair(tap, work, sender, receiver, out, payload, 132))
-            print("round %d of %d done, load %s" % (r + 1, rounds, load()), file=sys.stderr)
-        print("load average at the end: %s" % load())
-
-        def med(name, key):
-            # Medians over complete runs only: a run in which a peer stalled, was killed or left a
-            # wrong file is counted and shown apart, never averaged in.
-            values = [x[key] for x in results[name] if key in x and x["complete"]]
-            return statistics.median(values) if values else float("nan")
-
-        print("\n%d KiB, checksum-128, medians of the complete runs of %d per pair (seconds); every pair over the same tap"
-              % (kb, rounds))
-        print("%-20s %12s %8s %8s %8s %9s  %s" % ("pair", "end to end", "start", "blocks", "end", "complete",
-                                                   "apart: sender killed after its receiver exited / wrong file / exit status"))
-        for name in pairs:
-            runs = results[name]
-            print("%-20s %12.3f %8.3f %8.3f %8.3f %6d/%-2d  %d / %d / %d" % (
-                name, med(name, "total"), med(name, "start"), med(name, "blocks"), med(name, "end"),
-                sum(x["complete"] for x in runs), len(runs), sum(x["capped"] for x in runs),
-                sum(not x["exact"] for x in runs),
-                sum(x["exact"] and not x["capped"] and not x["complete"] for x in runs)))
-        base_total, base_blocks = med("sx -> rx", "total"), med("sx -> rx", "blocks")
-        print("\nratios to sx -> rx (its time / the pair's time: above 1 = faster than sx -> rx)")
-        print("%-20s %12s %12s" % ("pair", "end to end", "blocks"))
-        for name in pairs:
-            print("%-20s %11.2fx %11.2fx" % (name, base_total / med(name, "total"), base_blocks / med(name, "blocks")))
-        print("\nevery run, end to end seconds (k = sender killed %.0f s after its receiver exited):" % SENDER_CAP)
-        for name in pairs:
-            print("  %-20s %s" % (name, " ".join("%.2f%s" % (x["total"], "" if x["complete"] else "k" if x["capped"] else "x")
-                                                 for x in results[name])))
-        print("  (x = incomplete: a wrong file or a non-zero exit status)")
-        ours_failed = [name for name in pairs if "cnc_dnc" in name and not all(x["complete"] for x in results[name])]
+        if rounds > 0:
+            results = run_rounds(tap, work, pairs, os.urandom(kb * 1024), rounds)
+            print("load average at the end: %s" % load())
+            ours_failed += print_pairs(results, "%d KiB, checksum-128, unpaced ptys" % kb)
+        if line_rounds > 0:
+            results = run_rounds(tap, work, pairs, os.urandom(LINE_KB * 1024), line_rounds, LINE_BAUD)
+            print("load average at the end: %s" % load())
+            ours_failed += print_pairs(results, "%d KiB, checksum-128, %d baud both ways on the tap" % (LINE_KB, LINE_BAUD),
+                                       stop_and_wait_bound(LINE_KB, LINE_BAUD))
 
         # The noisy wire.
         if seeds > 0:

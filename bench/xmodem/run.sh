@@ -4,8 +4,10 @@
 # both having exited, over one pty link per run; the start, data-block and end phases of each run
 # read off the link by the same tap (bench/xmodem/tap.c, in place of socat); ratios to sx->rx of
 # the same run. Then a 16 KiB program through a noisy 115200 wire (seeded), in CRC and checksum
-# mode. Builds nothing but the tap: runs cnc_dnc from BUILD_DIR.
-# usage: BUILD_DIR=.build [ROUNDS=5] [SEEDS=8] bench/xmodem/run.sh [KILOBYTES]   (default 256)
+# mode. Between them, the same pairs at 115200 baud on the tap beside the stop-and-wait bound of
+# that line (LINE_RATE_ROUNDS, default 3; 0 leaves it out, as ROUNDS=0 and SEEDS=0 leave theirs).
+# Builds nothing but the tap: runs cnc_dnc from BUILD_DIR.
+# usage: BUILD_DIR=.build [ROUNDS=5] [SEEDS=8] [LINE_RATE_ROUNDS=3] bench/xmodem/run.sh [KILOBYTES]   (default 256)
 set -euo pipefail
 source "$(dirname "$(readlink -f "$0")")/../provenance.sh"
 here=$(cd "$(dirname "$0")" && pwd)
@@ -15,7 +17,7 @@ bin="$build/devel/lib/cnc_bridge"
 work=$(mktemp -d /tmp/bench_xmodem_tap.XXXXXX)
 trap 'rm -rf "$work"' EXIT
 cc -O2 -o "$work/tap" "$here/tap.c" -lutil
-echo "command: BUILD_DIR=$build ROUNDS=${ROUNDS:-5} SEEDS=${SEEDS:-8} bench/xmodem/run.sh ${1:-256}; $(date -u '+%Y-%m-%d %H:%M UTC')"
+echo "command: BUILD_DIR=$build ROUNDS=${ROUNDS:-5} SEEDS=${SEEDS:-8} LINE_RATE_ROUNDS=${LINE_RATE_ROUNDS:-3} bench/xmodem/run.sh ${1:-256}; $(date -u '+%Y-%m-%d %H:%M UTC')"
 python3 "$here/bench_xmodem.py" "$bin" "$work/tap" "${1:-256}" "${ROUNDS:-5}" "${SEEDS:-8}" ||
   bench_failed "a transfer with cnc_dnc on one side did not complete (above); its figures are left out"
 

@@ -166,6 +166,8 @@ void addTransferOptions(po::options_description& options, const std::string& def
                                                "checksum (NAK start, what a Haas speaks), crc, or 1k (send only)")(
       "eob", po::value<std::string>()->default_value("lf"),
       "the control's end-of-block pattern, Haas setting 25: lf|cr|crlf|crcr|lflf")(
+      "eob-checksum", po::value<std::string>()->default_value("wire"),
+      "how the control sums ends of block in a checksum: wire (the bytes sent) or lf (each as LF)")(
       "binary", po::bool_switch(), "move bytes exactly: no EOB conversion, received padding kept")(
       "timeout,t", po::value<double>()->default_value(60.0), "seconds to wait for the other side to start")(
       "retries", po::value<unsigned>()->default_value(10), "errors in a row on one block before giving up")(
@@ -200,6 +202,7 @@ xmodem::Config transferConfig(const po::variables_map& vm)
   if (config.max_bytes == 0)
     throw UsageError("--max-bytes must be at least 1");
   config.max_bytes_name = "--max-bytes";
+  config.eob_checksum_name = "--eob-checksum";
   xmodem::fitToLine(config, serialSettings(vm).charactersPerSecond());
   return config;
 }
@@ -240,6 +243,7 @@ int runSend(const std::vector<std::string>& args)
   xmodem::TextOptions text;
   text.binary = vm["binary"].as<bool>();
   text.control_eob = parsed(vm, "eob", &xmodem::parseEob);
+  text.eob_checksum = parsed(vm, "eob-checksum", &xmodem::parseEobChecksum);
   xmodem::Config config = transferConfig(vm);
   config.turnaround = Milliseconds(vm["turnaround"].as<unsigned>());
   config.ack_turnaround = Milliseconds(vm["ack-turnaround"].as<unsigned>());
@@ -283,6 +287,7 @@ int runReceive(const std::vector<std::string>& args)
   xmodem::TextOptions text;
   text.binary = vm["binary"].as<bool>();
   text.control_eob = parsed(vm, "eob", &xmodem::parseEob);
+  text.eob_checksum = parsed(vm, "eob-checksum", &xmodem::parseEobChecksum);
   text.file_eob = parsed(vm, "file-eob", &xmodem::parseEob);
   xmodem::Config config = transferConfig(vm);
   // Waiting for the other side: the start request is repeated every 3 s (more often when the whole

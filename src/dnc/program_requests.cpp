@@ -96,7 +96,7 @@ std::optional<Punch> RequestListener::listenXmodem(const std::atomic<bool>& stop
   xmodem::Config config = options_.xmodem;
   config.skip_initial_request = true;
   config.start_timeout = config.block_timeout;
-  xmodem::Receiver receiver(line, options_.mode, config, cancel);
+  xmodem::Receiver receiver(line, options_.mode, xmodem::withEobReading(config, options_.text), cancel);
   std::vector<uint8_t> payload = receiver.receive();
   Punch punch;
   punch.wire_bytes = payload.size();
@@ -177,7 +177,7 @@ std::string RequestListener::answer(const std::string& program, const std::atomi
     link_.drain();
     return "answered as text (" + std::to_string(wire.size()) + " bytes)";
   }
-  xmodem::Sender sender(link_, options_.mode, options_.xmodem, cancel);
+  xmodem::Sender sender(link_, options_.mode, xmodem::withEobReading(options_.xmodem, options_.text), cancel);
   const xmodem::Stats stats = sender.send(wire);
   return "answered by XModem (" + std::to_string(stats.blocks) + " blocks)";
 }

@@ -107,6 +107,10 @@ DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   // ~eob (string, default "lf"): the control's end-of-block pattern, Haas setting 25
   // (lf, cr, crlf, crcr, lflf). Programs are sent with it.
   text_options_.control_eob = xmodem::parseEob(pnh.param<std::string>("eob", "lf"));
+  // ~eob_checksum (string, default "wire"): how the control sums a checksum-mode packet holding
+  // ends of block: wire (the bytes sent, as every XModem) or lf (each end of block as LF, as one
+  // description of the Haas has it). A receive that meets the other reading says so.
+  text_options_.eob_checksum = xmodem::parseEobChecksum(pnh.param<std::string>("eob_checksum", "wire"));
   // ~file_eob (string, default "lf"): line ends of programs stored in ~program_dir.
   text_options_.file_eob = xmodem::parseEob(pnh.param<std::string>("file_eob", "lf"));
   // ~binary (bool, default false): move bytes exactly (no EOB conversion; received files keep the
@@ -114,6 +118,7 @@ DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   pnh.param("binary", text_options_.binary, false);
   xmodem_config_ = dnc::xmodemConfig(xmodemWaits(pnh, parseSerialAddress(serial_.device).networked()),
                                      serial_.charactersPerSecond());
+  xmodem_config_.eob_checksum_name = pnh.resolveName("eob_checksum");
   // ~max_program_bytes (int, default 16 MiB): the longest program moved by XModem.
   dnc::setMaxProgramBytes(xmodem_config_,
                           pnh.param("max_program_bytes", static_cast<int>(xmodem::kDefaultMaxProgramBytes)),

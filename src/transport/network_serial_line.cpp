@@ -30,6 +30,57 @@ std::unique_ptr<TcpConnection> connectToServer(const SerialSettings& settings, c
   }
 }
 
+/// What a server said before it closed the connection ("Port already in use"), when it is short
+/// printable text; empty otherwise (line data, not a message).
+std::string serverMessage(const uint8_t* bytes, size_t size)
+{
+  std::string text;
+  for (size_t i = 0; i < size && text.size() <= 200; ++i)
+  {
+    const char c = static_cast<char>(bytes[i]);
+    if (c == '\r' || c == '\n')
+      continue;
+    if (bytes[i] < 0x20 || bytes[i] > 0x7E)
+      return "";
+    text += c;
+  }
+  return text.size() <= 200 ? text : "";
+}
+
+/// A server closed a new connection at once: busy with another client, or still closing the
+/// previous connection (ser2net lets its port's output drain first).
+class TurnedAway : public LinkError
+{
+ public:
+  using LinkError::LinkError;
+};
+
+/// Runs \p open until it does not meet a busy server, for up to kBusyRetryFor (within the connect
+/// timeout): a client that closes a line and opens it again at once must not fail for it.
+template <class Open>
+auto openUnlessBusy(Milliseconds connect_timeout, Open open)
+{
+  const auto give_up = Clock::now() + std::min<Milliseconds>(connect_timeout, kBusyRetryFor);
+  for (;;)
+  {
+    try
+    {
+      return open();
+    }
+    catch (const TurnedAway& busy)
+    {
+      if (Clock::now() >= give_up)
+        throw LinkError(busy.what());
+    }
+    std::this_thread::sleep_for(kBusyRetryEvery);  // the server sends no notice when it is free
+  }
+}
+
+std::string saying(const std::string& message)
+{
+  return message.empty() ? "" : ", saying '" + message + "'";
+}
+
 /// Waits until the server has acknowledged what was written. Nothing signals an acknowledgement,
 /// so this looks at the send queue every millisecond, for at most kDeadPeerWithin (by then the
 /// connection has failed anyway).
@@ -47,29 +98,69 @@ void waitUntilAcknowledged(const TcpConnection& connection)
 // Raw TCP
 
 RawTcpSerialLine::RawTcpSerialLine(SerialSettings settings, std::unique_ptr<TcpConnection> connection)
-  : settings_(std::move(settings)), connection_(std::move(connection))
+    : settings_(std::move(settings)), connection_(std::move(connection))
 {
 }
 
 std::unique_ptr<RawTcpSerialLine> RawTcpSerialLine::open(const SerialSettings& settings, const SerialAddress& address,
                                                          InputOnOpen on_open, Milliseconds connect_timeout)
 {
-  std::unique_ptr<RawTcpSerialLine> line(
-      new RawTcpSerialLine(settings, connectToServer(settings, address, connect_timeout)));
-  if (on_open == InputOnOpen::kDiscard)
-  {
-    line->discardInput();
-  }
-  return line;
+  return openUnlessBusy(connect_timeout,
+                        [&]
+                        {
+                          std::unique_ptr<RawTcpSerialLine> line(
+                              new RawTcpSerialLine(settings, connectToServer(settings, address, connect_timeout)));
+                          line->refuseIfTurnedAway();
+                          if (on_open == InputOnOpen::kDiscard)
+                          {
+                            line->discardInput();
+                          }
+                          return line;
+                        });
 }
 
-void RawTcpSerialLine::fail(const LinkError& error)
+void RawTcpSerialLine::refuseIfTurnedAway()
+{
+  // A server that already serves another client accepts the connection, says so in plain text
+  // ("Port already in use") and closes it. On raw TCP that text would pass for the control's
+  // data, so the first moments of a connection are watched for it; whatever arrives meanwhile from
+  // a connection that stays open is kept for read().
+  const auto until = Clock::now() + kTurnedAwayWithin;
+  uint8_t buffer[256];
+  while (Clock::now() < until && held_.size() < sizeof buffer)
+  {
+    size_t got = 0;
+    try
+    {
+      got = connection_->read(buffer, sizeof buffer - held_.size(),
+                              std::chrono::ceil<Milliseconds>(until - Clock::now()));
+    }
+    catch (const LinkError& error)
+    {
+      throw TurnedAway(describe() + ": the device server closed the connection at once" +
+                       saying(serverMessage(held_.data(), held_.size())) +
+                       ": another client holds its port (most servers serve one client at a time), or the port is "
+                       "disabled on the server (" +
+                       error.what() + ")");
+    }
+    held_.insert(held_.end(), buffer, buffer + got);
+  }
+}
+
+void RawTcpSerialLine::fail(const LinkError& error) const
 {
   throw LinkError(describe() + ": " + kWhenClosed + " (" + error.what() + ")");
 }
 
 size_t RawTcpSerialLine::read(uint8_t* buffer, size_t size, Milliseconds timeout)
 {
+  if (held_start_ < held_.size())
+  {
+    const size_t count = std::min(size, held_.size() - held_start_);
+    std::memcpy(buffer, held_.data() + held_start_, count);
+    held_start_ += count;
+    return count;
+  }
   try
   {
     return connection_->read(buffer, size, timeout);
@@ -104,6 +195,8 @@ size_t RawTcpSerialLine::pendingOutput() const
 
 void RawTcpSerialLine::discardInput()
 {
+  held_.clear();
+  held_start_ = 0;
   connection_->discardInput();
 }
 
@@ -132,30 +225,33 @@ std::string RawTcpSerialLine::describe() const
 
 TelnetSerialLine::TelnetSerialLine(SerialSettings settings, std::unique_ptr<TcpConnection> connection,
                                    Milliseconds answer_timeout)
-  : settings_(std::move(settings)), connection_(std::move(connection)), answer_timeout_(answer_timeout)
+    : settings_(std::move(settings)), connection_(std::move(connection)), answer_timeout_(answer_timeout)
 {
 }
 
 std::unique_ptr<TelnetSerialLine> TelnetSerialLine::open(const SerialSettings& settings, const SerialAddress& address,
                                                          InputOnOpen on_open, Milliseconds connect_timeout)
 {
-  std::unique_ptr<TelnetSerialLine> line(
-      new TelnetSerialLine(settings, connectToServer(settings, address, connect_timeout), connect_timeout));
-  line->negotiate();
-  line->applySettings();
-  if (on_open == InputOnOpen::kDiscard)
-  {
-    line->discardInput();
-  }
-  return line;
+  return openUnlessBusy(connect_timeout,
+                        [&]
+                        {
+                          std::unique_ptr<TelnetSerialLine> line(new TelnetSerialLine(
+                              settings, connectToServer(settings, address, connect_timeout), connect_timeout));
+                          line->setUp();
+                          if (on_open == InputOnOpen::kDiscard)
+                          {
+                            line->discardInput();
+                          }
+                          return line;
+                        });
 }
 
-void TelnetSerialLine::fail(const LinkError& error)
+void TelnetSerialLine::fail(const LinkError& error) const
 {
   throw LinkError(describe() + ": " + kWhenClosed + " (" + error.what() + ")");
 }
 
-Milliseconds TelnetSerialLine::left(Clock::time_point deadline) const
+Milliseconds TelnetSerialLine::left(Clock::time_point deadline)
 {
   if (deadline == Clock::time_point::max())
   {
@@ -163,6 +259,26 @@ Milliseconds TelnetSerialLine::left(Clock::time_point deadline) const
   }
   const auto rest = std::chrono::ceil<Milliseconds>(deadline - Clock::now());
   return std::max(rest, Milliseconds(0));
+}
+
+void TelnetSerialLine::setUp()
+{
+  try
+  {
+    negotiate();
+    applySettings();
+  }
+  catch (const LinkError&)
+  {
+    if (isOpen())
+      throw;
+    // Closed while setting up: a server that serves another client negotiates, says so and closes
+    // (what it said may be lost when our next request meets the closed connection).
+    const std::string message = serverMessage(data_.data() + data_start_, data_.size() - data_start_);
+    throw TurnedAway(describe() + ": the device server closed the connection at once" + saying(message) +
+                     ": another client holds its port (most servers serve one client at a time), or the port is "
+                     "disabled on the server");
+  }
 }
 
 void TelnetSerialLine::negotiate()
@@ -342,8 +458,9 @@ void TelnetSerialLine::write(const uint8_t* data, size_t size, Milliseconds time
     // The server asked us to hold (FLOWCONTROL-SUSPEND): what arrives meanwhile is kept for read().
     if (Clock::now() >= deadline || (!pump(left(deadline)) && Clock::now() >= deadline))
     {
-      throw TimeoutError(describe() + ": the device server asked to hold sending (its buffer is full) and did not "
-                                      "resume within " +
+      throw TimeoutError(describe() +
+                         ": the device server asked to hold sending (its buffer is full) and did not "
+                         "resume within " +
                          std::to_string(timeout.count()) + " ms");
     }
   }

@@ -316,9 +316,8 @@ std::string explainConnectFailure(const std::string& where, int error_number)
 const std::vector<ProfileLine>& serialProfiles()
 {
   static const std::vector<ProfileLine> kProfiles = {
-      {"haas_classic_rs232", 115200, 8, 'N', 1},
-      {"haas_classic_rs232_7e1", 9600, 7, 'E', 1},
-      {"fanuc_0i_rs232", 9600, 7, 'E', 2},
+      {"haas_classic_rs232", 115200, 8, 'N', 1}, {"haas_classic_rs232_7e1", 9600, 7, 'E', 1},
+      {"fanuc_0i_rs232", 9600, 7, 'E', 2},       {"fanuc_0i_rs232_7n2", 9600, 7, 'N', 2},
       {"grbl_class_board", 115200, 8, 'N', 1},
   };
   return kProfiles;
@@ -445,7 +444,9 @@ LineGuess guessLineSettings(const std::vector<uint8_t>& bytes, size_t framing_er
   guess.line = line.str();
   for (const auto& profile : serialProfiles())
   {
-    if (profile.data_bits == guess.data_bits && profile.parity == guess.parity)
+    // Read 8 bits at a time, a 7N2 character's first stop bit is bit 7: always set, like mark parity.
+    const bool seven_n2 = profile.data_bits == 7 && profile.parity == 'N' && profile.stop_bits == 2;
+    if (profile.data_bits == guess.data_bits && (seven_n2 ? 'M' : profile.parity) == guess.parity)
       guess.profiles.push_back(std::string(profile.name) +
                                (profile.baud == baud ? "" : " (at " + std::to_string(profile.baud) + " baud there)"));
   }

@@ -21,8 +21,8 @@ bool startsWith(const std::string& text, const std::string& prefix)
 
 uint16_t parsePortNumber(const std::string& url, const std::string& digits)
 {
-  const bool all_digits = !digits.empty() && digits.size() <= 5 &&
-                          digits.find_first_not_of("0123456789") == std::string::npos;
+  const bool all_digits =
+      !digits.empty() && digits.size() <= 5 && digits.find_first_not_of("0123456789") == std::string::npos;
   const unsigned long number = all_digits ? std::stoul(digits) : 0;
   if (number < 1 || number > 65535)
   {
@@ -39,7 +39,7 @@ SerialAddress parseNetworkAddress(const std::string& url, const std::string& res
   {
     throw ConfigError("serial port '" + url + "': give host:port only (no user, path or query)");
   }
-  size_t colon;
+  size_t colon = 0;
   if (!rest.empty() && rest.front() == '[')
   {
     const size_t close = rest.find(']');

@@ -110,7 +110,8 @@ std::string describeValue(Command command, const std::vector<uint8_t>& value)
 {
   if (command == Command::kSetBaudRate && value.size() == 4)
   {
-    const uint32_t baud = (uint32_t{value[0]} << 24) | (uint32_t{value[1]} << 16) | (uint32_t{value[2]} << 8) | value[3];
+    const uint32_t baud =
+        (uint32_t{value[0]} << 24) | (uint32_t{value[1]} << 16) | (uint32_t{value[2]} << 8) | value[3];
     return std::to_string(baud);
   }
   if (value.size() != 1)
@@ -167,7 +168,7 @@ void Decoder::feed(const uint8_t* bytes, size_t size, std::vector<uint8_t>& data
       case State::kOption:
       {
         Event event;
-        event.kind = verb_ == kWill ? Event::Kind::kWill
+        event.kind = verb_ == kWill   ? Event::Kind::kWill
                      : verb_ == kWont ? Event::Kind::kWont
                      : verb_ == kDo   ? Event::Kind::kDo
                                       : Event::Kind::kDont;

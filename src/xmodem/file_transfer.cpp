@@ -25,6 +25,13 @@ std::string fromWire(std::vector<uint8_t> payload, const TextOptions& options)
   return fromControlEob(std::string(payload.begin(), payload.end()), options.control_eob, options.file_eob);
 }
 
+Config withEobReading(Config config, const TextOptions& options)
+{
+  config.eob_checksum = options.binary ? EobChecksum::kWire : options.eob_checksum;
+  config.eob = options.control_eob;
+  return config;
+}
+
 FileResult sendFile(Transport& link, const std::string& path, Mode mode, const Config& config,
                     const TextOptions& options, const ProgressCallback& progress, const std::atomic<bool>* cancel,
                     Stats* stats, const ContentCheck& check)
@@ -32,7 +39,7 @@ FileResult sendFile(Transport& link, const std::string& path, Mode mode, const C
   const std::string contents = RegularFile(path).readAll(config.max_bytes, config.max_bytes_name);
   if (check)
     check(contents);
-  Sender sender(link, mode, config, cancel);
+  Sender sender(link, mode, withEobReading(config, options), cancel);
   FileResult result;
   try
   {
@@ -58,7 +65,7 @@ FileResult receiveFile(Transport& link, const std::string& path, Mode mode, cons
 {
   // Opened first: an unwritable destination fails before the control is asked for anything.
   AtomicFileWriter writer(path);
-  Receiver receiver(link, mode, config, cancel);
+  Receiver receiver(link, mode, withEobReading(config, options), cancel);
   std::vector<uint8_t> payload;
   try
   {

@@ -105,7 +105,7 @@ const char* toString(PacketStatus status)
   return "?";
 }
 
-Packet decodePacket(const uint8_t* bytes, size_t size, CheckType check)
+Packet decodePacket(const uint8_t* bytes, size_t size, CheckType check, const ChecksumReading* reading)
 {
   Packet packet;
   if (size < 1)
@@ -131,17 +131,71 @@ Packet decodePacket(const uint8_t* bytes, size_t size, CheckType check)
   packet.block = bytes[1];
   const uint8_t* body = bytes + 3;
   const uint8_t* tail = body + packet.data_size;
+  const uint8_t sum = reading != nullptr ? reading->sum(body, packet.data_size) : checksum8(body, packet.data_size);
   const bool good = check == CheckType::kCrc16
                         ? crc16Xmodem(body, packet.data_size) == static_cast<uint16_t>((tail[0] << 8) | tail[1])
-                        : checksum8(body, packet.data_size) == tail[0];
-  if (!good)
-  {
-    packet.status = PacketStatus::kBadCheck;
-    return packet;
-  }
-  packet.status = PacketStatus::kOk;
+                        : sum == tail[0];
   packet.data = body;
+  packet.status = good ? PacketStatus::kOk : PacketStatus::kBadCheck;
   return packet;
+}
+
+const char* toString(EobChecksum reading)
+{
+  return reading == EobChecksum::kLf ? "lf" : "wire";
+}
+
+EobChecksum parseEobChecksum(const std::string& text)
+{
+  if (text == "wire")
+    return EobChecksum::kWire;
+  if (text == "lf")
+    return EobChecksum::kLf;
+  throw ConfigError("end-of-block checksum reading '" + text +
+                    "' is not one of wire (the sum of the bytes on the wire) or lf (each end of block summed as LF)");
+}
+
+ChecksumReading::ChecksumReading(EobChecksum reading, Eob eob) : reading_(reading), eob_(eob) {}
+
+uint8_t ChecksumReading::otherSum(const uint8_t* data, size_t size) const
+{
+  return sumAs(other(), data, size, nullptr);
+}
+
+void ChecksumReading::accept(const uint8_t* data, size_t size)
+{
+  sumAs(EobChecksum::kLf, data, size, &inside_pattern_);
+}
+
+uint8_t ChecksumReading::sumAs(EobChecksum reading, const uint8_t* data, size_t size, bool* inside_after) const
+{
+  const std::string pattern = eobBytes(eob_);
+  const auto first = static_cast<uint8_t>(pattern[0]);
+  const bool two_bytes = pattern.size() == 2;
+  const auto second = static_cast<uint8_t>(pattern.back());
+  bool inside = inside_pattern_;
+  uint8_t sum = 0;
+  for (size_t i = 0; i < size; ++i)
+  {
+    const uint8_t byte = data[i];
+    if (inside && byte == second)
+    {
+      inside = false;  // the rest of an end of block: nothing in the LF reading
+      sum = static_cast<uint8_t>(sum + (reading == EobChecksum::kWire ? byte : 0));
+      continue;
+    }
+    inside = false;
+    if (byte == first)
+    {
+      inside = two_bytes;
+      sum = static_cast<uint8_t>(sum + (reading == EobChecksum::kWire ? byte : '\n'));
+      continue;
+    }
+    sum = static_cast<uint8_t>(sum + byte);
+  }
+  if (inside_after != nullptr)
+    *inside_after = inside;
+  return sum;
 }
 
 const char* toString(Eob eob)

@@ -138,8 +138,29 @@ constexpr Milliseconds kDoubleReplyQuiet{1};
 constexpr Milliseconds kDoubledByteQuiet{1};
 
 Sender::Sender(Transport& link, Mode mode, Config config, const std::atomic<bool>* cancel)
-    : link_(link), input_(link, kReplyReadSize), mode_(mode), config_(std::move(config)), cancel_(cancel)
+    : link_(link),
+      input_(link, kReplyReadSize),
+      mode_(mode),
+      config_(std::move(config)),
+      cancel_(cancel),
+      reading_(config_.eob_checksum, config_.eob)
 {
+}
+
+void Sender::applyReading(std::vector<uint8_t>& packet, size_t block_size)
+{
+  if (stats_.check == CheckType::kChecksum && reading_.reading() != EobChecksum::kWire)
+    packet[3 + block_size] = reading_.sum(packet.data() + 3, block_size);
+}
+
+std::string Sender::readingAdvice(const std::vector<uint8_t>& packet, size_t block_size) const
+{
+  const uint8_t* data = packet.data() + 3;
+  if (stats_.check != CheckType::kChecksum || reading_.sum(data, block_size) == reading_.otherSum(data, block_size))
+    return "";
+  return "; the block holds an end of block, which controls sum in two ways: if the control's end-of-block "
+         "pattern (Haas setting 25) is not LF ONLY, try " +
+         config_.eob_checksum_name + " " + toString(reading_.other());
 }
 
 void Sender::checkCancel()
@@ -301,7 +322,8 @@ Stats Sender::send(const std::vector<uint8_t>& payload, const ProgressCallback& 
       // packets' overhead saved, and a short file still goes in 128-byte blocks as lrzsz does.
       const size_t block_size = use_1k && left > 7 * kBlockSize ? kBlockSize1K : kBlockSize;
       const size_t n = std::min(left, block_size);
-      const std::vector<uint8_t> packet = encodePacket(block, payload.data() + offset, n, block_size, stats_.check);
+      std::vector<uint8_t> packet = encodePacket(block, payload.data() + offset, n, block_size, stats_.check);
+      applyReading(packet, block_size);
       unsigned errors = 0;
       for (;;)
       {
@@ -323,7 +345,9 @@ Stats Sender::send(const std::vector<uint8_t>& payload, const ProgressCallback& 
           break;
         }
         if (reply == Reply::kCancel)
-          abort("the receiver cancelled (CAN CAN) at block " + std::to_string(block), false, false);
+          abort("the receiver cancelled (CAN CAN) at block " + std::to_string(block) +
+                    (errors > 0 ? readingAdvice(packet, block_size) : ""),
+                false, false);
         if (reply == Reply::kTimeout)
           ++stats_.timeouts;
         else
@@ -332,13 +356,15 @@ Stats Sender::send(const std::vector<uint8_t>& payload, const ProgressCallback& 
         ++state.retries;
         if (++errors > config_.max_retries)
         {
-          abort("block " + std::to_string(block) + " not acknowledged after " + std::to_string(errors) + " tries", true,
-                reply == Reply::kTimeout);
+          abort("block " + std::to_string(block) + " not acknowledged after " + std::to_string(errors) + " tries" +
+                    (reply == Reply::kNak ? readingAdvice(packet, block_size) : ""),
+                true, reply == Reply::kTimeout);
         }
         CNC_LOG_DEBUG("xmodem: block " << block << (reply == Reply::kTimeout ? " not answered" : " NAKed")
                                        << ", sending it again");
       }
       stats_.used_1k = stats_.used_1k || block_size == kBlockSize1K;
+      reading_.accept(packet.data() + 3, block_size);
       offset += n;
       stats_.bytes = offset;
       stats_.blocks = block;
@@ -409,7 +435,8 @@ Receiver::Receiver(Transport& link, Mode mode, Config config, const std::atomic<
       input_(link, packetSize(kBlockSize1K, CheckType::kCrc16)),
       mode_(mode),
       config_(std::move(config)),
-      cancel_(cancel)
+      cancel_(cancel),
+      reading_(config_.eob_checksum, config_.eob)
 {
 }
 
@@ -421,13 +448,27 @@ void Receiver::checkCancel()
   }
 }
 
+void Receiver::noteOtherReading(const Packet& packet)
+{
+  const uint8_t check = packet.data[packet.data_size];
+  if (stats_.other_eob_checksum_seen || reading_.otherSum(packet.data, packet.data_size) != check)
+    return;
+  stats_.other_eob_checksum_seen = true;  // said in the failure message: every such block fails
+}
+
 void Receiver::abort(const std::string& why, bool send_can, bool timeout)
 {
   if (send_can)
   {
     sendCancel(link_);
   }
-  const std::string message = link_.describe() + ": XModem receive failed: " + why;
+  std::string message = link_.describe() + ": XModem receive failed: " + why;
+  if (stats_.other_eob_checksum_seen)
+  {
+    message += "; its packets pass the other end-of-block checksum reading: the control sums each end of block " +
+               std::string(reading_.other() == EobChecksum::kLf ? "as LF" : "as the bytes on the wire") + ", so set " +
+               config_.eob_checksum_name + " to " + toString(reading_.other());
+  }
   if (timeout)
     throw TimeoutError(message);
   throw ProtocolError(message);
@@ -543,7 +584,9 @@ std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
                 config_.char_timeout);
           continue;
         }
-        const Packet packet = decodePacket(buffer.data(), need, check);
+        const Packet packet = decodePacket(buffer.data(), need, check, crc ? nullptr : &reading_);
+        if (packet.status == PacketStatus::kBadCheck && !crc)
+          noteOtherReading(packet);
         if (packet.status != PacketStatus::kOk)
         {
           ++stats_.garbled;
@@ -578,6 +621,7 @@ std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
           stats_.check = check;
           stats_.used_1k = stats_.used_1k || data_size == kBlockSize1K;
           data.insert(data.end(), packet.data, packet.data + packet.data_size);
+          reading_.accept(packet.data, packet.data_size);
           link_.writeByte(kAck);
           stats_.block_time = std::chrono::duration_cast<std::chrono::microseconds>(Clock::now() - first_block_start);
           errors = 0;

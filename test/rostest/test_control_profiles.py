@@ -22,7 +22,7 @@ from cnc_bridge.msg import MachineState
 SPEEDS = {4800: termios.B4800, 9600: termios.B9600, 19200: termios.B19200, 38400: termios.B38400,
           57600: termios.B57600, 115200: termios.B115200}
 # Profiles of controls on RS-232 that dnc_node serves.
-DNC_PROFILES = ["haas_classic_rs232", "haas_classic_rs232_7e1", "fanuc_0i_rs232"]
+DNC_PROFILES = ["haas_classic_rs232", "haas_classic_rs232_7e1", "fanuc_0i_rs232", "fanuc_0i_rs232_7n2"]
 
 
 class ControlProfilesOnAPty(unittest.TestCase):

@@ -109,6 +109,7 @@ PROFILE_NODES = {
     "haas_classic_device_server": ["dnc_node", "dprnt_node", "haas_mdc_node"],
     "haas_ngc_ethernet": ["haas_mdc_node", "dprnt_node"],
     "fanuc_0i_rs232": ["dnc_node"],
+    "fanuc_0i_rs232_7n2": ["dnc_node"],
     "grbl_class_board": ["slave_bus_node"],
     "qcnc_ethernut": ["ethernut_node"],
     "at_controller": ["at_controller_node"],

@@ -19,8 +19,6 @@
 #include <string>
 #include <thread>
 
-#include "cnc_bridge/transport/tcp.h"
-
 namespace cnc_bridge::test
 {
 class Ser2netServer
@@ -59,7 +57,7 @@ class Ser2netServer
     }
     ::setpgid(pid_, pid_);
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
-    while (!listening(raw_port) || !listening(rfc2217_port))
+    while (!accepts(raw_port) || !accepts(rfc2217_port))
     {
       int status = 0;
       if (::waitpid(pid_, &status, WNOHANG) == pid_)
@@ -115,16 +113,17 @@ class Ser2netServer
         << "  connector: serialdev," << device_ << "," << line_ << ",local\n";
   }
 
-  /// True once ser2net listens on \p port (127.0.0.1). Read from /proc/net/tcp rather than by
-  /// connecting: every connection opens the device, and ser2net holds a device whose connection
-  /// has just closed for a few milliseconds, refusing a connection to the other accepter of the
-  /// same device meanwhile ("Port's device already in use").
-  static bool listening(unsigned port)
+  /// Whether something listens on 127.0.0.1:\p port, read from /proc/net/tcp rather than by
+  /// connecting: a connection would make ser2net open the device, and a client connecting while it
+  /// still closes that one is turned away as a second client.
+  static bool accepts(unsigned port)
   {
     std::ifstream table("/proc/net/tcp");
+    std::string line;
+    std::getline(table, line);  // the header
     char wanted[32];
     std::snprintf(wanted, sizeof wanted, "0100007F:%04X", port);
-    for (std::string line; std::getline(table, line);)
+    while (std::getline(table, line))
     {
       std::istringstream fields(line);
       std::string slot, local, remote, state;

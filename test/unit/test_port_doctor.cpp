@@ -464,6 +464,14 @@ TEST(PortDoctor, ReadsParityFromBitSeven)
   EXPECT_EQ(o.parity, 'O');
   EXPECT_FALSE(e.baud_suspect);
   EXPECT_EQ(e.profiles, (std::vector<std::string>{"haas_classic_rs232_7e1", "fanuc_0i_rs232"}));
+  // 7N2 read at 8N1: the first stop bit is bit 7 of every byte.
+  std::vector<uint8_t> seven_n2;
+  for (uint8_t c : eight_n1)
+    seven_n2.push_back(c | 0x80);
+  const LineGuess m = guessLineSettings(seven_n2, 0, 9600);
+  EXPECT_EQ(m.data_bits, 7u);
+  EXPECT_NE(m.line.find("set 7 data bits, no parity, 2 stop bits"), std::string::npos) << m.line;
+  EXPECT_EQ(m.profiles, (std::vector<std::string>{"fanuc_0i_rs232_7n2"}));
 
   // A baud rate that differs: characters that are not program text, and framing errors.
   std::vector<uint8_t> garbled;

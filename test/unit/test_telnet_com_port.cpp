@@ -32,8 +32,8 @@ TEST(TelnetDecoder, DataAndEveryKindOfCommandSurviveEveryCut)
 {
   // 'A', an escaped 0xFF, WILL ECHO, 'B', the answer to a baud rate of 0x0001C2FF (escaped in the
   // subnegotiation), NOP, 'C'.
-  const Bytes stream = {'A',  kIac, kIac, kIac, kWill, kOptionEcho, 'B', kIac, kSb, kOptionComPort, 101, 0x00,
-                        0x01, 0xC2, kIac, kIac, kIac,  kSe,         kIac, 241, 'C'};
+  const Bytes stream = {'A',  kIac, kIac, kIac, kWill, kOptionEcho, 'B',  kIac, kSb, kOptionComPort, 101, 0x00,
+                        0x01, 0xC2, kIac, kIac, kIac,  kSe,         kIac, 241,  'C'};
   for (size_t cut = 0; cut <= stream.size(); ++cut)
   {
     SCOPED_TRACE("cut at " + std::to_string(cut));
@@ -78,9 +78,9 @@ Event negotiation(Event::Kind kind, uint8_t option)
 TEST(TelnetOptions, StartAsksForComPortBinaryAndSuppressGoAhead)
 {
   Options options;
-  EXPECT_EQ(options.start(), (Bytes{kIac, kWill, kOptionComPort, kIac, kWill, kOptionBinary, kIac, kWill,
-                                    kOptionSuppressGoAhead, kIac, kDo, kOptionBinary, kIac, kDo,
-                                    kOptionSuppressGoAhead}));
+  EXPECT_EQ(options.start(),
+            (Bytes{kIac, kWill, kOptionComPort, kIac, kWill, kOptionBinary, kIac, kWill, kOptionSuppressGoAhead, kIac,
+                   kDo, kOptionBinary, kIac, kDo, kOptionSuppressGoAhead}));
   EXPECT_FALSE(options.comPortAccepted());
 }
 

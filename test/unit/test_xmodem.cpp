@@ -191,6 +191,154 @@ TEST(XmodemText, ConvertsEndOfBlockBothWays)
 }
 
 // ---------------------------------------------------------------------------------------------
+// The Haas end-of-block checksum (docs/protocols/xmodem.md#haas-end-of-block): each end of block
+// summed as LF, whatever setting 25 sends.
+
+/// The LF reading of a whole wire stream, computed the plain way: every end of block replaced by
+/// one LF (left to right), the rest summed as it is.
+uint8_t lfReadingOfStream(const std::string& wire, Eob eob)
+{
+  const std::string pattern = eobBytes(eob);
+  uint8_t sum = 0;
+  for (size_t i = 0; i < wire.size();)
+  {
+    if (wire.compare(i, pattern.size(), pattern) == 0)
+    {
+      sum = static_cast<uint8_t>(sum + '\n');
+      i += pattern.size();
+    }
+    else
+    {
+      sum = static_cast<uint8_t>(sum + static_cast<uint8_t>(wire[i++]));
+    }
+  }
+  return sum;
+}
+
+TEST(XmodemEobChecksum, PacketByPacketSumsAddUpToTheStreamReadWithLfForEveryPattern)
+{
+  // Ends of block cut by packet ends at every offset (blank blocks included: doubled patterns).
+  std::string text = ncProgram(2000, 3);
+  text.insert(400, "\n\n\n");
+  size_t cut_patterns = 0;
+  for (Eob eob : {Eob::kLf, Eob::kCr, Eob::kCrLf, Eob::kCrCr, Eob::kLfLf})
+  {
+    SCOPED_TRACE(toString(eob));
+    std::string wire = toControlEob(text, eob);
+    wire.append((kBlockSize - wire.size() % kBlockSize) % kBlockSize, static_cast<char>(kSub));
+    ChecksumReading lf(EobChecksum::kLf, eob), on_wire(EobChecksum::kWire, eob);
+    uint8_t total = 0;
+    for (size_t at = 0; at < wire.size(); at += kBlockSize)
+    {
+      const auto* block = reinterpret_cast<const uint8_t*>(wire.data() + at);
+      EXPECT_EQ(on_wire.sum(block, kBlockSize), checksum8(block, kBlockSize));
+      EXPECT_EQ(lf.otherSum(block, kBlockSize), checksum8(block, kBlockSize));
+      total = static_cast<uint8_t>(total + lf.sum(block, kBlockSize));
+      lf.accept(block, kBlockSize);
+      const std::string pattern = eobBytes(eob);
+      cut_patterns += pattern.size() == 2 && at > 0 && wire[at - 1] == pattern[0] && wire[at] == pattern[1];
+    }
+    EXPECT_EQ(total, lfReadingOfStream(wire, eob));
+    if (eob == Eob::kLf)
+    {
+      EXPECT_EQ(total, checksum8(reinterpret_cast<const uint8_t*>(wire.data()), wire.size()));  // both agree
+    }
+  }
+  EXPECT_GT(cut_patterns, 0u) << "no end of block was cut by a packet end: the case is not covered";
+  EXPECT_EQ(parseEobChecksum("lf"), EobChecksum::kLf);
+  EXPECT_EQ(parseEobChecksum("wire"), EobChecksum::kWire);
+  EXPECT_THROW(parseEobChecksum("as-lf"), ConfigError);
+}
+
+TEST(XmodemEobChecksum, APatternCutByThePacketEndIsReadOnInTheNext)
+{
+  // "A\r" | "\nB": the CR ends packet 1 (summed as LF), the LF opens packet 2 (summed as nothing).
+  ChecksumReading lf(EobChecksum::kLf, Eob::kCrLf);
+  const Bytes first = {'A', '\r'}, second = {'\n', 'B'};
+  EXPECT_EQ(lf.sum(first.data(), first.size()), static_cast<uint8_t>('A' + '\n'));
+  // Not accepted yet (NAKed, sent again): the next packet is still read from the same place.
+  EXPECT_EQ(lf.sum(second.data(), second.size()), static_cast<uint8_t>('\n' + 'B'));
+  lf.accept(first.data(), first.size());
+  EXPECT_EQ(lf.sum(second.data(), second.size()), static_cast<uint8_t>('B'));
+  EXPECT_EQ(lf.otherSum(second.data(), second.size()), static_cast<uint8_t>('\n' + 'B'));
+}
+
+namespace
+{
+/// Sends \p text from one side to the other over an in-memory link, each side with its reading.
+/// \returns the sender's error ("" when it succeeded) and the receiver's (or the file received).
+std::pair<std::string, std::string> transferWithReadings(const std::string& text, Eob eob, EobChecksum sender_reading,
+                                                         EobChecksum receiver_reading, const TempDir& dir)
+{
+  writeFile(dir.path + "/source.nc", text);
+  Config config;
+  config.start_timeout = config.start_wait = Milliseconds(5000);
+  config.ack_timeout = config.block_timeout = Milliseconds(2000);
+  config.char_timeout = config.purge_quiet = Milliseconds(30);
+  config.max_retries = 3;
+  config.eot_timeout = Milliseconds(500);
+  TextOptions sending, receiving;
+  sending.control_eob = receiving.control_eob = eob;
+  sending.eob_checksum = sender_reading;
+  receiving.eob_checksum = receiver_reading;
+  LinkPair link;
+  auto sent = std::async(std::launch::async,
+                         [&]() -> std::string
+                         {
+                           try
+                           {
+                             sendFile(link.a, dir.path + "/source.nc", Mode::kChecksum, config, sending);
+                             return "";
+                           }
+                           catch (const Error& e)
+                           {
+                             return e.what();
+                           }
+                         });
+  std::string received;
+  try
+  {
+    receiveFile(link.b, dir.path + "/received.nc", Mode::kChecksum, config, receiving);
+    received = readFile(dir.path + "/received.nc");
+  }
+  catch (const Error& e)
+  {
+    received = std::string("error: ") + e.what();
+  }
+  return {sent.get(), received};
+}
+}  // namespace
+
+TEST(XmodemEobChecksum, BothSidesOnOneReadingMoveTheProgramExactlyForEveryPattern)
+{
+  TempDir dir("test_xmodem_eob");
+  const std::string text = ncProgram(1500, 8);
+  for (EobChecksum reading : {EobChecksum::kWire, EobChecksum::kLf})
+  {
+    for (Eob eob : {Eob::kLf, Eob::kCr, Eob::kCrLf, Eob::kCrCr, Eob::kLfLf})
+    {
+      SCOPED_TRACE(std::string(toString(eob)) + " " + toString(reading));
+      const auto [sender_error, received] = transferWithReadings(text, eob, reading, reading, dir);
+      EXPECT_EQ(sender_error, "");
+      EXPECT_EQ(received, text);
+    }
+  }
+}
+
+TEST(XmodemEobChecksum, AReceiverOnTheOtherReadingNamesTheOneTheControlUsesAndStoresNothing)
+{
+  TempDir dir("test_xmodem_eob");
+  const std::string text = ncProgram(1500, 9);
+  const auto [sender_error, received] =
+      transferWithReadings(text, Eob::kCrLf, EobChecksum::kLf, EobChecksum::kWire, dir);
+  EXPECT_NE(received.find("set eob_checksum to lf"), std::string::npos) << received;
+  EXPECT_NE(received.find("sums each end of block as LF"), std::string::npos) << received;
+  EXPECT_FALSE(exists(dir.path + "/received.nc"));
+  // The sender, NAKed on a block holding an end of block, says what to try.
+  EXPECT_NE(sender_error.find("try eob_checksum wire"), std::string::npos) << sender_error;
+}
+
+// ---------------------------------------------------------------------------------------------
 // The capture, CNC -> PC: the receiver, asking in checksum mode with NAK as a Haas needs, gets the
 // control's eight packets and must rebuild haas_O05555.nc byte for byte.
 TEST(XmodemCapture, ReceiverReproducesTheProgramTheHaasSent)

@@ -283,6 +283,56 @@ TEST(CncDncCli, ReceiveStoresTheSimulatorsProgramExactly)
   EXPECT_EQ(lines(run.err).back().rfind("receive " + target + " ", 0), 0u) << run.err;
 }
 
+// Haas setting 25 and the two ways of summing an end of block: with the simulated control set to
+// each pattern and each reading, cnc_dnc set the same moves the program exactly both ways; set
+// to the other reading, a receive fails naming the reading the control uses.
+TEST(CncDncCli, EveryEndOfBlockPatternAndChecksumReadingMovesTheProgramBothWays)
+{
+  TempDir dir("test_xmodem_cli");
+  const std::string source = dir.path + "/O02500.nc";
+  const std::string text = program(2500, 1500);
+  writeFile(source, text);
+  for (const char* reading : {"wire", "lf"})
+  {
+    for (const char* eob : {"lf", "cr", "crlf", "crcr", "lflf"})
+    {
+      SCOPED_TRACE(std::string(eob) + " " + reading);
+      const std::string memory = dir.path + "/haas_" + eob + "_" + reading;
+      Simulator haas(memory, {"--eob", eob, "--eob-checksum", reading, "--program", source});
+      const std::vector<std::string> options = {"--port", haas.port(), "--mode", "checksum",       "--timeout",
+                                                "20",     "--eob",     eob,      "--eob-checksum", reading};
+      std::vector<std::string> send = {"send"};
+      send.insert(send.end(), options.begin(), options.end());
+      send.push_back(source);
+      const ToolRun sent = cncDnc(send, dir.path);
+      ASSERT_EQ(sent.status, 0) << sent.err;
+      EXPECT_NE(haas.waitFor("received " + memory + "/O02500.nc", kSimulatorReply), "") << haas.seen();
+      EXPECT_EQ(readFile(memory + "/O02500.nc"), text);
+
+      std::vector<std::string> receive = {"receive"};
+      receive.insert(receive.end(), options.begin(), options.end());
+      receive.push_back(dir.path + "/back.nc");
+      const ToolRun received = cncDnc(receive, dir.path);
+      ASSERT_EQ(received.status, 0) << received.err;
+      EXPECT_EQ(readFile(dir.path + "/back.nc"), text);
+    }
+  }
+}
+
+TEST(CncDncCli, AReceiveOnTheOtherChecksumReadingSaysWhichOneTheControlUses)
+{
+  TempDir dir("test_xmodem_cli");
+  const std::string source = dir.path + "/O02501.nc";
+  writeFile(source, program(2501, 1500));
+  Simulator haas(dir.path + "/haas", {"--eob", "crlf", "--eob-checksum", "lf", "--program", source});
+  const std::string target = dir.path + "/received.nc";
+  const ToolRun run = cncDnc({"receive", "--port", haas.port(), "--mode", "checksum", "--timeout", "20", "--eob",
+                              "crlf", "--retries", "3", target},
+                             dir.path);
+  expectOneErrorLine(run, "receive", "set --eob-checksum to lf");
+  EXPECT_FALSE(exists(target));
+}
+
 // --send-on signal: the control sends only when its operator presses SEND (SIGUSR1). A host
 // asking before that gets nothing and gives up with one clear line; after SIGUSR1 it gets the program.
 TEST(CncDncCli, SimulatorSendsOnlyAfterSendIsPressed)

@@ -21,6 +21,14 @@ namespace cnc_bridge
 /// How long an unanswered peer (keepalive probes while idle, unacknowledged data while sending)
 /// may take before the line fails.
 constexpr std::chrono::seconds kDeadPeerWithin{10};
+/// How long a new raw TCP connection is watched for a server that turns it away (another client
+/// holds the port) before the line counts as open.
+constexpr std::chrono::milliseconds kTurnedAwayWithin{150};
+/// A server that turns a new connection away is asked again for this long (every
+/// kBusyRetryEvery), within the connect timeout: it may still be closing the previous connection
+/// (ser2net drains its port first), and a node that closes a line and reopens it must not fail.
+constexpr std::chrono::milliseconds kBusyRetryFor{2000};
+constexpr std::chrono::milliseconds kBusyRetryEvery{50};
 
 /// \brief A device server's raw TCP port: the bytes are the line's, the line settings are the
 /// server's own (settings() only tells this side the baud rate its waits are measured in).
@@ -49,14 +57,18 @@ class RawTcpSerialLine : public SerialLine
   /// Nothing to send: the server keeps its own line settings.
   void applySettings() override {}
   /// Nothing to send: the server keeps its own flow control.
-  void setFlowControl(FlowControl) override {}
+  void setFlowControl(FlowControl /*flow*/) override {}
 
  private:
   RawTcpSerialLine(SerialSettings settings, std::unique_ptr<TcpConnection> connection);
-  [[noreturn]] void fail(const LinkError& error);
+  /// \throws LinkError when the server closes the new connection at once, with what it said.
+  void refuseIfTurnedAway();
+  [[noreturn]] void fail(const LinkError& error) const;
 
   SerialSettings settings_;
   std::unique_ptr<TcpConnection> connection_;
+  std::vector<uint8_t> held_;  ///< line data that arrived while refuseIfTurnedAway() watched
+  size_t held_start_ = 0;
 };
 
 /// \brief A device server's port over Telnet with COM Port Control (RFC 2217): the line is set up
@@ -93,6 +105,9 @@ class TelnetSerialLine : public SerialLine
 
  private:
   TelnetSerialLine(SerialSettings settings, std::unique_ptr<TcpConnection> connection, Milliseconds answer_timeout);
+  /// Negotiates the options and sets the line up; \throws LinkError naming what the server said
+  /// when it closes the connection meanwhile.
+  void setUp();
   void negotiate();
   /// Sends every setting at once, then waits for each answer and checks it.
   void request(const std::vector<rfc2217::Setting>& settings);
@@ -100,18 +115,18 @@ class TelnetSerialLine : public SerialLine
   /// \returns false when nothing arrived in time.
   bool pump(Milliseconds timeout);
   void handle(const rfc2217::Event& event);
-  Milliseconds left(std::chrono::steady_clock::time_point deadline) const;
+  static Milliseconds left(std::chrono::steady_clock::time_point deadline);
   void send(const std::vector<uint8_t>& bytes, Milliseconds timeout);
-  [[noreturn]] void fail(const LinkError& error);
+  [[noreturn]] void fail(const LinkError& error) const;
 
   SerialSettings settings_;
   std::unique_ptr<TcpConnection> connection_;
   Milliseconds answer_timeout_;
   rfc2217::Decoder decoder_;
   rfc2217::Options options_;
-  std::vector<uint8_t> data_;   ///< line data received and not read yet
-  size_t data_start_ = 0;       ///< first unread byte of data_
-  bool suspended_ = false;      ///< the server asked us to stop sending (FLOWCONTROL-SUSPEND)
+  std::vector<uint8_t> data_;  ///< line data received and not read yet
+  size_t data_start_ = 0;      ///< first unread byte of data_
+  bool suspended_ = false;     ///< the server asked us to stop sending (FLOWCONTROL-SUSPEND)
   std::map<rfc2217::Command, std::vector<uint8_t>> answers_;  ///< the server's latest answer to each setting
 };
 }  // namespace cnc_bridge

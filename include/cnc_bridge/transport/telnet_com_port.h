@@ -103,9 +103,9 @@ class Decoder
   enum class State
   {
     kData,
-    kCommand,        ///< after IAC
-    kOption,         ///< after IAC WILL/WONT/DO/DONT
-    kSubnegotiation, ///< inside IAC SB ... IAC SE
+    kCommand,                ///< after IAC
+    kOption,                 ///< after IAC WILL/WONT/DO/DONT
+    kSubnegotiation,         ///< inside IAC SB ... IAC SE
     kSubnegotiationCommand,  ///< IAC inside a subnegotiation
   };
   void endSubnegotiation(std::vector<Event>& events);

@@ -24,7 +24,13 @@ struct TextOptions
   Eob control_eob = Eob::kLf;
   /// Line ends of the files on this side (what received programs are stored with).
   Eob file_eob = Eob::kLf;
+  /// How the control sums a checksum-mode packet holding ends of block (packet.h, EobChecksum).
+  /// A binary transfer has no ends of block: its packets are summed as on the wire.
+  EobChecksum eob_checksum = EobChecksum::kWire;
 };
+
+/// \brief \p config with the end-of-block checksum reading of \p options (Config::eob_checksum).
+Config withEobReading(Config config, const TextOptions& options);
 
 /// \brief A finished file transfer.
 struct FileResult

@@ -58,6 +58,58 @@ constexpr size_t packetSize(size_t data_size, CheckType check)
 /// \throws std::invalid_argument on an invalid size.
 std::vector<uint8_t> encodePacket(uint32_t block, const uint8_t* data, size_t size, size_t block_size, CheckType check);
 
+/// \brief End-of-block pattern of a Haas control (setting 25 "EOB PATTERN") or of a stored file.
+enum class Eob
+{
+  kLf,
+  kCr,
+  kCrLf,
+  kCrCr,
+  kLfLf
+};
+
+/// \brief How a control sums a checksum-mode packet that carries ends of block.
+///
+/// OpenDNC's description of the Haas says that whatever setting 25 sends for an end of block, the
+/// control computes the checksum as if it were LF (docs/protocols/xmodem.md#haas-end-of-block).
+/// Every other XModem sums the bytes on the wire. With setting 25 on LF ONLY both agree.
+enum class EobChecksum
+{
+  kWire,  ///< the sum of the bytes on the wire
+  kLf,    ///< each end of block counted as one LF (0x0A): its first byte as LF, the rest as nothing
+};
+/// \brief "wire", "lf".
+const char* toString(EobChecksum reading);
+/// \throws ConfigError naming the accepted values.
+EobChecksum parseEobChecksum(const std::string& text);
+
+/// \brief The checksum of packet after packet under one reading. An end of block cut by a
+/// packet's end (CR at the end of one, LF at the start of the next) is read on in the next, so the
+/// reading keeps where the packets accepted so far left off. Not thread-safe.
+class ChecksumReading
+{
+ public:
+  ChecksumReading() = default;  ///< the wire reading
+  ChecksumReading(EobChecksum reading, Eob eob);
+
+  /// \brief The sum of the next packet's data under this reading.
+  uint8_t sum(const uint8_t* data, size_t size) const { return sumAs(reading_, data, size, nullptr); }
+  /// \brief The sum of the same data under the other reading: a packet that fails this reading
+  /// and passes the other tells which one the control uses.
+  uint8_t otherSum(const uint8_t* data, size_t size) const;
+  /// \brief Moves past a packet's data once it was accepted (or acknowledged).
+  void accept(const uint8_t* data, size_t size);
+  EobChecksum reading() const { return reading_; }
+  EobChecksum other() const { return reading_ == EobChecksum::kWire ? EobChecksum::kLf : EobChecksum::kWire; }
+
+ private:
+  uint8_t sumAs(EobChecksum reading, const uint8_t* data, size_t size, bool* inside_after) const;
+
+  EobChecksum reading_ = EobChecksum::kWire;
+  Eob eob_ = Eob::kLf;
+  bool inside_pattern_ = false;  ///< the last byte accepted began a two-byte end of block
+};
+
 /// \brief What the parser made of one packet.
 enum class PacketStatus
 {
@@ -72,24 +124,17 @@ const char* toString(PacketStatus status);
 struct Packet
 {
   PacketStatus status = PacketStatus::kTruncated;
-  uint8_t block = 0;              ///< block number as on the wire (valid when the complement matched)
-  size_t data_size = 0;           ///< 128 or 1024 (from the header byte)
-  const uint8_t* data = nullptr;  ///< points into the parsed buffer, data_size bytes (valid when kOk)
+  uint8_t block = 0;     ///< block number as on the wire (valid when the complement matched)
+  size_t data_size = 0;  ///< 128 or 1024 (from the header byte)
+  /// Points into the parsed buffer, data_size bytes, followed by the check (valid when kOk or
+  /// kBadCheck).
+  const uint8_t* data = nullptr;
 };
 
 /// \brief Parses and checks one complete packet starting at its SOH/STX. Bounds-checked: any
 /// \p size is safe, bytes beyond the packet are ignored.
-Packet decodePacket(const uint8_t* bytes, size_t size, CheckType check);
-
-/// \brief End-of-block pattern of a Haas control (setting 25 "EOB PATTERN") or of a stored file.
-enum class Eob
-{
-  kLf,
-  kCr,
-  kCrLf,
-  kCrCr,
-  kLfLf
-};
+/// \param reading how a checksum is computed (nullptr: over the bytes on the wire).
+Packet decodePacket(const uint8_t* bytes, size_t size, CheckType check, const ChecksumReading* reading = nullptr);
 /// \brief "lf", "cr", "crlf", "crcr", "lflf".
 const char* toString(Eob eob);
 /// \throws ConfigError naming the accepted values.

@@ -103,6 +103,14 @@ struct Config
   uint64_t max_bytes = kDefaultMaxProgramBytes;
   /// How the user sets max_bytes, named in the error ("~max_program_bytes", "--max-bytes").
   std::string max_bytes_name = "max_program_bytes";
+  /// Both, checksum mode: how the control sums a packet that holds ends of block, and its
+  /// end-of-block pattern (Haas setting 25); sendFile() and receiveFile() take them from
+  /// TextOptions. A receiver whose packets fail this reading and pass the other says so when it
+  /// gives up.
+  EobChecksum eob_checksum = EobChecksum::kWire;
+  Eob eob = Eob::kLf;
+  /// How the user sets eob_checksum, named in that advice ("~eob_checksum", "--eob-checksum").
+  std::string eob_checksum_name = "eob_checksum";
 };
 
 /// \brief Fits the waits to a line moving \p characters_per_second: char_timeout and purge_quiet
@@ -133,6 +141,9 @@ struct Stats
   bool used_1k = false;                    ///< at least one 1024-byte block went across
   /// The peer answered our EOT with CANs after every block was ACKed (a Haas does): complete.
   bool eot_answered_with_can = false;
+  /// Receiver, checksum mode: packets failed the configured end-of-block checksum reading and
+  /// passed the other one (the control uses the other reading: Config::eob_checksum).
+  bool other_eob_checksum_seen = false;
   /// EOTs sent without any answer after every block was ACKed (Config::eot_silence_completes): the
   /// end of the transfer is unconfirmed; 0 when the receiver answered.
   uint32_t eot_unanswered = 0;
@@ -174,6 +185,12 @@ class Sender
   size_t countCans();
   void checkCancel();
   [[noreturn]] void abort(const std::string& why, bool send_can, bool timeout);
+  /// The checksum of a checksum-mode packet under the configured reading (it differs from the
+  /// wire sum only in the LF reading, and only for a block that holds an end of block).
+  void applyReading(std::vector<uint8_t>& packet, size_t block_size);
+  /// What to check when a block holding an end of block was never acknowledged: the control may
+  /// sum it under the other reading. Empty when the readings agree on it.
+  std::string readingAdvice(const std::vector<uint8_t>& packet, size_t block_size) const;
 
   Transport& link_;
   BufferedInput input_;  ///< replies are read through this, never from link_ directly
@@ -181,6 +198,7 @@ class Sender
   Config config_;
   const std::atomic<bool>* cancel_;
   Stats stats_;
+  ChecksumReading reading_;
 };
 
 /// \brief Receives one payload by XModem. Threading as Sender.
@@ -201,6 +219,10 @@ class Receiver
   void nak(uint8_t request, Milliseconds purge_limit, Milliseconds already_quiet);
   void checkCancel();
   [[noreturn]] void abort(const std::string& why, bool send_can, bool timeout);
+  /// Notes a packet that failed the checksum: if it passes the other end-of-block reading, the
+  /// control uses that one, which the failure message says (every block holding an end of block
+  /// fails alike, so the transfer does fail).
+  void noteOtherReading(const Packet& packet);
 
   Transport& link_;
   BufferedInput input_;  ///< packets are read through this (a whole packet per read when it is there)
@@ -208,6 +230,7 @@ class Receiver
   Config config_;
   const std::atomic<bool>* cancel_;
   Stats stats_;
+  ChecksumReading reading_;
 };
 
 /// \brief CANs sendCancel() writes: more than the three a Haas answers EOT with, so that a sender can

@@ -10,7 +10,7 @@
 //
 //   sim_haas_serial xmodem [--link PATH] [--dir DIR] [--program FILE] [--send-on request|signal]
 //                          [--send] [--nak-interval S] [--pace-baud N]
-//                          [--faults flip=..,drop=..,dup=..,lose=..,seed=..] [--eob lf]
+//                          [--faults flip=..,drop=..,dup=..,lose=..,seed=..] [--eob lf] [--eob-checksum wire]
 //   kill -USR1 <pid>       the operator presses SEND (the program goes to the host's next NAK)
 #include <pthread.h>
 
@@ -125,6 +125,8 @@ int runXmodem(const std::vector<std::string>& all_args)
       "pace-baud", po::value<unsigned>()->default_value(0), "pace output to this baud rate, 8N1 (0 = pty speed)")(
       "faults", po::value<std::string>()->default_value(""), "fault injection, e.g. flip=0.001,lose=0.01,seed=3")(
       "eob", po::value<std::string>()->default_value("lf"), "EOB pattern, Haas setting 25: lf|cr|crlf|crcr|lflf")(
+      "eob-checksum", po::value<std::string>()->default_value("wire"),
+      "how the control sums ends of block: wire (the bytes sent) or lf (each end of block as LF)")(
       "timeout-scale", po::value<double>()->default_value(1.0),
       "multiply the protocol timeouts (tests use 0.1 for fast recovery)");
   po::variables_map vm;
@@ -189,6 +191,7 @@ int runXmodem(const std::vector<std::string>& all_args)
     config.answer_eot_with_can = true;
     xmodem::TextOptions text;
     text.control_eob = xmodem::parseEob(vm["eob"].as<std::string>());
+    text.eob_checksum = xmodem::parseEobChecksum(vm["eob-checksum"].as<std::string>());
     const std::string dir = vm["dir"].as<std::string>();
     std::error_code ignored;
     std::filesystem::create_directories(dir, ignored);  // a failure shows when a program is stored
@@ -221,7 +224,7 @@ int runXmodem(const std::vector<std::string>& all_args)
         if (c == xmodem::kSoh || c == xmodem::kStx)
         {
           line.unread(static_cast<uint8_t>(c));
-          xmodem::Receiver receiver(line, xmodem::Mode::kChecksum, config);
+          xmodem::Receiver receiver(line, xmodem::Mode::kChecksum, xmodem::withEobReading(config, text));
           const std::string contents = xmodem::fromWire(receiver.receive(), text);
           const std::string path = dir + "/" + programName(contents, ++received);
           AtomicFileWriter writer(path);
