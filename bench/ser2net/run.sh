@@ -32,14 +32,12 @@ free_port() { python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1
 wait_for() { for _ in $(seq 200); do [[ -e $1 ]] && return 0; sleep 0.05; done; return 1; }  # a file another process makes
 # Waits until TCP port $1 accepts (ser2net started): polling the port, there is no event to wait on.
 wait_port() { for _ in $(seq 200); do python3 -c "import socket; socket.create_connection(('127.0.0.1', $1), 0.2).close()" 2>/dev/null && return 0; sleep 0.05; done; return 1; }
-start_server() {  # start_server NAME LINK LINE: ser2net on a raw and an RFC 2217 port for LINK
-  local raw rfc
+start_server() {  # start_server NAME LINK LINE: ser2net on a raw (port in $raw) and an RFC 2217 port ($rfc) for LINK
   raw=$(free_port); rfc=$(free_port)
   python3 "$root/test/rostest/ser2net_server.py" --config "$work/$1.yaml" "raw:$raw:$2:$3" "rfc2217:$rfc:$2:$3" \
     >"$work/$1.ser2net.log" 2>&1 &
-  pids+=($!)
+  pids+=($!)  # the script replaces itself with ser2net: this is the server's pid
   wait_port "$raw" && wait_port "$rfc" || { echo "ser2net did not start: $(cat "$work/$1.ser2net.log")" >&2; exit 1; }
-  echo "$raw $rfc"
 }
 median() { sort -g | awk '{ v[NR] = $1 } END { print (NR % 2) ? v[(NR + 1) / 2] : (v[NR / 2] + v[NR / 2 + 1]) / 2 }'; }
 now() { date +%s.%N; }
@@ -50,7 +48,8 @@ xm_link=$work/xmodem.pty
 "$sim" xmodem --link "$xm_link" --dir "$work/control" --nak-interval 0.05 >"$work/sim.log" 2>&1 &
 pids+=($!)
 wait_for "$xm_link" || { echo "sim_haas_serial did not start" >&2; exit 1; }
-read -r xm_raw xm_rfc <<<"$(start_server xmodem "$xm_link" 115200n81)"
+start_server xmodem "$xm_link" 115200n81  # not in a subshell: the cleanup needs its pid
+xm_raw=$raw xm_rfc=$rfc
 declare -A xm_median
 echo "--- 1. XModem send of $kib KiB (binary, checksum-128, random bytes: 0xFF among them), median of $rounds (load $(bench_load))"
 for path in pty "tcp://127.0.0.1:$xm_raw" "rfc2217://127.0.0.1:$xm_rfc"; do
@@ -83,7 +82,8 @@ while len(out) < $drip_bytes - 8:
     out += 'N%d G1 X%d.%d Y%d.5 F900.\n' % (n, n % 500, n % 10, n % 300); n += 1
 open('$work/drip.nc', 'w').write(out + 'M30\n%\n')"
 drip_link=$work/drip.pty
-read -r drip_raw drip_rfc <<<"$(start_server drip "$drip_link" 115200n81)"
+start_server drip "$drip_link" 115200n81
+drip_raw=$raw drip_rfc=$rfc
 declare -A drip_time
 drip_row() {  # drip_row LABEL PORT [cnc_dnc drip options]
   local label=$1 port=$2 start out
