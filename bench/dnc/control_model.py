@@ -9,7 +9,9 @@ queued at that moment and what it wrote after. A control may take 10 (Fanuc); mo
 small buffer. It runs until the program's closing '%' arrived (after the first) or SECONDS pass.
 
 Prints one line: xoff=N max_after_xoff=N over_10=N overflow=N characters=N seconds=S
-(overflow: characters beyond the buffer's size, which a control would lose).
+after_xoff_p50=N after_xoff_p90=N after_xoff_p99=N
+(overflow: characters beyond the buffer's size, which a control would lose; the percentiles are of
+the characters taken after each XOFF).
 
 usage: control_model.py LINK BAUD EXEC [BUFFER] [SECONDS]
 """
@@ -45,6 +47,7 @@ def main():
     stopped = False
     credit = 0.0
     after, worst, over, overflow, xoffs, total, percents = 0, 0, 0, 0, 0, 0, 0
+    afters = []  # characters taken after each XOFF, for the distribution
     start = last = time.monotonic()
     try:
         while time.monotonic() - start < limit and percents < 2:
@@ -79,12 +82,20 @@ def main():
             if buffered <= low:
                 worst = max(worst, after)
                 over += after > 10
+                afters.append(after)
                 os.write(master, bytes([DC1]))
                 stopped = False
     finally:
         os.unlink(link)
+    afters.sort()
+
+    def percentile(p):
+        return afters[min(len(afters) - 1, int(p / 100.0 * len(afters)))] if afters else 0
+
     print("xoff=%d max_after_xoff=%d over_10=%d overflow=%d characters=%d seconds=%.1f"
-          % (xoffs, worst, over, overflow, total, time.monotonic() - start))
+          " after_xoff_p50=%d after_xoff_p90=%d after_xoff_p99=%d"
+          % (xoffs, worst, over, overflow, total, time.monotonic() - start, percentile(50), percentile(90),
+             percentile(99)))
 
 
 if __name__ == "__main__":

@@ -16,6 +16,8 @@
 //   cnc_dnc doctor  --port DEV [serial options] [--listen S]            (cnc_dnc_doctor.cpp)
 //   cnc_dnc history (--archive DIR | --program-dir DIR) NAME
 //   cnc_dnc diff    (--archive DIR | --program-dir DIR) NAME [V1 [V2]]
+// DEV is a serial device, tcp://host:port (a device server's raw TCP port) or rfc2217://host:port
+// (a device server's RFC 2217 port): serial_line.h.
 #include <unistd.h>
 
 #include <algorithm>
@@ -29,8 +31,9 @@
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/stop_handler.h"
-#include "cnc_bridge/transport/serial_port.h"
+#include "cnc_bridge/transport/serial_line.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
+#include "cnc_bridge/xmodem/network_waits.h"
 #include "progress_line.h"
 #include "protected_options.h"
 #include "serial_options.h"
@@ -68,7 +71,8 @@ struct UsageError : std::runtime_error
 po::options_description serialOptions()
 {
   po::options_description options("serial port");
-  options.add_options()("port,p", po::value<std::string>()->required(), "serial device, e.g. /dev/ttyUSB0")(
+  options.add_options()("port,p", po::value<std::string>()->required(),
+                        "serial device (/dev/ttyUSB0) or device server port (tcp://host:port, rfc2217://host:port)")(
       "baud,b", po::value<unsigned>()->default_value(115200), "baud rate (Haas setting 11)")(
       "parity", po::value<std::string>()->default_value("none"), "none|even|odd (Haas setting 12)")(
       "data-bits", po::value<unsigned>()->default_value(8), "7|8 (Haas setting 37)")(
@@ -168,8 +172,9 @@ void addTransferOptions(po::options_description& options, const std::string& def
       "timeout,t", po::value<double>()->default_value(60.0), "seconds to wait for the other side to start")(
       "retries", po::value<unsigned>()->default_value(10), "errors in a row on one block before giving up")(
       "wait-chars", po::value<unsigned>()->default_value(30),
-      "gap inside a packet, and silence before a NAK, in character times of the line")(
-      "wait-floor", po::value<unsigned>()->default_value(30), "milliseconds: the least of those two waits")(
+      "gap inside a packet, and silence before a NAK, in character times of the line (140 at a device server)")(
+      "wait-floor", po::value<unsigned>()->default_value(30),
+      "milliseconds: the least of those two waits (200 at a device server)")(
       "max-bytes", po::value<uint64_t>()->default_value(xmodem::kDefaultMaxProgramBytes),
       "the longest program moved: a sender that goes past it is cancelled and nothing is stored; a larger "
       "file is not sent (XModem has no length field)");
@@ -185,6 +190,14 @@ xmodem::Config transferConfig(const po::variables_map& vm)
   config.max_retries = config.eot_retries = vm["retries"].as<unsigned>();
   config.wait_characters = vm["wait-chars"].as<unsigned>();
   config.wait_floor = Milliseconds(vm["wait-floor"].as<unsigned>());
+  if (parseSerialAddress(vm["port"].as<std::string>()).networked())
+  {
+    // A device server sends in chunks and the network adds its delays (xmodem/network_waits.h).
+    if (vm["wait-chars"].defaulted())
+      config.wait_characters = xmodem::kNetworkWaitCharacters;
+    if (vm["wait-floor"].defaulted())
+      config.wait_floor = xmodem::kNetworkWaitFloor;
+  }
   config.max_bytes = vm["max-bytes"].as<uint64_t>();
   if (config.max_bytes == 0)
     throw UsageError("--max-bytes must be at least 1");
@@ -201,14 +214,14 @@ int withPort(const po::variables_map& vm, const std::function<std::string(Transp
   installStopHandler();
   // A start request the receiver sent before this program opened the port is kept: it is the one
   // the transfer needs (a receiver repeats it only after its NAK interval, 10 s for lrzsz rx).
-  SerialPort port(serialSettings(vm), InputOnOpen::kKeep);
+  const auto port = openSerialLine(serialSettings(vm), InputOnOpen::kKeep);
   onStop(
       [&port]
       {
         cancel = true;
-        port.interrupt();
+        port->interrupt();
       });
-  std::cout << transfer(port, cancel) << std::endl;
+  std::cout << transfer(*port, cancel) << std::endl;
   return 0;
 }
 

@@ -26,7 +26,7 @@
 #include "cnc_bridge/dnc/backup.h"
 #include "cnc_bridge/dnc/dnc_codes.h"
 #include "cnc_bridge/dnc/drip_feed.h"
-#include "cnc_bridge/transport/serial_port.h"
+#include "cnc_bridge/transport/serial_line.h"
 #include "progress_line.h"
 #include "protected_options.h"
 #include "serial_options.h"
@@ -42,7 +42,9 @@ namespace
 po::options_description serialOptions()
 {
   po::options_description options("serial port");
-  options.add_options()("help,h", "this help")("port,p", po::value<std::string>(), "serial device, e.g. /dev/ttyUSB0")(
+  options.add_options()("help,h", "this help")(
+      "port,p", po::value<std::string>(),
+      "serial device (/dev/ttyUSB0) or device server port (tcp://host:port, rfc2217://host:port)")(
       "baud,b", po::value<unsigned>()->default_value(115200), "baud rate: the control's (as send/receive)")(
       "parity", po::value<std::string>()->default_value("none"), "none|even|odd (ISO tape code: even with 7 bits)")(
       "data-bits", po::value<unsigned>()->default_value(8), "7|8")("stop-bits", po::value<unsigned>()->default_value(1),
@@ -88,9 +90,20 @@ bool parse(const std::string& command, const std::vector<std::string>& args, con
 SerialSettings serialSettings(const po::variables_map& vm)
 {
   SerialSettings s = cli::serialSettingsFrom(vm);
-  // Drip-feed reads DC1/DC3 itself (kernel IXON would swallow them); RTS/CTS is the kernel's.
+  // Drip-feed reads DC1/DC3 itself (kernel IXON would swallow them); RTS/CTS is the kernel's. With
+  // --line-flow xonxoff the line obeys DC3/DC1 below the feed instead: the driver, or a device
+  // server's UART over rfc2217:// (which stops at once, where the feed stops only what it has not
+  // yet handed to the network).
   s.flow_control =
       vm.count("flow") && vm["flow"].as<std::string>() == "rtscts" ? FlowControl::kRtsCts : FlowControl::kNone;
+  if (vm.count("line-flow") && vm["line-flow"].as<std::string>() != "none")
+  {
+    if (vm["line-flow"].as<std::string>() != "xonxoff")
+      throw ConfigError("--line-flow is none or xonxoff, not '" + vm["line-flow"].as<std::string>() + "'");
+    if (s.flow_control != FlowControl::kNone || vm["flow"].as<std::string>() != "none")
+      throw ConfigError("--line-flow xonxoff needs --flow none: the line takes DC3/DC1, the feed would not see them");
+    s.flow_control = FlowControl::kXonXoff;
+  }
   s.validate();
   return s;
 }
@@ -162,7 +175,10 @@ int runDrip(const std::vector<std::string>& args)
   options.add_options()("eob", po::value<std::string>()->default_value("lf"),
                         "end of block sent: lf (ISO, Fanuc)|cr|crlf (Haas)|lfcr|lfcrcr")(
       "flow", po::value<std::string>()->default_value("xonxoff"), "xonxoff (DC3/DC1, parity masked)|rtscts|none")(
-      "no-pace", po::bool_switch(), "do not pace writes to the line rate (drain after each instead)")(
+      "line-flow", po::value<std::string>()->default_value("none"),
+      "none|xonxoff: the line itself obeys DC3/DC1 (the port's driver, or a device server's UART over "
+      "rfc2217://), with --flow none")("no-pace", po::bool_switch(),
+                                       "do not pace writes to the line rate (drain after each instead)")(
       "chunk", po::value<size_t>()->default_value(4), "characters per write")(
       "dc-codes", po::bool_switch(), "DC2 before and DC4 after the program (Haas setting 14)")(
       "leader", po::value<size_t>()->default_value(0), "NUL characters before and after the program")(
@@ -232,8 +248,8 @@ int runDrip(const std::vector<std::string>& args)
   installStopHandler();
   onStop([] { cancel = true; });
   drip.cancel = &cancel;
-  SerialPort port(settings);
-  dnc::DripSender sender(port, drip);
+  const auto port = openSerialLine(settings);
+  dnc::DripSender sender(*port, drip);
   const PauseSignals pause_signals(sender);
   std::cerr << "cnc_dnc drip: pause with kill -USR1 " << ::getpid() << ", resume with kill -USR2 " << ::getpid()
             << "\n";
@@ -276,9 +292,9 @@ int runBackup(const std::vector<std::string>& args)
   installStopHandler();
   onStop([] { cancel = true; });
   backup.cancel = &cancel;
-  SerialPort port(serialSettings(vm));
+  const auto port = openSerialLine(serialSettings(vm));
   const std::string file = vm["file"].as<std::string>();
-  dnc::BackupReceiver receiver(port, backup);
+  dnc::BackupReceiver receiver(*port, backup);
   cli::ProgressLine bar("backup " + file);
   std::cerr << "waiting for the control to punch (PUNCH / SEND RS-232 on the control)...\n";
   const auto result = receiver.receive(

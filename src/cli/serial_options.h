@@ -5,7 +5,7 @@
 #include <boost/program_options.hpp>
 #include <string>
 
-#include "cnc_bridge/transport/serial_port.h"
+#include "cnc_bridge/transport/serial_settings.h"
 
 namespace cnc_bridge
 {

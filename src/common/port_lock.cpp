@@ -78,6 +78,29 @@ std::string makeLockDir(const std::string& dir, mode_t mode)
 }
 }  // namespace
 
+std::string lockName(const std::string& device)
+{
+  std::string name;
+  const size_t scheme_end = device.find("://");
+  if (scheme_end != std::string::npos)
+  {
+    // A device server's port (tcp://host:port, rfc2217://host:port): no file to resolve; the same
+    // host:port is the same line whichever protocol reaches it.
+    name = "net-" + device.substr(scheme_end + 3);
+  }
+  else
+  {
+    char resolved[PATH_MAX];
+    name = ::realpath(device.c_str(), resolved) ? resolved : device;
+  }
+  for (char& c : name)
+  {
+    if (c == '/')
+      c = '_';
+  }
+  return name;
+}
+
 std::string lockDirectory(const std::string& requested)
 {
   if (requested != kDefaultLockDir)
@@ -100,14 +123,7 @@ std::string lockDirectory(const std::string& requested)
 PortLock::PortLock(const std::string& device, const std::string& lock_dir_requested)
 {
   const std::string lock_dir = lockDirectory(lock_dir_requested);
-  char resolved[PATH_MAX];
-  std::string name = ::realpath(device.c_str(), resolved) ? resolved : device;
-  for (char& c : name)
-  {
-    if (c == '/')
-      c = '_';
-  }
-  path_ = lock_dir + "/cnc_bridge-" + name + ".lock";
+  path_ = lock_dir + "/cnc_bridge-" + lockName(device) + ".lock";
 }
 
 PortLock::~PortLock()

@@ -4,7 +4,6 @@
 #include "dnc_drip_handlers.h"
 
 #include <std_srvs/Trigger.h>
-#include <termios.h>
 
 #include <memory>
 #include <mutex>
@@ -35,47 +34,42 @@ Milliseconds secondsOrZero(const ros::NodeHandle& pnh, const std::string& name, 
   return Milliseconds(static_cast<int64_t>(value * 1000.0));
 }
 
-/// Sets the port's termios for the drip-feed's flow control for the length of one transfer:
-/// XON/XOFF is read in user space (so the kernel must not act on DC1/DC3 itself), RTS/CTS is the
-/// kernel's. The node's own settings come back afterwards.
+/// Sets the line's flow control for the drip-feed for the length of one transfer: XON/XOFF is read
+/// by the feed itself (so neither the kernel nor a device server may act on DC1/DC3), RTS/CTS is
+/// the driver's (or the device server's, over RFC 2217). The node's own settings come back
+/// afterwards (applySettings()).
 class FlowControlGuard
 {
  public:
-  FlowControlGuard(Transport& link, dnc::DripFlow flow)
+  FlowControlGuard(Transport& link, dnc::DripFlow flow) : line_(dynamic_cast<SerialLine*>(&link))
   {
-    auto* port = dynamic_cast<SerialPort*>(&link);
-    if (port == nullptr || ::tcgetattr(port->nativeHandle(), &saved_) != 0)
+    if (line_ == nullptr)
     {
-      return;  // not a serial port (tests): nothing to set
+      return;  // not a serial line (tests): nothing to set
     }
-    fd_ = port->nativeHandle();
-    struct termios tio = saved_;
-    tio.c_iflag &= ~(IXON | IXOFF | IXANY);
-    if (flow == dnc::DripFlow::kRtsCts)
-    {
-      tio.c_cflag |= CRTSCTS;
-    }
-    else
-    {
-      tio.c_cflag &= ~CRTSCTS;
-    }
-    ::tcsetattr(fd_, TCSANOW, &tio);
+    line_->setFlowControl(flow == dnc::DripFlow::kRtsCts ? FlowControl::kRtsCts : FlowControl::kNone);
   }
   ~FlowControlGuard()
   {
-    if (fd_ >= 0)
+    if (line_ == nullptr)
     {
-      ::tcsetattr(fd_, TCSANOW, &saved_);
+      return;
+    }
+    try
+    {
+      line_->applySettings();
+    }
+    catch (const Error& e)
+    {
+      // The feed's outcome stands; a line that failed is opened and set up afresh next time.
+      ROS_WARN("drip-feed: cannot restore the line settings of %s: %s", line_->settings().describe().c_str(), e.what());
     }
   }
   FlowControlGuard(const FlowControlGuard&) = delete;
   FlowControlGuard& operator=(const FlowControlGuard&) = delete;
 
  private:
-  int fd_ = -1;
-  struct termios saved_
-  {
-  };
+  SerialLine* line_;
 };
 
 class DripHandlers

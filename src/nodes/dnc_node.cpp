@@ -16,6 +16,7 @@
 #include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/ros/params.h"
 #include "cnc_bridge/ros/request_boundary.h"
+#include "cnc_bridge/xmodem/network_waits.h"
 #include "dnc_drip_handlers.h"
 
 namespace cnc_bridge
@@ -23,7 +24,7 @@ namespace cnc_bridge
 namespace
 {
 // XModem timing (seconds) and limits; defaults are the protocol's (docs/protocols/xmodem.md#timeouts-and-limits).
-dnc::XmodemWaits xmodemWaits(const ros::NodeHandle& pnh)
+dnc::XmodemWaits xmodemWaits(const ros::NodeHandle& pnh, bool networked)
 {
   dnc::XmodemWaits waits;
   // ~start_timeout: receiving, how long to wait for the control to start sending (the operator
@@ -38,11 +39,18 @@ dnc::XmodemWaits xmodemWaits(const ros::NodeHandle& pnh)
   waits.ack_timeout = params::seconds(pnh, "ack_timeout", 10.0);
   // ~eot_quiet: receiving, silence after EOT before it is believed (a garbled SOH looks like EOT).
   waits.eot_quiet = params::seconds(pnh, "eot_quiet", 0.03);
-  // ~wait_characters (int, default 30), ~wait_floor (s, default 0.03): the longest gap between two
-  // bytes of a packet and the silence that ends the purge of a garbled packet before a NAK, in
-  // character times of the line, at least wait_floor (1 s at 300 baud, 30 ms at 9600 and above).
-  waits.wait_characters = static_cast<unsigned>(std::max(1, pnh.param("wait_characters", 30)));
-  waits.wait_floor = params::seconds(pnh, "wait_floor", 0.03);
+  // ~wait_characters (int), ~wait_floor (s): the longest gap between two bytes of a packet and the
+  // silence that ends the purge of a garbled packet before a NAK, in character times of the line,
+  // at least wait_floor. 0 (the launch file's) or not set: 30 and 0.03 s on a cable (1 s at 300
+  // baud, 30 ms at 9600 and above), 140 and 0.2 s at a device server (xmodem/network_waits.h).
+  const int characters = pnh.param("wait_characters", 0);
+  waits.wait_characters = characters > 0 ? static_cast<unsigned>(characters)
+                          : networked    ? xmodem::kNetworkWaitCharacters
+                                         : 30u;
+  const double floor = pnh.param("wait_floor", 0.0);
+  waits.wait_floor = floor > 0   ? Milliseconds(static_cast<int64_t>(floor * 1000.0))
+                     : networked ? xmodem::kNetworkWaitFloor
+                                 : Milliseconds(30);
   // ~char_timeout, ~purge_quiet (s, default 0: from the line rate as above): fixed values instead.
   if (pnh.param("char_timeout", 0.0) > 0)
     waits.char_timeout = params::seconds(pnh, "char_timeout", 1.0);
@@ -108,7 +116,8 @@ DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   // ~binary (bool, default false): move bytes exactly (no EOB conversion; received files keep the
   // SUB padding of the last block).
   pnh.param("binary", text_options_.binary, false);
-  xmodem_config_ = dnc::xmodemConfig(xmodemWaits(pnh), serial_.charactersPerSecond());
+  xmodem_config_ = dnc::xmodemConfig(xmodemWaits(pnh, parseSerialAddress(serial_.device).networked()),
+                                     serial_.charactersPerSecond());
   xmodem_config_.eob_checksum_name = pnh.resolveName("eob_checksum");
   // ~max_program_bytes (int, default 16 MiB): the longest program moved by XModem.
   dnc::setMaxProgramBytes(xmodem_config_,
@@ -205,7 +214,7 @@ Transport& DncNode::openLink()
     {
       // What the control sent while the port was closed stays, as it does in a port kept open
       // (~keep_open): a receiving control's NAK, queued before a send starts, is its start request.
-      link_ = std::make_unique<SerialPort>(serial_, InputOnOpen::kKeep);
+      link_ = openSerialLine(serial_, InputOnOpen::kKeep);
       ++link_generation_;
     }
     catch (const Error& e)

@@ -35,7 +35,7 @@
 #include "cnc_bridge/programs/program_request.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/runtime_switch.h"
-#include "cnc_bridge/transport/serial_port.h"
+#include "cnc_bridge/transport/serial_line.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
 
 namespace cnc_bridge
@@ -143,7 +143,7 @@ class DncNode
   /// request listener only while none runs; its cancel flag stops the running transfer.
   dnc::TransferGate gate_;
   std::mutex link_mutex_;  ///< guards link_ for cancelRunning()
-  std::unique_ptr<SerialPort> link_;
+  std::unique_ptr<SerialLine> link_;
   uint64_t link_generation_ = 0;  ///< counts the links opened (guarded by link_mutex_)
 
   dnc::TransferCounters counters_;

@@ -26,7 +26,7 @@
 #include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/ros/params.h"
 #include "cnc_bridge/ros/request_boundary.h"
-#include "cnc_bridge/transport/serial_port.h"
+#include "cnc_bridge/transport/serial_line.h"
 #include "cnc_bridge/transport/tcp.h"
 
 namespace cnc_bridge
@@ -45,8 +45,8 @@ std::unique_ptr<dprnt::DprntInput> makeInput(const ros::NodeHandle& pnh)
   if (input == "serial")
   {
     const SerialSettings settings = params::serialSettings(pnh, 9600);
-    return std::make_unique<dprnt::StreamInput>([settings] { return std::make_unique<SerialPort>(settings); },
-                                                settings.describe(), backoff);
+    return std::make_unique<dprnt::StreamInput>([settings] { return openSerialLine(settings); }, settings.describe(),
+                                                backoff);
   }
   if (input == "tcp")
   {

@@ -29,7 +29,7 @@
 #include "cnc_bridge/ros/runtime_switch.h"
 #include "cnc_bridge/transport/backoff.h"
 #include "cnc_bridge/transport/reconnecting_link.h"
-#include "cnc_bridge/transport/serial_port.h"
+#include "cnc_bridge/transport/serial_line.h"
 #include "cnc_bridge/transport/tcp.h"
 
 namespace cnc_bridge
@@ -164,7 +164,7 @@ class HaasMdcNode
     poller_->setPortRegainedHook(
         [](Transport& link)
         {
-          if (auto* serial = dynamic_cast<SerialPort*>(&link))
+          if (auto* serial = dynamic_cast<SerialLine*>(&link))
             serial->applySettings();
         });
     if (const auto axes = vars_.workOffsetAxes(); !axes.empty())
@@ -223,7 +223,7 @@ class HaasMdcNode
   {
     if (serial_)
     {
-      return std::make_unique<SerialPort>(*serial_);
+      return openSerialLine(*serial_);
     }
     return TcpConnection::connect(host_, tcp_port_, connect_timeout_);
   }

@@ -23,7 +23,7 @@
 #include "cnc_bridge/slave_bus/slave_table.h"
 #include "cnc_bridge/slave_bus/step_queue.h"
 #include "cnc_bridge/transport/reconnecting_link.h"
-#include "cnc_bridge/transport/serial_port.h"
+#include "cnc_bridge/transport/serial_line.h"
 
 namespace cnc_bridge
 {
@@ -166,7 +166,7 @@ class SlaveBusNode
         });
     state_.diagnostics().add("slave bus", this, &SlaveBusNode::diagnose);
     link_ = std::make_unique<ReconnectingLink>("slave bus " + settings_.describe(),
-                                               [this] { return std::make_unique<SerialPort>(settings_); });
+                                               [this] { return openSerialLine(settings_); });
     queue_.close();  // until the link is up: nothing waits to be sent when it opens
     link_->start([this](Transport& port) { ioLoop(port); },
                  [this](LinkState link, const std::string& why) { onLinkState(link, why); });

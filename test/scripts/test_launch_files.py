@@ -106,6 +106,7 @@ class NodeLaunchFiles(unittest.TestCase):
 PROFILE_NODES = {
     "haas_classic_rs232": ["dnc_node", "dprnt_node", "haas_mdc_node"],
     "haas_classic_rs232_7e1": ["dnc_node", "dprnt_node", "haas_mdc_node"],
+    "haas_classic_device_server": ["dnc_node", "dprnt_node", "haas_mdc_node"],
     "haas_ngc_ethernet": ["haas_mdc_node", "dprnt_node"],
     "fanuc_0i_rs232": ["dnc_node"],
     "fanuc_0i_rs232_7n2": ["dnc_node"],

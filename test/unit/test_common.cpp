@@ -209,6 +209,22 @@ std::string lockDir()
 }
 }  // namespace
 
+TEST(PortLock, NodesOnOneDeviceServerPortShareTheLockWhicheverProtocolTheyUse)
+{
+  // dnc_node on tcp://, haas_mdc_node on rfc2217:// to the same server port: one line, one lock.
+  const std::string dir = lockDir();
+  PortLock dnc("tcp://10.0.0.7:4001", dir);
+  PortLock mdc("rfc2217://10.0.0.7:4001", dir);
+  PortLock other_port("rfc2217://10.0.0.7:4002", dir);
+  ASSERT_TRUE(dnc.tryLock());
+  EXPECT_TRUE(mdc.heldElsewhere());
+  EXPECT_FALSE(mdc.tryLock());
+  EXPECT_FALSE(other_port.heldElsewhere());
+  EXPECT_EQ(lockName("tcp://10.0.0.7:4001"), "net-10.0.0.7:4001");
+  // The lock file stays inside the lock directory: no '/' of the URL makes a path of it.
+  EXPECT_EQ(dnc.lockFile(), dir + "/cnc_bridge-net-10.0.0.7:4001.lock");
+}
+
 TEST(PortLock, ATransferWaitingForTheLockGoesBeforeTheNextQuery)
 {
   const std::string dir = lockDir();

@@ -28,6 +28,12 @@ constexpr const char* kDefaultLockDir = "/run/lock/cnc_bridge";
 /// the line falls back alike, as one user). \throws ConfigError if neither can be used.
 std::string lockDirectory(const std::string& requested);
 
+/// \brief The name of the lock of serial port \p device: a device path with its symbolic links
+/// resolved (so /dev/serial/by-id/... and /dev/ttyUSB0 share one lock), or for a device server's port
+/// (tcp://host:port, rfc2217://host:port) "net-host:port" (nodes reaching one server port by either
+/// protocol share one lock), '/' made '_'.
+std::string lockName(const std::string& device);
+
 /// \brief An exclusive, inter-process lock on one serial device. Not thread-safe.
 ///
 /// Files: `<lock_dir>/cnc_bridge-<device>.lock` (the lock; holds the transfer generation as text)
@@ -37,7 +43,7 @@ std::string lockDirectory(const std::string& requested);
 class PortLock
 {
  public:
-  /// \param device the serial device (symbolic links are resolved so both nodes agree).
+  /// \param device the serial device or device server URL (lockName()).
   /// \param lock_dir where lock files live (lockDirectory(): the default is created); every node on
   /// the line must use the same. \throws ConfigError if the default cannot be set up.
   explicit PortLock(const std::string& device, const std::string& lock_dir = kDefaultLockDir);
