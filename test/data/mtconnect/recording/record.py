@@ -216,6 +216,7 @@ def main():
     # has a new instanceId and starts its sequence again.
     resume = header_of(rec.get("current_after_overrun", "/current"), "nextSequence")
     target = "/sample?from=%d&count=8%s" % (resume, STREAM)
+    # stands for: the machine's pace (the sleep below)
     threading.Thread(target=lambda: (time.sleep(0.5), adapter.send("Zact|4.0|Zcom|4.0")), daemon=True).start()
     data = http_get(target, read_for=10, kill_after=(time.time() + 1.2, rec.stop_agent))
     rec.save("stream_agent_stopped", target, data, "the agent is stopped 1.2 s into the stream")
@@ -224,6 +225,7 @@ def main():
     rec.get("probe_after_restart", "/probe")
     again = header_of(rec.get("current_after_restart", "/current", "new instanceId, sequences from 1"),
                       "nextSequence")
+    # stands for: the machine's pace (the sleep below)
     threading.Thread(target=lambda: (time.sleep(0.4), adapter.send("exec|ACTIVE|Xact|5.0|Xcom|5.0")),
                      daemon=True).start()
     target = "/sample?from=%d&count=8%s" % (again, STREAM)
