@@ -2,6 +2,7 @@
 
 #include <tinyxml2.h>
 
+#include <algorithm>
 #include <charconv>
 #include <cstring>
 
@@ -30,7 +31,7 @@ std::string attribute(const XMLElement* e, const char* name)
 /// First child element with the local name \p name, or nullptr.
 const XMLElement* child(const XMLElement* parent, std::string_view name)
 {
-  for (auto* c = parent->FirstChildElement(); c; c = c->NextSiblingElement())
+  for (const auto* c = parent->FirstChildElement(); c; c = c->NextSiblingElement())
   {
     if (localName(c) == name)
       return c;
@@ -91,7 +92,7 @@ void addDataItems(const XMLElement* component, const std::string& device, Device
   const std::string component_type(localName(component));
   if (const XMLElement* items = child(component, "DataItems"))
   {
-    for (auto* d = items->FirstChildElement(); d; d = d->NextSiblingElement())
+    for (const auto* d = items->FirstChildElement(); d; d = d->NextSiblingElement())
     {
       if (localName(d) != "DataItem")
         continue;
@@ -113,7 +114,7 @@ void addDataItems(const XMLElement* component, const std::string& device, Device
   if (const XMLElement* components = child(component, "Components"))
   {
     // tinyxml2 bounds the nesting depth while parsing, which bounds this recursion.
-    for (auto* c = components->FirstChildElement(); c; c = c->NextSiblingElement())
+    for (const auto* c = components->FirstChildElement(); c; c = c->NextSiblingElement())
       addDataItems(c, device, out);
   }
 }
@@ -123,7 +124,7 @@ void parseDevices(const XMLElement* root, Document& doc)
   const XMLElement* devices = child(root, "Devices");
   if (!devices)
     throw ProtocolError("MTConnectDevices without Devices");
-  for (auto* d = devices->FirstChildElement(); d; d = d->NextSiblingElement())
+  for (const auto* d = devices->FirstChildElement(); d; d = d->NextSiblingElement())
   {
     Device device;
     device.id = attribute(d, "id");
@@ -163,12 +164,12 @@ void parseStreams(const XMLElement* root, Document& doc)
   const XMLElement* streams = child(root, "Streams");
   if (!streams)
     return;  // a heartbeat of an agent that leaves the empty element out
-  for (auto* ds = streams->FirstChildElement(); ds; ds = ds->NextSiblingElement())
+  for (const auto* ds = streams->FirstChildElement(); ds; ds = ds->NextSiblingElement())
   {
     const std::string device = attribute(ds, "name");
-    for (auto* cs = ds->FirstChildElement(); cs; cs = cs->NextSiblingElement())
+    for (const auto* cs = ds->FirstChildElement(); cs; cs = cs->NextSiblingElement())
     {
-      for (auto* group = cs->FirstChildElement(); group; group = group->NextSiblingElement())
+      for (const auto* group = cs->FirstChildElement(); group; group = group->NextSiblingElement())
       {
         const std::string_view kind = localName(group);
         const char* category = kind == "Samples"     ? "SAMPLE"
@@ -177,7 +178,7 @@ void parseStreams(const XMLElement* root, Document& doc)
                                                      : nullptr;
         if (!category)
           continue;
-        for (auto* e = group->FirstChildElement(); e; e = e->NextSiblingElement())
+        for (const auto* e = group->FirstChildElement(); e; e = e->NextSiblingElement())
           doc.observations.push_back(observationOf(e, device, category));
       }
     }
@@ -193,7 +194,7 @@ void parseErrors(const XMLElement* root, Document& doc)
   };
   if (const XMLElement* errors = child(root, "Errors"))
   {
-    for (auto* e = errors->FirstChildElement(); e; e = e->NextSiblingElement())
+    for (const auto* e = errors->FirstChildElement(); e; e = e->NextSiblingElement())
       add(e);
   }
   else if (const XMLElement* e = child(root, "Error"))  // MTConnect 1.0
@@ -219,12 +220,7 @@ std::string Document::errorText() const
 
 bool Document::hasError(const std::string& code) const
 {
-  for (const auto& e : errors)
-  {
-    if (e.code == code)
-      return true;
-  }
-  return false;
+  return std::any_of(errors.begin(), errors.end(), [&](const AgentError& e) { return e.code == code; });
 }
 
 Document parseDocument(std::string_view xml, size_t max_bytes)

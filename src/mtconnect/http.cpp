@@ -21,14 +21,14 @@ struct SinkBody
 {
   using value_type = ResponseParser::BodySink;
 
-  class reader
+  class reader  // NOLINT(readability-identifier-naming): the name Beast's Body concept requires
   {
    public:
     template <bool isRequest, class Fields>
     reader(http::header<isRequest, Fields>& /*header*/, value_type& sink) : sink_(sink)
     {
     }
-    void init(const boost::optional<std::uint64_t>& /*length*/, boost::beast::error_code& ec) { ec = {}; }
+    static void init(const boost::optional<std::uint64_t>& /*length*/, boost::beast::error_code& ec) { ec = {}; }
     template <class ConstBufferSequence>
     std::size_t put(const ConstBufferSequence& buffers, boost::beast::error_code& ec)
     {
@@ -41,7 +41,7 @@ struct SinkBody
       }
       return n;
     }
-    void finish(boost::beast::error_code& ec) { ec = {}; }
+    static void finish(boost::beast::error_code& ec) { ec = {}; }
 
    private:
     value_type& sink_;

@@ -149,6 +149,7 @@ std::optional<std::time_t> epochSeconds(const std::string& stamp, double& fracti
 {
   std::tm tm{};
   int consumed = 0;
+  // NOLINTNEXTLINE(cert-err34-c): every field is 2 or 4 digits and the count of fields is checked
   if (std::sscanf(stamp.c_str(), "%4d-%2d-%2dT%2d:%2d:%2d%n", &tm.tm_year, &tm.tm_mon, &tm.tm_mday, &tm.tm_hour,
                   &tm.tm_min, &tm.tm_sec, &consumed) != 6)
     return std::nullopt;
@@ -167,11 +168,11 @@ std::optional<std::time_t> epochSeconds(const std::string& stamp, double& fracti
 
 const std::vector<std::string>& mappingFields()
 {
-  static const std::vector<std::string> fields = {
+  static const std::vector<std::string> kFields = {
       "availability", "emergency_stop", "controller_mode", "execution",  "program",     "line",
       "part_count",   "x_position",     "y_position",      "z_position", "x_commanded", "y_commanded",
       "z_commanded",  "spindle_speed",  "feed_rate",       "tool",       "door"};
-  return fields;
+  return kFields;
 }
 
 Mapping defaultMapping()
@@ -218,18 +219,18 @@ Mapping mergeMapping(const Mapping& overrides)
 
 std::optional<double> siFactor(const std::string& units)
 {
-  static const std::map<std::string, double> factors = {{"MILLIMETER", 0.001},
-                                                        {"INCH", 0.0254},
-                                                        {"METER", 1.0},
-                                                        {"MILLIMETER/SECOND", 0.001},
-                                                        {"MILLIMETER/MINUTE", 0.001 / 60},
-                                                        {"INCH/MINUTE", 0.0254 / 60},
-                                                        {"INCH/SECOND", 0.0254},
-                                                        {"METER/SECOND", 1.0},
-                                                        {"REVOLUTION/MINUTE", 1.0},
-                                                        {"REVOLUTION/SECOND", 60.0}};
-  const auto it = factors.find(units);
-  if (it == factors.end())
+  static const std::map<std::string, double> kFactors = {{"MILLIMETER", 0.001},
+                                                         {"INCH", 0.0254},
+                                                         {"METER", 1.0},
+                                                         {"MILLIMETER/SECOND", 0.001},
+                                                         {"MILLIMETER/MINUTE", 0.001 / 60},
+                                                         {"INCH/MINUTE", 0.0254 / 60},
+                                                         {"INCH/SECOND", 0.0254},
+                                                         {"METER/SECOND", 1.0},
+                                                         {"REVOLUTION/MINUTE", 1.0},
+                                                         {"REVOLUTION/SECOND", 60.0}};
+  const auto it = kFactors.find(units);
+  if (it == kFactors.end())
     return std::nullopt;
   return it->second;
 }
