@@ -17,7 +17,7 @@ namespace cnc_bridge::mtconnect
 /// \brief Bounds on what an agent may send, so that a broken or hostile peer cannot exhaust memory.
 struct HttpLimits
 {
-  size_t max_header_bytes = 16u * 1024u;
+  size_t max_header_bytes = size_t{16} * 1024;
   size_t max_document_bytes = 16u << 20u;  ///< one XML document (a body or one part of a stream)
 };
 
