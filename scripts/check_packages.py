@@ -67,6 +67,7 @@ DEBIAN_OF_KEY = {
     "rviz": ["rviz"],
     "boost": ["libboost-dev", "libboost-system-dev", "libboost-thread-dev", "libboost-program-options-dev"],
     "yaml-cpp": ["libyaml-cpp-dev"],
+    "tinyxml2": ["libtinyxml2-dev"],
     "libsmbclient-dev": ["libsmbclient-dev"],
     "samba": ["samba"],
     "smbclient": ["smbclient"],
@@ -110,6 +111,7 @@ RUNTIME_DEBIAN_OF_KEY = {
     "std_srvs": ["python3-std-srvs"],
     "boost": ["libboost-thread1.74.0", "libboost-program-options1.74.0"],
     "yaml-cpp": ["libyaml-cpp0.7"],
+    "tinyxml2": ["libtinyxml2-9"],
     "libsmbclient-dev": ["libsmbclient"],
     "message_runtime": [],
     "roslaunch": ["python3-roslaunch"],
@@ -131,7 +133,7 @@ RUNTIME_TAGS = ("depend", "exec_depend")
 # System keys of rosdep (ros/rosdistro rosdep/base.yaml and rosdep/python.yaml) this package uses;
 # all resolve on Debian and Ubuntu. A new system key goes here once looked up there.
 ROSDEP_SYSTEM_KEYS = {
-    "boost", "yaml-cpp", "gtest", "socat", "rt-tests", "xvfb", "python3-pil", "clang", "clang-format",
+    "boost", "yaml-cpp", "tinyxml2", "gtest", "socat", "rt-tests", "xvfb", "python3-pil", "clang", "clang-format",
     "iproute2", "procps", "python3-numpy", "python3-matplotlib", "python3-yaml", "smbclient",
 }
 # Keys without a rosdep rule, with what a user does instead (docs/INSTALL.md says the same).
