@@ -311,14 +311,8 @@ void DprntNode::publishRule(const dprnt::RuleOutput& output, const std::string& 
     }
     case dprnt::OutputType::kCycleEvent:
     {
-      CycleEvent event;
-      event.header.stamp = stamp;
-      event.machine = state_->machineName();
-      event.event = static_cast<uint8_t>(rule.event);
-      event.program = output.program;
-      event.part_count = output.part_count;
-      event.cycle_time = output.cycle_time >= 0 ? output.cycle_time : std::numeric_limits<double>::quiet_NaN();
-      event.text = line;
+      const CycleEvent event = state_->cycleEvent(stamp, static_cast<uint8_t>(rule.event), output.program,
+                                                  output.part_count, output.cycle_time, line);
       pubs.live.publish(event);
       pubs.last.publish(event);
       state_->update(

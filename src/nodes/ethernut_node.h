@@ -111,6 +111,10 @@ class EthernutNode : public ethernut::ClientListener
 
   template <typename Response, typename F>
   bool command(Response& res, const std::string& what, F f);
+  /// Fills \p res with the refusal of \p service when motion is disabled (the caller holds
+  /// motion_mutex_, so the switch cannot change before the command goes out). \returns true then.
+  template <typename Response>
+  bool motionRefused(Response& res, const std::string& service) const;
   bool onPause(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   bool onResume(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   std::string releaseHolds();

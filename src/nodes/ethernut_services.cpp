@@ -153,6 +153,16 @@ bool EthernutNode::command(Response& res, const std::string& what, F f)
   return true;
 }
 
+template <typename Response>
+bool EthernutNode::motionRefused(Response& res, const std::string& service) const
+{
+  if (motion_->enabled())
+    return false;
+  res.success = false;
+  res.message = motion_->refusal(service);
+  return true;
+}
+
 bool EthernutNode::onPause(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigger::Response& res)
 {
   return command(res, "paused", [](ethernut::Client& c) { c.pause(); });
@@ -163,12 +173,8 @@ bool EthernutNode::onPause(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigge
 bool EthernutNode::onResume(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigger::Response& res)
 {
   std::lock_guard<std::mutex> gate(motion_mutex_);
-  if (!motion_->enabled())
-  {
-    res.success = false;
-    res.message = motion_->refusal("resume");
+  if (motionRefused(res, "resume"))
     return true;
-  }
   const std::string held = releaseHolds();
   std::string why;
   const auto c = client(why);
@@ -251,12 +257,8 @@ void EthernutNode::onMotionSwitched(bool enabled, const std::string& caller)
 bool EthernutNode::onClear(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigger::Response& res)
 {
   std::lock_guard<std::mutex> gate(motion_mutex_);
-  if (!motion_->enabled())
-  {
-    res.success = false;
-    res.message = motion_->refusal("clear");
+  if (motionRefused(res, "clear"))
     return true;
-  }
   return command(res, "clear: job cancelled, board cleared to 0/0/0; the connection kept",
                  [](ethernut::Client& c) { c.reset(); });
 }
@@ -264,12 +266,8 @@ bool EthernutNode::onClear(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigge
 bool EthernutNode::onReset(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigger::Response& res)
 {
   std::lock_guard<std::mutex> gate(motion_mutex_);
-  if (!motion_->enabled())
-  {
-    res.success = false;
-    res.message = motion_->refusal("reset");
+  if (motionRefused(res, "reset"))
     return true;
-  }
   return command(res, "reset: job cancelled, board cleared to 0/0/0; the connection closed, reconnecting",
                  [this](ethernut::Client& c)
                  {
@@ -312,12 +310,8 @@ bool EthernutNode::onSyncOled(EthernutCoordinates::Request& req, EthernutCoordin
 bool EthernutNode::onBoardCommand(EthernutCoordinates::Request& req, EthernutCoordinates::Response& res)
 {
   std::lock_guard<std::mutex> gate(motion_mutex_);
-  if (!motion_->enabled())
-  {
-    res.success = false;
-    res.message = motion_->refusal("board_command");
+  if (motionRefused(res, "board_command"))
     return true;
-  }
   res.message = floatRefusal("board_command", req);
   if (!res.message.empty())
     return true;
@@ -349,12 +343,8 @@ bool EthernutNode::onSetMode(EthernutSetMode::Request& req, EthernutSetMode::Res
   // A mode change changes what drives the machine (standalone: the board runs on its own), and the
   // mode is also the one selected on every reconnection: gated like motion, nothing changed if refused.
   std::lock_guard<std::mutex> gate(motion_mutex_);
-  if (!motion_->enabled())
-  {
-    res.success = false;
-    res.message = motion_->refusal("set_mode");
+  if (motionRefused(res, "set_mode"))
     return true;
-  }
   if (leaveStandalone(mode, res))
   {
     return true;

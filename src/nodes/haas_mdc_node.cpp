@@ -275,16 +275,7 @@ class HaasMdcNode
     }
     for (const auto& e : events)
     {
-      CycleEvent msg;
-      msg.header.stamp = now;
-      msg.header.frame_id = state_->frame("machine");
-      msg.machine = state_->machineName();
-      msg.event = e.type;
-      msg.program = e.program;
-      msg.part_count = e.part_count;
-      msg.cycle_time = e.cycle_time >= 0 ? e.cycle_time : std::numeric_limits<double>::quiet_NaN();
-      msg.text = e.text;
-      events_pub_.publish(msg);
+      events_pub_.publish(state_->cycleEvent(now, e.type, e.program, e.part_count, e.cycle_time, e.text));
       ROS_INFO_STREAM("haas_mdc_node: " << e.text << " (program " << e.program << ", parts " << e.part_count << ")");
     }
   }

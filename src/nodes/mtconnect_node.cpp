@@ -196,16 +196,7 @@ class MtconnectNode : public mtconnect::FollowerListener
 
   void publishEvent(const mtconnect::CycleEvent& e, const ros::Time& now)
   {
-    CycleEvent msg;
-    msg.header.stamp = now;
-    msg.header.frame_id = state_->frame("machine");
-    msg.machine = state_->machineName();
-    msg.event = e.type;
-    msg.program = e.program;
-    msg.part_count = e.part_count;
-    msg.cycle_time = e.cycle_time >= 0 ? e.cycle_time : std::numeric_limits<double>::quiet_NaN();
-    msg.text = e.text;
-    events_pub_.publish(msg);
+    events_pub_.publish(state_->cycleEvent(now, e.type, e.program, e.part_count, e.cycle_time, e.text));
     ROS_INFO_STREAM("mtconnect_node: " << e.text << " (program " << e.program << ", parts " << e.part_count << ")");
   }
 

@@ -159,6 +159,21 @@ void MachineStatePublisher::setCommandedPosition(double x, double y, double z)
       });
 }
 
+CycleEvent MachineStatePublisher::cycleEvent(const ros::Time& stamp, uint8_t event, const std::string& program,
+                                             int64_t part_count, double cycle_time, const std::string& text) const
+{
+  CycleEvent msg;
+  msg.header.stamp = stamp;
+  msg.header.frame_id = frame("machine");
+  msg.machine = machine_;
+  msg.event = event;
+  msg.program = program;
+  msg.part_count = part_count;
+  msg.cycle_time = cycle_time >= 0 ? cycle_time : std::numeric_limits<double>::quiet_NaN();
+  msg.text = text;
+  return msg;
+}
+
 MachineState MachineStatePublisher::snapshot() const
 {
   std::lock_guard<std::mutex> lock(mutex_);

@@ -95,10 +95,48 @@ void waitUntilAcknowledged(const TcpConnection& connection)
 }  // namespace
 
 // ---------------------------------------------------------------------------------------------
+// Both kinds
+
+NetworkSerialLine::NetworkSerialLine(SerialSettings settings, std::unique_ptr<TcpConnection> connection)
+    : settings_(std::move(settings)), connection_(std::move(connection))
+{
+}
+
+void NetworkSerialLine::fail(const LinkError& error) const
+{
+  throw LinkError(describe() + ": " + kWhenClosed + " (" + error.what() + ")");
+}
+
+void NetworkSerialLine::drain()
+{
+  waitUntilAcknowledged(*connection_);
+}
+
+size_t NetworkSerialLine::pendingOutput() const
+{
+  return connection_->unacknowledged();
+}
+
+void NetworkSerialLine::interrupt()
+{
+  connection_->interrupt();
+}
+
+void NetworkSerialLine::close()
+{
+  connection_->close();
+}
+
+bool NetworkSerialLine::isOpen() const
+{
+  return connection_->isOpen();
+}
+
+// ---------------------------------------------------------------------------------------------
 // Raw TCP
 
 RawTcpSerialLine::RawTcpSerialLine(SerialSettings settings, std::unique_ptr<TcpConnection> connection)
-    : settings_(std::move(settings)), connection_(std::move(connection))
+    : NetworkSerialLine(std::move(settings), std::move(connection))
 {
 }
 
@@ -147,11 +185,6 @@ void RawTcpSerialLine::refuseIfTurnedAway()
   }
 }
 
-void RawTcpSerialLine::fail(const LinkError& error) const
-{
-  throw LinkError(describe() + ": " + kWhenClosed + " (" + error.what() + ")");
-}
-
 size_t RawTcpSerialLine::read(uint8_t* buffer, size_t size, Milliseconds timeout)
 {
   if (held_start_ < held_.size())
@@ -183,36 +216,11 @@ void RawTcpSerialLine::write(const uint8_t* data, size_t size, Milliseconds time
   }
 }
 
-void RawTcpSerialLine::drain()
-{
-  waitUntilAcknowledged(*connection_);
-}
-
-size_t RawTcpSerialLine::pendingOutput() const
-{
-  return connection_->unacknowledged();
-}
-
 void RawTcpSerialLine::discardInput()
 {
   held_.clear();
   held_start_ = 0;
   connection_->discardInput();
-}
-
-void RawTcpSerialLine::interrupt()
-{
-  connection_->interrupt();
-}
-
-void RawTcpSerialLine::close()
-{
-  connection_->close();
-}
-
-bool RawTcpSerialLine::isOpen() const
-{
-  return connection_->isOpen();
 }
 
 std::string RawTcpSerialLine::describe() const
@@ -225,7 +233,7 @@ std::string RawTcpSerialLine::describe() const
 
 TelnetSerialLine::TelnetSerialLine(SerialSettings settings, std::unique_ptr<TcpConnection> connection,
                                    Milliseconds answer_timeout)
-    : settings_(std::move(settings)), connection_(std::move(connection)), answer_timeout_(answer_timeout)
+    : NetworkSerialLine(std::move(settings), std::move(connection)), answer_timeout_(answer_timeout)
 {
 }
 
@@ -244,11 +252,6 @@ std::unique_ptr<TelnetSerialLine> TelnetSerialLine::open(const SerialSettings& s
                           }
                           return line;
                         });
-}
-
-void TelnetSerialLine::fail(const LinkError& error) const
-{
-  throw LinkError(describe() + ": " + kWhenClosed + " (" + error.what() + ")");
 }
 
 Milliseconds TelnetSerialLine::left(Clock::time_point deadline)
@@ -469,16 +472,6 @@ void TelnetSerialLine::write(const uint8_t* data, size_t size, Milliseconds time
   send(escaped, timeout);
 }
 
-void TelnetSerialLine::drain()
-{
-  waitUntilAcknowledged(*connection_);
-}
-
-size_t TelnetSerialLine::pendingOutput() const
-{
-  return connection_->unacknowledged();
-}
-
 void TelnetSerialLine::discardInput()
 {
   send(rfc2217::subnegotiation(rfc2217::Command::kPurgeData, {rfc2217::kPurgeReceiveBuffer}), answer_timeout_);
@@ -490,21 +483,6 @@ void TelnetSerialLine::discardInput()
   }
   data_.clear();
   data_start_ = 0;
-}
-
-void TelnetSerialLine::interrupt()
-{
-  connection_->interrupt();
-}
-
-void TelnetSerialLine::close()
-{
-  connection_->close();
-}
-
-bool TelnetSerialLine::isOpen() const
-{
-  return connection_->isOpen();
 }
 
 std::string TelnetSerialLine::describe() const

@@ -13,6 +13,7 @@
 #include <mutex>
 #include <string>
 
+#include "cnc_bridge/CycleEvent.h"
 #include "cnc_bridge/MachineState.h"
 #include "cnc_bridge/transport/reconnecting_link.h"
 #include "cnc_bridge/transport/transport.h"
@@ -47,6 +48,11 @@ class MachineStatePublisher
   /// \brief Sets the last position sent to the machine in metres (machine frame) and marks it valid.
   /// Nodes that command no position never call it: commanded_valid stays false.
   void setCommandedPosition(double x, double y, double z);
+
+  /// \brief A cycle event of this machine (its name, its machine frame): \p cycle_time in s, NaN in
+  /// the message when negative (unknown); \p part_count -1 when unknown.
+  CycleEvent cycleEvent(const ros::Time& stamp, uint8_t event, const std::string& program, int64_t part_count,
+                        double cycle_time, const std::string& text) const;
 
   MachineState snapshot() const;
   const std::string& tfPrefix() const { return tf_prefix_; }

@@ -30,10 +30,34 @@ constexpr std::chrono::milliseconds kTurnedAwayWithin{150};
 constexpr std::chrono::milliseconds kBusyRetryFor{2000};
 constexpr std::chrono::milliseconds kBusyRetryEvery{50};
 
+/// \brief What both kinds of device-server line share: the TCP connection, the settings asked
+/// for, and the calls that go straight to the connection. Thread-safe only for interrupt().
+class NetworkSerialLine : public SerialLine
+{
+ public:
+  /// \brief Waits until the server has acknowledged every byte written (what it still holds for
+  /// its own port is out of sight).
+  void drain() override;
+  /// \returns bytes written that the server has not acknowledged yet.
+  size_t pendingOutput() const override;
+  void interrupt() override;
+  void close() override;
+  bool isOpen() const override;
+  const SerialSettings& settings() const override { return settings_; }
+
+ protected:
+  NetworkSerialLine(SerialSettings settings, std::unique_ptr<TcpConnection> connection);
+  /// \throws LinkError with \p error and what a closed or silent server means.
+  [[noreturn]] void fail(const LinkError& error) const;
+
+  SerialSettings settings_;
+  std::unique_ptr<TcpConnection> connection_;
+};
+
 /// \brief A device server's raw TCP port: the bytes are the line's, the line settings are the
 /// server's own (settings() only tells this side the baud rate its waits are measured in).
 /// Thread-safe only for interrupt().
-class RawTcpSerialLine : public SerialLine
+class RawTcpSerialLine : public NetworkSerialLine
 {
  public:
   static std::unique_ptr<RawTcpSerialLine> open(const SerialSettings& settings, const SerialAddress& address,
@@ -42,18 +66,9 @@ class RawTcpSerialLine : public SerialLine
   using Transport::write;
   size_t read(uint8_t* buffer, size_t size, Milliseconds timeout) override;
   void write(const uint8_t* data, size_t size, Milliseconds timeout) override;
-  /// \brief Waits until the server has acknowledged every byte written (what it still holds for
-  /// its own port is out of sight).
-  void drain() override;
-  /// \returns bytes written that the server has not acknowledged yet.
-  size_t pendingOutput() const override;
   void discardInput() override;
-  void interrupt() override;
-  void close() override;
-  bool isOpen() const override;
   std::string describe() const override;
 
-  const SerialSettings& settings() const override { return settings_; }
   /// Nothing to send: the server keeps its own line settings.
   void applySettings() override {}
   /// Nothing to send: the server keeps its own flow control.
@@ -63,10 +78,7 @@ class RawTcpSerialLine : public SerialLine
   RawTcpSerialLine(SerialSettings settings, std::unique_ptr<TcpConnection> connection);
   /// \throws LinkError when the server closes the new connection at once, with what it said.
   void refuseIfTurnedAway();
-  [[noreturn]] void fail(const LinkError& error) const;
 
-  SerialSettings settings_;
-  std::unique_ptr<TcpConnection> connection_;
   std::vector<uint8_t> held_;  ///< line data that arrived while refuseIfTurnedAway() watched
   size_t held_start_ = 0;
 };
@@ -75,7 +87,7 @@ class RawTcpSerialLine : public SerialLine
 /// from settings() and every setting is checked against the server's answer; data bytes 0xFF
 /// (Telnet's IAC) are escaped both ways, so binary XModem blocks pass intact; the server's
 /// flow-control suspend and resume hold this side's writes. Thread-safe only for interrupt().
-class TelnetSerialLine : public SerialLine
+class TelnetSerialLine : public NetworkSerialLine
 {
  public:
   /// \throws LinkError when the server does not speak RFC 2217 on that port or refuses a setting.
@@ -85,17 +97,10 @@ class TelnetSerialLine : public SerialLine
   using Transport::write;
   size_t read(uint8_t* buffer, size_t size, Milliseconds timeout) override;
   void write(const uint8_t* data, size_t size, Milliseconds timeout) override;
-  /// \brief Waits until the server has acknowledged every byte written.
-  void drain() override;
-  size_t pendingOutput() const override;
   /// \brief Drops what this side holds and asks the server to purge its receive buffer.
   void discardInput() override;
-  void interrupt() override;
-  void close() override;
-  bool isOpen() const override;
   std::string describe() const override;
 
-  const SerialSettings& settings() const override { return settings_; }
   void applySettings() override;
   void setFlowControl(FlowControl flow) override;
 
@@ -117,10 +122,7 @@ class TelnetSerialLine : public SerialLine
   void handle(const rfc2217::Event& event);
   static Milliseconds left(std::chrono::steady_clock::time_point deadline);
   void send(const std::vector<uint8_t>& bytes, Milliseconds timeout);
-  [[noreturn]] void fail(const LinkError& error) const;
 
-  SerialSettings settings_;
-  std::unique_ptr<TcpConnection> connection_;
   Milliseconds answer_timeout_;
   rfc2217::Decoder decoder_;
   rfc2217::Options options_;
