@@ -107,8 +107,13 @@ std::string ncProgram(size_t size, uint32_t seed)
   std::mt19937 random(seed);
   std::string out = "%\nO1234 (TEST)\n";
   for (unsigned n = 10; out.size() < size; n += 5)
-    out += "N" + std::to_string(n) + "G01X" + std::to_string(random() % 10000) + "Y" + std::to_string(random() % 999) +
-           "\n";
+  {
+    // Drawn one after the other: the operands of one + have no order, and every build must make
+    // the same program.
+    const auto x = random() % 10000;
+    const auto y = random() % 999;
+    out += "N" + std::to_string(n) + "G01X" + std::to_string(x) + "Y" + std::to_string(y) + "\n";
+  }
   return out + "M30\n%\n";
 }
 }  // namespace
@@ -217,8 +222,9 @@ uint8_t lfReadingOfStream(const std::string& wire, Eob eob)
 
 TEST(XmodemEobChecksum, PacketByPacketSumsAddUpToTheStreamReadWithLfForEveryPattern)
 {
-  // Ends of block cut by packet ends at every offset (blank blocks included: doubled patterns).
-  std::string text = ncProgram(2000, 3);
+  // Ends of block cut by packet ends (blank blocks included: doubled patterns). A first line of
+  // 127 characters puts its end of block on bytes 127 and 128: the first cut by a packet's end.
+  std::string text = "(" + std::string(125, 'C') + ")\n" + ncProgram(2000, 3);
   text.insert(400, "\n\n\n");
   size_t cut_patterns = 0;
   for (Eob eob : {Eob::kLf, Eob::kCr, Eob::kCrLf, Eob::kCrCr, Eob::kLfLf})
