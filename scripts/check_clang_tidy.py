@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """clang-tidy (the checks of .clang-tidy) on the core sources, with the build's compile commands.
 
-The core is every source under src/<module>/ except the ROS layer (src/nodes, src/ros) and the
-executables' folders (src/sim, src/cli); its headers under include/cnc_bridge/ are checked through
+The core is every source under src/core/<module>/ (not the ROS layer, src/ros/, nor the
+executables' folders, src/sim/ and src/cli/); its headers under include/cnc_bridge/ are checked through
 them (.clang-tidy's HeaderFilterRegex). The compile commands come from the build directory
 (CMakeLists.txt sets CMAKE_EXPORT_COMPILE_COMMANDS). Files are checked in parallel, JOBS at a time
 (default: the number of processors). A finding is a failure; each is reported once with its file,
@@ -23,12 +23,11 @@ import sys
 from repo_files import repo_files
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-NOT_CORE = ("src/nodes/", "src/ros/", "src/sim/", "src/cli/")
 FINDING = re.compile(r"^(/[^:\n]+):(\d+):\d+: (?:warning|error): (.*) \[([\w.,-]+)\]$", re.M)
 
 
 def core_sources():
-    return [path for path in repo_files(ROOT, "src/*.cpp") if path.count("/") == 2 and not path.startswith(NOT_CORE)]
+    return [path for path in repo_files(ROOT, "src/core/*.cpp") if path.count("/") == 3]
 
 
 def unexplained_exclusions():

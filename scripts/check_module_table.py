@@ -1,10 +1,10 @@
 #!/usr/bin/env python3
 """The module table of docs/DEVELOPING.md against the tree.
 
-The table ("## Modules") has a row per src/ folder and names, in backquotes, the module's CMake
+The table ("## Modules") has a row per folder of src/core/ and src/ros/ and per other src/ folder and names, in backquotes, the module's CMake
 fragment, library, node, simulator, unit tests, rostests, fuzz targets, benchmark folder and doc
 pages. This check fails when:
-- a src/ folder has no row, or a row names a folder that does not exist;
+- such a folder has no row, or a row names a folder that does not exist;
 - a named file or folder does not exist, or a named CMake target is declared nowhere in
   CMakeLists.txt or cmake/modules/*.cmake;
 - a CMake fragment, a rostest launch file, a fuzz target (test/fuzz/fuzz_*.cpp), a benchmark
@@ -25,6 +25,9 @@ GUIDE = "docs/DEVELOPING.md"
 HEADING = "## Modules"
 COLUMNS = ("folder", "cmake fragment", "library", "node", "simulator", "unit tests", "rostests", "fuzz targets",
            "benchmark", "doc pages")
+# src/ shows the layers: the ROS-free core (a folder per protocol), the ROS layer (the nodes and what
+# they share), the simulators, the test doubles and the command-line tools.
+LAYERS = ("src/core", "src/ros")
 TARGET_COLUMNS = ("library", "node", "simulator", "unit tests", "fuzz targets")
 # A CMake target is declared by one of these (the package's own helpers and CMake's/catkin's).
 DECLARATION = re.compile(r"\b(?:cnc_core_module|cnc_sim_library|cnc_node|cnc_tool|cnc_core_gtest|cnc_fuzz_target|add_library|"
@@ -101,8 +104,11 @@ def row_problems(rows, targets):
 def coverage_problems(named):
     problems = []
     folders = {name.rstrip("/") for name in named["folder"]}
-    for folder in sorted(d for d in glob.glob(os.path.join(ROOT, "src/*")) if os.path.isdir(d)):
+    for folder in sorted(d for d in glob.glob(os.path.join(ROOT, "src/*")) + glob.glob(os.path.join(ROOT, "src/*/*"))
+                         if os.path.isdir(d)):
         rel = os.path.relpath(folder, ROOT)
+        if rel in LAYERS or rel.startswith("src/sim/"):
+            continue  # a layer has a row per folder in it; the simulators' folders share one row
         if rel not in folders:
             problems.append(f"{rel}/ has no row")
     expected = {

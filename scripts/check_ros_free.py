@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Checks that the core of cnc_bridge is free of ROS, in its sources and in what it links.
 
-- Sources: no core file (anything outside src/ros, src/nodes, *_node.{h,cpp}, test/rostest and
+- Sources: no core file (anything outside src/ros/, *_node.{h,cpp}, test/rostest and
   bench/) includes a ROS header: roscpp, tf/tf2, actionlib, diagnostics, rosbag, any *_msgs or
   *_srvs package, or one of cnc_bridge's generated message headers (cnc_bridge/MachineState.h).
 - Binaries (after a build): the core's executables (simulators, cnc_dnc, core unit tests) load no

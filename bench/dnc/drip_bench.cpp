@@ -24,10 +24,10 @@
 #include <thread>
 
 #include "cnc_bridge/dnc/drip_feed.h"
-#include "cnc_bridge/testing/pty.h"
-#include "cnc_bridge/testing/simulated_line.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "dnc_sim.h"
+#include "testing/pty.h"
+#include "testing/simulated_line.h"
 
 namespace po = boost::program_options;
 using namespace cnc_bridge;

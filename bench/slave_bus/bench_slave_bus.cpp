@@ -14,8 +14,8 @@
 
 #include "cnc_bridge/slave_bus/bus_session.h"
 #include "cnc_bridge/slave_bus/value_codec.h"
-#include "cnc_bridge/testing/paced_transport.h"
 #include "cnc_bridge/transport/serial_port.h"
+#include "testing/paced_transport.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::slave_bus;

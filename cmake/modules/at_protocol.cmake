@@ -5,15 +5,15 @@
 # its unit tests, the controller simulator, the streaming benchmark tool, the fuzz target, and
 # at_controller_node.
 cnc_core_module(cnc_bridge_at_protocol
-  src/at_protocol/codec.cpp
-  src/at_protocol/sequencer.cpp
-  src/at_protocol/planner.cpp
-  src/at_protocol/program_path.cpp
-  src/at_protocol/sender.cpp
-  src/at_protocol/deadman.cpp
-  src/at_protocol/controller_session.cpp
-  src/at_protocol/session_monitor.cpp
-  src/at_protocol/goal_runner.cpp)
+  src/core/at_protocol/codec.cpp
+  src/core/at_protocol/sequencer.cpp
+  src/core/at_protocol/planner.cpp
+  src/core/at_protocol/program_path.cpp
+  src/core/at_protocol/sender.cpp
+  src/core/at_protocol/deadman.cpp
+  src/core/at_protocol/controller_session.cpp
+  src/core/at_protocol/session_monitor.cpp
+  src/core/at_protocol/goal_runner.cpp)
 target_link_libraries(cnc_bridge_at_protocol PUBLIC cnc_bridge_gcode)
 
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
@@ -35,14 +35,6 @@ target_link_libraries(cnc_bridge_at_protocol_sim PUBLIC cnc_bridge_at_protocol c
 cnc_tool(sim_at_controller src/sim/sim_at_controller.cpp)
 target_link_libraries(sim_at_controller cnc_bridge_at_protocol_sim cnc_bridge_testing)
 cnc_tool(at_stream_bench bench/at_controller/at_stream_bench.cpp)
-# cnc_plan: the '@' path as 1 ms setpoints (CSV, PNG through scripts/plot_plan.py), ROS-free.
-cnc_tool(cnc_plan src/cli/cnc_plan.cpp)
-target_link_libraries(cnc_plan cnc_bridge_at_protocol)
-target_compile_definitions(cnc_plan PRIVATE CNC_PLAN_PLOT_SCRIPT="${PROJECT_SOURCE_DIR}/scripts/plot_plan.py")
-if(NOT CNC_BRIDGE_CORE_ONLY)
-  # Installed beside cnc_plan, which looks for it there first (then in the source tree).
-  install(PROGRAMS scripts/plot_plan.py DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
-endif()
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   # cnc_plan's setpoints against the node's planning path (planProgram, Trajectory, TrajectoryStream).
   cnc_core_gtest(test_cnc_plan test/unit/test_cnc_plan.cpp)
@@ -53,8 +45,8 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
 endif()
 
 if(NOT CNC_BRIDGE_CORE_ONLY)
-  cnc_node(at_controller_node src/nodes/at_controller_node.cpp src/nodes/at_controller_params.cpp
-           src/nodes/at_controller_goal.cpp)
+  cnc_node(at_controller_node src/ros/nodes/at_controller_node.cpp src/ros/nodes/at_controller_params.cpp
+           src/ros/nodes/at_controller_goal.cpp)
   target_link_libraries(at_controller_node cnc_bridge_at_protocol cnc_bridge_gcode)
 endif()
 

@@ -1,11 +1,11 @@
-# DNC drip-feed and program backup (docs/protocols/drip_feed.md): the streaming sender, the backup receiver, the
-# simulated control (sim_haas_serial drip / punch), their tests, and their part of dnc_node and
-# cnc_dnc. Included after xmodem.cmake, whose targets it extends when they exist.
+# DNC drip-feed and program backup (docs/protocols/drip_feed.md): the streaming sender, the backup
+# receiver, the simulated control (used by sim_haas_serial's drip and punch modes), program requests
+# from the control, their tests, and dnc_node.
 cnc_core_module(cnc_bridge_drip
-  src/dnc/dnc_codes.cpp
-  src/dnc/nc_program.cpp
-  src/dnc/drip_feed.cpp
-  src/dnc/backup.cpp)
+  src/core/dnc/dnc_codes.cpp
+  src/core/dnc/nc_program.cpp
+  src/core/dnc/drip_feed.cpp
+  src/core/dnc/backup.cpp)
 target_link_libraries(cnc_bridge_drip PUBLIC cnc_bridge_gcode)  # the block lexer of nc_program.cpp
 target_link_libraries(cnc_bridge_drip PUBLIC cnc_bridge_programs)  # the program header the feed checks
 
@@ -15,11 +15,6 @@ add_library(cnc_bridge_dnc_sim STATIC
   src/sim/haas_serial/dnc_punch.cpp)
 target_include_directories(cnc_bridge_dnc_sim PUBLIC ${PROJECT_SOURCE_DIR}/src/sim/haas_serial)
 target_link_libraries(cnc_bridge_dnc_sim PUBLIC cnc_bridge_drip)
-
-target_sources(sim_haas_serial PRIVATE
-  src/sim/haas_serial/drip_mode.cpp
-  src/sim/haas_serial/punch_mode.cpp)
-target_link_libraries(sim_haas_serial cnc_bridge_dnc_sim)
 
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   cnc_core_gtest(test_drip_program test/unit/test_drip_program.cpp)
@@ -37,13 +32,17 @@ cnc_fuzz_target(fuzz_dnc_program test/fuzz/fuzz_dnc_program.cpp)
 cnc_tool(dnc_drip_bench bench/dnc/drip_bench.cpp)
 target_link_libraries(dnc_drip_bench cnc_bridge_dnc_sim cnc_bridge_testing)
 
-# dnc_node's drip and backup protocols (xmodem.cmake declares the node).
-if(NOT CNC_BRIDGE_CORE_ONLY AND TARGET dnc_node)
-  target_sources(dnc_node PRIVATE src/nodes/dnc_drip_handlers.cpp)
-  target_link_libraries(dnc_node cnc_bridge_drip)
+# dnc_node: XModem send and receive, drip and backup, program requests from the control.
+if(NOT CNC_BRIDGE_CORE_ONLY)
+  cnc_node(dnc_node
+    src/ros/nodes/dnc_node.cpp
+    src/ros/nodes/dnc_transfer_action.cpp
+    src/ros/nodes/dnc_drip_handlers.cpp
+    src/ros/nodes/dnc_requests.cpp)
+  target_link_libraries(dnc_node cnc_bridge_xmodem cnc_bridge_programs cnc_bridge_drip cnc_bridge_requests)
 endif()
 
-if(NOT CNC_BRIDGE_CORE_ONLY AND CATKIN_ENABLE_TESTING AND TARGET dnc_node)
+if(NOT CNC_BRIDGE_CORE_ONLY AND CATKIN_ENABLE_TESTING)
   find_package(rostest REQUIRED)  # the top level finds it only after the fragments
   add_rostest_gtest(test_dnc_drip test/rostest/dnc_drip.test test/rostest/test_dnc_drip.cpp)
   target_link_libraries(test_dnc_drip ${catkin_LIBRARIES} ${GTEST_LIBRARIES})
@@ -54,17 +53,12 @@ if(NOT CNC_BRIDGE_CORE_ONLY AND CATKIN_ENABLE_TESTING AND TARGET dnc_node)
   add_dependencies(test_dnc_drip_link dnc_node sim_haas_serial ${PROJECT_NAME}_generate_messages_cpp)
 endif()
 
-# cnc_dnc drip / backup subcommands (xmodem.cmake declares the tool).
-if(TARGET cnc_dnc)
-  target_sources(cnc_dnc PRIVATE src/cli/cnc_dnc_drip.cpp)
-  target_link_libraries(cnc_dnc cnc_bridge_drip)
-endif()
 
 # Program requests punched by the control (docs/dnc_node.md, "Program requests from the control"):
 # the idle listener reads a punch with the XModem receiver or the backup parser and answers; and
 # dnc_node's ROS-free transfer rules (one transfer at a time, the files a transfer may touch, the
 # archive, the counters).
-cnc_core_module(cnc_bridge_requests src/dnc/program_requests.cpp src/dnc/transfer_gate.cpp src/dnc/transfer_rules.cpp)
+cnc_core_module(cnc_bridge_requests src/core/dnc/program_requests.cpp src/core/dnc/transfer_gate.cpp src/core/dnc/transfer_rules.cpp)
 target_link_libraries(cnc_bridge_requests PUBLIC cnc_bridge_xmodem cnc_bridge_drip cnc_bridge_programs)
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   # A control played by lrzsz sx/rx (XModem) and by the test (text) on a pty pair.
@@ -76,11 +70,7 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
     add_dependencies(test_program_requests sim_haas_serial)
   endif()
 endif()
-if(NOT CNC_BRIDGE_CORE_ONLY AND TARGET dnc_node)
-  target_sources(dnc_node PRIVATE src/nodes/dnc_requests.cpp)
-  target_link_libraries(dnc_node cnc_bridge_requests)
-endif()
-if(NOT CNC_BRIDGE_CORE_ONLY AND CATKIN_ENABLE_TESTING AND TARGET dnc_node)
+if(NOT CNC_BRIDGE_CORE_ONLY AND CATKIN_ENABLE_TESTING)
   # dnc_node ~requests against python3-xmodem and lrzsz on a socat pty pair.
   add_rostest_gtest(test_dnc_requests test/rostest/dnc_requests.test test/rostest/test_dnc_requests.cpp)
   target_link_libraries(test_dnc_requests cnc_bridge_programs ${catkin_LIBRARIES} ${GTEST_LIBRARIES})

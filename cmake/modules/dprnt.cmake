@@ -1,11 +1,11 @@
 # dprnt: DPRNT output of CNC controls (Haas serial, NGC TCP/file) to typed ROS topics, the
 # surface_mapper, and the DPRNT mode of sim_haas_serial.
 cnc_core_module(cnc_bridge_dprnt
-  src/dprnt/line_assembler.cpp
-  src/dprnt/format.cpp
-  src/dprnt/parser.cpp
-  src/dprnt/rules.cpp
-  src/dprnt/input.cpp)
+  src/core/dprnt/line_assembler.cpp
+  src/core/dprnt/format.cpp
+  src/core/dprnt/parser.cpp
+  src/core/dprnt/rules.cpp
+  src/core/dprnt/input.cpp)
 target_link_libraries(cnc_bridge_dprnt PUBLIC yaml-cpp)
 
 if(CATKIN_ENABLE_TESTING AND NOT CNC_BRIDGE_CORE_ONLY)
@@ -20,8 +20,6 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   target_link_libraries(test_dprnt_sim cnc_bridge_dprnt)
 endif()
 
-target_sources(sim_haas_serial PRIVATE src/sim/haas_serial/dprnt_mode.cpp src/sim/haas_serial/dprnt_program.cpp)
-target_link_libraries(sim_haas_serial cnc_bridge_dprnt)
 
 cnc_fuzz_target(fuzz_dprnt_line test/fuzz/fuzz_dprnt_line.cpp)
 if(CNC_BRIDGE_FUZZ)
@@ -33,7 +31,7 @@ add_executable(bench_dprnt_parser bench/dprnt/bench_dprnt_parser.cpp)
 target_link_libraries(bench_dprnt_parser cnc_bridge_dprnt)
 
 if(NOT CNC_BRIDGE_CORE_ONLY)
-  cnc_node(dprnt_node src/nodes/dprnt_node.cpp)
+  cnc_node(dprnt_node src/ros/nodes/dprnt_node.cpp)
   target_link_libraries(dprnt_node cnc_bridge_dprnt)
   catkin_install_python(PROGRAMS scripts/surface_mapper DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
   if(CATKIN_ENABLE_TESTING)

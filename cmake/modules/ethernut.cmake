@@ -1,11 +1,11 @@
 # ethernut: the qCNC 5-float opcode protocol (codec, client session, settings file, simulated
 # board), sim_ethernut, and ethernut_node (job streaming and preview; uses cnc_bridge_gcode).
 cnc_core_module(cnc_bridge_ethernut
-  src/ethernut/protocol.cpp
-  src/ethernut/client.cpp
-  src/ethernut/settings.cpp
-  src/ethernut/job.cpp
-  src/ethernut/motion_hold.cpp)
+  src/core/ethernut/protocol.cpp
+  src/core/ethernut/client.cpp
+  src/core/ethernut/settings.cpp
+  src/core/ethernut/job.cpp
+  src/core/ethernut/motion_hold.cpp)
 target_link_libraries(cnc_bridge_ethernut PUBLIC cnc_bridge_gcode)  # a job's G-code program
 # The simulated board (a peer model, not shipped in the protocol library): sim_ethernut and tests.
 cnc_sim_library(cnc_bridge_ethernut_sim src/sim/ethernut/board.cpp)
@@ -22,7 +22,7 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
 endif()
 cnc_fuzz_target(fuzz_ethernut_stream test/fuzz/fuzz_ethernut_stream.cpp)
 if(NOT CNC_BRIDGE_CORE_ONLY)
-  cnc_node(ethernut_node src/nodes/ethernut_node.cpp src/nodes/ethernut_services.cpp src/nodes/ethernut_jobs.cpp)
+  cnc_node(ethernut_node src/ros/nodes/ethernut_node.cpp src/ros/nodes/ethernut_services.cpp src/ros/nodes/ethernut_jobs.cpp)
   target_link_libraries(ethernut_node cnc_bridge_ethernut cnc_bridge_gcode)
   if(CATKIN_ENABLE_TESTING)
     find_package(rostest REQUIRED)

@@ -1,7 +1,7 @@
 # G-code parser: a ROS-free streaming parser shared by ethernut_node (job streaming and preview)
 # and at_controller_node (path planning).
-cnc_core_module(cnc_bridge_gcode src/gcode/lexer.cpp src/gcode/gcode.cpp src/gcode/gcode_words.cpp src/gcode/gcode_cycles.cpp
-                src/gcode/gcode_comp.cpp src/gcode/tool_table.cpp)
+cnc_core_module(cnc_bridge_gcode src/core/gcode/lexer.cpp src/core/gcode/gcode.cpp src/core/gcode/gcode_words.cpp src/core/gcode/gcode_cycles.cpp
+                src/core/gcode/gcode_comp.cpp src/core/gcode/tool_table.cpp)
 target_link_libraries(cnc_bridge_gcode PUBLIC yaml-cpp)
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   cnc_core_gtest(test_gcode test/unit/test_gcode.cpp test/unit/test_gcode_lexer.cpp test/unit/test_program_steps.cpp)

@@ -3,16 +3,16 @@
 # program requests and their server, fan-out, daily times and the daily timer, withdrawals,
 # transfers), its unit tests and fuzz targets.
 cnc_core_module(cnc_bridge_programs
-  src/programs/program_name.cpp
-  src/programs/program_store.cpp
-  src/programs/archive.cpp
-  src/programs/program_request.cpp
-  src/programs/fan_out.cpp
-  src/programs/daily_time.cpp
-  src/programs/daily_timer.cpp
-  src/programs/withdrawal.cpp
-  src/programs/request_server.cpp
-  src/programs/program_transfers.cpp)
+  src/core/programs/program_name.cpp
+  src/core/programs/program_store.cpp
+  src/core/programs/archive.cpp
+  src/core/programs/program_request.cpp
+  src/core/programs/fan_out.cpp
+  src/core/programs/daily_time.cpp
+  src/core/programs/daily_timer.cpp
+  src/core/programs/withdrawal.cpp
+  src/core/programs/request_server.cpp
+  src/core/programs/program_transfers.cpp)
 
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   cnc_core_gtest(test_program_name test/unit/test_program_name.cpp test/unit/test_program_archive.cpp

@@ -6,7 +6,7 @@ find_library(SMBCLIENT_LIBRARY smbclient)
 if(NOT SMBCLIENT_INCLUDE_DIR OR NOT SMBCLIENT_LIBRARY)
   message(FATAL_ERROR "libsmbclient not found: install the Debian package libsmbclient-dev")
 endif()
-cnc_core_module(cnc_bridge_share src/share/smb_store.cpp src/share/share_settings.cpp src/share/share_service.cpp)
+cnc_core_module(cnc_bridge_share src/core/share/smb_store.cpp src/core/share/share_settings.cpp src/core/share/share_service.cpp)
 target_include_directories(cnc_bridge_share PRIVATE ${SMBCLIENT_INCLUDE_DIR})
 target_link_libraries(cnc_bridge_share PUBLIC cnc_bridge_programs ${SMBCLIENT_LIBRARY})
 
@@ -21,9 +21,7 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   target_link_libraries(test_share_core cnc_bridge_share)
 endif()
 
-# cnc_dnc send/receive --share and cnc_dnc list, and their test against smbd.
-target_sources(cnc_dnc PRIVATE src/cli/cnc_dnc_share.cpp)
-target_link_libraries(cnc_dnc cnc_bridge_share)
+# cnc_dnc send/receive --share and cnc_dnc list (cmake/modules/tools.cmake), against smbd.
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   cnc_core_gtest(test_share_cli test/unit/test_share_cli.cpp)
   if(TARGET test_share_cli)
@@ -35,7 +33,7 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
 endif()
 
 if(NOT CNC_BRIDGE_CORE_ONLY)
-  cnc_node(share_node src/nodes/share_node.cpp src/nodes/share_params.cpp src/nodes/share_services.cpp)
+  cnc_node(share_node src/ros/nodes/share_node.cpp src/ros/nodes/share_params.cpp src/ros/nodes/share_services.cpp)
   target_link_libraries(share_node cnc_bridge_share)
   if(CATKIN_ENABLE_TESTING)
     # The real share_node against a real smbd, both started by the test (the server's port is free

@@ -1,12 +1,12 @@
 # slave_bus: the universal-CNC serial array protocol to a master with I2C slaves (WirePacker, CRC-8).
 cnc_core_module(cnc_bridge_slave_bus
-  src/slave_bus/wire_packer.cpp
-  src/slave_bus/array_protocol.cpp
-  src/slave_bus/value_codec.cpp
-  src/slave_bus/bus_session.cpp
-  src/slave_bus/slave_table.cpp
-  src/slave_bus/step_queue.cpp
-  src/slave_bus/bus_monitor.cpp)
+  src/core/slave_bus/wire_packer.cpp
+  src/core/slave_bus/array_protocol.cpp
+  src/core/slave_bus/value_codec.cpp
+  src/core/slave_bus/bus_session.cpp
+  src/core/slave_bus/slave_table.cpp
+  src/core/slave_bus/step_queue.cpp
+  src/core/slave_bus/bus_monitor.cpp)
 # The simulated master (a peer model, not shipped in the protocol library): sim_slave_bus and tests.
 cnc_sim_library(cnc_bridge_slave_bus_sim src/sim/slave_bus/sim_master.cpp)
 target_link_libraries(cnc_bridge_slave_bus_sim PUBLIC cnc_bridge_slave_bus)
@@ -25,7 +25,7 @@ if(CNC_BRIDGE_FUZZ)
   target_link_libraries(fuzz_slave_bus_master cnc_bridge_slave_bus_sim)
 endif()
 if(NOT CNC_BRIDGE_CORE_ONLY)
-  cnc_node(slave_bus_node src/nodes/slave_bus_node.cpp)
+  cnc_node(slave_bus_node src/ros/nodes/slave_bus_node.cpp)
   target_link_libraries(slave_bus_node cnc_bridge_slave_bus)
   if(CATKIN_ENABLE_TESTING)
     add_rostest_gtest(test_slave_bus_node test/rostest/slave_bus_node.test test/rostest/test_slave_bus_node.cpp)

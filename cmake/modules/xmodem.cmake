@@ -1,9 +1,9 @@
-# xmodem module: XModem program transfer (core library cnc_bridge_xmodem, the cnc_dnc tool, the
-# sim_haas_serial xmodem mode, dnc_node).
+# xmodem module: XModem program transfer (core library cnc_bridge_xmodem, its tests; the cnc_dnc
+# tool and sim_haas_serial are declared in cmake/modules/tools.cmake, dnc_node in dnc.cmake).
 cnc_core_module(cnc_bridge_xmodem
-  src/xmodem/packet.cpp
-  src/xmodem/session.cpp
-  src/xmodem/file_transfer.cpp)
+  src/core/xmodem/packet.cpp
+  src/core/xmodem/session.cpp
+  src/core/xmodem/file_transfer.cpp)
 
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   cnc_core_gtest(test_xmodem test/unit/test_xmodem.cpp)
@@ -21,10 +21,6 @@ if(CNC_BRIDGE_FUZZ)
   target_link_libraries(fuzz_xmodem_receiver cnc_bridge_xmodem)
 endif()
 
-# cnc_dnc: the ROS-free transfer tool (subcommands in a table in src/cli/cnc_dnc.cpp).
-cnc_tool(cnc_dnc src/cli/cnc_dnc.cpp src/cli/cnc_dnc_doctor.cpp)
-target_link_libraries(cnc_dnc cnc_bridge_xmodem cnc_bridge_programs)
-
 # The tools as a user runs them: cnc_dnc and sim_haas_serial xmodem as processes over a pty.
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   cnc_core_gtest(test_xmodem_cli test/unit/test_xmodem_cli.cpp)
@@ -36,19 +32,12 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   endif()
 endif()
 
-# sim_haas_serial xmodem: the Haas of the capture.
-target_sources(sim_haas_serial PRIVATE src/sim/haas_serial/xmodem_mode.cpp)
-target_link_libraries(sim_haas_serial cnc_bridge_xmodem)
-
-if(NOT CNC_BRIDGE_CORE_ONLY)
-  cnc_node(dnc_node src/nodes/dnc_node.cpp src/nodes/dnc_transfer_action.cpp)
-  target_link_libraries(dnc_node cnc_bridge_xmodem cnc_bridge_programs)
-  if(CATKIN_ENABLE_TESTING)
-    find_package(rostest REQUIRED)
-    add_rostest_gtest(test_dnc_node test/rostest/dnc_node.test test/rostest/test_dnc_node.cpp)
-    target_link_libraries(test_dnc_node ${catkin_LIBRARIES} ${GTEST_LIBRARIES})
-    add_dependencies(test_dnc_node dnc_node sim_haas_serial ${PROJECT_NAME}_generate_messages_cpp)
-  endif()
+if(NOT CNC_BRIDGE_CORE_ONLY AND CATKIN_ENABLE_TESTING)
+  # dnc_node (cmake/modules/dnc.cmake) sending and receiving through the simulated Haas.
+  find_package(rostest REQUIRED)
+  add_rostest_gtest(test_dnc_node test/rostest/dnc_node.test test/rostest/test_dnc_node.cpp)
+  target_link_libraries(test_dnc_node ${catkin_LIBRARIES} ${GTEST_LIBRARIES})
+  add_dependencies(test_dnc_node dnc_node sim_haas_serial ${PROJECT_NAME}_generate_messages_cpp)
 endif()
 
 # The serial control profiles of config/controls/ through dnc_node.launch onto a pty.
@@ -56,7 +45,7 @@ if(NOT CNC_BRIDGE_CORE_ONLY AND CATKIN_ENABLE_TESTING)
   add_rostest(test/rostest/control_profiles.test DEPENDENCIES dnc_node ${PROJECT_NAME}_generate_messages_py)
 endif()
 
-# The port doctor (src/transport/port_doctor.cpp) and `cnc_dnc doctor` on ptys and the simulated punch.
+# The port doctor (src/core/transport/port_doctor.cpp) and `cnc_dnc doctor` on ptys and the simulated punch.
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   cnc_core_gtest(test_port_doctor test/unit/test_port_doctor.cpp)
   if(TARGET test_port_doctor)

@@ -19,8 +19,8 @@
 #include <sstream>
 
 #include "cnc_bridge/common/error.h"
-#include "cnc_bridge/testing/sim_support.h"
 #include "sim/at_protocol/sim_controller.h"
+#include "sim/sim_support.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::at_protocol;

@@ -5,9 +5,9 @@
 #include <iostream>
 
 #include "cnc_bridge/common/log.h"
-#include "cnc_bridge/testing/sim_support.h"
 #include "cnc_bridge/transport/tcp.h"
 #include "sim/ethernut/board.h"
+#include "sim/sim_support.h"
 
 namespace po = boost::program_options;
 using namespace cnc_bridge;

@@ -16,9 +16,9 @@
 #include <sstream>
 
 #include "cnc_bridge/common/error.h"
-#include "cnc_bridge/testing/pty.h"
-#include "cnc_bridge/testing/sim_support.h"
 #include "sim/mdc/sim_machine.h"
+#include "sim/sim_support.h"
+#include "testing/pty.h"
 
 namespace asio = boost::asio;
 using asio::ip::tcp;

@@ -12,11 +12,11 @@
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/log.h"
-#include "cnc_bridge/testing/paced_transport.h"
-#include "cnc_bridge/testing/pty.h"
-#include "cnc_bridge/testing/sim_support.h"
 #include "cnc_bridge/transport/serial_port.h"
+#include "sim/sim_support.h"
 #include "sim/slave_bus/sim_master.h"
+#include "testing/paced_transport.h"
+#include "testing/pty.h"
 
 namespace
 {

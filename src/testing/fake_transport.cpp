@@ -1,5 +1,5 @@
 // FakeTransport: an input queue and a record of writes behind one mutex.
-#include "cnc_bridge/testing/fake_transport.h"
+#include "testing/fake_transport.h"
 
 #include "cnc_bridge/common/error.h"
 

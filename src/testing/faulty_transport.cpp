@@ -1,5 +1,5 @@
 // Seeded fault injection over any Transport (see faulty_transport.h).
-#include "cnc_bridge/testing/faulty_transport.h"
+#include "testing/faulty_transport.h"
 
 #include <sstream>
 

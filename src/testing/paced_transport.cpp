@@ -1,6 +1,6 @@
 // PacedTransport: sleeps until the simulated line is free, in slices of a few milliseconds, so the
 // receiver sees a steady trickle as from a UART rather than bursts.
-#include "cnc_bridge/testing/paced_transport.h"
+#include "testing/paced_transport.h"
 
 #include <algorithm>
 #include <sstream>

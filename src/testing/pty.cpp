@@ -1,5 +1,5 @@
 // PtyMaster: openpty(3), raw slave, master wrapped in an Asio stream_descriptor.
-#include "cnc_bridge/testing/pty.h"
+#include "testing/pty.h"
 
 #include <pty.h>
 #include <termios.h>

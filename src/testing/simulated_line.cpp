@@ -1,5 +1,5 @@
 // SimulatedLine: a serial line in memory, each character one character time on the wire.
-#include "cnc_bridge/testing/simulated_line.h"
+#include "testing/simulated_line.h"
 
 #include <algorithm>
 #include <thread>

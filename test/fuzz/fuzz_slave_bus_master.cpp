@@ -6,8 +6,8 @@
 #include <cstdlib>
 
 #include "cnc_bridge/common/log.h"
-#include "cnc_bridge/testing/fake_transport.h"
 #include "sim/slave_bus/sim_master.h"
+#include "testing/fake_transport.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::slave_bus;

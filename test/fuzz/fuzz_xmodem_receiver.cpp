@@ -6,10 +6,10 @@
 #include <vector>
 
 #include "cnc_bridge/common/error.h"
-#include "cnc_bridge/testing/fake_transport.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
 #include "cnc_bridge/xmodem/packet.h"
 #include "cnc_bridge/xmodem/session.h"
+#include "testing/fake_transport.h"
 
 using namespace cnc_bridge;
 

@@ -3,7 +3,7 @@
 with params_file:=config/controls/<profile>.yaml and a pty as its port (keep_open, so the port is
 opened at start-up), must leave the pty's termios as the profile says: baud rate in and out, stop
 bits and the flow control the kernel does. A pty keeps 8 data bits and no parity whatever it is
-told (the driver asks again without them, see src/transport/serial_port.cpp), so those two are
+told (the driver asks again without them, see src/core/transport/serial_port.cpp), so those two are
 checked as what a pty shows, and against the profile in test/scripts/test_launch_files.py."""
 import os
 import pty

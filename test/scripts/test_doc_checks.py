@@ -23,7 +23,7 @@ class Tree(unittest.TestCase):
         self.addCleanup(self.directory.cleanup)
         self.root = self.directory.name
         files = {
-            "CMakeLists.txt": "cnc_node(a_node src/nodes/a_node.cpp)\n",
+            "CMakeLists.txt": "cnc_node(a_node src/ros/nodes/a_node.cpp)\n",
             "cmake/modules/a.cmake": "cnc_core_module(cnc_bridge_a src/a/a.cpp)\ncnc_core_gtest(test_a t.cpp)\n"
                                      "cnc_fuzz_target(fuzz_a test/fuzz/fuzz_a.cpp)\n",
             "src/a/a.cpp": "", "test/fuzz/fuzz_a.cpp": "", "test/rostest/a.test": "", "bench/a/run.sh": "",

@@ -20,8 +20,8 @@
 #include "cnc_bridge/at_protocol/goal_runner.h"
 #include "cnc_bridge/at_protocol/session_monitor.h"
 #include "cnc_bridge/common/error.h"
-#include "cnc_bridge/testing/fake_transport.h"
 #include "cnc_bridge/transport/forwarding_transport.h"
+#include "testing/fake_transport.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::at_protocol;

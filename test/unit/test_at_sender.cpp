@@ -10,7 +10,7 @@
 
 #include "cnc_bridge/at_protocol/sender.h"
 #include "cnc_bridge/common/error.h"
-#include "cnc_bridge/testing/fake_transport.h"
+#include "testing/fake_transport.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::at_protocol;

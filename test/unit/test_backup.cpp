@@ -16,12 +16,12 @@
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/dnc/backup.h"
 #include "cnc_bridge/dnc/dnc_codes.h"
-#include "cnc_bridge/testing/fake_transport.h"
-#include "cnc_bridge/testing/paced_transport.h"
-#include "cnc_bridge/testing/pty.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "dnc_sim.h"
 #include "temp_dir.h"
+#include "testing/fake_transport.h"
+#include "testing/paced_transport.h"
+#include "testing/pty.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::dnc;

@@ -19,7 +19,7 @@
 #include "cnc_bridge/dprnt/line_assembler.h"
 #include "cnc_bridge/dprnt/parser.h"
 #include "cnc_bridge/dprnt/rules.h"
-#include "cnc_bridge/testing/fake_transport.h"
+#include "testing/fake_transport.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::dprnt;

@@ -11,9 +11,9 @@
 #include <thread>
 
 #include "cnc_bridge/ethernut/client.h"
-#include "cnc_bridge/testing/fake_transport.h"
 #include "cnc_bridge/transport/tcp.h"
 #include "sim/ethernut/board.h"
+#include "testing/fake_transport.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::ethernut;

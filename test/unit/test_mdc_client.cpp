@@ -15,9 +15,9 @@
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/mdc/mdc_client.h"
 #include "cnc_bridge/mdc/mdc_monitor.h"
-#include "cnc_bridge/testing/fake_transport.h"
-#include "cnc_bridge/testing/pty.h"
 #include "cnc_bridge/transport/serial_port.h"
+#include "testing/fake_transport.h"
+#include "testing/pty.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::mdc;

@@ -21,7 +21,7 @@
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/mdc/mdc_client.h"
 #include "cnc_bridge/mdc/mdc_protocol.h"
-#include "cnc_bridge/testing/fake_transport.h"
+#include "testing/fake_transport.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::mdc;

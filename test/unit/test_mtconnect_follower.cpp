@@ -8,8 +8,8 @@
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/mtconnect/follower.h"
-#include "cnc_bridge/testing/fake_transport.h"
 #include "mtconnect_fixtures.h"
+#include "testing/fake_transport.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::mtconnect;

@@ -11,11 +11,11 @@
 #include <thread>
 
 #include "cnc_bridge/common/error.h"
-#include "cnc_bridge/testing/pty.h"
 #include "cnc_bridge/transport/network_serial_line.h"
 #include "cnc_bridge/transport/serial_line.h"
 #include "ser2net_server.h"
 #include "temp_dir.h"
+#include "testing/pty.h"
 
 namespace cnc_bridge
 {

@@ -17,13 +17,13 @@
 #include "cnc_bridge/dnc/program_requests.h"
 #include "cnc_bridge/programs/program_name.h"
 #include "cnc_bridge/programs/program_request.h"
-#include "cnc_bridge/testing/fake_transport.h"
-#include "cnc_bridge/testing/pty.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/xmodem/packet.h"
 #include "haas_capture.h"
 #include "peer_process.h"
 #include "temp_dir.h"
+#include "testing/fake_transport.h"
+#include "testing/pty.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::programs;

@@ -19,11 +19,11 @@
 #include <vector>
 
 #include "cnc_bridge/common/error.h"
-#include "cnc_bridge/testing/pty.h"
 #include "cnc_bridge/transport/serial_line.h"
 #include "peer_process.h"
 #include "ser2net_server.h"
 #include "temp_dir.h"
+#include "testing/pty.h"
 
 namespace cnc_bridge
 {

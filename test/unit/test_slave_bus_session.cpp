@@ -7,10 +7,10 @@
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/slave_bus/bus_session.h"
-#include "cnc_bridge/testing/fake_transport.h"
-#include "cnc_bridge/testing/pty.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "sim/slave_bus/sim_master.h"
+#include "testing/fake_transport.h"
+#include "testing/pty.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::slave_bus;

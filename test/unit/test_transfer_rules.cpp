@@ -12,8 +12,8 @@
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/dnc/transfer_gate.h"
 #include "cnc_bridge/dnc/transfer_rules.h"
-#include "cnc_bridge/testing/fake_transport.h"
 #include "temp_dir.h"
+#include "testing/fake_transport.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::dnc;

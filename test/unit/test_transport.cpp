@@ -24,14 +24,14 @@
 #include <vector>
 
 #include "cnc_bridge/common/error.h"
-#include "cnc_bridge/testing/fake_transport.h"
-#include "cnc_bridge/testing/paced_transport.h"
-#include "cnc_bridge/testing/pty.h"
 #include "cnc_bridge/transport/backoff.h"
 #include "cnc_bridge/transport/forwarding_transport.h"
 #include "cnc_bridge/transport/reconnecting_link.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/transport/tcp.h"
+#include "testing/fake_transport.h"
+#include "testing/paced_transport.h"
+#include "testing/pty.h"
 
 using namespace cnc_bridge;
 using std::chrono::steady_clock;

@@ -18,8 +18,6 @@
 #include <thread>
 
 #include "cnc_bridge/common/error.h"
-#include "cnc_bridge/testing/fake_transport.h"
-#include "cnc_bridge/testing/faulty_transport.h"
 #include "cnc_bridge/transport/buffered_input.h"
 #include "cnc_bridge/transport/forwarding_transport.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
@@ -27,6 +25,8 @@
 #include "cnc_bridge/xmodem/session.h"
 #include "haas_capture.h"
 #include "temp_dir.h"
+#include "testing/fake_transport.h"
+#include "testing/faulty_transport.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::xmodem;

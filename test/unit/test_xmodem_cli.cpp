@@ -27,11 +27,11 @@
 #include <vector>
 
 #include "cnc_bridge/common/error.h"
-#include "cnc_bridge/testing/pty.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
 #include "peer_process.h"
 #include "temp_dir.h"
+#include "testing/pty.h"
 
 using namespace cnc_bridge;
 using namespace cnc_bridge::test;

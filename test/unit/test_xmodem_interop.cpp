@@ -20,13 +20,13 @@
 #include <thread>
 
 #include "cnc_bridge/common/error.h"
-#include "cnc_bridge/testing/pty.h"
 #include "cnc_bridge/transport/forwarding_transport.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
 #include "cnc_bridge/xmodem/session.h"
 #include "peer_process.h"
 #include "temp_dir.h"
+#include "testing/pty.h"
 
 using namespace cnc_bridge;
 using cnc_bridge::test::Peer;

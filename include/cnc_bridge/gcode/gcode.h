@@ -363,7 +363,7 @@ class Parser
   /// \throws ParseError if compensation is still on (a program must end with G40).
   bool finish(Block& out);
 
-  // Defined in src/gcode (the words of a line, one block's working state, cutter compensation).
+  // Defined in src/core/gcode (the words of a line, one block's working state, cutter compensation).
   struct Scan;
   struct Step;
   struct Comp;

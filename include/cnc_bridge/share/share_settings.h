@@ -1,5 +1,5 @@
 // share_node's settings (docs/share_node.md), one struct per part of the node: the node reads them
-// from its parameters (src/nodes/share_params.cpp) and builds the core objects from them. What can
+// from its parameters (src/ros/nodes/share_params.cpp) and builds the core objects from them. What can
 // be checked without ROS is checked here: ~url against ~serve_dir, the requests folder's name,
 // the archive's version count.
 #pragma once

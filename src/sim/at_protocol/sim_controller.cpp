@@ -9,7 +9,7 @@
 #include <thread>
 
 #include "cnc_bridge/common/error.h"
-#include "cnc_bridge/testing/sim_support.h"
+#include "sim/sim_support.h"
 
 namespace cnc_bridge
 {

@@ -14,11 +14,11 @@
 #include <sstream>
 
 #include "cnc_bridge/common/error.h"
-#include "cnc_bridge/sim/haas_serial_modes.h"
-#include "cnc_bridge/testing/pty.h"
-#include "cnc_bridge/testing/sim_support.h"
 #include "cnc_bridge/transport/tcp.h"
 #include "dprnt_program.h"
+#include "sim/haas_serial/modes.h"
+#include "sim/sim_support.h"
+#include "testing/pty.h"
 
 namespace po = boost::program_options;
 

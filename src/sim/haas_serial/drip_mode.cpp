@@ -15,12 +15,12 @@
 
 #include "cnc_bridge/common/atomic_file.h"
 #include "cnc_bridge/common/error.h"
-#include "cnc_bridge/sim/haas_serial_modes.h"
-#include "cnc_bridge/testing/paced_transport.h"
-#include "cnc_bridge/testing/pty.h"
-#include "cnc_bridge/testing/sim_support.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "dnc_sim.h"
+#include "sim/haas_serial/modes.h"
+#include "sim/sim_support.h"
+#include "testing/paced_transport.h"
+#include "testing/pty.h"
 
 namespace po = boost::program_options;
 

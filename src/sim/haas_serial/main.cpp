@@ -2,7 +2,7 @@
 // prints "sim_haas_serial pty <path>" as its first line and stops cleanly on SIGINT/SIGTERM.
 #include <iostream>
 
-#include "cnc_bridge/sim/haas_serial_modes.h"
+#include "sim/haas_serial/modes.h"
 
 namespace cnc_bridge
 {

@@ -25,14 +25,14 @@
 
 #include "cnc_bridge/common/atomic_file.h"
 #include "cnc_bridge/common/error.h"
-#include "cnc_bridge/sim/haas_serial_modes.h"
-#include "cnc_bridge/testing/faulty_transport.h"
-#include "cnc_bridge/testing/paced_transport.h"
-#include "cnc_bridge/testing/pty.h"
-#include "cnc_bridge/testing/sim_support.h"
 #include "cnc_bridge/transport/forwarding_transport.h"
 #include "cnc_bridge/transport/pushback_transport.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
+#include "sim/haas_serial/modes.h"
+#include "sim/sim_support.h"
+#include "testing/faulty_transport.h"
+#include "testing/paced_transport.h"
+#include "testing/pty.h"
 
 namespace po = boost::program_options;
 

@@ -1,5 +1,5 @@
 // Simulator support: the announcement line, the pid file.
-#include "cnc_bridge/testing/sim_support.h"
+#include "sim/sim_support.h"
 
 #include <unistd.h>
 

@@ -5,8 +5,8 @@
 // the program's stops and dwells, a pause by a disable) is carried out by the core's
 // at_protocol::GoalRunner; at_protocol::SessionMonitor computes the diagnostics. The node reads
 // as parameters -> those core objects -> ROS interfaces:
-// src/nodes/at_controller_params.cpp: the parameters; src/nodes/at_controller_node.cpp: the
-// session's events, the services and diagnostics; src/nodes/at_controller_goal.cpp: the
+// src/ros/nodes/at_controller_params.cpp: the parameters; src/ros/nodes/at_controller_node.cpp: the
+// session's events, the services and diagnostics; src/ros/nodes/at_controller_goal.cpp: the
 // ~follow_path action (goal in, feedback, result, job/path and state out).
 #pragma once
 

@@ -4,9 +4,9 @@
 // requests, publishes the machine's reported and commanded position as state (the reported one as
 // joint_states/tf), and a preview of each job for rviz before it runs. The protocol and the jobs
 // (coordinates, segments, preview) live in the ROS-free cnc_bridge_ethernut library; the program's
-// stops and dwells wait through JobHold. src/nodes/ethernut_node.cpp: parameters, link, preview,
-// diagnostics; src/nodes/ethernut_services.cpp: the client's events and the services;
-// src/nodes/ethernut_jobs.cpp: the ~run_job action.
+// stops and dwells wait through JobHold. src/ros/nodes/ethernut_node.cpp: parameters, link, preview,
+// diagnostics; src/ros/nodes/ethernut_services.cpp: the client's events and the services;
+// src/ros/nodes/ethernut_jobs.cpp: the ~run_job action.
 #pragma once
 
 #include <ros/ros.h>

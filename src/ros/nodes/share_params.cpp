@@ -1,5 +1,5 @@
 // share_node's parameters (docs/share_node.md), each part read, checked and returned as the
-// core's settings (cnc_bridge/share/share_settings.h); src/nodes/share_node.h declares them.
+// core's settings (cnc_bridge/share/share_settings.h); src/ros/nodes/share_node.h declares them.
 #include "share_node.h"
 
 #include "cnc_bridge/ros/params.h"

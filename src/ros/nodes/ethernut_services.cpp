@@ -1,4 +1,4 @@
-// ethernut_node (src/nodes/ethernut_node.h): the client's events as state, and the
+// ethernut_node (src/ros/nodes/ethernut_node.h): the client's events as state, and the
 // services (pause, resume, clear, reset, sync_oled, board_command, kill, set_mode, and the motion
 // switch's effect on a running job).
 #include "ethernut_node.h"

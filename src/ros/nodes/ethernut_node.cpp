@@ -1,4 +1,4 @@
-// ethernut_node (src/nodes/ethernut_node.h): parameters, the link to the board, the
+// ethernut_node (src/ros/nodes/ethernut_node.h): parameters, the link to the board, the
 // job preview as ROS messages and diagnostics. The client's events and the services:
 // ethernut_services.cpp; the ~run_job action: ethernut_jobs.cpp.
 #include "ethernut_node.h"

@@ -1,6 +1,6 @@
 // mtconnect_node: any MTConnect agent's device (a Haas NGC's built-in agent, Mazak, Okuma, ...)
 // into the suite's interface (docs/mtconnect_node.md). Parameters -> the core's follower and
-// machine model (src/mtconnect/) -> state, joint_states, tf, events, conditions, diagnostics.
+// machine model (src/core/mtconnect/) -> state, joint_states, tf, events, conditions, diagnostics.
 #include <ros/ros.h>
 
 #include <cmath>

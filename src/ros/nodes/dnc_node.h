@@ -5,7 +5,7 @@
 // dispatches each transfer to a protocol handler by name. XModem (xmodem, xmodem-crc, xmodem-1k) is registered here;
 // other protocols (drip-feed, backup) register with registerProtocol() in the constructor. With
 // ~requests, a thread listens on the idle port for request programs the control punches
-// (src/nodes/dnc_requests.cpp) and leaves the port to any transfer asked for meanwhile.
+// (src/ros/nodes/dnc_requests.cpp) and leaves the port to any transfer asked for meanwhile.
 #pragma once
 
 #include <actionlib/server/action_server.h>
@@ -101,7 +101,7 @@ class DncNode
                            const std::function<void(const TransferFeedback&)>& feedback,
                            const std::atomic<bool>& cancel);
 
-  // Program requests punched by the control (src/nodes/dnc_requests.cpp, docs/dnc_node.md).
+  // Program requests punched by the control (src/ros/nodes/dnc_requests.cpp, docs/dnc_node.md).
   /// Reads the ~request* parameters; starts the listener thread if ~requests is set.
   void setUpRequests(ros::NodeHandle& nh, ros::NodeHandle& pnh);
   void stopRequests();

@@ -1,4 +1,4 @@
-// share_node's services on the share and the archive (src/nodes/share_node.h): listing, removal,
+// share_node's services on the share and the archive (src/ros/nodes/share_node.h): listing, removal,
 // withdrawals, history, comparison and ~publish_to_machines, each mapped onto the core.
 #include "share_node.h"
 

@@ -1,7 +1,7 @@
-// share_node (src/nodes/share_node.h): the core objects built from the settings
-// (src/nodes/share_params.cpp); the transfers (the action, ~send_program, ~receive_program and
+// share_node (src/ros/nodes/share_node.h): the core objects built from the settings
+// (src/ros/nodes/share_params.cpp); the transfers (the action, ~send_program, ~receive_program and
 // program requests), the periodic check of the share, state and diagnostics. The other services:
-// src/nodes/share_services.cpp.
+// src/ros/nodes/share_services.cpp.
 #include "share_node.h"
 
 #include <filesystem>

@@ -1,4 +1,4 @@
-// ethernut_node's ~run_job action (src/nodes/ethernut_node.h): a goal loads an
+// ethernut_node's ~run_job action (src/ros/nodes/ethernut_node.h): a goal loads an
 // ethernut::Job (refused before anything is sent if it is bad), publishes its preview, then streams
 // it segment by segment, carrying out the program's own steps between two segments
 // (docs/ethernut_node.md).

@@ -5,9 +5,9 @@
 // (ProgramTransfers, one at a time), withdrawals and their daily timer (withdrawal.h, DailyTimer),
 // program requests (RequestServer), and what the services decide (share_service.h). A periodic
 // check of the share keeps the link state (UP while the share answers, DOWN with the reason) and
-// serves the request files. src/nodes/share_params.cpp: the parameters, as the core's settings;
-// src/nodes/share_node.cpp: the core objects, the transfers, the check, state and diagnostics;
-// src/nodes/share_services.cpp: the other services.
+// serves the request files. src/ros/nodes/share_params.cpp: the parameters, as the core's settings;
+// src/ros/nodes/share_node.cpp: the core objects, the transfers, the check, state and diagnostics;
+// src/ros/nodes/share_services.cpp: the other services.
 #pragma once
 
 #include <ros/ros.h>
