@@ -2,12 +2,13 @@
 # (every source, every library), after the modules whose libraries they link.
 
 # cnc_dnc: the transfer tool a user types (subcommands in a table in src/cli/cnc_dnc.cpp): send and
-# receive by XModem or over a share, drip, backup, list, doctor.
+# receive by XModem or over a share, drip, backup, list, doctor, replay.
 cnc_tool(cnc_dnc
   src/cli/cnc_dnc.cpp
   src/cli/cnc_dnc_doctor.cpp
   src/cli/cnc_dnc_drip.cpp
-  src/cli/cnc_dnc_share.cpp)
+  src/cli/cnc_dnc_share.cpp
+  src/cli/cnc_dnc_replay.cpp)
 target_link_libraries(cnc_dnc cnc_bridge_xmodem cnc_bridge_programs cnc_bridge_drip cnc_bridge_share)
 
 # cnc_plan: the '@' path as 1 ms setpoints (CSV, PNG through scripts/plot_plan.py).

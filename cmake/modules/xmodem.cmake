@@ -27,6 +27,7 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   if(TARGET test_xmodem_cli)
     target_link_libraries(test_xmodem_cli cnc_bridge_xmodem)
     target_compile_definitions(test_xmodem_cli PRIVATE CNC_DNC="$<TARGET_FILE:cnc_dnc>"
+                                                       XMODEM_TEST_DATA="${PROJECT_SOURCE_DIR}/test/data/xmodem"
                                                        SIM_HAAS_SERIAL="$<TARGET_FILE:sim_haas_serial>")
     add_dependencies(test_xmodem_cli cnc_dnc sim_haas_serial)
   endif()

@@ -14,6 +14,8 @@
 //   cnc_dnc receive --share URL [--credentials FILE] NAME OUT
 //   cnc_dnc list    --share URL [--credentials FILE]
 //   cnc_dnc doctor  --port DEV [serial options] [--listen S]            (cnc_dnc_doctor.cpp)
+//   cnc_dnc replay  --port DEV [serial options] [--speed X] [--slack S] TRACE (cnc_dnc_replay.cpp)
+//   (send, receive, drip, backup: [--wire-trace DIR] traces the line)
 //   cnc_dnc history (--archive DIR | --program-dir DIR) NAME
 //   cnc_dnc diff    (--archive DIR | --program-dir DIR) NAME [V1 [V2]]
 // DEV is a serial device, tcp://host:port (a device server's raw TCP port) or rfc2217://host:port
@@ -56,6 +58,7 @@ bool namesShare(const std::vector<std::string>& args);      // cnc_dnc_share.cpp
 int runDrip(const std::vector<std::string>& args);          // cnc_dnc_drip.cpp
 int runBackup(const std::vector<std::string>& args);        // cnc_dnc_drip.cpp
 int runDoctor(const std::vector<std::string>& args);        // cnc_dnc_doctor.cpp
+int runReplay(const std::vector<std::string>& args);        // cnc_dnc_replay.cpp
 }  // namespace cli
 }  // namespace cnc_bridge
 
@@ -76,7 +79,9 @@ po::options_description serialOptions()
       "baud,b", po::value<unsigned>()->default_value(115200), "baud rate (Haas setting 11)")(
       "parity", po::value<std::string>()->default_value("none"), "none|even|odd (Haas setting 12)")(
       "data-bits", po::value<unsigned>()->default_value(8), "7|8 (Haas setting 37)")(
-      "stop-bits", po::value<unsigned>()->default_value(1), "1|2 (Haas setting 13)");
+      "stop-bits", po::value<unsigned>()->default_value(1), "1|2 (Haas setting 13)")(
+      "wire-trace", po::value<std::string>(),
+      "write every byte of the line, both ways, to a trace file in this folder (cnc_dnc replay plays it back)");
   return options;
 }
 
@@ -328,6 +333,8 @@ const Command kCommands[] = {
     {"diff", "unified diff of two kept versions of a program, or of one and the current file", &cli::runDiff},
     {"list", "list the programs of a share (--share URL): name, O number, size, time, first comment", &cli::runList},
     {"doctor", "check a port: opens? why not, in words; with --listen S, what the control sends", &cli::runDoctor},
+    {"replay", "play the far side of a wire trace on a port, checking that the program there answers as recorded",
+     &cli::runReplay},
 };
 
 void usage(std::ostream& out)

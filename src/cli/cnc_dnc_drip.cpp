@@ -48,7 +48,9 @@ po::options_description serialOptions()
       "baud,b", po::value<unsigned>()->default_value(115200), "baud rate: the control's (as send/receive)")(
       "parity", po::value<std::string>()->default_value("none"), "none|even|odd (ISO tape code: even with 7 bits)")(
       "data-bits", po::value<unsigned>()->default_value(8), "7|8")("stop-bits", po::value<unsigned>()->default_value(1),
-                                                                   "1|2");
+                                                                   "1|2")(
+      "wire-trace", po::value<std::string>(),
+      "write every byte of the line, both ways, to a trace file in this folder (cnc_dnc replay plays it back)");
   return options;
 }
 

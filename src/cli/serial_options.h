@@ -1,5 +1,6 @@
 // The serial line settings every cnc_dnc subcommand reads from its command line (--port, --baud,
-// --parity, --data-bits, --stop-bits: Haas settings 11, 12, 37, 13).
+// --parity, --data-bits, --stop-bits: Haas settings 11, 12, 37, 13; --wire-trace DIR where a
+// subcommand offers it).
 #pragma once
 
 #include <boost/program_options.hpp>
@@ -21,6 +22,10 @@ inline SerialSettings serialSettingsFrom(const boost::program_options::variables
   s.parity = parseParity(vm["parity"].as<std::string>());
   s.data_bits = vm["data-bits"].as<unsigned>();
   s.stop_bits = vm["stop-bits"].as<unsigned>();
+  if (vm.count("wire-trace") != 0)
+  {
+    s.wire_trace.dir = vm["wire-trace"].as<std::string>();
+  }
   return s;
 }
 }  // namespace cli

@@ -772,3 +772,79 @@ TEST(CncDncCli, ReceiveTakesTheExactProgramFromSx)
       << "a block was not ACKed";
   EXPECT_EQ(from_dnc.find_first_not_of("\x06\x15"), std::string::npos) << "cnc_dnc sent more than NAKs and ACKs";
 }
+
+// ---------------------------------------------------------------------------------------------
+// Wire traces: `cnc_dnc replay` plays the far side of a trace. The Haas capture (a serial
+// sniffer's dump of a Haas Classic sending O05555, test/data/xmodem/) played to `cnc_dnc receive`
+// hands it the captured program; a trace `cnc_dnc send --wire-trace` recorded against the simulated
+// Haas, played back, gets the same send from cnc_dnc again, and a different program is caught.
+namespace
+{
+std::string onlyTraceIn(const std::string& dir)
+{
+  const auto names = filesIn(dir);
+  return names.size() == 1 ? dir + "/" + names[0] : "";
+}
+}  // namespace
+
+TEST(CncDncReplay, TheHaasCapturePlayedToReceiveHandsItTheCapturedProgram)
+{
+  TempDir dir("test_xmodem_cli");
+  PtyMaster haas_side, dnc_side;
+  Tap tap(haas_side, dnc_side);
+  const std::string target = dir.path + "/received.nc";
+  const std::string replay_dir = dir.path + "/replay";
+  ::mkdir(replay_dir.c_str(), 0755);
+  Tool replay(
+      {"replay", "--port", haas_side.slavePath(), "--speed", "10", XMODEM_TEST_DATA "/haas_capture_cnc_to_pc.trace"},
+      replay_dir);
+  Tool receive({"receive", "--port", dnc_side.slavePath(), "--mode", "checksum", "--timeout", "30", target}, dir.path);
+  const ToolRun received = receive.finish();
+  const ToolRun replayed = replay.finish();
+  ASSERT_EQ(received.status, 0) << received.err;
+  EXPECT_EQ(readFile(target), readFile(XMODEM_TEST_DATA "/haas_O05555.nc"));
+  EXPECT_EQ(replayed.status, 0) << replayed.out << replayed.err;
+  // Two NAKs, eight block ACKs and the ACK of EOT: what the PC of the capture answered.
+  EXPECT_NE(replayed.out.find("the program answered all 11 bytes as recorded"), std::string::npos) << replayed.out;
+}
+
+TEST(CncDncReplay, ASendRecordedAgainstTheSimulatedHaasReplaysToTheSameSendAndCatchesAnother)
+{
+  TempDir dir("test_xmodem_cli");
+  const std::string traces = dir.path + "/traces";
+  ::mkdir(traces.c_str(), 0755);
+  const std::string payload = program(4400, 3 * 128 + 40);
+  const std::string file = dir.path + "/O04400.nc";
+  writeFile(file, payload);
+  {
+    Simulator haas(dir.path + "/haas", {});
+    const ToolRun sent =
+        cncDnc({"send", "--port", haas.port(), "--mode", "checksum", "--timeout", "20", "--wire-trace", traces, file},
+               dir.path);
+    ASSERT_EQ(sent.status, 0) << sent.err;
+  }
+  const std::string trace = onlyTraceIn(traces);
+  ASSERT_FALSE(trace.empty()) << "trace files: " << filesIn(traces).size();
+  auto replayAgainstSendOf = [&](const std::string& path, const std::string& name)
+  {
+    PtyMaster haas_side, dnc_side;
+    Tap tap(haas_side, dnc_side);
+    const std::string replay_dir = dir.path + "/" + name;
+    ::mkdir(replay_dir.c_str(), 0755);
+    Tool replay({"replay", "--port", haas_side.slavePath(), "--slack", "5", trace}, replay_dir);
+    const ToolRun sent = cncDnc(
+        {"send", "--port", dnc_side.slavePath(), "--mode", "checksum", "--timeout", "10", "--retries", "1", path},
+        dir.path);
+    return std::make_pair(sent, replay.finish());
+  };
+  const auto [again, replayed] = replayAgainstSendOf(file, "same");
+  EXPECT_EQ(again.status, 0) << again.err;
+  EXPECT_EQ(replayed.status, 0) << replayed.out << replayed.err;
+
+  std::string changed = payload;
+  changed[payload.size() / 2] = changed[payload.size() / 2] == '1' ? '2' : '1';
+  writeFile(dir.path + "/O04401.nc", changed);
+  const auto [other, caught] = replayAgainstSendOf(dir.path + "/O04401.nc", "other");
+  EXPECT_EQ(caught.status, 1) << caught.out << caught.err;
+  EXPECT_NE(caught.out.find("where the trace has"), std::string::npos) << caught.out;
+}

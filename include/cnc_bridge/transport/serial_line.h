@@ -48,6 +48,16 @@ class SerialLine : public Transport
   virtual void setFlowControl(FlowControl flow) = 0;
 };
 
+/// \brief A serial line traced into a wire trace (wire_trace.h): the line it wraps, unchanged.
+class TracingSerialLine : public TracingLink<SerialLine>
+{
+ public:
+  using TracingLink<SerialLine>::TracingLink;
+  const SerialSettings& settings() const override { return inner().settings(); }
+  void applySettings() override { inner().applySettings(); }
+  void setFlowControl(FlowControl flow) override { inner().setFlowControl(flow); }
+};
+
 /// \brief The parts of a serial `port` value.
 struct SerialAddress
 {
@@ -70,7 +80,8 @@ struct SerialAddress
 /// or a user in the URL).
 SerialAddress parseSerialAddress(const std::string& port);
 
-/// \brief Opens the serial line \p settings.device names, configured from \p settings.
+/// \brief Opens the serial line \p settings.device names, configured from \p settings, and traced
+/// when settings.wire_trace says so.
 /// \param connect_timeout for the network kinds: the TCP connect and, for RFC 2217, the server's
 ///        answers to the line settings.
 /// \throws ConfigError for invalid settings, LinkError when the line cannot be opened or set up

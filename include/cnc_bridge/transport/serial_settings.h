@@ -5,6 +5,8 @@
 
 #include <string>
 
+#include "cnc_bridge/transport/wire_trace.h"
+
 namespace cnc_bridge
 {
 enum class Parity
@@ -33,6 +35,8 @@ struct SerialSettings
   Parity parity = Parity::kNone;
   unsigned stop_bits = 1;  ///< 1 or 2
   FlowControl flow_control = FlowControl::kNone;
+  /// Off unless set: every byte of the line, both ways, into a trace file (wire_trace.h).
+  WireTraceSettings wire_trace;
 
   /// \brief "/dev/ttyUSB0@9600 8N1" for messages.
   std::string describe() const;

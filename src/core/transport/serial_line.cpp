@@ -94,10 +94,11 @@ SerialAddress parseSerialAddress(const std::string& port)
   return address;
 }
 
-std::unique_ptr<SerialLine> openSerialLine(const SerialSettings& settings, InputOnOpen on_open,
-                                           Milliseconds connect_timeout)
+namespace
 {
-  settings.validate();
+std::unique_ptr<SerialLine> openUntraced(const SerialSettings& settings, InputOnOpen on_open,
+                                         Milliseconds connect_timeout)
+{
   const SerialAddress address = parseSerialAddress(settings.device);
   switch (address.kind)
   {
@@ -109,5 +110,14 @@ std::unique_ptr<SerialLine> openSerialLine(const SerialSettings& settings, Input
       return TelnetSerialLine::open(settings, address, on_open, connect_timeout);
   }
   throw ConfigError("serial port '" + settings.device + "': unknown kind of link");
+}
+}  // namespace
+
+std::unique_ptr<SerialLine> openSerialLine(const SerialSettings& settings, InputOnOpen on_open,
+                                           Milliseconds connect_timeout)
+{
+  settings.validate();
+  return traced<SerialLine, TracingSerialLine>(openUntraced(settings, on_open, connect_timeout), settings.wire_trace,
+                                               settings.device);
 }
 }  // namespace cnc_bridge

@@ -111,6 +111,9 @@ SerialSettings serialSettings(const ros::NodeHandle& pnh, unsigned default_baud)
   settings.stop_bits = static_cast<unsigned>(stop_bits);
   settings.parity = parseParity(parity);
   settings.flow_control = parseFlowControl(flow);
+  // ~wire_trace: a folder; when set, every byte of the line, both ways, goes to a trace file there
+  // (one per opening of the line, at most 16 MiB each; `cnc_dnc replay` plays one back).
+  pnh.param<std::string>("wire_trace", settings.wire_trace.dir, "");
   settings.validate();
   return settings;
 }
