@@ -3,7 +3,7 @@
 this test's master): it must exit 0, print a summary of every step with its numbers, leave the
 surface-map PNG, and leave a rosbag that holds what launch/record.launch promises (state, DPRNT
 lines, the probe cloud, the actions' results, the '@' controller's planned path, the slave
-commands). While it runs, every machine's tool_path trail and the '@' controller's job/path are
+commands) and a wire trace of the VF-2's RS-232 line that replays to the same transfer. While it runs, every machine's tool_path trail and the '@' controller's job/path are
 watched: each must arrive, in its machine's frame, with the tool's motion in it.
 """
 import glob
@@ -168,7 +168,37 @@ class Demo(unittest.TestCase):
         self.assertEqual(mdc.program, dprnt.program)
         self.assertLessEqual(abs(mdc.part_count - dprnt.part_count), 1,
                              "MDC counts %d parts, DPRNT %d" % (mdc.part_count, dprnt.part_count))
+        self.check_the_traced_transfer_replays(out)
         shutil.rmtree(out, ignore_errors=True)  # kept for a look when something failed
+
+    def check_the_traced_transfer_replays(self, out):
+        """dnc_node traced the VF-2's RS-232 line (its ~wire_trace): played back by `cnc_dnc replay`
+        to `cnc_dnc send` of the same program, the send goes as the demo's did, byte for byte."""
+        traces = glob.glob(os.path.join(out, "traces", "*.trace"))
+        self.assertEqual(len(traces), 1, "trace files of the demo: %s" % traces)
+        links = tempfile.mkdtemp(prefix="cnc_demo_replay.")
+        control, dnc = os.path.join(links, "control"), os.path.join(links, "dnc")
+        pair = subprocess.Popen(["socat", "-d", "-d", "pty,rawer,link=" + control, "pty,rawer,link=" + dnc],
+                                stderr=subprocess.PIPE, text=True)
+        try:
+            made = 0
+            while made < 2:  # socat says "PTY is /dev/pts/N" once each end exists
+                line = pair.stderr.readline()
+                self.assertTrue(line, "socat ended before making its ptys")
+                made += "PTY is" in line
+            program = os.path.join(os.path.dirname(rospy.get_param("~demo")), "..", "config", "demo", "O05555.nc")
+            replay = subprocess.Popen(["cnc_dnc", "replay", "--port", control, "--speed", "4", traces[0]],
+                                      stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+            send = subprocess.run(["cnc_dnc", "send", "--port", dnc, "--mode", "checksum", "--timeout", "20",
+                                   "--retries", "1", program], capture_output=True, text=True, timeout=120)
+            replayed = replay.communicate(timeout=120)[0]
+        finally:
+            pair.terminate()
+            pair.wait()
+            shutil.rmtree(links, ignore_errors=True)
+        self.assertEqual(send.returncode, 0, send.stdout + send.stderr)
+        self.assertEqual(replay.returncode, 0, replayed)
+        self.assertIn("as recorded", replayed)
 
 
 if __name__ == "__main__":

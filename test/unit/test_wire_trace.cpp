@@ -129,11 +129,23 @@ TEST(WireTrace, ATraceStopsAtItsLimitAndSaysSoWhileTheLinkGoesOn)
   EXPECT_NE(readFile(path).find("limit of 100 bytes is reached"), std::string::npos) << readFile(path);
 }
 
-TEST(WireTrace, AFolderThatCannotTakeTheTraceIsAClearErrorBeforeAnyByteMoves)
+TEST(WireTrace, AMissingFolderIsMade)
 {
+  TempDir dir("test_wire_trace");
   PtyMaster machine;
   SerialSettings settings = ptyLine(machine);
-  settings.wire_trace.dir = "/nonexistent/traces";
+  settings.wire_trace.dir = dir.path + "/cell/traces";
+  openSerialLine(settings)->write(std::string("%\n"));
+  EXPECT_FALSE(onlyFileIn(dir.path + "/cell/traces").empty());
+}
+
+TEST(WireTrace, AFolderThatCannotBeMadeIsAClearErrorBeforeAnyByteMoves)
+{
+  TempDir dir("test_wire_trace");
+  const std::string not_a_folder = dir.write("traces", "a file where the folder belongs");
+  PtyMaster machine;
+  SerialSettings settings = ptyLine(machine);
+  settings.wire_trace.dir = not_a_folder;
   try
   {
     openSerialLine(settings);
@@ -141,7 +153,7 @@ TEST(WireTrace, AFolderThatCannotTakeTheTraceIsAClearErrorBeforeAnyByteMoves)
   }
   catch (const ConfigError& e)
   {
-    EXPECT_NE(std::string(e.what()).find("/nonexistent/traces"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find(not_a_folder), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("writable"), std::string::npos) << e.what();
   }
   uint8_t byte = 0;

@@ -5,6 +5,7 @@
 #include <cctype>
 #include <cstdio>
 #include <ctime>
+#include <filesystem>
 #include <fstream>
 #include <iomanip>
 #include <sstream>
@@ -111,13 +112,30 @@ std::string hexOf(uint8_t byte)
 // ---------------------------------------------------------------------------------------------
 // Writing
 
-WireTraceWriter::WireTraceWriter(const std::string& path, const std::string& link, size_t max_bytes)
-    : path_(path), link_(link), max_bytes_(max_bytes), out_(std::make_unique<std::ofstream>(path, std::ios::trunc))
+namespace
 {
-  if (!*out_)
+/// The trace file, its folder made if missing. \throws ConfigError naming the path.
+std::unique_ptr<std::ofstream> createTrace(const std::string& path)
+{
+  std::error_code error;
+  const std::filesystem::path folder = std::filesystem::path(path).parent_path();
+  if (!folder.empty())
   {
-    throw ConfigError("cannot create the wire trace " + path + ": check that its folder exists and is writable");
+    std::filesystem::create_directories(folder, error);
   }
+  auto out = std::make_unique<std::ofstream>(path, std::ios::trunc);
+  if (error || !*out)
+  {
+    throw ConfigError("cannot create the wire trace " + path + ": check that its folder can be made and is writable" +
+                      (error ? " (" + error.message() + ")" : std::string()));
+  }
+  return out;
+}
+}  // namespace
+
+WireTraceWriter::WireTraceWriter(const std::string& path, const std::string& link, size_t max_bytes)
+    : path_(path), link_(link), max_bytes_(max_bytes), out_(createTrace(path))
+{
   *out_ << "# cnc_bridge wire trace of " << link << ", opened " << utcStamp(SystemClock::now(), "%F %T", true)
         << " UTC\n# \"Written data\" is what this side sent, \"Read data\" what it received; at most " << max_bytes
         << " bytes\n";
