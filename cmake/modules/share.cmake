@@ -6,7 +6,8 @@ find_library(SMBCLIENT_LIBRARY smbclient)
 if(NOT SMBCLIENT_INCLUDE_DIR OR NOT SMBCLIENT_LIBRARY)
   message(FATAL_ERROR "libsmbclient not found: install the Debian package libsmbclient-dev")
 endif()
-cnc_core_module(cnc_bridge_share src/core/share/smb_store.cpp src/core/share/share_settings.cpp src/core/share/share_service.cpp)
+cnc_core_module(cnc_bridge_share src/core/share/smb_store.cpp src/core/share/share_settings.cpp src/core/share/share_service.cpp
+  src/core/share/hybrid_share.cpp)
 target_include_directories(cnc_bridge_share PRIVATE ${SMBCLIENT_INCLUDE_DIR})
 target_link_libraries(cnc_bridge_share PUBLIC cnc_bridge_programs ${SMBCLIENT_LIBRARY})
 
@@ -16,6 +17,9 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   target_link_libraries(test_smb_store cnc_bridge_share)
   target_compile_definitions(test_smb_store PRIVATE
                              SERVED_SHARE_CONF="${PROJECT_SOURCE_DIR}/config/share/served_share.smb.conf")
+  # The hybrid share: the drop folder and the collection, on local folders and a real Samba share.
+  cnc_core_gtest(test_hybrid_share test/unit/test_hybrid_share.cpp)
+  target_link_libraries(test_hybrid_share cnc_bridge_share)
   # share_node's settings and decisions, on local folders (no server).
   cnc_core_gtest(test_share_core test/unit/test_share_settings.cpp test/unit/test_share_service.cpp)
   target_link_libraries(test_share_core cnc_bridge_share)
