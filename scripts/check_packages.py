@@ -148,7 +148,7 @@ ROSDEP_EXCEPTIONS = {
 }
 
 # Installed for building and running the scripts and benchmarks, not a dependency of the package.
-TOOLS = {"build-essential", "cmake", "ccache", "bc", "nodejs", "npm", "time", "clang-tidy"}
+TOOLS = {"build-essential", "cmake", "ccache", "bc", "nodejs", "npm", "time", "clang-tidy", "universal-ctags"}
 
 # Python module (top-level name) -> the Debian 12 package that provides it.
 PYTHON_MODULE_PACKAGE = {
@@ -196,6 +196,7 @@ PROGRAM_PACKAGES = {
     "clang": ["clang", "libclang-rt-14-dev"],  # sanitizers and libFuzzer
     "clang-format": ["clang-format"],
     "clang-tidy": ["clang-tidy"],  # the lint step, on the core
+    "ctags-universal": ["universal-ctags"],  # the lint step: function lengths
     "cmake": ["cmake"], "cc": ["build-essential"], "ccache": ["ccache"],
     "nm": ["build-essential"],  # binutils: the install-space test's look at what nodes ship
     "roscore": ["python3-roslaunch"], "roslaunch": ["python3-roslaunch"], "rostest": ["python3-rostest"],
