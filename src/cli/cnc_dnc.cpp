@@ -70,21 +70,6 @@ struct UsageError : std::runtime_error
   using std::runtime_error::runtime_error;
 };
 
-/// The serial options every subcommand shares (Haas settings 11, 12, 13, 37).
-po::options_description serialOptions()
-{
-  po::options_description options("serial port");
-  options.add_options()("port,p", po::value<std::string>()->required(),
-                        "serial device (/dev/ttyUSB0) or device server port (tcp://host:port, rfc2217://host:port)")(
-      "baud,b", po::value<unsigned>()->default_value(115200), "baud rate (Haas setting 11)")(
-      "parity", po::value<std::string>()->default_value("none"), "none|even|odd (Haas setting 12)")(
-      "data-bits", po::value<unsigned>()->default_value(8), "7|8 (Haas setting 37)")(
-      "stop-bits", po::value<unsigned>()->default_value(1), "1|2 (Haas setting 13)")(
-      "wire-trace", po::value<std::string>(),
-      "write every byte of the line, both ways, to a trace file in this folder (cnc_dnc replay plays it back)");
-  return options;
-}
-
 SerialSettings serialSettings(const po::variables_map& vm)
 {
   SerialSettings s = cli::serialSettingsFrom(vm);
@@ -234,7 +219,7 @@ int runSend(const std::vector<std::string>& args)
 {
   if (cli::namesShare(args))
     return cli::runShareSend(args);
-  po::options_description options = serialOptions();
+  po::options_description options = cli::serialOptions();
   addTransferOptions(options, "checksum");
   options.add_options()("turnaround", po::value<unsigned>()->default_value(10),
                         "milliseconds of quiet after the start request or a NAK before a block (lrzsz rx "
@@ -278,7 +263,7 @@ int runReceive(const std::vector<std::string>& args)
 {
   if (cli::namesShare(args))
     return cli::runShareReceive(args);
-  po::options_description options = serialOptions();
+  po::options_description options = cli::serialOptions();
   addTransferOptions(options, "crc");
   options.add_options()("file-eob", po::value<std::string>()->default_value("lf"),
                         "line ends of the stored file: lf|cr|crlf|crcr|lflf")(

@@ -39,7 +39,8 @@ namespace cli
 {
 namespace
 {
-po::options_description serialOptions()
+/// The serial options of drip and backup: --port is checked by parse(), so that --help needs none.
+po::options_description dripSerialOptions()
 {
   po::options_description options("serial port");
   options.add_options()("help,h", "this help")(
@@ -173,7 +174,7 @@ class PauseSignals
 
 int runDrip(const std::vector<std::string>& args)
 {
-  po::options_description options = serialOptions();
+  po::options_description options = dripSerialOptions();
   options.add_options()("eob", po::value<std::string>()->default_value("lf"),
                         "end of block sent: lf (ISO, Fanuc)|cr|crlf (Haas)|lfcr|lfcrcr")(
       "flow", po::value<std::string>()->default_value("xonxoff"), "xonxoff (DC3/DC1, parity masked)|rtscts|none")(
@@ -276,7 +277,7 @@ int runDrip(const std::vector<std::string>& args)
 
 int runBackup(const std::vector<std::string>& args)
 {
-  po::options_description options = serialOptions();
+  po::options_description options = dripSerialOptions();
   options.add_options()("timeout,t", po::value<double>()->default_value(120),
                         "seconds to wait for the control to start punching (0: forever)")(
       "quiet", po::value<double>()->default_value(5),

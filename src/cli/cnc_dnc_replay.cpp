@@ -30,15 +30,9 @@ namespace
 {
 po::options_description replayOptions()
 {
-  po::options_description options("cnc_dnc replay");
-  options.add_options()("help,h", "this help")(
-      "port,p", po::value<std::string>()->required(),
-      "where the program under test is: a serial device, tcp://host:port or rfc2217://host:port")(
-      "baud,b", po::value<unsigned>()->default_value(115200), "baud rate")(
-      "parity", po::value<std::string>()->default_value("none"), "none|even|odd")(
-      "data-bits", po::value<unsigned>()->default_value(8), "7|8")(
-      "stop-bits", po::value<unsigned>()->default_value(1), "1|2")("speed", po::value<double>()->default_value(1.0),
-                                                                   "time scale: 2 plays the trace twice as fast")(
+  po::options_description options = serialOptions();  // --port: where the program under test is
+  options.add_options()("help,h", "this help")("speed", po::value<double>()->default_value(1.0),
+                                               "time scale: 2 plays the trace twice as fast")(
       "slack", po::value<double>()->default_value(15.0),
       "s the program under test may take beyond the recorded time to send what the trace expects");
   return options;

@@ -269,23 +269,26 @@ TraceReplay::Options quick()
   options.quiet_after = Milliseconds(200);
   return options;
 }
+
+/// exchange() replayed against \p program, which runs on the other end of a pty.
+ReplayResult replayAgainst(const std::function<void(Transport&)>& program)
+{
+  PtyMaster far_side;
+  TraceReplay replay(exchange(), quick());
+  Responder responder(far_side.slavePath(), program);
+  return replay.run(far_side);
+}
 }  // namespace
 
 TEST(TraceReplay, AProgramThatAnswersAsRecordedMatches)
 {
-  PtyMaster far_side;
-  TraceReplay replay(exchange(), quick());
-  ReplayResult result;
-  {
-    Responder program(far_side.slavePath(),
-                      [](Transport& line)
-                      {
-                        line.write(std::string("?Q100\r"));
-                        readAnswer(line);
-                        line.write(std::string("?Q500\r"));  // in one piece where the trace has two: the same bytes
-                      });
-    result = replay.run(far_side);
-  }
+  const ReplayResult result = replayAgainst(
+      [](Transport& line)
+      {
+        line.write(std::string("?Q100\r"));
+        readAnswer(line);
+        line.write(std::string("?Q500\r"));  // in one piece where the trace has two: the same bytes
+      });
   EXPECT_TRUE(result.matched) << result.message;
   EXPECT_EQ(result.bytes_sent, 11u);
   EXPECT_EQ(result.bytes_checked, 12u);
@@ -293,19 +296,13 @@ TEST(TraceReplay, AProgramThatAnswersAsRecordedMatches)
 
 TEST(TraceReplay, AWrongByteIsADifferenceNamingTheEntryAndTheByte)
 {
-  PtyMaster far_side;
-  TraceReplay replay(exchange(), quick());
-  ReplayResult result;
-  {
-    Responder program(far_side.slavePath(),
-                      [](Transport& line)
-                      {
-                        line.write(std::string("?Q100\r"));
-                        readAnswer(line);
-                        line.write(std::string("?Q600\r"));
-                      });
-    result = replay.run(far_side);
-  }
+  const ReplayResult result = replayAgainst(
+      [](Transport& line)
+      {
+        line.write(std::string("?Q100\r"));
+        readAnswer(line);
+        line.write(std::string("?Q600\r"));
+      });
   EXPECT_FALSE(result.matched);
   EXPECT_NE(result.message.find("entry 3 of 3"), std::string::npos) << result.message;
   EXPECT_NE(result.message.find("sent 36 where the trace has 35 (byte 3 of 6)"), std::string::npos) << result.message;
@@ -313,18 +310,12 @@ TEST(TraceReplay, AWrongByteIsADifferenceNamingTheEntryAndTheByte)
 
 TEST(TraceReplay, AProgramThatFallsSilentIsADifferenceAfterTheRecordedTimeAndTheSlack)
 {
-  PtyMaster far_side;
-  TraceReplay replay(exchange(), quick());
-  ReplayResult result;
-  {
-    Responder program(far_side.slavePath(),
-                      [](Transport& line)
-                      {
-                        line.write(std::string("?Q100\r"));
-                        readAnswer(line);
-                      });
-    result = replay.run(far_side);
-  }
+  const ReplayResult result = replayAgainst(
+      [](Transport& line)
+      {
+        line.write(std::string("?Q100\r"));
+        readAnswer(line);
+      });
   EXPECT_FALSE(result.matched);
   EXPECT_NE(result.message.find("sent 0 of the 6 bytes the trace expects next (next: 3f)"), std::string::npos)
       << result.message;
@@ -332,19 +323,13 @@ TEST(TraceReplay, AProgramThatFallsSilentIsADifferenceAfterTheRecordedTimeAndThe
 
 TEST(TraceReplay, BytesAfterTheTracesEndAreADifference)
 {
-  PtyMaster far_side;
-  TraceReplay replay(exchange(), quick());
-  ReplayResult result;
-  {
-    Responder program(far_side.slavePath(),
-                      [](Transport& line)
-                      {
-                        line.write(std::string("?Q100\r"));
-                        readAnswer(line);
-                        line.write(std::string("?Q500\r?Q104\r"));
-                      });
-    result = replay.run(far_side);
-  }
+  const ReplayResult result = replayAgainst(
+      [](Transport& line)
+      {
+        line.write(std::string("?Q100\r"));
+        readAnswer(line);
+        line.write(std::string("?Q500\r?Q104\r"));
+      });
   EXPECT_FALSE(result.matched);
   EXPECT_NE(result.message.find("after the trace's end (first: 3f)"), std::string::npos) << result.message;
 }
