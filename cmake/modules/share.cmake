@@ -37,7 +37,8 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
 endif()
 
 if(NOT CNC_BRIDGE_CORE_ONLY)
-  cnc_node(share_node src/ros/nodes/share_node.cpp src/ros/nodes/share_params.cpp src/ros/nodes/share_services.cpp)
+  cnc_node(share_node src/ros/nodes/share_node.cpp src/ros/nodes/share_params.cpp src/ros/nodes/share_services.cpp
+           src/ros/nodes/share_hub.cpp)
   target_link_libraries(share_node cnc_bridge_share)
   if(CATKIN_ENABLE_TESTING)
     # The real share_node against a real smbd, both started by the test (the server's port is free

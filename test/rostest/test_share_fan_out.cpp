@@ -17,6 +17,7 @@
 
 #include <std_srvs/Trigger.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <ctime>
 #include <filesystem>
@@ -334,4 +335,74 @@ int main(int argc, char** argv)
   ros::AsyncSpinner spinner(2);
   spinner.start();
   return RUN_ALL_TESTS();
+}
+
+// The hybrid share: a third share_node whose served folder is the NAS, with ~drop_to both machines'
+// shares and ~collect_from the VF-2's. A program copied onto the NAS reaches both machines once
+// complete (one event per machine on hub_events, a line each in <archive>/hub_results.log); a
+// protected one reaches neither; what the VF-2 writes on its share is collected into the NAS's vf2
+// folder and kept in the archive.
+TEST_F(ShareFanOutTest, TheHybridShareDropsOntoEveryMachineAndCollectsWhatTheMachineWrites)
+{
+  const std::string nas = dir_.file("nas");
+  std::filesystem::create_directories(nas);
+  XmlRpc::XmlRpcValue drop_to, collect_from;
+  drop_to["vf2"] = share("vf2");
+  drop_to["st10"] = share("st10");
+  collect_from["vf2"] = share("vf2");
+  ros::param::set("/cell/nas/share_node/drop_to", drop_to);
+  ros::param::set("/cell/nas/share_node/collect_from", collect_from);
+  topic_watch::TopicWatch<ProgramRequestEvent> events("/cell/nas/hub_events", 20);
+  start("nas", {"_serve_dir:=" + nas, "_hub_period:=0.2", "_hub_settle:=0.5"});
+  events.waitForPublisher(20);
+  ASSERT_EQ(events.publishers(), 1u);
+
+  // Copied onto the NAS as a file manager would: written under another name, then renamed.
+  const std::string content = program(50 * 1024);
+  writeFile(nas + "/.O01234.nc.copying", content);
+  std::filesystem::rename(nas + "/.O01234.nc.copying", nas + "/O01234.nc");
+  writeFile(nas + "/O09001.nc", "%\nO09001 (PROBE MACRO)\nM99\n%\n");
+  auto dropped = [](const std::string& program, const std::string& machine)
+  {
+    return [program, machine](const std::vector<ProgramRequestEvent>& all)
+    {
+      return std::any_of(all.begin(), all.end(),
+                         [&](const ProgramRequestEvent& e)
+                         { return e.request == "DROP" && e.program == program && e.machine == machine; });
+    };
+  };
+  ASSERT_TRUE(events.waitFor(dropped("O01234.nc", "vf2"), 20));
+  ASSERT_TRUE(events.waitFor(dropped("O01234.nc", "st10"), 20));
+  ASSERT_TRUE(events.waitFor(dropped("O09001.nc", "(all)"), 20));
+  for (const auto& event : events.all())
+  {
+    EXPECT_EQ(event.success, event.program == "O01234.nc")
+        << event.program << " " << event.machine << ": " << event.outcome;
+    if (event.program == "O09001.nc")
+      EXPECT_NE(event.outcome.find("~allow_protected_programs"), std::string::npos) << event.outcome;
+  }
+  EXPECT_EQ(readFile(share("vf2") + "/O01234.nc"), content);
+  EXPECT_EQ(readFile(share("st10") + "/O01234.nc"), content);
+  EXPECT_FALSE(test::exists(share("vf2") + "/O09001.nc"));
+  EXPECT_FALSE(test::exists(share("st10") + "/O09001.nc"));
+
+  // The operator saves an edited program at the VF-2: collected into the NAS's vf2 folder.
+  const std::string edited = "%\nO02000 (EDITED AT THE CONTROL)\nG0 X1.\nM30\n%\n";
+  writeFile(share("vf2") + "/O02000.nc", edited);
+  ASSERT_TRUE(events.waitFor(
+      [](const std::vector<ProgramRequestEvent>& all)
+      {
+        return std::any_of(all.begin(), all.end(),
+                           [](const ProgramRequestEvent& e)
+                           { return e.request == "COLLECT" && e.program == "O02000.nc"; });
+      },
+      20));
+  EXPECT_EQ(readFile(nas + "/vf2/O02000.nc"), edited);
+  const std::string archive = programs_ + ".archive";
+  EXPECT_EQ(readFile(archive + "/O02000.nc/v0001.nc"), edited);
+  EXPECT_NE(readFile(archive + "/O02000.nc/v0001.meta").find("collected"), std::string::npos);
+  const std::string log = readFile(archive + "/hub_results.log");
+  EXPECT_NE(log.find("DROP\tO01234.nc\tvf2\tok"), std::string::npos) << log;
+  EXPECT_NE(log.find("DROP\tO01234.nc\tst10\tok"), std::string::npos) << log;
+  EXPECT_NE(log.find("COLLECT\tO02000.nc\tvf2\tok"), std::string::npos) << log;
 }

@@ -12,6 +12,7 @@
 #pragma once
 
 #include <cstdint>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <vector>
@@ -42,7 +43,8 @@ struct ArchiveVersion
   std::string path;   ///< the content's file
 };
 
-/// \brief The archive of one program directory. Thread-compatible (one writer at a time).
+/// \brief The archive of one program directory. Thread-safe: add() calls from several threads of one
+/// process (a transfer, the hybrid share's collection) are serialised.
 class ProgramArchive
 {
  public:
@@ -70,6 +72,7 @@ class ProgramArchive
   std::string folder(const std::string& name) const;
   std::string root_;
   unsigned keep_;
+  std::mutex add_mutex_;  ///< one version numbered and written at a time
 };
 
 /// \brief The unified diff a user asks for by version numbers: \p from (0: the newest kept version)

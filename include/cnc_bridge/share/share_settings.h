@@ -5,6 +5,7 @@
 #pragma once
 
 #include <chrono>
+#include <map>
 #include <optional>
 #include <string>
 
@@ -52,6 +53,22 @@ struct NodeSettings
   double publish_timeout = 60;                     ///< s, each machine of ~publish_to_machines
   double check_period = 5;                         ///< s
 };
+
+/// \brief The hybrid share (hybrid_share.h): the share of this node is the NAS; programs dropped
+/// onto it are pushed to the machines of drop_to, and what the machines of collect_from write on
+/// their shares is collected into the NAS folder of each (machine name -> share address).
+struct HubSettings
+{
+  std::map<std::string, std::string> drop_to;
+  std::map<std::string, std::string> collect_from;
+  double period = 5;                       ///< s between polls
+  std::chrono::milliseconds settle{2000};  ///< a file unchanged this long is complete
+  bool enabled() const { return !drop_to.empty() || !collect_from.empty(); }
+};
+
+/// \brief Refuses a machine name that cannot be a folder of the NAS (empty, '/', '.', '..', a
+/// control character): \p given_as names the parameter. \throws ConfigError.
+void checkMachineName(const std::string& name, const std::string& given_as);
 
 /// \brief Refuses an address (\p given_as names it: "~url", "--share") whose user information holds
 /// a password (`smb://user:secret@host/...`): credentials come only from the credentials file. The

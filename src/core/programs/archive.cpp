@@ -172,6 +172,7 @@ ArchiveVersion ProgramArchive::version(const std::string& name, unsigned number)
 std::optional<ArchiveVersion> ProgramArchive::add(const std::string& name, const std::string& content,
                                                   const VersionSource& source, unsigned mode)
 {
+  const std::lock_guard<std::mutex> lock(add_mutex_);
   const std::string dir = folder(name);
   const std::string crc = crc32Hex(content);
   const auto versions = history(name);

@@ -27,6 +27,17 @@ std::pair<size_t, size_t> userInformation(const std::string& address)
 }
 }  // namespace
 
+void checkMachineName(const std::string& name, const std::string& given_as)
+{
+  const bool control =
+      std::any_of(name.begin(), name.end(), [](char c) { return static_cast<unsigned char>(c) < 0x20; });
+  if (name.empty() || name == "." || name == ".." || name.find('/') != std::string::npos || control)
+  {
+    throw ConfigError(given_as + ": '" + name + "' cannot be a machine's folder on the NAS (no '/', '.', '..', " +
+                      "control character or empty name): name the machine as in the cell (haas_vf2)");
+  }
+}
+
 void refusePassword(const std::string& address, const std::string& given_as)
 {
   const auto [begin, end] = userInformation(address);

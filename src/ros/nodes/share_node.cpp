@@ -52,6 +52,7 @@ ShareNode::ShareNode(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh)
       });
   state_->setLink(LinkState::kConnecting, "first check of " + store_->describe());
   state_->diagnostics().add("Share", this, &ShareNode::diagnostics);
+  hub_ = startShareHub(nh, store, readHubSettings(pnh), program_settings_, *archive_, *state_);
   withdrawals_pub_ = nh.advertise<ProgramRequestEvent>("withdrawals", 50);
   advertise(pnh);
   if (const auto at = settings_.withdraw_at)

@@ -44,6 +44,17 @@ share::StoreSettings readStoreSettings(const ros::NodeHandle& pnh);
 share::ProgramSettings readProgramSettings(const ros::NodeHandle& pnh);
 share::RequestSettings readRequestSettings(const ros::NodeHandle& pnh);
 share::NodeSettings readNodeSettings(const ros::NodeHandle& pnh);
+share::HubSettings readHubSettings(const ros::NodeHandle& pnh);
+
+/// \brief The hybrid share (share_hub.cpp): the drop folder and the collection polled on a timer of
+/// their own, each result published on hub_events, logged, kept in <archive>/hub_results.log and
+/// counted in the diagnostics.
+class ShareHub;
+/// \returns the running hub, or none when neither ~drop_to nor ~collect_from is set.
+/// \throws ConfigError for a machine share that cannot be opened.
+std::shared_ptr<ShareHub> startShareHub(ros::NodeHandle nh, const share::StoreSettings& store,
+                                        const share::HubSettings& hub, const share::ProgramSettings& programs,
+                                        programs::ProgramArchive& archive, MachineStatePublisher& state);
 
 class ShareNode
 {
@@ -107,5 +118,6 @@ class ShareNode
   ros::Subscriber dprnt_sub_;
   /// ~withdraw_at; last, so that its thread stops before what it uses goes.
   std::unique_ptr<programs::DailyTimer> withdraw_timer_;
+  std::shared_ptr<ShareHub> hub_;
 };
 }  // namespace cnc_bridge

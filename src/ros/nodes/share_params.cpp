@@ -17,6 +17,27 @@ std::optional<programs::DailyTime> withdrawAt(const ros::NodeHandle& pnh)
                       "which otherwise reads 18:00 as a number");
   return programs::DailyTime::parse(pnh.param<std::string>("withdraw_at", ""), pnh.resolveName("withdraw_at"));
 }
+
+/// A map parameter of machine name -> share address (\p name), each checked; empty when unset.
+std::map<std::string, std::string> machineShares(const ros::NodeHandle& pnh, const std::string& name)
+{
+  std::map<std::string, std::string> shares;
+  XmlRpc::XmlRpcValue given;
+  if (!pnh.getParam(name, given))
+    return shares;
+  const std::string where = pnh.resolveName(name);
+  if (given.getType() != XmlRpc::XmlRpcValue::TypeStruct)
+    throw ConfigError(where + " must map each machine to its share: {haas_vf2: smb://10.0.0.5/memory, ...}");
+  for (auto& [machine, address] : given)
+  {
+    share::checkMachineName(machine, where);
+    if (address.getType() != XmlRpc::XmlRpcValue::TypeString || static_cast<std::string>(address).empty())
+      throw ConfigError(where + "/" + machine + " must be the machine's share address (smb://host/share or a folder)");
+    share::refusePassword(address, where + "/" + machine);
+    shares[machine] = static_cast<std::string>(address);
+  }
+  return shares;
+}
 }  // namespace
 
 share::StoreSettings readStoreSettings(const ros::NodeHandle& pnh)
@@ -89,6 +110,23 @@ share::NodeSettings readNodeSettings(const ros::NodeHandle& pnh)
   settings.withdraw_at = withdrawAt(pnh);
   // ~check_period (s, default 5): how often the share is listed to keep the link state.
   settings.check_period = params::positive(pnh, "check_period", 5.0);
+  return settings;
+}
+
+share::HubSettings readHubSettings(const ros::NodeHandle& pnh)
+{
+  share::HubSettings settings;
+  // ~drop_to ({machine: share address}, default none): programs dropped onto this node's share
+  // (the NAS) are pushed to each of these machines once complete.
+  settings.drop_to = machineShares(pnh, "drop_to");
+  // ~collect_from ({machine: share address}, default none): what these machines write on their
+  // own shares is collected into the NAS folder named after the machine, each version archived.
+  settings.collect_from = machineShares(pnh, "collect_from");
+  // ~hub_period (s, default 5): how often the NAS and the machines are listed.
+  settings.period = params::positive(pnh, "hub_period", 5.0);
+  // ~hub_settle (s, default 2): a file unchanged this long is complete (a copy onto the NAS still
+  // running is not pushed half-written).
+  settings.settle = params::seconds(pnh, "hub_settle", 2.0);
   return settings;
 }
 }  // namespace cnc_bridge
