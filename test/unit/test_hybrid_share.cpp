@@ -10,6 +10,7 @@
 #include <filesystem>
 
 #include "cnc_bridge/share/hybrid_share.h"
+#include "cnc_bridge/share/share_settings.h"
 #include "cnc_bridge/share/smb_store.h"
 #include "samba_server.h"
 #include "temp_dir.h"
@@ -243,4 +244,21 @@ TEST(HubConfiguration, ADropFolderWithoutMachinesAndACollectionWithoutAFolderAre
   EXPECT_THROW(DropFolder(nas, {}, rules(), nullptr), ConfigError);
   programs::ProgramArchive archive(dir.path + "/archive");
   EXPECT_THROW(Collection({{"vf2", nas, nullptr}}, rules(), archive, {}, nullptr), ConfigError);
+}
+
+TEST(HubConfiguration, AMachineNameThatIsNoFolderNameIsRefusedNamingTheParameter)
+{
+  for (const std::string name : {"", ".", "..", "../etc", "vf2/x", std::string("vf\n2")})
+  {
+    try
+    {
+      checkMachineName(name, "/nas/share_node/collect_from");
+      ADD_FAILURE() << "took '" << name << "'";
+    }
+    catch (const ConfigError& e)
+    {
+      EXPECT_NE(std::string(e.what()).find("/nas/share_node/collect_from"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_NO_THROW(checkMachineName("haas_vf2", "~collect_from"));
 }
