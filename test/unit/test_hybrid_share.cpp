@@ -248,7 +248,7 @@ TEST(HubConfiguration, ADropFolderWithoutMachinesAndACollectionWithoutAFolderAre
 
 TEST(HubConfiguration, AMachineNameThatIsNoFolderNameIsRefusedNamingTheParameter)
 {
-  for (const std::string name : {"", ".", "..", "../etc", "vf2/x", std::string("vf\n2")})
+  for (const std::string name : std::vector<std::string>{"", ".", "..", "../etc", "vf2/x", "vf\n2"})
   {
     try
     {
