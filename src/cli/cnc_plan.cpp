@@ -8,8 +8,8 @@
 // (M00, M01) adds no time, since it lasts until the operator resumes.
 //
 //   cnc_plan (--gcode FILE | --points FILE) [--profile trapezoid|scurve] [--max-speed X,Y,Z]
-//            [--max-accel X,Y,Z] [--max-jerk X,Y,Z] [--period S] [--corner-share F] [--feed MM_S]
-//            [--start X,Y,Z] [--dialect haas|fanuc|linuxcnc] [--tool-table FILE]
+//            [--max-accel X,Y,Z] [--max-jerk X,Y,Z] [--path-tolerance MM] [--period S] [--corner-share F]
+//            [--feed MM_S] [--start X,Y,Z] [--dialect haas|fanuc|linuxcnc] [--tool-table FILE]
 //            [--program-commands true|false] [--csv FILE] [--png FILE]
 // Units: mm, mm/s, mm/s^2, mm/s^3, s (the node's parameters are the same numbers in metres).
 // A point list has one point a line, "x y z [feed]" in mm (feed in mm/s for the segment to it).
@@ -108,6 +108,8 @@ int run(int argc, char** argv)
       "max-speed", po::value<std::string>()->default_value("50,50,25"), "mm/s per axis")(
       "max-accel", po::value<std::string>()->default_value("500,500,250"), "mm/s^2 per axis")(
       "max-jerk", po::value<std::string>()->default_value("10000,10000,5000"), "mm/s^3 per axis")(
+      "path-tolerance", po::value<double>()->default_value(0.01),
+      "mm the scurve profile may pass from a corner (0: stop on every corner)")(
       "period", po::value<double>()->default_value(0.001), "s between setpoints")(
       "corner-share", po::value<double>()->default_value(0.2), "acceleration kept for corners")(
       "feed", po::value<double>()->default_value(10.0), "mm/s when the program gives no F")(
@@ -138,6 +140,7 @@ int run(int argc, char** argv)
   limits.max_jerk = triple(vm["max-jerk"].as<std::string>(), "max-jerk");
   limits.period = vm["period"].as<double>();
   limits.corner_share = vm["corner-share"].as<double>();
+  limits.path_tolerance = vm["path-tolerance"].as<double>();
   const std::string profile = vm["profile"].as<std::string>();
   if (profile != "trapezoid" && profile != "scurve")
   {

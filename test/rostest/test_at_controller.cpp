@@ -77,6 +77,36 @@ std::vector<std::array<long, 6>> setpointLines(const std::vector<std::string>& l
 }
 
 // cnc_plan's CSV rows as the same six numbers (feed and position per axis).
+/// Distance (um) of the point \p x, \p y, \p z (um) from test/data/at_controller/square.nc's path,
+/// starting at \p start (m): the rapid to X5 Y5 Z2, the plunge to Z-1, X25, Y25, the half circle
+/// about X15 Y25 through Y15, and back down to Y5 (mm).
+double distanceFromSquare(const geometry_msgs::Point& start, double x, double y, double z)
+{
+  using P = std::array<double, 3>;
+  auto to_segment = [&](const P& a, const P& b)
+  {
+    const P ab{b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+    const double len2 = ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2];
+    double t = len2 > 0 ? ((x - a[0]) * ab[0] + (y - a[1]) * ab[1] + (z - a[2]) * ab[2]) / len2 : 0.0;
+    t = std::clamp(t, 0.0, 1.0);
+    return std::hypot(x - (a[0] + t * ab[0]), y - (a[1] + t * ab[1]), z - (a[2] + t * ab[2]));
+  };
+  const P from{start.x * 1e6, start.y * 1e6, start.z * 1e6};
+  const std::vector<P> lines = {
+      from, {5000, 5000, 2000}, {5000, 5000, -1000}, {25000, 5000, -1000}, {25000, 25000, -1000}};
+  double best = 1e300;
+  for (size_t k = 1; k < lines.size(); ++k)
+  {
+    best = std::min(best, to_segment(lines[k - 1], lines[k]));
+  }
+  best = std::min(best, to_segment({5000, 25000, -1000}, {5000, 5000, -1000}));
+  if (y <= 25000)  // the half circle below Y25
+  {
+    best = std::min(best, std::hypot(std::hypot(x - 15000, y - 25000) - 10000, z + 1000));
+  }
+  return best;
+}
+
 std::vector<std::array<long, 6>> cncPlanSetpoints(const std::string& program, const geometry_msgs::Point& start)
 {
   const std::string csv = "/tmp/test_at_controller_" + std::to_string(::getpid()) + ".csv";
@@ -162,6 +192,27 @@ TEST_F(AtController, FollowsAGcodeProgramToItsEndPoint)
   for (size_t k = 0; k < sent.size(); ++k)
   {
     ASSERT_EQ(sent[k], planned[k]) << "setpoint " << k;
+  }
+  // The jerk-limited profile passes the square's corners (90 degrees, and the turns back where the
+  // half circle begins and ends) within the node's ~path_tolerance, 10 um, of the program's path
+  // as the controller receives it; the half circle is cut in chords of 10 um sagitta, so 20 um
+  // from the true circle there, plus the rounding to whole pulses.
+  if (profile == "scurve")
+  {
+    double worst = 0.0;
+    size_t worst_at = 0;
+    for (size_t k = 0; k < sent.size(); ++k)
+    {
+      const double d = distanceFromSquare(start_position, sent[k][1], sent[k][3], sent[k][5]);  // fx px fy py fz pz
+      if (d > worst)
+      {
+        worst = d;
+        worst_at = k;
+      }
+    }
+    EXPECT_LE(worst, 21.0) << "um from the program's path, at setpoint " << worst_at << " of " << sent.size() << ": "
+                           << sent[worst_at][1] << " " << sent[worst_at][3] << " " << sent[worst_at][5] << "; start "
+                           << start_position;
   }
 }
 

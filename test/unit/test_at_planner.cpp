@@ -3,8 +3,10 @@
 // that decelerates along the path without a jump.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <iostream>
+#include <limits>
 
 #include "cnc_bridge/at_protocol/planner.h"
 #include "cnc_bridge/common/error.h"
@@ -382,7 +384,8 @@ TEST(AtPlannerSCurve, ArcStaysWithinTheChordTolerance)
     worst = std::max(worst, std::fabs(std::hypot(p[0], p[1]) - r));
   }
   EXPECT_LE(worst, 2 * tol) << "pulses off the circle";
-  std::cout << "S-curve on a chorded 20 mm circle: at most " << worst << " um off the circle\n";
+  std::cout << "S-curve on a chorded 20 mm circle: at most " << worst << " um off the circle, " << s.total()
+            << " setpoints\n";
   const Ratios ratios = worstRatios(out.positions, limits);
   EXPECT_LE(ratios.jerk, 1.0 + 1e-6);
 }
@@ -457,4 +460,129 @@ TEST(AtPlanner, TheRestOfAPathStoppedAtACornerOrAtItsEnd)
   EXPECT_TRUE(at_end.empty());
   EXPECT_EQ(at_end.points, std::vector<Vec3>{mm(20, 10, 0)});
   EXPECT_THROW(restOfPath(points, {40.0}, 0.0, mm(0, 0, 0)), ConfigError);
+}
+
+// ---- The path tolerance: corners within it, the jerk limit held ----
+
+namespace
+{
+/// The furthest any streamed position passes from the polyline \p corners (pulses).
+double worstDistanceFromPath(const std::vector<Vec3>& positions, const std::vector<Vec3>& corners)
+{
+  double worst = 0.0;
+  for (const Vec3& p : positions)
+  {
+    double nearest = 1e300;
+    for (size_t k = 1; k < corners.size(); ++k)
+    {
+      const Vec3& a = corners[k - 1];
+      const Vec3& b = corners[k];
+      double ab2 = 0, t = 0;
+      for (int i = 0; i < 3; ++i)
+      {
+        ab2 += (b[i] - a[i]) * (b[i] - a[i]);
+        t += (p[i] - a[i]) * (b[i] - a[i]);
+      }
+      t = ab2 > 0 ? std::clamp(t / ab2, 0.0, 1.0) : 0.0;
+      double d2 = 0;
+      for (int i = 0; i < 3; ++i)
+      {
+        const double d = p[i] - (a[i] + t * (b[i] - a[i]));
+        d2 += d * d;
+      }
+      nearest = std::min(nearest, std::sqrt(d2));
+    }
+    worst = std::max(worst, nearest);
+  }
+  return worst;
+}
+
+/// A corner: from the origin 10 mm along X, then 10 mm turned by \p degrees.
+std::vector<Vec3> corner(double degrees)
+{
+  const double turn = degrees * M_PI / 180.0;
+  return {mm(0, 0, 0), mm(10, 0, 0), mm(10 + 10 * std::cos(turn), 10 * std::sin(turn), 0)};
+}
+
+/// The limits of the square that cut its corners by 86 um: jerk 10 m/s^3, 0.5 m/s^2.
+PlannerLimits squareLimits(double tolerance_mm)
+{
+  PlannerLimits limits = scurveLimits();
+  limits.max_accel = {500.0, 500.0, 250.0};
+  limits.max_jerk = {10000.0, 10000.0, 5000.0};
+  limits.path_tolerance = tolerance_mm;
+  return limits;
+}
+
+const std::vector<Vec3> kSquare = {mm(0, 0, 0), mm(20, 0, 0), mm(20, 20, 0), mm(0, 20, 0), mm(0, 0, 0)};
+}  // namespace
+
+TEST(AtPlannerPathTolerance, TheSquaresCornersArePassedWithinTheToleranceWithTheJerkLimitHeld)
+{
+  for (const double tolerance : {0.01, 0.002, 0.0})
+  {
+    const PlannerLimits limits = squareLimits(tolerance);
+    TrajectoryStream s(Trajectory(kSquare, 40.0, limits));
+    const Streamed out = stream(s);
+    const double worst = worstDistanceFromPath(out.positions, kSquare);
+    EXPECT_LE(worst, tolerance * kPulsesPerMm + 1e-6) << "tolerance " << tolerance << " mm";
+    const Ratios r = worstRatios(out.positions, limits);
+    EXPECT_LE(r.jerk, 1.0 + 1e-6) << "tolerance " << tolerance;
+    EXPECT_LE(r.accel, 1.0 + 1e-6) << "tolerance " << tolerance;
+    EXPECT_EQ(out.positions.back(), kSquare.back());
+  }
+}
+
+TEST(AtPlannerPathTolerance, WithoutItTheMovingAverageCutsTheSquaresCornersFarOutside)
+{
+  // What the tolerance is for: a tolerance so loose that no corner is held shows the cut.
+  TrajectoryStream s(Trajectory(kSquare, 40.0, squareLimits(1000.0)));
+  EXPECT_GT(worstDistanceFromPath(stream(s).positions, kSquare), 50.0) << "pulses: the cut the tolerance prevents";
+}
+
+TEST(AtPlannerPathTolerance, CornersOfEveryAngleAtSeveralFeedsStayWithinIt)
+{
+  for (const double degrees : {10.0, 30.0, 60.0, 90.0, 120.0, 150.0, 175.0})
+  {
+    for (const double feed : {5.0, 20.0, 40.0})
+    {
+      const PlannerLimits limits = squareLimits(0.01);
+      const std::vector<Vec3> path = corner(degrees);
+      TrajectoryStream s(Trajectory(path, feed, limits));
+      const Streamed out = stream(s);
+      EXPECT_LE(worstDistanceFromPath(out.positions, path), 10.0 + 1e-6) << degrees << " deg at " << feed << " mm/s";
+      EXPECT_LE(worstRatios(out.positions, limits).jerk, 1.0 + 1e-6) << degrees << " deg at " << feed << " mm/s";
+    }
+  }
+}
+
+TEST(AtPlannerPathTolerance, AGentleCornerIsSlowedThroughAZoneNotStoppedOn)
+{
+  // 10 degrees at 20 mm/s: taken slower (as slow as the corner's own acceleration rule asks, or
+  // slower through a zone around it), never a stop and a hold; the legs away from it at the feed.
+  const Trajectory t(corner(10.0), 20.0, squareLimits(0.01));
+  const auto& segments = t.segments();
+  const auto at_corner = std::find_if(segments.begin(), segments.end(),
+                                      [](const Trajectory::Segment& s) {
+                                        return std::fabs(s.start[0] - 10000.0) < 1e-6 && std::fabs(s.start[1]) < 1e-6;
+                                      });
+  ASSERT_NE(at_corner, segments.end());
+  EXPECT_EQ(at_corner->dwell, 0.0);
+  EXPECT_GT(at_corner->v_entry, 100.0) << "pulses/s through the corner: not stopped";
+  double fastest = 0;
+  for (const auto& s : segments)
+  {
+    fastest = std::max(fastest, s.v_cruise);
+  }
+  EXPECT_NEAR(fastest, 20000.0, 1.0) << "the legs away from the corner at the feed";
+}
+
+TEST(AtPlannerPathTolerance, ANegativeOrNoNumberToleranceIsRefused)
+{
+  for (const double tolerance : {-0.01, std::nan(""), std::numeric_limits<double>::infinity()})
+  {
+    PlannerLimits limits = scurveLimits();
+    limits.path_tolerance = tolerance;
+    EXPECT_THROW(limits.validate(), ConfigError) << tolerance;
+  }
 }

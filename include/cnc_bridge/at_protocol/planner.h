@@ -40,8 +40,15 @@ struct PlannerLimits
   double corner_share = 0.2;
   Profile profile = Profile::kTrapezoid;
   Vec3 max_jerk{10000.0, 10000.0, 5000.0};  ///< mm/s^3 per axis (held by the S-curve profile)
+  /// mm: how far the S-curve's path may pass from a corner (LinuxCNC's G64 P). The moving average
+  /// mixes the two legs of a corner over its window; a corner whose mix would pass further is taken
+  /// slower, or, where no speed is slow enough, stopped on and held for a window, so that the
+  /// average never mixes its legs (an exact stop). 0: every corner so. The trapezoid follows the
+  /// polyline itself and ignores it.
+  double path_tolerance = 0.01;
 
-  /// \throws ConfigError if a value is not positive or corner_share is not in (0, 1).
+  /// \throws ConfigError if a value is not positive, corner_share is not in (0, 1) or
+  /// path_tolerance is negative or not finite.
   void validate() const;
   /// \brief Samples the S-curve averages over: n = max over the axes of ceil(2 a / (j period)), so
   /// that a moving average of n samples of a trapezoid that keeps acceleration a keeps jerk j (a
@@ -124,17 +131,29 @@ class Trajectory
     double v_max = 0.0;  ///< pulses/s
     double v_entry = 0.0, v_cruise = 0.0, v_exit = 0.0;
     double t_accel = 0.0, t_cruise = 0.0, t_decel = 0.0;
-    double t_start = 0.0;  ///< s from the start of the trajectory
+    double t_start = 0.0;  ///< s from the start of the trajectory (the start of its dwell)
     double s_start = 0.0;  ///< pulses from the start of the trajectory
+    double dwell = 0.0;    ///< s at rest on start before moving: an exact stop at a corner
   };
   const std::vector<Segment>& segments() const { return segments_; }
 
  private:
   void plan(const std::vector<Vec3>& points, const std::vector<double>& feeds, double entry_speed);
+  /// S-curve: plans again, slower through (or stopping on) each corner whose moving average passes
+  /// further from the path than limits_.path_tolerance.
+  void holdPathTolerance(double entry_speed);
+  /// For each corner k (the start of segment k), the furthest the moving average of \p window
+  /// samples passes from the path while its window holds that corner (pulses).
+  std::vector<double> cornerDeviations(size_t window) const;
+  /// Whether segment \p k starts with a change of direction.
+  bool isCorner(size_t k) const;
   static Sample sampleSegment(const Segment& segment, double tau);
 
   PlannerLimits limits_;
   std::vector<Segment> segments_;
+  std::vector<double> corner_caps_;     ///< pulses/s at corner k at most (holdPathTolerance())
+  std::vector<double> corner_dwells_;   ///< s held at corner k
+  std::vector<size_t> refined_corner_;  ///< for each point planned, the corner of the path it is (0: none)
   Vec3 start_{};
   Vec3 end_{};
   double duration_ = 0.0;

@@ -47,6 +47,10 @@ void PlannerLimits::validate() const
       throw ConfigError(std::string("planner: max jerk of axis ") + "XYZ"[i] + " must be positive");
     }
   }
+  if (!(path_tolerance >= 0.0) || !std::isfinite(path_tolerance))
+  {
+    throw ConfigError("planner: the path tolerance must be a distance from 0 (mm)");
+  }
 }
 
 size_t PlannerLimits::smoothingWindow() const
@@ -128,6 +132,7 @@ Trajectory::Trajectory(const std::vector<Vec3>& points, const std::vector<double
     }
   }
   plan(points, feeds, std::max(0.0, entry_speed));
+  holdPathTolerance(std::max(0.0, entry_speed));
 }
 
 void Trajectory::plan(const std::vector<Vec3>& points, const std::vector<double>& feeds, double entry_speed)
@@ -168,6 +173,7 @@ void Trajectory::plan(const std::vector<Vec3>& points, const std::vector<double>
     }
     segment.v_max = v_max;
     segment.accel = (1.0 - share) * accel;
+    segment.dwell = segments_.size() < corner_dwells_.size() ? corner_dwells_[segments_.size()] : 0.0;
     segments_.push_back(segment);
     from = points[p];
   }
@@ -193,7 +199,7 @@ void Trajectory::plan(const std::vector<Vec3>& points, const std::vector<double>
         limit = std::min(limit, share * limits_.max_accel[i] * kPulsesPerMm * dt / jump);
       }
     }
-    junction[k] = limit;
+    junction[k] = k < corner_caps_.size() ? std::min(limit, corner_caps_[k]) : limit;
   }
   junction[n] = 0.0;  // end at rest
 
@@ -232,12 +238,253 @@ void Trajectory::plan(const std::vector<Vec3>& points, const std::vector<double>
     s.t_cruise = s.v_cruise > 0.0 ? d_cruise / s.v_cruise : 0.0;
     s.t_start = t;
     s.s_start = s_total;
-    t += s.t_accel + s.t_cruise + s.t_decel;
+    t += s.dwell + s.t_accel + s.t_cruise + s.t_decel;
     s_total += s.length;
     v = s.v_exit;
   }
   duration_ = t;
   length_ = s_total;
+}
+
+namespace
+{
+/// Distance from \p p to the segment \p s (pulses).
+double distanceToSegment(const Vec3& p, const Trajectory::Segment& s)
+{
+  double along = 0.0;
+  for (int i = 0; i < 3; ++i)
+  {
+    along += (p[i] - s.start[i]) * s.direction[i];
+  }
+  along = std::clamp(along, 0.0, s.length);
+  Vec3 off;
+  for (int i = 0; i < 3; ++i)
+  {
+    off[i] = p[i] - (s.start[i] + s.direction[i] * along);
+  }
+  return norm(off);
+}
+
+/// The segment holding \p distance along the path (the last one past its end).
+size_t segmentAt(const std::vector<Trajectory::Segment>& segments, double distance)
+{
+  auto it = std::upper_bound(segments.begin(), segments.end(), distance,
+                             [](double d, const Trajectory::Segment& s) { return d < s.s_start; });
+  return it == segments.begin() ? 0 : static_cast<size_t>(std::prev(it) - segments.begin());
+}
+}  // namespace
+
+std::vector<double> Trajectory::cornerDeviations(size_t window) const
+{
+  // The stream's moving average (TrajectoryStream::next) replayed: a ring of the last window
+  // trapezoid samples, the start point before the start and the end point after the end.
+  std::vector<double> worst(segments_.size(), 0.0);
+  std::vector<Vec3> ring(window, start_);
+  std::vector<double> ring_distance(window, 0.0);
+  Vec3 sum{};
+  for (int i = 0; i < 3; ++i)
+  {
+    sum[i] = start_[i] * static_cast<double>(window);
+  }
+  const size_t total = steps() + window - 1;
+  for (size_t k = 1; k <= total; ++k)
+  {
+    const Sample raw = step(std::min(k, steps()));
+    const size_t slot = k % window;
+    for (int i = 0; i < 3; ++i)
+    {
+      sum[i] += raw.position[i] - ring[slot][i];
+    }
+    ring[slot] = raw.position;
+    ring_distance[slot] = raw.distance;
+    // The window spans [oldest, newest] along the path: a corner inside it is being mixed.
+    const double newest = raw.distance;
+    const double oldest = ring_distance[(k + 1) % window];
+    const size_t first = segmentAt(segments_, oldest), last = segmentAt(segments_, newest);
+    if (first == last)
+    {
+      continue;  // one segment: the mean of points on a line lies on it
+    }
+    Vec3 mean;
+    for (int i = 0; i < 3; ++i)
+    {
+      mean[i] = sum[i] / static_cast<double>(window);
+    }
+    double deviation = kInf;
+    for (size_t j = first; j <= last; ++j)
+    {
+      deviation = std::min(deviation, distanceToSegment(mean, segments_[j]));
+    }
+    // Charged to the corner nearest the window's middle (a point between two segments of one
+    // direction, where a slow zone begins, is no corner).
+    const double middle = (oldest + newest) / 2.0;
+    size_t corner = 0;
+    for (size_t j = first + 1; j <= last; ++j)
+    {
+      if (isCorner(j) &&
+          (corner == 0 || std::fabs(segments_[j].s_start - middle) < std::fabs(segments_[corner].s_start - middle)))
+      {
+        corner = j;
+      }
+    }
+    if (corner != 0)
+    {
+      worst[corner] = std::max(worst[corner], deviation);
+    }
+  }
+  return worst;
+}
+
+bool Trajectory::isCorner(size_t k) const
+{
+  if (k == 0 || k >= segments_.size())
+  {
+    return false;
+  }
+  double change = 0.0;
+  for (int i = 0; i < 3; ++i)
+  {
+    change += std::fabs(segments_[k].direction[i] - segments_[k - 1].direction[i]);
+  }
+  return change > 1e-9;
+}
+
+namespace
+{
+/// The polyline to plan: each corner k of \p base with a speed cap gets a slow zone, a stretch of
+/// \p zone(k) on either side followed at the cap (so that the whole window of the moving average
+/// around the corner moves at it, not only the corner point); \p dwells[k] marks an exact stop.
+struct Refined
+{
+  std::vector<Vec3> points;
+  std::vector<double> feeds;        ///< mm/s per segment
+  std::vector<double> dwell_at;     ///< s held at each point
+  std::vector<size_t> base_corner;  ///< the base corner each point is, or 0 for a zone's edge
+};
+
+Refined refine(const std::vector<Vec3>& base, const std::vector<double>& base_feeds, const std::vector<double>& caps,
+               const std::vector<double>& dwells, double half_window)
+{
+  Refined out;
+  auto add = [&out](const Vec3& point, double dwell, size_t corner)
+  {
+    out.points.push_back(point);
+    out.dwell_at.push_back(dwell);
+    out.base_corner.push_back(corner);
+  };
+  add(base[0], 0.0, 0);
+  for (size_t k = 0; k + 1 < base.size(); ++k)
+  {
+    Vec3 delta;
+    for (int i = 0; i < 3; ++i)
+    {
+      delta[i] = base[k + 1][i] - base[k][i];
+    }
+    const double length = norm(delta);
+    // A zone long enough that the window around the corner stays in it: half a window at the
+    // cap, and a quarter more.
+    auto zone = [&](size_t c) { return std::isfinite(caps[c]) ? 1.25 * caps[c] * kPulsesPerMm * half_window : 0.0; };
+    double lead = k > 0 ? zone(k) : 0.0, trail = k + 2 < base.size() ? zone(k + 1) : 0.0;
+    if (lead + trail > length)
+    {
+      const double scale = length / (lead + trail);
+      lead *= scale;
+      trail *= scale;
+    }
+    auto at = [&](double along)
+    {
+      return Vec3{base[k][0] + delta[0] * along / length, base[k][1] + delta[1] * along / length,
+                  base[k][2] + delta[2] * along / length};
+    };
+    const double lead_feed = std::min(base_feeds[k], caps[k]);
+    const double trail_feed = trail > kSamePoint ? std::min(base_feeds[k], caps[k + 1]) : base_feeds[k];
+    if (lead >= length - kSamePoint)
+    {
+      out.feeds.push_back(std::min(lead_feed, trail_feed));  // the whole segment is a slow zone
+    }
+    else
+    {
+      if (lead > kSamePoint)
+      {
+        add(at(lead), 0.0, 0);
+        out.feeds.push_back(lead_feed);
+      }
+      if (length - trail > lead + kSamePoint && trail > kSamePoint)
+      {
+        add(at(length - trail), 0.0, 0);
+        out.feeds.push_back(base_feeds[k]);
+      }
+      out.feeds.push_back(trail_feed);
+    }
+    add(base[k + 1], dwells[k + 1], k + 1);
+  }
+  return out;
+}
+}  // namespace
+
+void Trajectory::holdPathTolerance(double entry_speed)
+{
+  const size_t window = limits_.smoothingWindow();
+  if (window <= 1 || segments_.size() < 2)
+  {
+    return;
+  }
+  const double tolerance = limits_.path_tolerance * kPulsesPerMm;
+  const double hold = static_cast<double>(window) * limits_.period;
+  // The path as planned (identical points merged), each segment's feed as its speed limit.
+  std::vector<Vec3> base;
+  std::vector<double> base_feeds;
+  for (const Segment& segment : segments_)
+  {
+    base.push_back(segment.start);
+    base_feeds.push_back(segment.v_max / kPulsesPerMm);
+  }
+  base.push_back(end_);
+  std::vector<double> caps(base.size(), kInf);  // mm/s through base corner k
+  std::vector<double> dwells(base.size(), 0.0);
+  // Each pass slows the corners still cut too far, in proportion (at a steady speed through the
+  // corner the cut grows with it); a corner still too far after kSlowingPasses, or already slow,
+  // becomes an exact stop held for a window. A few passes suffice in practice.
+  constexpr int kSlowingPasses = 6;
+  constexpr double kLowSpeed = 0.05;  // mm/s: slower than this is a stop
+  for (int pass = 0; pass <= kSlowingPasses + 1; ++pass)
+  {
+    const std::vector<double> worst = cornerDeviations(window);
+    bool changed = false;
+    for (size_t k = 1; k < segments_.size(); ++k)
+    {
+      const size_t c = refined_corner_.empty() ? k : refined_corner_[k];
+      if (c == 0 || worst[k] <= tolerance + 1e-9 || dwells[c] > 0.0)
+      {
+        continue;
+      }
+      const double speed = std::min(caps[c], segments_[k].v_entry / kPulsesPerMm);
+      if (pass >= kSlowingPasses || tolerance <= 0.0 || speed < kLowSpeed)
+      {
+        caps[c] = 0.0;
+        dwells[c] = hold;
+      }
+      else
+      {
+        caps[c] = speed * 0.9 * tolerance / worst[k];
+      }
+      changed = true;
+    }
+    if (!changed)
+    {
+      return;
+    }
+    const Refined path = refine(base, base_feeds, caps, dwells, hold / 2.0);
+    corner_dwells_ = path.dwell_at;
+    corner_caps_.assign(path.points.size(), kInf);
+    for (size_t k = 0; k < path.points.size(); ++k)
+    {
+      corner_caps_[k] = path.dwell_at[k] > 0.0 ? 0.0 : kInf;
+    }
+    refined_corner_ = path.base_corner;
+    segments_.clear();
+    plan(path.points, path.feeds, entry_speed);
+  }
 }
 
 size_t Trajectory::steps() const
@@ -251,6 +498,7 @@ size_t Trajectory::steps() const
 
 Sample Trajectory::sampleSegment(const Segment& s, double tau)
 {
+  tau = std::max(0.0, tau - s.dwell);  // at rest on the start while it dwells
   double distance = 0.0;
   double speed = 0.0;
   const double a = s.accel;

@@ -1,6 +1,7 @@
 // at_controller_node's parameters (at_controller_node.h; docs/at_controller_node.md, parameters).
 #include "at_controller_node.h"
 
+#include <cmath>
 #include <string>
 
 #include "cnc_bridge/common/error.h"
@@ -40,6 +41,16 @@ ap::PlannerLimits plannerLimits(const ros::NodeHandle& pnh)
   {
     limits.max_jerk[i] = params::positive(pnh, std::string("max_jerk_") + axes[i], jerk[i]) * 1000.0;
   }
+  // ~path_tolerance (m, default 0.00001): how far the scurve profile may pass from a corner
+  // (LinuxCNC's G64 P); a corner it would cut further is taken slower, or stopped on; 0 stops on
+  // every corner.
+  const double tolerance = pnh.param("path_tolerance", limits.path_tolerance / 1000.0);
+  if (!(tolerance >= 0.0) || !std::isfinite(tolerance) || tolerance > 0.01)
+  {
+    throw ConfigError(pnh.resolveName("path_tolerance") + " must be a distance from 0 to 0.01 m, not " +
+                      std::to_string(tolerance));
+  }
+  limits.path_tolerance = tolerance * 1000.0;
   limits.validate();
   return limits;
 }
