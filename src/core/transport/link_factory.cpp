@@ -75,6 +75,6 @@ std::unique_ptr<Transport> openLink(const LinkSettings& settings)
 LinkFactory linkFactory(LinkSettings settings)
 {
   settings.validate();
-  return [settings] { return openLink(settings); };
+  return [settings = std::move(settings)] { return openLink(settings); };
 }
 }  // namespace cnc_bridge
