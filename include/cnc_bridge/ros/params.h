@@ -50,6 +50,21 @@ T required(const ros::NodeHandle& pnh, const std::string& name)
   return value;
 }
 
+/// \brief \p read() (a parameter's value parsed), its ConfigError prefixed with the resolved name of
+/// parameter \p name: "/cell/bus/slave_bus_node/framing: framing must be raw or framed, not 'x'".
+template <class Read>
+auto naming(const ros::NodeHandle& pnh, const std::string& name, Read read) -> decltype(read())
+{
+  try
+  {
+    return read();
+  }
+  catch (const ConfigError& e)
+  {
+    throw ConfigError(pnh.resolveName(name) + ": " + e.what());
+  }
+}
+
 /// \brief Reads a positive number; logs and falls back to \p fallback if the value is not positive.
 double positive(const ros::NodeHandle& pnh, const std::string& name, double fallback);
 

@@ -87,20 +87,6 @@ SoftLimits softLimits(const ros::NodeHandle& pnh, const std::string& name)
 
 namespace
 {
-/// \p read(), its ConfigError prefixed with the resolved name of the parameter it reads.
-template <class Read>
-auto naming(const ros::NodeHandle& pnh, const std::string& name, Read read) -> decltype(read())
-{
-  try
-  {
-    return read();
-  }
-  catch (const ConfigError& e)
-  {
-    throw ConfigError(pnh.resolveName(name) + ": " + e.what());
-  }
-}
-
 /// An integer parameter that must lie in \p low..\p high; \p fallback when not set.
 unsigned boundedInt(const ros::NodeHandle& pnh, const std::string& name, int fallback, int low, int high)
 {
