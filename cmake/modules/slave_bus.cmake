@@ -6,13 +6,14 @@ cnc_core_module(cnc_bridge_slave_bus
   src/core/slave_bus/bus_session.cpp
   src/core/slave_bus/slave_table.cpp
   src/core/slave_bus/step_queue.cpp
-  src/core/slave_bus/bus_monitor.cpp)
+  src/core/slave_bus/bus_monitor.cpp
+  src/core/slave_bus/bus_runner.cpp)
 # The simulated master (a peer model, not shipped in the protocol library): sim_slave_bus and tests.
 cnc_sim_library(cnc_bridge_slave_bus_sim src/sim/slave_bus/sim_master.cpp)
 target_link_libraries(cnc_bridge_slave_bus_sim PUBLIC cnc_bridge_slave_bus)
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   cnc_core_gtest(test_slave_bus test/unit/test_slave_bus.cpp test/unit/test_slave_bus_session.cpp
-    test/unit/test_slave_bus_table.cpp)
+    test/unit/test_slave_bus_table.cpp test/unit/test_slave_bus_runner.cpp)
   target_link_libraries(test_slave_bus cnc_bridge_slave_bus_sim)
 endif()
 cnc_tool(sim_slave_bus src/sim/sim_slave_bus.cpp)
@@ -25,7 +26,7 @@ if(CNC_BRIDGE_FUZZ)
   target_link_libraries(fuzz_slave_bus_master cnc_bridge_slave_bus_sim)
 endif()
 if(NOT CNC_BRIDGE_CORE_ONLY)
-  cnc_node(slave_bus_node src/ros/nodes/slave_bus_node.cpp)
+  cnc_node(slave_bus_node src/ros/nodes/slave_bus_node.cpp src/ros/nodes/slave_bus_params.cpp)
   target_link_libraries(slave_bus_node cnc_bridge_slave_bus)
   if(CATKIN_ENABLE_TESTING)
     add_rostest_gtest(test_slave_bus_node test/rostest/slave_bus_node.test test/rostest/test_slave_bus_node.cpp)

@@ -8,6 +8,7 @@
 #include <fstream>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <sstream>
 
 #include "cnc_bridge/common/error.h"
@@ -80,42 +81,56 @@ std::function<void(uint8_t, const std::vector<uint8_t>&)> deliveryLogger(const s
     *out << std::endl;
   };
 }
-}  // namespace
-
-int main(int argc, char** argv)
+/// The command line (--help lists it).
+struct CommandLine
 {
-  namespace po = boost::program_options;
-  po::options_description options("sim_slave_bus options");
   std::string link, framing, wirepacker_crc, delivery_log, pid_file;
   std::vector<std::string> slave_specs;
   std::vector<unsigned> noisy_slaves;
   unsigned baud = 0, resync_gap_ms = 0, corrupt_every = 0, max_payload = 0;
-  options.add_options()("help,h", "this help")("link", po::value(&link),
+  bool verbose = false;
+};
+
+boost::program_options::options_description describeOptions(CommandLine& args)
+{
+  namespace po = boost::program_options;
+  po::options_description options("sim_slave_bus options");
+  options.add_options()("help,h", "this help")("link", po::value(&args.link),
                                                "symbolic link to create to the pty device (default: none)")(
-      "framing", po::value(&framing)->default_value("raw"), "raw (the paper's bytes) or framed (WirePacker + CRC-8)")(
-      "slave", po::value(&slave_specs)->composing(),
+      "framing", po::value(&args.framing)->default_value("raw"),
+      "raw (the paper's bytes) or framed (WirePacker + CRC-8)")(
+      "slave", po::value(&args.slave_specs)->composing(),
       "ADDR:ROLE[:ENCODING], repeatable, addresses 1..N in order; ROLE axis|tool|generic, ENCODING "
       "bytes|hundreds|be16|be16s (default: 3 be16s axes, a tool, 4 generic slaves)")(
-      "baud", po::value(&baud)->default_value(0),
+      "baud", po::value(&args.baud)->default_value(0),
       "time the uplink as a line of this rate, 8N1: each byte reaches the PC when a UART would have finished "
       "it (0: unpaced)")(
-      "resync-gap-ms", po::value(&resync_gap_ms)->default_value(0),
+      "resync-gap-ms", po::value(&args.resync_gap_ms)->default_value(0),
       "silence after which a partial frame from the PC is dropped; raw: 0 = never (as the paper's firmware); "
       "framed: always resynchronises, 0 = 100 ms")(
-      "wirepacker-crc", po::value(&wirepacker_crc)->default_value("spec"),
+      "wirepacker-crc", po::value(&args.wirepacker_crc)->default_value("spec"),
       "spec (CRC over length and data, as the packet format documents) or library (data only, as the "
       "ESP32_I2C_Slave library's released code computes it): I2C frames and the framed link")(
-      "max-payload", po::value(&max_payload)->default_value(0),
+      "max-payload", po::value(&args.max_payload)->default_value(0),
       "most data bytes of one WirePacker frame (each slave's payload, a framed step); longer payloads are "
       "reported with status 4 (0: 251 for spec, 124 for library, the library's 128-byte buffers)")(
-      "noisy-slave", po::value(&noisy_slaves)->composing(),
+      "noisy-slave", po::value(&args.noisy_slaves)->composing(),
       "ADDR, repeatable: this slave's I2C answers fail the master's CRC check (status 3)")(
-      "corrupt-uplink-every", po::value(&corrupt_every)->default_value(0),
+      "corrupt-uplink-every", po::value(&args.corrupt_every)->default_value(0),
       "corrupt one byte of every Nth uplink write (0: never)")(
-      "delivery-log", po::value(&delivery_log),
+      "delivery-log", po::value(&args.delivery_log),
       "append every payload handed to a slave to this file as 'ADDRESS HEX', one per line")(
-      "pid-file", po::value(&pid_file), "write the process id here (a test that stops the simulator reads it)")(
+      "pid-file", po::value(&args.pid_file), "write the process id here (a test that stops the simulator reads it)")(
       "verbose,v", "log every frame on stderr");
+  return options;
+}
+
+/// Reads the command line into \p args. \returns the exit status when there is nothing to serve
+/// (--help: 0; a wrong option: 2, with the options listed).
+std::optional<int> parseCommandLine(int argc, char** argv, CommandLine& args)
+{
+  namespace po = boost::program_options;
+  const po::options_description options = describeOptions(args);
   po::variables_map vm;
   try
   {
@@ -133,67 +148,96 @@ int main(int argc, char** argv)
     std::cout << options;
     return 0;
   }
+  args.verbose = vm.count("verbose") > 0;
+  return std::nullopt;
+}
+
+/// The slaves of --slave (or the default bus), with --noisy-slave's marked noisy.
+std::vector<SimSlave> makeSlaves(const CommandLine& args)
+{
+  std::vector<SimSlave> slaves;
+  for (const auto& spec : args.slave_specs.empty() ? kDefaultSlaves : args.slave_specs)
+  {
+    slaves.push_back(parseSlave(spec));
+  }
+  for (const unsigned address : args.noisy_slaves)
+  {
+    if (address < 1 || address > slaves.size())
+    {
+      throw ConfigError("--noisy-slave " + std::to_string(address) + " is not one of the slaves 1.." +
+                        std::to_string(slaves.size()));
+    }
+    slaves[address - 1].setNoisy(true);
+  }
+  return slaves;
+}
+
+SimMaster::Options masterOptions(const CommandLine& args)
+{
+  SimMaster::Options options;
+  options.framing = parseFraming(args.framing);
+  options.resync_gap = Milliseconds(args.resync_gap_ms);
+  options.corrupt_uplink_every = args.corrupt_every;
+  options.wire = WireFormat::of(parseWireCrc(args.wirepacker_crc), args.max_payload);
+  if (!args.delivery_log.empty())
+  {
+    options.on_delivery = deliveryLogger(args.delivery_log);
+  }
+  return options;
+}
+
+void printStats(const SimMaster::Stats& s)
+{
+  std::cerr << "sim_slave_bus: " << s.frames << " frames, " << s.deliveries << " payloads, " << s.bad_frames
+            << " bad frames, " << s.unknown_slaves << " for unknown slaves, " << s.oversize_payloads << " too long, "
+            << s.slave_errors << " failed slave reads, " << s.resyncs << " resyncs, " << s.uplink_records
+            << " uplink records\n";
+}
+
+/// Serves the pty until stopped. \throws ConfigError for a wrong option, LinkError.
+void serve(const CommandLine& args)
+{
+  auto& stop = sim::installStopHandler();
+  std::vector<SimSlave> slaves = makeSlaves(args);
+  const SimMaster::Options options = masterOptions(args);
+  PtyMaster pty(args.link);
+  sim::onStop([&pty] { pty.interrupt(); });
+  // The uplink reaches the PC when a UART at --baud would have finished each byte, not before.
+  std::unique_ptr<PacedTransport> timed;
+  Transport* transport = &pty;
+  if (args.baud > 0)
+  {
+    timed = std::make_unique<PacedTransport>(pty, args.baud / static_cast<double>(bitsPerCharacter(8, false, 1)),
+                                             PacedTransport::Release::kWhenSent);
+    transport = timed.get();
+  }
+  if (args.verbose)
+  {
+    setLogHandler([](LogLevel level, const std::string& line)
+                  { std::cerr << toString(level) << ": " << line << "\n"; });
+  }
+  SimMaster master(*transport, std::move(slaves), options);
+  if (!args.pid_file.empty())
+  {
+    sim::writePidFile(args.pid_file);
+  }
+  sim::announce("sim_slave_bus", "pty " + pty.slavePath());
+  master.run(stop);
+  printStats(master.stats());
+}
+}  // namespace
+
+int main(int argc, char** argv)
+{
+  CommandLine args;
+  if (const std::optional<int> status = parseCommandLine(argc, argv, args))
+  {
+    return *status;
+  }
   try
   {
-    auto& stop = sim::installStopHandler();
-    std::vector<SimSlave> slaves;
-    for (const auto& spec : slave_specs.empty() ? kDefaultSlaves : slave_specs)
-    {
-      slaves.push_back(parseSlave(spec));
-    }
-    SimMaster::Options sim_options;
-    sim_options.framing = parseFraming(framing);
-    sim_options.resync_gap = Milliseconds(resync_gap_ms);
-    sim_options.corrupt_uplink_every = corrupt_every;
-    sim_options.wire = WireFormat::of(parseWireCrc(wirepacker_crc), max_payload);
-    if (!delivery_log.empty())
-    {
-      sim_options.on_delivery = deliveryLogger(delivery_log);
-    }
-    for (const unsigned address : noisy_slaves)
-    {
-      if (address < 1 || address > slaves.size())
-      {
-        throw ConfigError("--noisy-slave " + std::to_string(address) + " is not one of the slaves 1.." +
-                          std::to_string(slaves.size()));
-      }
-      slaves[address - 1].setNoisy(true);
-    }
-
-    PtyMaster pty(link);
-    sim::onStop([&pty] { pty.interrupt(); });
-    // The uplink reaches the PC when a UART at --baud would have finished each byte, not before.
-    std::unique_ptr<PacedTransport> timed;
-    Transport* transport = &pty;
-    if (baud > 0)
-    {
-      timed = std::make_unique<PacedTransport>(pty, baud / static_cast<double>(bitsPerCharacter(8, false, 1)),
-                                               PacedTransport::Release::kWhenSent);
-      transport = timed.get();
-    }
-    if (vm.count("verbose"))
-    {
-      setLogHandler([](LogLevel level, const std::string& line)
-                    { std::cerr << toString(level) << ": " << line << "\n"; });
-    }
-    SimMaster master(*transport, std::move(slaves), sim_options);
-    if (!pid_file.empty())
-    {
-      sim::writePidFile(pid_file);
-    }
-    sim::announce("sim_slave_bus", "pty " + pty.slavePath());
-    master.run(stop);
-    const auto& s = master.stats();
-    std::cerr << "sim_slave_bus: " << s.frames << " frames, " << s.deliveries << " payloads, " << s.bad_frames
-              << " bad frames, " << s.unknown_slaves << " for unknown slaves, " << s.oversize_payloads << " too long, "
-              << s.slave_errors << " failed slave reads, " << s.resyncs << " resyncs, " << s.uplink_records
-              << " uplink records\n";
+    serve(args);
     return 0;
-  }
-  catch (const LinkError& e)
-  {
-    std::cerr << "sim_slave_bus: " << e.what() << std::endl;
-    return 1;
   }
   catch (const std::exception& e)
   {

@@ -70,6 +70,18 @@ class NodeErrors(unittest.TestCase):
         self.assertRefused("ethernut_node", ["host:=127.0.0.1", "g53_moves:=ignore"],
                            "g53_moves must be one of refuse, skip, not 'ignore'")
 
+    def test_a_link_parameter_that_cannot_be_used(self):
+        """A serial port that is neither a device nor a device server's address, or a line setting
+        out of range, stops the node at start naming the parameter (params::serialLink), instead of
+        a link that fails at every reconnection."""
+        self.assertRefused("slave_bus_node", ["port:=telnet2://10.0.0.5:23"],
+                           "/node_errors/slave_bus_node_errors/port: serial port 'telnet2://10.0.0.5:23': "
+                           "unknown kind of link")
+        self.assertRefused("dprnt_node", ["input:=serial", "port:=/dev/null", "stop_bits:=3"],
+                           "/node_errors/dprnt_node_errors/stop_bits must be 1..2, not 3")
+        self.assertRefused("haas_mdc_node", ["port:=/dev/null", "parity:=mark"],
+                           "/node_errors/haas_mdc_node_errors/parity: parity must be none, even or odd, not 'mark'")
+
     def assertRequired(self, node, params, parameter):
         """`node` without `parameter` stops, naming its resolved name and the launch argument."""
         self.assertRefused(node, params,

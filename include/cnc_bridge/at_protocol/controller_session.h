@@ -25,6 +25,7 @@
 #include "cnc_bridge/common/program_dir.h"
 #include "cnc_bridge/common/soft_limits.h"
 #include "cnc_bridge/gcode/gcode.h"
+#include "cnc_bridge/transport/link_factory.h"
 #include "cnc_bridge/transport/reconnecting_link.h"
 
 namespace cnc_bridge
@@ -104,17 +105,21 @@ struct ControllerLinks
 /// \brief Where the controller's servers are (docs/at_controller_node.md, parameters).
 struct TcpLinkSettings
 {
-  std::string host = "127.0.0.1";
-  uint16_t command_port = 5000;  ///< the controller's command server (the paper's server_recv)
-  bool report_server = false;    ///< we listen for the controller's report connection
-  uint16_t report_port = 5001;   ///< the controller's report server (client mode)
-  uint16_t listen_port = 5001;   ///< our report server (server mode); 0: any free port
-  Milliseconds connect_timeout{2000};
+  /// The controller's command server (the paper's server_recv); its host and connect timeout are
+  /// the report link's too.
+  LinkSettings command = LinkSettings::tcp("127.0.0.1", 5000, Milliseconds(2000));
+  bool report_server = false;   ///< we listen for the controller's report connection
+  uint16_t report_port = 5001;  ///< the controller's report server (client mode)
+  uint16_t listen_port = 5001;  ///< our report server (server mode); 0: any free port
+
+  /// \brief The report link in client mode: the command link's host, report_port.
+  LinkSettings reportLink() const;
 };
 
-/// \brief TCP openers for both links; in server mode the report server listens from here on.
+/// \brief Openers for both links (the link factory's; in server mode the report link is accepted by
+/// a report server, which listens from here on).
 /// \param listening_on set to the report server's address in server mode ("0.0.0.0:5001").
-/// \throws LinkError if the report server cannot listen.
+/// \throws ConfigError for invalid link settings, LinkError if the report server cannot listen.
 ControllerLinks tcpLinks(const TcpLinkSettings& settings, std::string* listening_on = nullptr);
 
 /// \brief A goal of follow_path without ROS types (docs/at_controller_node.md, the action).

@@ -1,19 +1,21 @@
-// RuntimeSwitch: a safety gate (motion, kill) that starts from a private parameter and can be
-// switched while the node runs through a std_srvs/SetBool service (docs/SAFETY.md). The parameter
-// is read once at start-up (`rosparam set` has no effect afterwards), so every refusal names both
-// the service and the parameter; every switch is logged with the caller's node name (the service
-// connection header's callerid) and shown in diagnostics.
+// RuntimeSwitch: the ROS side of a SafetySwitch (cnc_bridge/common/safety_switch.h), the one
+// design of a safety gate (motion, kill; docs/SAFETY.md): it starts from a private parameter and
+// can be switched while the node runs through a std_srvs/SetBool service. The parameter is read
+// once at start-up (`rosparam set` has no effect afterwards), so every refusal names both the
+// service and the parameter; every switch is logged with the caller's node name (the service
+// connection header's callerid) and shown in diagnostics. What a change does is a listener of the
+// core switch (core() hands it to a core session), called under its gate.
 #pragma once
 
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <ros/ros.h>
 #include <std_srvs/SetBool.h>
 
-#include <atomic>
 #include <functional>
-#include <mutex>
+#include <memory>
 #include <string>
 
+#include "cnc_bridge/common/safety_switch.h"
 #include "cnc_bridge/ros/request_boundary.h"
 
 namespace cnc_bridge
@@ -23,7 +25,8 @@ namespace cnc_bridge
 class RuntimeSwitch
 {
  public:
-  /// Called after each change (on the service's thread) with the new value and the caller.
+  /// Called after each change (on the service's thread, under the switch's gate) with the new
+  /// value and the caller.
   using OnChange = std::function<void(bool enabled, const std::string& caller)>;
 
   /// \param what the gated thing in words ("motion", "kill").
@@ -31,44 +34,36 @@ class RuntimeSwitch
   /// \param service private service that switches it.
   RuntimeSwitch(ros::NodeHandle pnh, const std::string& what, const std::string& parameter, const std::string& service,
                 OnChange on_change = nullptr)
-      : what_(what),
-        parameter_(pnh.resolveName(parameter)),
-        service_name_(pnh.resolveName(service)),
-        on_change_(std::move(on_change))
+      : core_(std::make_shared<SafetySwitch>(
+            SafetySwitch::Names{what, pnh.resolveName(service), pnh.resolveName(parameter)},
+            pnh.param(parameter, false)))
   {
-    bool initial = false;
-    pnh.param(parameter, initial, false);
-    enabled_ = initial;
-    last_change_ = std::string("start-up value of ") + parameter_;
+    if (on_change)
+    {
+      core_->subscribe(std::move(on_change));
+    }
     service_ = advertiseGuardedService(pnh, service, &RuntimeSwitch::onSet, this);
   }
 
   /// \brief Sets the value as a change by \p caller would (e.g. a value read from a settings file).
-  void set(bool enabled, const std::string& caller)
-  {
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      enabled_ = enabled;
-      last_change_ = std::string(enabled ? "enabled" : "disabled") + " by " + caller;
-    }
-  }
+  void set(bool enabled, const std::string& caller) { core_->set(enabled, caller); }
 
-  bool enabled() const { return enabled_.load(); }
+  bool enabled() const { return core_->enabled(); }
+
+  /// \brief The core switch, for a core session that gates its motion on it.
+  SafetySwitch& core() { return *core_; }
+  std::shared_ptr<SafetySwitch> shared() { return core_; }
 
   /// \brief "<action> refused: motion is disabled; enable it with <service> (std_srvs/SetBool), or
   /// start the node with <parameter> true".
-  std::string refusal(const std::string& action) const
-  {
-    return action + " refused: " + what_ + " is disabled; enable it with " + service_name_ +
-           " (std_srvs/SetBool, data: true), or start the node with the parameter " + parameter_ + " true";
-  }
+  std::string refusal(const std::string& action) const { return core_->refusal(action); }
 
   /// \brief Adds "<what> enabled" and "<what> last change" to a diagnostics status.
   void addTo(diagnostic_updater::DiagnosticStatusWrapper& status) const
   {
-    std::lock_guard<std::mutex> lock(mutex_);
-    status.add(what_ + " enabled", enabled_.load());
-    status.add(what_ + " last change", last_change_);
+    const std::string what = core_->names().what;
+    status.add(what + " enabled", core_->enabled());
+    status.add(what + " last change", core_->lastChange());
   }
 
  private:
@@ -77,30 +72,17 @@ class RuntimeSwitch
     const bool enable = event.getRequest().data;
     // The connection header's callerid: the node that called, for the log and diagnostics.
     const std::string caller = event.getCallerName().empty() ? "an unnamed caller" : event.getCallerName();
-    bool was;
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      was = enabled_.exchange(enable);
-      last_change_ = std::string(enable ? "enabled" : "disabled") + " by " + caller + " at " +
-                     std::to_string(ros::WallTime::now().toSec());
-    }
-    ROS_WARN_STREAM(service_name_ << ": " << what_ << (enable ? " enabled" : " disabled") << " by " << caller
-                                  << (was == enable ? " (no change)" : ""));
+    const std::string& what = core_->names().what;
+    const bool was = core_->set(enable, caller, std::to_string(ros::WallTime::now().toSec()));
+    ROS_WARN_STREAM(core_->names().service << ": " << what << (enable ? " enabled" : " disabled") << " by " << caller
+                                           << (was == enable ? " (no change)" : ""));
     auto& response = event.getResponse();
     response.success = true;
-    response.message = what_ + (enable ? " enabled" : " disabled") + " by " + caller;
-    if (on_change_)
-      on_change_(enable, caller);
+    response.message = what + (enable ? " enabled" : " disabled") + " by " + caller;
     return true;
   }
 
-  const std::string what_;
-  const std::string parameter_;
-  const std::string service_name_;
-  OnChange on_change_;
-  mutable std::mutex mutex_;  ///< last_change_, and enabled_ together with it
-  std::atomic<bool> enabled_{false};
-  std::string last_change_;
+  std::shared_ptr<SafetySwitch> core_;
   ros::ServiceServer service_;
 };
 }  // namespace cnc_bridge

@@ -10,6 +10,7 @@
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/log.h"
 #include "cnc_bridge/transport/forwarding_transport.h"
+#include "cnc_bridge/transport/link_factory.h"
 #include "cnc_bridge/transport/tcp.h"
 
 namespace cnc_bridge
@@ -50,24 +51,25 @@ class CommandLink : public ForwardingTransport
   std::shared_ptr<Transport> link_;
   std::function<void()> on_interrupt_;
 };
-
-std::string withPort(const std::string& host, uint16_t port)
-{
-  return host + ":" + std::to_string(port);
-}
 }  // namespace
+
+LinkSettings TcpLinkSettings::reportLink() const
+{
+  LinkSettings report = command;
+  report.tcp_port = report_port;
+  return report;
+}
 
 ControllerLinks tcpLinks(const TcpLinkSettings& settings, std::string* listening_on)
 {
   ControllerLinks links;
-  links.command_name = "at_controller command link " + withPort(settings.host, settings.command_port);
-  links.open_command = [settings]
-  { return TcpConnection::connect(settings.host, settings.command_port, settings.connect_timeout); };
+  links.command_name = "at_controller command link " + settings.command.hardwareId();
+  links.open_command = linkFactory(settings.command);
   if (!settings.report_server)
   {
-    links.report_name = "at_controller report link " + withPort(settings.host, settings.report_port);
-    links.open_report = [settings]
-    { return TcpConnection::connect(settings.host, settings.report_port, settings.connect_timeout); };
+    const LinkSettings report = settings.reportLink();
+    links.report_name = "at_controller report link " + report.hardwareId();
+    links.open_report = linkFactory(report);
     links.stop_opening = [] {};
     return links;
   }

@@ -62,7 +62,7 @@ AtControllerNode::AtControllerNode(ros::NodeHandle nh, ros::NodeHandle pnh)
                                            << " is 0: the jog deadman is off, a jog goes on until the next jog, "
                                               "set_auto or a disable, even if its client has gone");
   }
-  state_ = std::make_unique<MachineStatePublisher>(nh, pnh, link.host + ":" + std::to_string(link.command_port));
+  state_ = std::make_unique<MachineStatePublisher>(nh, pnh, link.command.hardwareId());
   // ~enable_motion (start-up value) and ~set_motion_enabled (at run time): nothing that moves
   // axes or turns the spindle is sent unless motion is enabled.
   motion_ = std::make_unique<RuntimeSwitch>(pnh, "motion", "enable_motion", "set_motion_enabled",

@@ -59,10 +59,13 @@ ap::PlannerLimits plannerLimits(const ros::NodeHandle& pnh)
 ap::TcpLinkSettings linkSettings(const ros::NodeHandle& pnh)
 {
   ap::TcpLinkSettings link;
-  // ~host (required): address of the controller (both sockets in client mode).
-  link.host = params::required<std::string>(pnh, "host");
-  // ~tcp_port: the controller's command server (the paper's server_recv).
-  link.command_port = params::tcpPort(pnh, "tcp_port", 5000);
+  // ~host (required): address of the controller (both sockets in client mode); ~tcp_port: the
+  // controller's command server (the paper's server_recv); ~connect_timeout: s allowed for one
+  // TCP connect.
+  params::TcpLinkDefaults defaults;
+  defaults.tcp_port = 5000;
+  defaults.connect_timeout = 2.0;
+  link.command = params::tcpLink(pnh, defaults);
   // ~report_mode: "client" connects to the controller's report server (the paper's server_send,
   // like the add-in's ReceiveClient); "server" listens on ~listen_port for the controller.
   link.report_server = params::choice(pnh, "report_mode", "client", {"client", "server"}) == "server";
@@ -70,8 +73,6 @@ ap::TcpLinkSettings linkSettings(const ros::NodeHandle& pnh)
   link.report_port = params::tcpPort(pnh, "report_port", 5001);
   // ~listen_port: our report server (server mode); 0 picks a free port (logged).
   link.listen_port = params::tcpPort(pnh, "listen_port", 5001, params::PortZero::kMeansAny);
-  // ~connect_timeout: s allowed for one TCP connect.
-  link.connect_timeout = params::seconds(pnh, "connect_timeout", 2.0);
   return link;
 }
 

@@ -13,7 +13,6 @@
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/node_main.h"
 #include "cnc_bridge/transport/backoff.h"
-#include "cnc_bridge/transport/tcp.h"
 #include "mtconnect_node.h"
 
 namespace cnc_bridge
@@ -76,10 +75,8 @@ class MtconnectNode : public mtconnect::FollowerListener
   {
     link_ = readMtconnectLink(pnh);
     model_ = mtconnect::MachineModel(readMapping(pnh));
-    hardware_id_ = "http://" + link_.host + ":" + std::to_string(link_.tcp_port);
-    http_ = std::make_unique<mtconnect::HttpClient>(
-        link_.host + ":" + std::to_string(link_.tcp_port),
-        [this] { return TcpConnection::connect(link_.host, link_.tcp_port, link_.connect_timeout); }, link_.limits);
+    hardware_id_ = "http://" + link_.agent.hardwareId();
+    http_ = std::make_unique<mtconnect::HttpClient>(link_.agent.hardwareId(), linkFactory(link_.agent), link_.limits);
     follower_ = std::make_unique<mtconnect::Follower>(readFollowerSettings(pnh), *http_, *this);
 
     state_ = std::make_unique<MachineStatePublisher>(nh, pnh, hardware_id_);

@@ -9,14 +9,13 @@
 #include "cnc_bridge/mtconnect/follower.h"
 #include "cnc_bridge/mtconnect/http.h"
 #include "cnc_bridge/mtconnect/machine_model.h"
+#include "cnc_bridge/transport/link_factory.h"
 
 namespace cnc_bridge
 {
 struct MtconnectLinkSettings
 {
-  std::string host;
-  uint16_t tcp_port = 0;
-  Milliseconds connect_timeout{3000};
+  LinkSettings agent;  ///< the agent's HTTP port (a TCP link)
   mtconnect::HttpLimits limits;
 };
 

@@ -18,12 +18,13 @@ Milliseconds milliseconds(const ros::NodeHandle& pnh, const std::string& name, d
 MtconnectLinkSettings readMtconnectLink(const ros::NodeHandle& pnh)
 {
   MtconnectLinkSettings link;
-  // ~host: address of the MTConnect agent (a Haas NGC control, a PC running an agent).
-  link.host = params::required<std::string>(pnh, "host");
-  // ~tcp_port: the agent's HTTP port (cppagent's default 5000; a Haas NGC's built-in agent 8082).
-  link.tcp_port = params::tcpPort(pnh, "tcp_port", 5000);
+  // ~host (required): address of the MTConnect agent (a Haas NGC control, a PC running an agent);
+  // ~tcp_port: the agent's HTTP port (cppagent's default 5000; a Haas NGC's built-in agent 8082);
   // ~connect_timeout: s allowed for a TCP connection.
-  link.connect_timeout = params::seconds(pnh, "connect_timeout", 3.0);
+  params::TcpLinkDefaults defaults;
+  defaults.tcp_port = 5000;
+  defaults.connect_timeout = 3.0;
+  link.agent = params::tcpLink(pnh, defaults);
   // ~max_document_bytes: largest document (a probe, one part of the stream) accepted.
   int max_bytes = 16 << 20;
   pnh.param("max_document_bytes", max_bytes, max_bytes);
