@@ -1,6 +1,6 @@
-// sim_slave_bus: a universal-CNC master board with its I2C slaves, on a pty. It runs the paper's
-// receive state machine on the serial link, forwards each payload to its slave as a WirePacker
-// frame, and while idle polls the slaves and writes their answers up the link (the uplink format of
+// sim_slave_bus: a universal-CNC master board with its I2C slaves, on a pty. It runs the receive state machine of the
+// universal-CNC paper (docs/protocols/slave_bus.md#source) on the serial link, forwards each payload to its slave as a
+// WirePacker frame, and while idle polls the slaves and writes their answers up the link (the uplink format of
 // include/cnc_bridge/slave_bus/array_protocol.h). First line: "sim_slave_bus pty <path>".
 
 #include <boost/program_options.hpp>

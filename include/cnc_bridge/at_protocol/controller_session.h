@@ -105,7 +105,7 @@ struct ControllerLinks
 struct TcpLinkSettings
 {
   std::string host = "127.0.0.1";
-  uint16_t command_port = 5000;  ///< the controller's command server (the paper's server_recv)
+  uint16_t command_port = 5000;  ///< the controller's command server (the ESPRIT paper's server_recv)
   bool report_server = false;    ///< we listen for the controller's report connection
   uint16_t report_port = 5001;   ///< the controller's report server (client mode)
   uint16_t listen_port = 5001;   ///< our report server (server mode); 0: any free port

@@ -1,5 +1,5 @@
 // Serial array protocol: step encoder, the master's receive state machine and the uplink codec
-// (see array_protocol.h for the wire formats and how they read the paper).
+// (see array_protocol.h for the wire formats and how they read the universal-CNC paper).
 #include "cnc_bridge/slave_bus/array_protocol.h"
 
 #include <algorithm>
@@ -113,7 +113,7 @@ void StepReceiver::feed(uint8_t byte)
     case State::kSlavesNum:
       if (byte == 0)
       {
-        // An empty frame. The paper's code would enter RS_SLAVE_LEN with slave_n = 0 and count down past
+        // An empty frame. The universal-CNC paper's code would enter RS_SLAVE_LEN with slave_n = 0 and count down past
         // zero; treating it as complete keeps a stray zero from desynchronising the stream.
         ++frames_;
         if (frame_done_)

@@ -50,9 +50,10 @@ ap::TcpLinkSettings linkSettings(const ros::NodeHandle& pnh)
   ap::TcpLinkSettings link;
   // ~host (required): address of the controller (both sockets in client mode).
   link.host = params::required<std::string>(pnh, "host");
-  // ~tcp_port: the controller's command server (the paper's server_recv).
+  // ~tcp_port: the controller's command server (the ESPRIT paper's server_recv,
+  // docs/protocols/at_protocol.md#source).
   link.command_port = params::tcpPort(pnh, "tcp_port", 5000);
-  // ~report_mode: "client" connects to the controller's report server (the paper's server_send,
+  // ~report_mode: "client" connects to the controller's report server (the ESPRIT paper's server_send,
   // like the add-in's ReceiveClient); "server" listens on ~listen_port for the controller.
   link.report_server = params::choice(pnh, "report_mode", "client", {"client", "server"}) == "server";
   // ~report_port: the controller's report server (client mode).

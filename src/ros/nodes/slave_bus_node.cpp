@@ -79,7 +79,7 @@ slave_bus::WireFormat wireFormat(const ros::NodeHandle& pnh)
 }
 
 /// ~slaves: list of {address, name, role (x|y|z|tool|generic), encoding (bytes|hundreds|be16|be16s),
-/// scale (device units per metre, axes only)}; ~bus_size: slaves in every frame (the paper's master
+/// scale (device units per metre, axes only)}; ~bus_size: slaves in every frame (the universal-CNC paper's master
 /// firmware is built for a fixed count, e.g. 8); 0 (default): the highest configured address.
 slave_bus::SlaveTable slaveTable(const ros::NodeHandle& pnh, const slave_bus::WireFormat& wire)
 {
@@ -129,7 +129,7 @@ class SlaveBusNode
   SlaveBusNode(ros::NodeHandle nh, ros::NodeHandle pnh)
       : settings_(params::serialSettings(pnh, 115200)),
         state_(nh, pnh, settings_.describe()),
-        // ~framing: raw (the paper's bytes, for its stock master firmware) or framed (every frame in
+        // ~framing: raw (the universal-CNC paper's bytes, for its stock master firmware) or framed (every frame in
         // a WirePacker frame with CRC-8, both directions; recommended where the firmware supports it).
         framing_(slave_bus::parseFraming(pnh.param<std::string>("framing", "raw"))),
         table_(slaveTable(pnh, wireFormat(pnh))),
