@@ -99,7 +99,7 @@ struct Limits
   double speed = 0, accel = 0, jerk = 0;
 };
 
-int run(int argc, char** argv)
+po::options_description commandLine()
 {
   po::options_description options("cnc_plan: plan an '@' path into 1 ms setpoints (CSV, PNG)");
   options.add_options()("help,h", "this text")("gcode", po::value<std::string>(), "G-code program")(
@@ -121,19 +121,11 @@ int run(int argc, char** argv)
       "~program_commands; false refuses such programs, as the node does by default)")(
       "csv", po::value<std::string>(), "write the setpoints here")("png", po::value<std::string>(),
                                                                    "write a plot here (python3-matplotlib)");
-  po::variables_map vm;
-  po::store(po::parse_command_line(argc, argv, options), vm);
-  if (vm.count("help"))
-  {
-    std::cout << options << "\n";
-    return 0;
-  }
-  po::notify(vm);
-  if (vm.count("gcode") == vm.count("points"))
-  {
-    throw ConfigError("give exactly one of --gcode and --points");
-  }
+  return options;
+}
 
+ap::PlannerLimits readLimits(const po::variables_map& vm)
+{
   ap::PlannerLimits limits;
   limits.max_speed = triple(vm["max-speed"].as<std::string>(), "max-speed");
   limits.max_accel = triple(vm["max-accel"].as<std::string>(), "max-accel");
@@ -148,10 +140,12 @@ int run(int argc, char** argv)
   }
   limits.profile = profile == "scurve" ? ap::Profile::kSCurve : ap::Profile::kTrapezoid;
   limits.validate();
+  return limits;
+}
 
-  const auto t0 = std::chrono::steady_clock::now();
-  const ap::Vec3 mm = triple(vm["start"].as<std::string>(), "start");
-  const ap::Vec3 start{mm[0] * ap::kPulsesPerMm, mm[1] * ap::kPulsesPerMm, mm[2] * ap::kPulsesPerMm};
+// The operations of the program (split as the node splits them) or the one of the point list.
+std::vector<ap::OperationPlan> readPlans(const po::variables_map& vm, const ap::Vec3& start)
+{
   const double feed = vm["feed"].as<double>();
   std::vector<ap::OperationPlan> plans;
   if (vm.count("gcode"))
@@ -181,6 +175,203 @@ int run(int argc, char** argv)
     plans.emplace_back().points.push_back(start);
     readPoints(vm["points"].as<std::string>(), feed, plans.back());
   }
+  return plans;
+}
+
+// Streams the setpoints of every operation in order, as the node sends them, and keeps their
+// velocity, acceleration and jerk (from the setpoints' exact positions: the controller gets whole
+// pulses; these are what the planner asks of each axis) against the limits, writing them as CSV
+// when asked. Every operation starts and ends at rest, so the differences run on from one
+// operation into the next.
+class SetpointWalk
+{
+ public:
+  SetpointWalk(const ap::PlannerLimits& limits, const ap::Vec3& start) : limits_(limits), dt_(limits.period), p1_(start)
+  {
+    for (double& c : p1_)
+    {
+      c = std::round(c);
+    }
+  }
+
+  void openCsv(const std::string& path)
+  {
+    csv_.open(path);
+    if (!csv_)
+    {
+      throw ConfigError("cannot write " + path);
+    }
+    csv_ << "t_s,x_pulses,y_pulses,z_pulses,feed_x,feed_y,feed_z,x_mm,y_mm,z_mm,vx_mm_s,vy_mm_s,vz_mm_s,"
+            "ax_mm_s2,ay_mm_s2,az_mm_s2,jx_mm_s3,jy_mm_s3,jz_mm_s3,operation\n";
+    csv_.precision(10);
+  }
+
+  void closeCsv(const std::string& path)
+  {
+    if (csv_.is_open())
+    {
+      csv_.close();
+      if (!csv_)
+      {
+        throw ConfigError("writing " + path + " failed");
+      }
+    }
+  }
+
+  // Streams every operation; prints the step each one ends with.
+  void walk(std::vector<ap::OperationPlan>& plans, std::vector<ap::Trajectory>& trajectories)
+  {
+    for (operation_ = 0; operation_ < trajectories.size(); ++operation_)
+    {
+      const size_t operation_segments = trajectories[operation_].segments().size();
+      segments_ += operation_segments;
+      length_ += trajectories[operation_].length();
+      if (plans[operation_].moves())  // as the node: an operation without moves sends nothing
+      {
+        streamOperation(std::move(trajectories[operation_]));
+      }
+      if (const auto& after = plans[operation_].after)
+      {
+        std::printf("operation %zu: %zu segments, then %s\n", operation_ + 1, operation_segments,
+                    after->describe().c_str());
+        if (after->kind == cnc_bridge::gcode::ProgramStep::Kind::kDwell)
+        {
+          dwell_s_ += after->dwell_s;
+          t_ = static_cast<double>(k_) * dt_ + dwell_s_;
+        }
+      }
+    }
+  }
+
+  const Limits& worst() const { return worst_; }
+  size_t setpoints() const { return k_; }
+  size_t segments() const { return segments_; }
+  double length() const { return length_; }
+  double time() const { return t_; }
+  double dwellTime() const { return dwell_s_; }
+
+ private:
+  void streamOperation(ap::Trajectory trajectory)
+  {
+    ap::TrajectoryStream stream(std::move(trajectory));
+    ap::Setpoint sp;
+    while (stream.next(sp))
+    {
+      ++k_;
+      t_ = static_cast<double>(k_) * dt_ + dwell_s_;
+      account(stream.current().position, &sp);
+    }
+    // At rest after the last setpoint: the deceleration into rest counts too.
+    account(p1_, nullptr);
+    account(p1_, nullptr);
+  }
+
+  void account(const ap::Vec3& p, const ap::Setpoint* setpoint)
+  {
+    ap::Vec3 v, a, j;
+    for (int i = 0; i < 3; ++i)
+    {
+      v[i] = (p[i] - p1_[i]) / dt_ / ap::kPulsesPerMm;
+      a[i] = (v[i] - v1_[i]) / dt_;
+      j[i] = (a[i] - a1_[i]) / dt_;
+      worst_.speed = std::max(worst_.speed, std::fabs(v[i]) / limits_.max_speed[i]);
+      worst_.accel = std::max(worst_.accel, std::fabs(a[i]) / limits_.max_accel[i]);
+      worst_.jerk = std::max(worst_.jerk, std::fabs(j[i]) / limits_.max_jerk[i]);
+    }
+    if (csv_.is_open() && setpoint)
+    {
+      writeRow(p, *setpoint, {&v, &a, &j});
+    }
+    p1_ = p;
+    v1_ = v;
+    a1_ = a;
+  }
+
+  void writeRow(const ap::Vec3& p, const ap::Setpoint& setpoint, const std::array<const ap::Vec3*, 3>& derivatives)
+  {
+    csv_ << t_ << ',' << setpoint.position[0] << ',' << setpoint.position[1] << ',' << setpoint.position[2] << ','
+         << setpoint.feed[0] << ',' << setpoint.feed[1] << ',' << setpoint.feed[2];
+    for (int i = 0; i < 3; ++i)
+    {
+      csv_ << ',' << p[i] / ap::kPulsesPerMm;
+    }
+    for (const ap::Vec3* q : derivatives)
+    {
+      for (int i = 0; i < 3; ++i)
+      {
+        csv_ << ',' << (*q)[i];
+      }
+    }
+    csv_ << ',' << operation_ << '\n';
+  }
+
+  const ap::PlannerLimits& limits_;
+  const double dt_;
+  std::ofstream csv_;
+  ap::Vec3 p1_, v1_{}, a1_{};
+  Limits worst_;
+  size_t k_ = 0;
+  double t_ = 0.0, dwell_s_ = 0.0;  // s: setpoints so far and G04 dwells between operations
+  size_t operation_ = 0;
+  size_t segments_ = 0;
+  double length_ = 0.0;
+};
+
+void printSummary(const std::string& profile, const ap::PlannerLimits& limits,
+                  const std::vector<ap::OperationPlan>& plans, const SetpointWalk& walk, double plan_s, double stream_s)
+{
+  const Limits& worst = walk.worst();
+  const double worst_ratio =
+      std::max({worst.speed, worst.accel, limits.profile == ap::Profile::kSCurve ? worst.jerk : 0.0});
+  // Operations without moves (a spindle or coolant change after the last cut) send nothing.
+  const auto operations_sent =
+      static_cast<size_t>(std::count_if(plans.begin(), plans.end(), [](const auto& p) { return p.moves(); }));
+  const size_t segments = walk.segments();
+  const size_t k = walk.setpoints();
+  std::printf(
+      "%s: %zu operations, %zu segments, %.3f mm, %zu setpoints, total time %.3f s (%.3f s of it G04 "
+      "dwells; stops not counted)\n",
+      profile.c_str(), operations_sent, segments, walk.length() / ap::kPulsesPerMm, k, walk.time(), walk.dwellTime());
+  std::printf("worst limit ratio %.4f (speed %.4f, acceleration %.4f, jerk %.4f%s)\n", worst_ratio, worst.speed,
+              worst.accel, worst.jerk, limits.profile == ap::Profile::kSCurve ? "" : ", not limited by a trapezoid");
+  std::printf("planning %.3f s (%.0f segments/s), setpoints %.3f s (%.0f setpoints/s)\n", plan_s,
+              plan_s > 0 ? segments / plan_s : 0.0, stream_s, stream_s > 0 ? k / stream_s : 0.0);
+}
+
+void plot(const std::string& csv, const std::string& png, const ap::PlannerLimits& limits)
+{
+  std::ostringstream command;
+  command << "/usr/bin/python3 '" << plotScript() << "' '" << csv << "' '" << png << "' " << limits.max_speed[0] << ','
+          << limits.max_speed[1] << ',' << limits.max_speed[2] << ' ' << limits.max_accel[0] << ','
+          << limits.max_accel[1] << ',' << limits.max_accel[2] << ' ' << limits.max_jerk[0] << ',' << limits.max_jerk[1]
+          << ',' << limits.max_jerk[2];
+  if (std::system(command.str().c_str()) != 0)
+  {
+    throw ConfigError("the plot failed (python3-matplotlib installed?): " + command.str());
+  }
+}
+
+int run(int argc, char** argv)
+{
+  const po::options_description options = commandLine();
+  po::variables_map vm;
+  po::store(po::parse_command_line(argc, argv, options), vm);
+  if (vm.count("help"))
+  {
+    std::cout << options << "\n";
+    return 0;
+  }
+  po::notify(vm);
+  if (vm.count("gcode") == vm.count("points"))
+  {
+    throw ConfigError("give exactly one of --gcode and --points");
+  }
+  const ap::PlannerLimits limits = readLimits(vm);
+
+  const auto t0 = std::chrono::steady_clock::now();
+  const ap::Vec3 mm = triple(vm["start"].as<std::string>(), "start");
+  const ap::Vec3 start{mm[0] * ap::kPulsesPerMm, mm[1] * ap::kPulsesPerMm, mm[2] * ap::kPulsesPerMm};
+  std::vector<ap::OperationPlan> plans = readPlans(vm, start);
   std::vector<ap::Trajectory> trajectories;
   for (ap::OperationPlan& plan : plans)
   {
@@ -189,138 +380,25 @@ int run(int argc, char** argv)
   }
   const auto t1 = std::chrono::steady_clock::now();
 
-  std::ofstream csv;
+  SetpointWalk walk(limits, start);
+  const std::string csv = vm.count("csv") ? vm["csv"].as<std::string>() : std::string();
   if (vm.count("csv"))
   {
-    csv.open(vm["csv"].as<std::string>());
-    if (!csv)
-    {
-      throw ConfigError("cannot write " + vm["csv"].as<std::string>());
-    }
-    csv << "t_s,x_pulses,y_pulses,z_pulses,feed_x,feed_y,feed_z,x_mm,y_mm,z_mm,vx_mm_s,vy_mm_s,vz_mm_s,"
-           "ax_mm_s2,ay_mm_s2,az_mm_s2,jx_mm_s3,jy_mm_s3,jz_mm_s3,operation\n";
-    csv.precision(10);
+    walk.openCsv(csv);
   }
-  // Velocity, acceleration and jerk from the setpoints' exact positions (the controller gets
-  // whole pulses; these are what the planner asks of each axis). Every operation starts and ends
-  // at rest, so the differences run on from one operation into the next.
-  const double dt = limits.period;
-  ap::Vec3 p1 = start, v1{}, a1{};
-  for (double& c : p1)
-  {
-    c = std::round(c);
-  }
-  Limits worst;
-  size_t k = 0;
-  double t = 0.0, dwell_s = 0.0;  // s: setpoints so far and G04 dwells between operations
-  size_t operation = 0;
-  auto account = [&](const ap::Vec3& p, const ap::Setpoint* setpoint)
-  {
-    ap::Vec3 v, a, j;
-    for (int i = 0; i < 3; ++i)
-    {
-      v[i] = (p[i] - p1[i]) / dt / ap::kPulsesPerMm;
-      a[i] = (v[i] - v1[i]) / dt;
-      j[i] = (a[i] - a1[i]) / dt;
-      worst.speed = std::max(worst.speed, std::fabs(v[i]) / limits.max_speed[i]);
-      worst.accel = std::max(worst.accel, std::fabs(a[i]) / limits.max_accel[i]);
-      worst.jerk = std::max(worst.jerk, std::fabs(j[i]) / limits.max_jerk[i]);
-    }
-    if (csv.is_open() && setpoint)
-    {
-      csv << t << ',' << setpoint->position[0] << ',' << setpoint->position[1] << ',' << setpoint->position[2] << ','
-          << setpoint->feed[0] << ',' << setpoint->feed[1] << ',' << setpoint->feed[2];
-      for (int i = 0; i < 3; ++i)
-      {
-        csv << ',' << p[i] / ap::kPulsesPerMm;
-      }
-      for (const ap::Vec3* q : std::array<const ap::Vec3*, 3>{&v, &a, &j})
-      {
-        for (int i = 0; i < 3; ++i)
-        {
-          csv << ',' << (*q)[i];
-        }
-      }
-      csv << ',' << operation << '\n';
-    }
-    p1 = p;
-    v1 = v;
-    a1 = a;
-  };
-  size_t segments = 0;
-  double length = 0.0;
-  for (; operation < trajectories.size(); ++operation)
-  {
-    const size_t operation_segments = trajectories[operation].segments().size();
-    segments += operation_segments;
-    length += trajectories[operation].length();
-    if (plans[operation].moves())  // as the node: an operation without moves sends nothing
-    {
-      ap::TrajectoryStream stream(std::move(trajectories[operation]));
-      ap::Setpoint sp;
-      while (stream.next(sp))
-      {
-        ++k;
-        t = static_cast<double>(k) * dt + dwell_s;
-        account(stream.current().position, &sp);
-      }
-      // At rest after the last setpoint: the deceleration into rest counts too.
-      account(p1, nullptr);
-      account(p1, nullptr);
-    }
-    if (const auto& after = plans[operation].after)
-    {
-      std::printf("operation %zu: %zu segments, then %s\n", operation + 1, operation_segments,
-                  after->describe().c_str());
-      if (after->kind == cnc_bridge::gcode::ProgramStep::Kind::kDwell)
-      {
-        dwell_s += after->dwell_s;
-        t = static_cast<double>(k) * dt + dwell_s;
-      }
-    }
-  }
+  walk.walk(plans, trajectories);
   const auto t2 = std::chrono::steady_clock::now();
-  if (csv.is_open())
-  {
-    csv.close();
-    if (!csv)
-    {
-      throw ConfigError("writing " + vm["csv"].as<std::string>() + " failed");
-    }
-  }
+  walk.closeCsv(csv);
 
-  const double plan_s = std::chrono::duration<double>(t1 - t0).count();
-  const double stream_s = std::chrono::duration<double>(t2 - t1).count();
-  const double worst_ratio =
-      std::max({worst.speed, worst.accel, limits.profile == ap::Profile::kSCurve ? worst.jerk : 0.0});
-  // Operations without moves (a spindle or coolant change after the last cut) send nothing.
-  const auto operations_sent =
-      static_cast<size_t>(std::count_if(plans.begin(), plans.end(), [](const auto& p) { return p.moves(); }));
-  std::printf(
-      "%s: %zu operations, %zu segments, %.3f mm, %zu setpoints, total time %.3f s (%.3f s of it G04 "
-      "dwells; stops not counted)\n",
-      profile.c_str(), operations_sent, segments, length / ap::kPulsesPerMm, k, t, dwell_s);
-  std::printf("worst limit ratio %.4f (speed %.4f, acceleration %.4f, jerk %.4f%s)\n", worst_ratio, worst.speed,
-              worst.accel, worst.jerk, limits.profile == ap::Profile::kSCurve ? "" : ", not limited by a trapezoid");
-  std::printf("planning %.3f s (%.0f segments/s), setpoints %.3f s (%.0f setpoints/s)\n", plan_s,
-              plan_s > 0 ? segments / plan_s : 0.0, stream_s, stream_s > 0 ? k / stream_s : 0.0);
-
+  printSummary(vm["profile"].as<std::string>(), limits, plans, walk, std::chrono::duration<double>(t1 - t0).count(),
+               std::chrono::duration<double>(t2 - t1).count());
   if (vm.count("png"))
   {
     if (!vm.count("csv"))
     {
       throw ConfigError("--png needs --csv (the plot is drawn from it)");
     }
-    std::ostringstream command;
-    command << "/usr/bin/python3 '" << plotScript() << "' '" << vm["csv"].as<std::string>() << "' '"
-            << vm["png"].as<std::string>() << "' " << limits.max_speed[0] << ',' << limits.max_speed[1] << ','
-            << limits.max_speed[2] << ' ' << limits.max_accel[0] << ',' << limits.max_accel[1] << ','
-            << limits.max_accel[2] << ' ' << limits.max_jerk[0] << ',' << limits.max_jerk[1] << ','
-            << limits.max_jerk[2];
-    if (std::system(command.str().c_str()) != 0)
-    {
-      throw ConfigError("the plot failed (python3-matplotlib installed?): " + command.str());
-    }
+    plot(csv, vm["png"].as<std::string>(), limits);
   }
   return 0;
 }

@@ -3,7 +3,8 @@
 //
 // Jog (with --jog-speed): in jog mode a feed F<n>@ above 0 moves the jog axis in the positive
 // direction at n/255 of --jog-speed until the next feed or mode change, as if the operator held the
-// joystick that way (the paper leaves the direction to the joystick); F0@ stops it.
+// joystick that way (the ESPRIT paper, docs/protocols/at_protocol.md#source, leaves the direction to the
+// joystick); F0@ stops it.
 //
 // Emergency stop: stdin lines "estop on" / "estop off", SIGUSR1 (on) / SIGUSR2 (off), or a fault
 // script. Also on stdin: "auto", "jog X|Y|Z" (the mode selector), "home".

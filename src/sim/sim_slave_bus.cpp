@@ -1,6 +1,6 @@
-// sim_slave_bus: a universal-CNC master board with its I2C slaves, on a pty. It runs the paper's
-// receive state machine on the serial link, forwards each payload to its slave as a WirePacker
-// frame, and while idle polls the slaves and writes their answers up the link (the uplink format of
+// sim_slave_bus: a universal-CNC master board with its I2C slaves, on a pty. It runs the receive state machine of the
+// universal-CNC paper (docs/protocols/slave_bus.md#source) on the serial link, forwards each payload to its slave as a
+// WirePacker frame, and while idle polls the slaves and writes their answers up the link (the uplink format of
 // include/cnc_bridge/slave_bus/array_protocol.h). First line: "sim_slave_bus pty <path>".
 
 #include <boost/program_options.hpp>
@@ -98,16 +98,16 @@ boost::program_options::options_description describeOptions(CommandLine& args)
   options.add_options()("help,h", "this help")("link", po::value(&args.link),
                                                "symbolic link to create to the pty device (default: none)")(
       "framing", po::value(&args.framing)->default_value("raw"),
-      "raw (the paper's bytes) or framed (WirePacker + CRC-8)")(
+      "raw (the universal-CNC paper's bytes) or framed (WirePacker + CRC-8)")(
       "slave", po::value(&args.slave_specs)->composing(),
       "ADDR:ROLE[:ENCODING], repeatable, addresses 1..N in order; ROLE axis|tool|generic, ENCODING "
       "bytes|hundreds|be16|be16s (default: 3 be16s axes, a tool, 4 generic slaves)")(
       "baud", po::value(&args.baud)->default_value(0),
       "time the uplink as a line of this rate, 8N1: each byte reaches the PC when a UART would have finished "
-      "it (0: unpaced)")(
-      "resync-gap-ms", po::value(&args.resync_gap_ms)->default_value(0),
-      "silence after which a partial frame from the PC is dropped; raw: 0 = never (as the paper's firmware); "
-      "framed: always resynchronises, 0 = 100 ms")(
+      "it (0: unpaced)")("resync-gap-ms", po::value(&args.resync_gap_ms)->default_value(0),
+                         "silence after which a partial frame from the PC is dropped; raw: 0 = never (as the "
+                         "universal-CNC paper's firmware); "
+                         "framed: always resynchronises, 0 = 100 ms")(
       "wirepacker-crc", po::value(&args.wirepacker_crc)->default_value("spec"),
       "spec (CRC over length and data, as the packet format documents) or library (data only, as the "
       "ESP32_I2C_Slave library's released code computes it): I2C frames and the framed link")(

@@ -1,6 +1,6 @@
-// libFuzzer target: the simulated master (the paper's receive state machine, WirePacker to the slaves,
-// the slaves' value decoding) on arbitrary bytes from the PC, raw and framed. Invariant: no crash,
-// and whatever it writes up the link parses as whole uplink records.
+// libFuzzer target: the simulated master (the receive state machine of the universal-CNC paper,
+// docs/protocols/slave_bus.md#source, WirePacker to the slaves, the slaves' value decoding) on arbitrary bytes from the
+// PC, raw and framed. Invariant: no crash, and whatever it writes up the link parses as whole uplink records.
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>

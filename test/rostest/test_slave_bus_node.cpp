@@ -253,7 +253,7 @@ TEST(SlaveBusNode, PerSlaveCommandsAreQueuedIntoTheNextFrame)
   x.publish(cmd);
   cmd.values = {0};  // laser off
   laser.publish(cmd);
-  cmd.values = {1234};  // aux7 takes the paper's hi*100+lo form
+  cmd.values = {1234};  // aux7 takes the universal-CNC paper's hi*100+lo form
   aux7.publish(cmd);
   ASSERT_TRUE(responses.waitFor(
       [](auto& r)

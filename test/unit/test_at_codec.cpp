@@ -1,5 +1,5 @@
 // The '@'-protocol codec: every message of docs/protocols/at_protocol.md in both
-// directions, byte-exact against the paper's own examples ("S150@", "JX@", "F150@", "T1 34@",
+// directions, byte-exact against the ESPRIT paper's own examples ("S150@", "JX@", "F150@", "T1 34@",
 // "45334 34623 54934"), stream reassembly over split and merged reads, and malformed input.
 #include <gtest/gtest.h>
 
@@ -24,7 +24,7 @@ std::vector<CommandCase> commandCases()
 {
   return {
       {AutoMode{}, "A@"},
-      {JogMode{Axis::kX}, "JX@"},  // paper: "JX@" for jog mode in X
+      {JogMode{Axis::kX}, "JX@"},  // the ESPRIT paper: "JX@" for jog mode in X
       {JogMode{Axis::kY}, "JY@"},
       {JogMode{Axis::kZ}, "JZ@"},
       {Machining{true}, "M1@"},

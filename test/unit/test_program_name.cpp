@@ -42,7 +42,7 @@ TEST(NamePattern, FormatsAndParses)
 
 TEST(ProgramHeader, NumberAndFirstComment)
 {
-  // The head of the Haas capture in test/data/xmodem (a program punched by a Haas VF-2).
+  // The head of OpenDNC's Haas capture in test/data/xmodem (a program punched by a Haas VF-2).
   auto h = readHeader("%\nO05555(CS390_Test_NC)\n(Using G0 which travels along dogleg path.)\n");
   EXPECT_EQ(h.number, 5555u);
   EXPECT_EQ(h.comment, "CS390_Test_NC");

@@ -1,10 +1,10 @@
 // Program requests over RS-232 (include/cnc_bridge/dnc/program_requests.h) and what is done about
 // a request (programs::decideRequest). The control is played by independent programs where one
 // exists: lrzsz `sx` punches the request by XModem, as a Haas set to XMODEM does (it waits for the
-// PC's NAK, then sends checksum blocks: the capture in test/data/xmodem/haas_xmodem_capture.json),
+// PC's NAK, then sends checksum blocks: OpenDNC's Haas capture, test/data/xmodem/haas_xmodem_capture.json),
 // and the python3-xmodem package (test/data/xmodem/pyxmodem_peer.py) receives the answer. The text
 // punch of a control set to XON/XOFF is written by the test on a pty; the bytes of a real Haas punch
-// come from OpenDNC's capture (test/data/xmodem/haas_xmodem_capture.json).
+// come from OpenDNC's Haas capture (test/data/xmodem/haas_xmodem_capture.json).
 #include <gtest/gtest.h>
 
 #include <atomic>
@@ -101,7 +101,7 @@ TEST(RequestDecision, TheAnswerProgramIsShortUppercaseAndLoadable)
   EXPECT_LE(header.comment.size(), kAnswerCommentLength);
 }
 
-// The Haas case of the capture: the control is an XModem sender that waits for the PC's NAK.
+// The Haas case of OpenDNC's Haas capture: the control is an XModem sender that waits for the PC's NAK.
 TEST(RequestListener, XmodemPunchBySxIsReadAndTheAnswerReachesPythonXmodem)
 {
   TempDir dir("test_program_requests");
@@ -217,7 +217,7 @@ TEST(RequestListener, APunchRefusedByTheNodeIsNotRead)
   EXPECT_TRUE(asked);
 }
 
-// The Haas of the capture, as sim_haas_serial xmodem plays it: it NAKs while it waits to receive,
+// The Haas of OpenDNC's Haas capture, as sim_haas_serial xmodem plays it: it NAKs while it waits to receive,
 // punches its program on the PC's NAK once its operator pressed SEND (--send), and answers the
 // EOT of a program it received with CAN CAN CAN. The answer must be taken as delivered.
 TEST(RequestListener, TheSimulatedHaasPunchesARequestAndStoresTheAnswer)
@@ -250,9 +250,9 @@ TEST(RequestListener, TheSimulatedHaasPunchesARequestAndStoresTheAnswer)
   EXPECT_EQ(readFile(stored), answer);
 }
 
-// The bytes a real Haas punched (OpenDNC's capture, exchange cnc_to_pc: the control sends O05555
+// The bytes a real Haas punched (OpenDNC's Haas capture, exchange cnc_to_pc: the control sends O05555
 // after the PC's NAK, checksum blocks beginning with LF %, EOT) are read whole by the listener, and
-// the PC side writes what the capture's PC wrote: NAK, an ACK per block and one for EOT.
+// the PC side writes what the PC of that capture wrote: NAK, an ACK per block and one for EOT.
 TEST(RequestListener, AHaasPunchFromTheCaptureIsReadWhole)
 {
   std::vector<test::Bytes> control;
@@ -279,7 +279,7 @@ TEST(RequestListener, AHaasPunchFromTheCaptureIsReadWhole)
   ASSERT_TRUE(punch);
   EXPECT_EQ(punch->text, readFile(std::string(XMODEM_TEST_DATA) + "/haas_O05555.nc"));
   EXPECT_EQ(punch->how, "by XModem, 8 blocks");
-  // The capture's PC sent two NAKs before block 1 came; this one needed one.
+  // The PC of OpenDNC's Haas capture sent two NAKs before block 1 came; this one needed one.
   test::Bytes expected = pc_wrote_in_capture;
   expected.erase(expected.begin());
   EXPECT_EQ(cnc.written(), expected);

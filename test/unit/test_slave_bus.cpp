@@ -1,6 +1,6 @@
-// Codecs of the slave bus: the paper's step frames byte for byte, WirePacker frames and CRC-8/MAXIM
-// against published check values, the master's receive state machine fed byte by byte and in chunks,
-// the uplink parser raw and framed (with garbage and corruption), and the value encodings.
+// Codecs of the slave bus: the step frames of the universal-CNC paper (docs/protocols/slave_bus.md#source) byte for
+// byte, WirePacker frames and CRC-8/MAXIM against published check values, the master's receive state machine fed byte
+// by byte and in chunks, the uplink parser raw and framed (with garbage and corruption), and the value encodings.
 #include <gtest/gtest.h>
 
 #include <string>
@@ -16,7 +16,7 @@ using Bytes = std::vector<uint8_t>;
 
 namespace
 {
-// Stand-ins for the paper's symbolic bytes x, y, z, a, f, g, h, data.
+// Stand-ins for the universal-CNC paper's symbolic bytes x, y, z, a, f, g, h, data.
 constexpr uint8_t x = 10, y = 20, z = 30, a = 40, f = 50, g = 60, h = 70, data = 99;
 
 struct Collected
@@ -194,7 +194,7 @@ TEST(WireStreamUnpacker, ResyncAbandonsATornFrameAndFindsWhatItHid)
   EXPECT_EQ(unpacker.feed(good.data(), good.size()).size(), 1u);
 }
 
-// The released ESP32_I2C_Slave library (the one the paper cites) computes its CRC over the data
+// The released ESP32_I2C_Slave library (the one the universal-CNC paper cites) computes its CRC over the data
 // only: its WireCrc::update() starts from the member seed (0) and never stores the result of
 // calc(&length, 1). Vectors worked by hand from its code: CRC-8/MAXIM of 31 32 33 is 0x95; over
 // 07 31 32 33 (the documented format, length first) it is 0x13.
@@ -274,21 +274,21 @@ TEST(WireStreamUnpacker, LibraryModeRejectsALengthOverItsBufferAtOnce)
 
 TEST(EncodeStep, PaperExampleThreeSlaves)
 {
-  // Paper: [3, 2, x, y, 1, a, 3, f, g, h]
+  // The universal-CNC paper: [3, 2, x, y, 1, a, 3, f, g, h]
   const StepPayloads payloads = {{x, y}, {a}, {f, g, h}};
   EXPECT_EQ(encodeStep(payloads), (Bytes{3, 2, x, y, 1, a, 3, f, g, h}));
 }
 
 TEST(EncodeStep, PaperExampleEightSlavesXYZ)
 {
-  // Paper: [8,1,x,1,y,1,z,0,0,0,0,0] -- x, y, z to slaves 1..3, nothing to the other five.
+  // The universal-CNC paper: [8,1,x,1,y,1,z,0,0,0,0,0] -- x, y, z to slaves 1..3, nothing to the other five.
   const StepPayloads payloads = {{x}, {y}, {z}, {}, {}, {}, {}, {}};
   EXPECT_EQ(encodeStep(payloads), (Bytes{8, 1, x, 1, y, 1, z, 0, 0, 0, 0, 0}));
 }
 
 TEST(EncodeStep, PaperExampleSlaveSixGetsData)
 {
-  // Paper: [8,1,x,1,y,1,z,0,0,1,data,0,0] -- slave 6 gets data.
+  // The universal-CNC paper: [8,1,x,1,y,1,z,0,0,1,data,0,0] -- slave 6 gets data.
   const StepPayloads payloads = {{x}, {y}, {z}, {}, {}, {data}, {}, {}};
   EXPECT_EQ(encodeStep(payloads), (Bytes{8, 1, x, 1, y, 1, z, 0, 0, 1, data, 0, 0}));
 }
@@ -615,7 +615,7 @@ TEST(Uplink, FramedRecordWithNoAddressIsNotDelivered)
 
 TEST(ValueCodec, PaperHundredsForm)
 {
-  // The paper's slave reads recived[0]*100 + recived[1]: 1234 travels as [12, 34].
+  // The universal-CNC paper's slave reads recived[0]*100 + recived[1]: 1234 travels as [12, 34].
   EXPECT_EQ(encodeValues({1234, 7, 25599}, Encoding::kHundreds), (Bytes{12, 34, 0, 7, 255, 99}));
   EXPECT_EQ(decodeValues({12, 34, 0, 7}, Encoding::kHundreds), (std::vector<int32_t>{1234, 7}));
   EXPECT_THROW(encodeValues({25600}, Encoding::kHundreds), ProtocolError);

@@ -345,7 +345,7 @@ TEST(XmodemEobChecksum, AReceiverOnTheOtherReadingNamesTheOneTheControlUsesAndSt
 }
 
 // ---------------------------------------------------------------------------------------------
-// The capture, CNC -> PC: the receiver, asking in checksum mode with NAK as a Haas needs, gets the
+// OpenDNC's Haas capture, CNC -> PC: the receiver, asking in checksum mode with NAK as a Haas needs, gets the
 // control's eight packets and must rebuild haas_O05555.nc byte for byte.
 TEST(XmodemCapture, ReceiverReproducesTheProgramTheHaasSent)
 {
@@ -357,7 +357,7 @@ TEST(XmodemCapture, ReceiverReproducesTheProgramTheHaasSent)
   ASSERT_EQ(from_cnc.size(), 9u);  // 8 packets + EOT
 
   FakeTransport cnc("haas");
-  // The control answers each byte the PC writes with its next transmission, as in the capture.
+  // The control answers each byte the PC writes with its next transmission, as in OpenDNC's Haas capture.
   answerEachWriteWith(cnc, from_cnc);
   Receiver receiver(cnc, Mode::kChecksum, fastConfig());
   const Bytes payload = receiver.receive();
@@ -372,9 +372,9 @@ TEST(XmodemCapture, ReceiverReproducesTheProgramTheHaasSent)
   EXPECT_EQ(cnc.written(), expected);
 }
 
-// The capture, PC -> CNC: the control NAKs once, then twice more before the PC starts. The
-// capture's PC sent block 1 twice (the stale NAKs) and the Haas then NAKed block 2. Our sender's
-// packets must equal the capture's packets for that file, block 1 once, and a CAN CAN CAN
+// OpenDNC's Haas capture, PC -> CNC: the control NAKs once, then twice more before the PC starts.
+// The PC of that capture sent block 1 twice (the stale NAKs) and the Haas then NAKed block 2. Our
+// sender's packets must equal the packets of that capture for that file, block 1 once, and a CAN CAN CAN
 // answer to EOT is a completed transfer.
 TEST(XmodemCapture, SenderPacketsEqualTheCaptureAndStaleNaksDoNotRepeatBlockOne)
 {

@@ -804,7 +804,7 @@ TEST(CncDncReplay, TheHaasCapturePlayedToReceiveHandsItTheCapturedProgram)
   ASSERT_EQ(received.status, 0) << received.err;
   EXPECT_EQ(readFile(target), readFile(XMODEM_TEST_DATA "/haas_O05555.nc"));
   EXPECT_EQ(replayed.status, 0) << replayed.out << replayed.err;
-  // Two NAKs, eight block ACKs and the ACK of EOT: what the PC of the capture answered.
+  // Two NAKs, eight block ACKs and the ACK of EOT: what the PC of OpenDNC's capture answered.
   EXPECT_NE(replayed.out.find("the program answered all 11 bytes as recorded"), std::string::npos) << replayed.out;
 }
 

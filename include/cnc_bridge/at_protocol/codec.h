@@ -1,5 +1,5 @@
 // The '@'-protocol of the ESPRIT add-in and its real-time Linux controller (docs/protocols/at_protocol.md;
-// its paper's section 4.2): the messages in both directions as plain structs,
+// the ESPRIT paper's section 4.2): the messages in both directions as plain structs,
 // their text encoding, and the reassemblers that cut a TCP byte stream back into messages. The
 // controller side only sees a byte stream, which is why every PC -> controller message ends in '@';
 // the controller -> PC side is line based.
@@ -17,7 +17,7 @@ namespace cnc_bridge
 {
 namespace at_protocol
 {
-/// Pulses per millimetre on every axis (paper, 4.2: "there are 1000 pulses in 1 millimetre").
+/// Pulses per millimetre on every axis (the ESPRIT paper, 4.2: "there are 1000 pulses in 1 millimetre").
 constexpr double kPulsesPerMm = 1000.0;
 /// Pulses per metre, for the SI conversion in the ROS layer.
 constexpr double kPulsesPerMetre = 1.0e6;

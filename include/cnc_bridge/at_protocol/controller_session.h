@@ -105,7 +105,7 @@ struct ControllerLinks
 /// \brief Where the controller's servers are (docs/at_controller_node.md, parameters).
 struct TcpLinkSettings
 {
-  /// The controller's command server (the paper's server_recv); its host and connect timeout are
+  /// The controller's command server (the ESPRIT paper's server_recv); its host and connect timeout are
   /// the report link's too.
   LinkSettings command = LinkSettings::tcp("127.0.0.1", 5000, Milliseconds(2000));
   bool report_server = false;   ///< we listen for the controller's report connection

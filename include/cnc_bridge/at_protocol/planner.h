@@ -1,4 +1,4 @@
-// Trajectory planning for the '@'-protocol (docs/protocols/at_protocol.md; its paper's section 4.1):
+// Trajectory planning for the '@'-protocol (docs/protocols/at_protocol.md; the ESPRIT paper's section 4.1):
 // the add-in, not the controller, turns a tool path into "the required speed and position for each
 // axis at each time loop" of 1 ms, with acceleration and deceleration. This file holds that planner:
 // a polyline in pulses becomes a time-parametrised trapezoidal velocity profile along the path,
@@ -139,6 +139,12 @@ class Trajectory
 
  private:
   void plan(const std::vector<Vec3>& points, const std::vector<double>& feeds, double entry_speed);
+  // The steps of plan(): the segments, the speed limits at their junctions, the backward pass,
+  // one segment's speed profile.
+  void buildSegments(const std::vector<Vec3>& points, const std::vector<double>& feeds);
+  std::vector<double> junctionLimits() const;
+  std::vector<double> entryLimits(const std::vector<double>& junction) const;
+  static void profileSegment(Segment& segment);
   /// S-curve: plans again, slower through (or stopping on) each corner whose moving average passes
   /// further from the path than limits_.path_tolerance.
   void holdPathTolerance(double entry_speed);

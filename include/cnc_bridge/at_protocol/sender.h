@@ -193,6 +193,13 @@ class SetpointSender
 
   void run();
   void runJob(const std::shared_ptr<Job>& job);
+  // The steps of runJob: the commands before the setpoints, the setpoints until the path ends or
+  // the job is cancelled or aborted (false: the link failed and finished the job), the timing of
+  // one setpoint written, and the sequencer and job brought to the end.
+  void writePrologue(const Operation& operation);
+  bool streamJob(Job& job, TrajectoryStream& stream, Job::State& outcome, std::string& message);
+  void recordWrite(int64_t due, int64_t period_ns, bool& behind);
+  void endJob(Job& job, Job::State state, const std::string& message);
   /// Writes queued commands that are ready; \p wait_lock false: give up if the lock is busy.
   bool writeQueuedCommands(bool wait_lock);
   void write(const std::string& bytes);

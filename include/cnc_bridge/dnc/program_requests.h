@@ -1,7 +1,7 @@
 // Program requests over RS-232: the operator at the control asks for a program by punching a short
 // request program, `O00001 (LOAD O1234)` (docs/dnc_node.md, "Program requests from the control").
 // A control punches the way its RS-232 is set (Haas setting 14): with XMODEM it is an XModem
-// sender and waits for the PC's NAK before its first block (the capture in OpenDNC's appendix,
+// sender and waits for the PC's NAK before its first block (OpenDNC's Haas capture,
 // test/data/xmodem/haas_xmodem_capture.json: NAK NAK from the PC, then block 1); with RTS/CTS or
 // XON/XOFF it punches '%'-framed text unasked. RequestListener waits on an idle line for either,
 // reads the punch with the project's own XModem receiver or backup parser, and sends a control the

@@ -1,7 +1,7 @@
-// The serial array protocol of the universal-CNC paper (docs/protocols/slave_bus.md; the paper's
+// The serial array protocol of the universal-CNC paper (docs/protocols/slave_bus.md#source; its
 // "Equation 1 serial array protocol" and its state machine), in both directions: the PC's step
 // frame to the master, the master's receive state machine, and the uplink from the master to the
-// PC that the paper leaves loose and cnc_bridge defines here. Raw and framed (WirePacker + CRC) links.
+// PC that the universal-CNC paper leaves loose and cnc_bridge defines here. Raw and framed (WirePacker + CRC) links.
 #pragma once
 
 #include <cstddef>
@@ -16,7 +16,7 @@ namespace cnc_bridge
 {
 namespace slave_bus
 {
-/// \brief Largest slave count of one frame: I2C has 7-bit addresses, and the paper numbers slaves 1..N.
+/// \brief Largest slave count of one frame: I2C has 7-bit addresses, and the universal-CNC paper numbers slaves 1..N.
 constexpr size_t kMaxSlaves = 127;
 /// \brief Largest payload per slave: the length is one byte, and the master repacks it into one
 /// WirePacker frame for the I2C bus (at most 251 data bytes; a master built on the ESP32 library
@@ -26,7 +26,7 @@ constexpr size_t kMaxPayload = WirePacker::kMaxData;
 /// \brief How bytes travel on the PC <-> master serial link.
 enum class Framing
 {
-  kRaw,    ///< the paper's bytes as they are: byte-compatible with its master firmware; no error detection
+  kRaw,    ///< the universal-CNC paper's bytes as they are: byte-compatible with its master firmware; no error check
   kFramed  ///< every step frame and every uplink record inside a WirePacker frame (CRC-8, resync)
 };
 Framing parseFraming(const std::string& text);  ///< "raw" | "framed"; \throws ConfigError
@@ -35,12 +35,12 @@ const char* toString(Framing framing);
 /// \brief One step: payloads[i] goes to slave address i + 1; an empty payload sends nothing to it.
 using StepPayloads = std::vector<std::vector<uint8_t>>;
 
-/// \brief Encodes the PC -> master step frame of the paper:
+/// \brief Encodes the PC -> master step frame of the universal-CNC paper:
 /// \code
 ///   [number of slaves N, len_1, payload_1..., len_2, payload_2..., ..., len_N, payload_N...]
 /// \endcode
 /// every field one byte; a slave that gets nothing this step has length 0 and no payload bytes.
-/// The paper's examples: [3, 2, x, y, 1, a, 3, f, g, h] and [8, 1, x, 1, y, 1, z, 0, 0, 1, data, 0, 0]
+/// The universal-CNC paper's examples: [3, 2, x, y, 1, a, 3, f, g, h] and [8, 1, x, 1, y, 1, z, 0, 0, 1, data, 0, 0]
 /// (slave 6 gets data). The frame carries all slaves so that they get their data at nearly the same
 /// time (the tool fires only once X and Y are in place).
 /// \throws ProtocolError if there are no slaves, more than kMaxSlaves, or a payload over
@@ -52,15 +52,15 @@ std::vector<uint8_t> encodeStep(const StepPayloads& payloads, size_t max_payload
 /// \throws ProtocolError as encodeStep(), and if a framed step exceeds format.max_data bytes.
 std::vector<uint8_t> encodeStepForLink(const StepPayloads& payloads, Framing framing, const WireFormat& format = {});
 
-/// \brief The master's receive state machine, as the paper's firmware runs it (states RS_SLAVES_NUM,
+/// \brief The master's receive state machine, as the universal-CNC paper's firmware runs it (states RS_SLAVES_NUM,
 /// RS_SLAVE_LEN, RS_SLAVE_BYTES), fed one byte or a chunk at a time. Not thread-safe.
 ///
-/// Each completed payload is delivered at once (the paper's master sends it to its slave over I2C as
+/// Each completed payload is delivered at once (the universal-CNC paper's master sends it to its slave over I2C as
 /// soon as it is complete, before the rest of the frame arrives). Zero-length payloads deliver
-/// nothing. Deviations from the paper's code, all for frames the paper's PC never sends:
-/// - a slave count of 0 is an empty frame (the paper's code would wrap its counter and lose sync);
+/// nothing. Deviations from the universal-CNC paper's code, all for frames the universal-CNC paper's PC never sends:
+/// - a slave count of 0 is an empty frame (the universal-CNC paper's code would wrap its counter and lose sync);
 /// - addresses above \p bus_size still consume their bytes (so the stream stays in sync) but are
-///   delivered with known = false, for the master to report (the paper's I2C write gets a NAK).
+///   delivered with known = false, for the master to report (the universal-CNC paper's I2C write gets a NAK).
 /// The raw protocol cannot resynchronise by itself: call reset() after a silence inside a frame.
 class StepReceiver
 {
@@ -93,7 +93,7 @@ class StepReceiver
   bool reset();
 
   State state() const { return state_; }
-  /// \returns true while between frames (the paper's master polls its slaves only then).
+  /// \returns true while between frames (the universal-CNC paper's master polls its slaves only then).
   bool idle() const { return state_ == State::kSlavesNum; }
   uint64_t framesCompleted() const { return frames_; }
 
@@ -113,7 +113,7 @@ class StepReceiver
 
 /// \brief One record of the master -> PC uplink.
 ///
-/// The paper's master writes the slave address and then what it read from the slave, with no
+/// The universal-CNC paper's master writes the slave address and then what it read from the slave, with no
 /// length, so the PC cannot tell where a reply ends. cnc_bridge defines:
 /// \code
 ///   raw:     [address, length, payload...]                 length 0..255

@@ -32,7 +32,8 @@ struct BusSettings
 
   SlaveTable table;                 ///< the slaves, the bus size and the master's WirePacker dialect
   LinkSettings link;                ///< the master's serial line
-  Framing framing = Framing::kRaw;  ///< raw (the paper's bytes) or framed (WirePacker, CRC-8)
+  Framing framing = Framing::kRaw;  ///< raw (the universal-CNC paper's bytes, docs/protocols/slave_bus.md#source) or
+                                    ///< framed (WirePacker, CRC-8)
   size_t max_queued_steps = 100;    ///< steps waiting for the link; more are refused
   Milliseconds command_delay{5};    ///< a step of commands leaves this long after its first command
   Milliseconds reply_timeout{500};  ///< a slave that got a payload answers within this, or times out

@@ -17,8 +17,9 @@ namespace slave_bus
 /// \brief One PC <-> master link: step frames down, uplink records up. Not thread-safe: one thread
 /// calls send/poll/step (Transport::interrupt() may stop it from another).
 ///
-/// Timing: the paper's master polls its slaves only while idle between frames, and a slave answers
-/// once after each payload it got (its requestEvent sends what it has, then clears `requested`).
+/// Timing: the master of the universal-CNC paper (docs/protocols/slave_bus.md#source) polls its slaves only while
+/// idle between frames, and a slave answers once after each payload it got (its requestEvent sends what it has,
+/// then clears `requested`).
 /// So step() expects one reply from every slave that got a non-empty payload, and counts a timeout
 /// for each that does not answer within the reply timeout. A partial uplink record followed by a
 /// silence of \p resync_gap is dropped, so a torn record cannot swallow the next one.
@@ -44,7 +45,7 @@ class BusSession
   };
 
   /// \param link must outlive the session.
-  /// \param bus_size slaves on the bus: every frame carries this many lengths (the paper sends 8).
+  /// \param bus_size slaves on the bus: every frame carries this many lengths (the universal-CNC paper sends 8).
   /// \param format the master's WirePacker dialect: CRC coverage of framed mode, and the most data
   /// one frame carries (each payload becomes one I2C frame; in framed mode so does the whole step).
   /// \throws ProtocolError if bus_size is 0 or over kMaxSlaves.

@@ -1,6 +1,6 @@
-// Integer values in slave payloads. The paper's slaves take plain bytes, and two-byte values as
-// hi * 100 + lo (its slave loop reads recived[0]*100+recived[1]); a big-endian 16-bit form is the
-// usual alternative. Each slave picks one encoding; the node and the simulator share this codec.
+// Integer values in slave payloads. The universal-CNC paper's slaves (docs/protocols/slave_bus.md#source) take
+// plain bytes, and two-byte values as hi * 100 + lo (its slave loop reads recived[0]*100+recived[1]); a big-endian
+// 16-bit form is the usual alternative. Each slave picks one encoding; the node and the simulator share this codec.
 #pragma once
 
 #include <cstdint>
@@ -15,7 +15,7 @@ namespace slave_bus
 enum class Encoding
 {
   kBytes,        ///< one byte per value, 0..255
-  kHundreds,     ///< two bytes [hi, lo], value = hi * 100 + lo, lo < 100: 0..25599 (the paper's form)
+  kHundreds,     ///< two bytes [hi, lo], value = hi * 100 + lo, lo < 100: 0..25599 (the universal-CNC paper's form)
   kBigEndian16,  ///< two bytes, unsigned, most significant first: 0..65535
   kBigEndian16s  ///< two bytes, two's complement, most significant first: -32768..32767
 };

@@ -19,8 +19,8 @@ uint8_t crc8Maxim(const uint8_t* data, size_t size, uint8_t crc = 0);
 
 /// \brief Which bytes of a frame the CRC covers.
 ///
-/// The packet format (the library's header comment, the paper's figure 17, docs/protocols/slave_bus.md) says
-/// "CRC8 of packet length and data". The released code of the library the paper cites
+/// The packet format (the library's header comment, the universal-CNC paper's figure 17, protocols/slave_bus.md) says
+/// "CRC8 of packet length and data". The released code of the library the universal-CNC paper cites
 /// (gutierrezps/ESP32_I2C_Slave, src/WirePacker.cpp and src/WireCrc.h) computes something else:
 /// end() calls `crc8.calc(&length, 1)` and then returns `crc8.update(data, n)`, but update() starts
 /// from the member `seed` (0, set by calc()) and never stores its result, so the length byte's CRC
@@ -59,7 +59,7 @@ struct WireFormat
 
 /// \brief Packs and unpacks WirePacker frames.
 ///
-/// Wire format (the paper's figure 17; docs/protocols/slave_bus.md#wirepacker-frame):
+/// Wire format (the universal-CNC paper's figure 17; docs/protocols/slave_bus.md#wirepacker-frame):
 /// \code
 ///   [0]     0x02            start byte (STX)
 ///   [1]     total length    every byte of the frame: data + 4, so 4..255

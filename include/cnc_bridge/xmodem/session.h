@@ -65,7 +65,8 @@ struct Config
   /// Sender: wait this long for ACK/NAK after a packet or EOT.
   Milliseconds ack_timeout{10000};
   /// Sender, block 1 only: a NAK is answered only after this long without an ACK, because the NAKs a
-  /// receiver repeats while it waits may still be queued when block 1 goes out (see the capture).
+  /// receiver repeats while it waits may still be queued when block 1 goes out (see OpenDNC's Haas
+  /// capture, test/data/xmodem/haas_xmodem_capture.json).
   Milliseconds stale_nak_settle{100};
   /// Sender: after a NAK or the start request, wait until the line has been quiet this long before
   /// sending (what arrives meanwhile is dropped). lrzsz `rx` flushes its input right after it
@@ -86,7 +87,7 @@ struct Config
   /// Receiver: answer EOT with CAN CAN CAN as a Haas control does (the simulator), not with ACK.
   bool answer_eot_with_can = false;
   /// Sender: take the Haas's answer to EOT, CAN CAN CAN after every block was ACKed, as a completed
-  /// transfer (the capture). Only in checksum mode (a Haas knows no other) and only for at most
+  /// transfer (OpenDNC's Haas capture). Only in checksum mode (a Haas knows no other) and only for at most
   /// three CANs: a receiver that aborts sends more (lrzsz ten, sendCancel() eight), and an abort
   /// must not pass for success (the receiver stored nothing). Off: any CANs after EOT fail the
   /// transfer. On by default because the Haas path (dnc_node, cnc_dnc send --mode checksum) needs it.

@@ -123,7 +123,8 @@ void checkRange(int64_t value, int64_t low, int64_t high, const char* what)
 
 constexpr int64_t kMinPulses = std::numeric_limits<int32_t>::min();
 constexpr int64_t kMaxPulses = std::numeric_limits<int32_t>::max();
-// Tool numbers and lengths: the paper only says "integer"; these bounds reject garbage, not tools.
+// Tool numbers and lengths: the ESPRIT paper (docs/protocols/at_protocol.md#source) only says "integer"; these bounds
+// reject garbage, not tools.
 constexpr int64_t kMaxTool = 9999;
 constexpr int64_t kMaxToolLengthMm = 10000;
 

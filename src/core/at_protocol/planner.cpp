@@ -139,10 +139,45 @@ void Trajectory::plan(const std::vector<Vec3>& points, const std::vector<double>
 {
   start_ = points.front();
   end_ = points.back();
-  const double dt = limits_.period;
-  const double share = limits_.corner_share;
+  buildSegments(points, feeds);
+  const size_t n = segments_.size();
+  if (n == 0)
+  {
+    entry_feasible_ = entry_speed <= 1e-9;
+    return;
+  }
+  const std::vector<double> entry_max = entryLimits(junctionLimits());
+  // Forward pass: the fastest each segment can be left given how fast it was entered.
+  if (entry_speed > entry_max[0] * (1.0 + 1e-9) + 1e-9)
+  {
+    entry_feasible_ = false;
+    entry_speed = entry_max[0];
+  }
+  double v = entry_speed;
+  double t = 0.0;
+  double s_total = 0.0;
+  for (size_t k = 0; k < n; ++k)
+  {
+    Segment& s = segments_[k];
+    const double exit_max = k + 1 < n ? entry_max[k + 1] : 0.0;
+    s.v_entry = v;
+    s.v_exit = std::min(exit_max, std::sqrt(v * v + 2.0 * s.accel * s.length));
+    profileSegment(s);
+    s.t_start = t;
+    s.s_start = s_total;
+    t += s.dwell + s.t_accel + s.t_cruise + s.t_decel;
+    s_total += s.length;
+    v = s.v_exit;
+  }
+  duration_ = t;
+  length_ = s_total;
+}
 
-  // Segments with their own speed and acceleration limits along the path.
+// Segments with their own speed and acceleration limits along the path; points closer than
+// kSamePoint to the last one are left out (end_ is the last point kept).
+void Trajectory::buildSegments(const std::vector<Vec3>& points, const std::vector<double>& feeds)
+{
+  const double share = limits_.corner_share;
   Vec3 from = points.front();
   for (size_t p = 1; p < points.size(); ++p)
   {
@@ -178,15 +213,14 @@ void Trajectory::plan(const std::vector<Vec3>& points, const std::vector<double>
     from = points[p];
   }
   end_ = from;
-  const size_t n = segments_.size();
-  if (n == 0)
-  {
-    entry_feasible_ = entry_speed <= 1e-9;
-    return;
-  }
+}
 
-  // Junction speed limits: the axis velocity may jump by share * max_accel * period at a corner.
-  std::vector<double> junction(n + 1, 0.0);  // junction[k]: speed at the start of segment k; [n]: end
+// Junction speed limits: the axis velocity may jump by share * max_accel * period at a corner.
+// junction[k]: speed at the start of segment k; [n]: at the end (rest).
+std::vector<double> Trajectory::junctionLimits() const
+{
+  const size_t n = segments_.size();
+  std::vector<double> junction(n + 1, 0.0);
   junction[0] = kInf;
   for (size_t k = 1; k < n; ++k)
   {
@@ -196,14 +230,19 @@ void Trajectory::plan(const std::vector<Vec3>& points, const std::vector<double>
       const double jump = std::fabs(segments_[k].direction[i] - segments_[k - 1].direction[i]);
       if (jump > 1e-12)
       {
-        limit = std::min(limit, share * limits_.max_accel[i] * kPulsesPerMm * dt / jump);
+        limit = std::min(limit, limits_.corner_share * limits_.max_accel[i] * kPulsesPerMm * limits_.period / jump);
       }
     }
     junction[k] = k < corner_caps_.size() ? std::min(limit, corner_caps_[k]) : limit;
   }
   junction[n] = 0.0;  // end at rest
+  return junction;
+}
 
-  // Backward pass: the fastest each segment may be entered and still slow down in time.
+// Backward pass: the fastest each segment may be entered and still slow down in time.
+std::vector<double> Trajectory::entryLimits(const std::vector<double>& junction) const
+{
+  const size_t n = segments_.size();
   std::vector<double> entry_max(n);
   double exit = 0.0;
   for (size_t k = n; k-- > 0;)
@@ -212,38 +251,22 @@ void Trajectory::plan(const std::vector<Vec3>& points, const std::vector<double>
     entry_max[k] = std::min(junction[k], std::sqrt(exit * exit + 2.0 * s.accel * s.length));
     exit = entry_max[k];
   }
-  // Forward pass: the fastest each segment can be left given how fast it was entered.
-  if (entry_speed > entry_max[0] * (1.0 + 1e-9) + 1e-9)
-  {
-    entry_feasible_ = false;
-    entry_speed = entry_max[0];
-  }
-  double v = entry_speed;
-  double t = 0.0;
-  double s_total = 0.0;
-  for (size_t k = 0; k < n; ++k)
-  {
-    Segment& s = segments_[k];
-    const double exit_max = k + 1 < n ? entry_max[k + 1] : 0.0;
-    s.v_entry = v;
-    s.v_exit = std::min(exit_max, std::sqrt(v * v + 2.0 * s.accel * s.length));
-    const double v_top = std::max({s.v_max, s.v_entry, s.v_exit});
-    const double peak = std::sqrt((2.0 * s.accel * s.length + s.v_entry * s.v_entry + s.v_exit * s.v_exit) / 2.0);
-    s.v_cruise = std::max({std::min(v_top, peak), s.v_entry, s.v_exit});
-    const double d_accel = (s.v_cruise * s.v_cruise - s.v_entry * s.v_entry) / (2.0 * s.accel);
-    const double d_decel = (s.v_cruise * s.v_cruise - s.v_exit * s.v_exit) / (2.0 * s.accel);
-    const double d_cruise = std::max(0.0, s.length - d_accel - d_decel);
-    s.t_accel = (s.v_cruise - s.v_entry) / s.accel;
-    s.t_decel = (s.v_cruise - s.v_exit) / s.accel;
-    s.t_cruise = s.v_cruise > 0.0 ? d_cruise / s.v_cruise : 0.0;
-    s.t_start = t;
-    s.s_start = s_total;
-    t += s.dwell + s.t_accel + s.t_cruise + s.t_decel;
-    s_total += s.length;
-    v = s.v_exit;
-  }
-  duration_ = t;
-  length_ = s_total;
+  return entry_max;
+}
+
+// The speed profile of one segment between its entry and exit speeds: accelerate, cruise,
+// decelerate.
+void Trajectory::profileSegment(Segment& s)
+{
+  const double v_top = std::max({s.v_max, s.v_entry, s.v_exit});
+  const double peak = std::sqrt((2.0 * s.accel * s.length + s.v_entry * s.v_entry + s.v_exit * s.v_exit) / 2.0);
+  s.v_cruise = std::max({std::min(v_top, peak), s.v_entry, s.v_exit});
+  const double d_accel = (s.v_cruise * s.v_cruise - s.v_entry * s.v_entry) / (2.0 * s.accel);
+  const double d_decel = (s.v_cruise * s.v_cruise - s.v_exit * s.v_exit) / (2.0 * s.accel);
+  const double d_cruise = std::max(0.0, s.length - d_accel - d_decel);
+  s.t_accel = (s.v_cruise - s.v_entry) / s.accel;
+  s.t_decel = (s.v_cruise - s.v_exit) / s.accel;
+  s.t_cruise = s.v_cruise > 0.0 ? d_cruise / s.v_cruise : 0.0;
 }
 
 namespace

@@ -536,114 +536,19 @@ void SetpointSender::runJob(const std::shared_ptr<Job>& job)
 {
   const Operation& operation = job->operation();
   TrajectoryStream stream(*operation.trajectory);
-  const auto period_ns = static_cast<int64_t>(std::llround(options_.period * 1e9));
-  auto end_job = [&](Job::State state, const std::string& message)
-  {
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      // The epilogue was written (or the link is gone and the controller starts over anyway).
-      if (sequencer_.phase() == Phase::kOperation)
-      {
-        sequencer_.apply(EndOperation{});
-      }
-      if (sequencer_.phase() == Phase::kMachining)
-      {
-        sequencer_.apply(Machining{false});
-      }
-      running_.reset();
-    }
-    job->finish(state, message);
-  };
   try
   {
-    // Prologue in the order of at_protocol.md#sequence-of-one-machining: M1@ (1), P@ (5), tool (7), spindle (8).
-    std::string prologue = encode(Machining{true}) + encode(StartOperation{operation.coolant});
-    if (operation.tool)
-    {
-      prologue += encode(*operation.tool);
-    }
-    if (operation.spindle)
-    {
-      prologue += encode(Spindle{*operation.spindle});
-    }
-    write(prologue);
-    commands_ += 2 + (operation.tool ? 1 : 0) + (operation.spindle ? 1 : 0);
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      if (operation.tool)
-      {
-        sequencer_.apply(*operation.tool);
-      }
-      if (operation.spindle)
-      {
-        sequencer_.apply(Spindle{*operation.spindle});
-      }
-    }
-
-    int64_t due = monotonicNs() + period_ns;
-    bool behind = false;  // the previous setpoint was an underrun: this one belongs to the same stall
-    last_write_ns_ = 0;
-    Setpoint setpoint;
+    writePrologue(operation);
     Job::State outcome = Job::State::kSucceeded;
     std::string message = "path complete";
-    for (;;)
+    if (!streamJob(*job, stream, outcome, message))
     {
-      sleepUntilNs(due);
-      if (job->abort_requested_)
-      {
-        outcome = Job::State::kAborted;
-        std::lock_guard<std::mutex> lock(job->mutex_);
-        message = job->abort_reason_;
-        break;
-      }
-      if (job->cancel_requested_ && !stream.stopping())
-      {
-        stream.stop();
-      }
-      if (!stream.next(setpoint))
-      {
-        if (stream.stopping())
-        {
-          outcome = Job::State::kCancelled;
-          message = "cancelled: decelerated to a stop";
-        }
-        break;
-      }
-      writeQueuedCommands(false);  // e.g. a spindle change during the operation
-      if (!linkUp())
-      {
-        return;  // the commands' write failed and finished the job
-      }
-      buffer_.clear();
-      appendSetpoint(setpoint, buffer_);
-      write(buffer_);
-      const int64_t now = monotonicNs();
-      const int64_t late = now - due;
-      const bool underrun = late > period_ns;
-      if (underrun)
-      {
-        underruns_.fetch_add(1, std::memory_order_relaxed);
-        if (!behind)
-        {
-          stalls_.fetch_add(1, std::memory_order_relaxed);
-        }
-      }
-      behind = underrun;
-      atomicMax(max_late_ns_, late);
-      sum_late_ns_.fetch_add(std::max<int64_t>(late, 0), std::memory_order_relaxed);
-      if (last_write_ns_ != 0)
-      {
-        intervals_.record(now - last_write_ns_);
-      }
-      last_write_ns_ = now;
-      setpoints_.fetch_add(1, std::memory_order_relaxed);
-      job->publish(setpoint, stream.sent(), stream.total(), stream.distance());
-      due += period_ns;
+      return;  // the commands' write failed and finished the job
     }
     // Epilogue: #@ ends the operation (coolant off, step 16), M0@ the machining (spindle 0).
     write(encode(EndOperation{}) + encode(Machining{false}));
     commands_ += 2;
-    end_job(outcome, message);
+    endJob(*job, outcome, message);
   }
   catch (const Error& e)
   {
@@ -653,9 +558,120 @@ void SetpointSender::runJob(const std::shared_ptr<Job>& job)
       std::lock_guard<std::mutex> lock(job->mutex_);
       why = job->abort_reason_ + " (" + why + ")";
     }
-    end_job(Job::State::kFailed, why);
+    endJob(*job, Job::State::kFailed, why);
     linkFailed(why);
   }
+}
+
+void SetpointSender::writePrologue(const Operation& operation)
+{
+  // Prologue in the order of at_protocol.md#sequence-of-one-machining: M1@ (1), P@ (5), tool (7), spindle (8).
+  std::string prologue = encode(Machining{true}) + encode(StartOperation{operation.coolant});
+  if (operation.tool)
+  {
+    prologue += encode(*operation.tool);
+  }
+  if (operation.spindle)
+  {
+    prologue += encode(Spindle{*operation.spindle});
+  }
+  write(prologue);
+  commands_ += 2 + (operation.tool ? 1 : 0) + (operation.spindle ? 1 : 0);
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (operation.tool)
+  {
+    sequencer_.apply(*operation.tool);
+  }
+  if (operation.spindle)
+  {
+    sequencer_.apply(Spindle{*operation.spindle});
+  }
+}
+
+bool SetpointSender::streamJob(Job& job, TrajectoryStream& stream, Job::State& outcome, std::string& message)
+{
+  const auto period_ns = static_cast<int64_t>(std::llround(options_.period * 1e9));
+  int64_t due = monotonicNs() + period_ns;
+  bool behind = false;  // the previous setpoint was an underrun: this one belongs to the same stall
+  last_write_ns_ = 0;
+  Setpoint setpoint;
+  for (;;)
+  {
+    sleepUntilNs(due);
+    if (job.abort_requested_)
+    {
+      outcome = Job::State::kAborted;
+      std::lock_guard<std::mutex> lock(job.mutex_);
+      message = job.abort_reason_;
+      return true;
+    }
+    if (job.cancel_requested_ && !stream.stopping())
+    {
+      stream.stop();
+    }
+    if (!stream.next(setpoint))
+    {
+      if (stream.stopping())
+      {
+        outcome = Job::State::kCancelled;
+        message = "cancelled: decelerated to a stop";
+      }
+      return true;
+    }
+    writeQueuedCommands(false);  // e.g. a spindle change during the operation
+    if (!linkUp())
+    {
+      return false;
+    }
+    buffer_.clear();
+    appendSetpoint(setpoint, buffer_);
+    write(buffer_);
+    recordWrite(due, period_ns, behind);
+    job.publish(setpoint, stream.sent(), stream.total(), stream.distance());
+    due += period_ns;
+  }
+}
+
+void SetpointSender::recordWrite(int64_t due, int64_t period_ns, bool& behind)
+{
+  const int64_t now = monotonicNs();
+  const int64_t late = now - due;
+  const bool underrun = late > period_ns;
+  if (underrun)
+  {
+    underruns_.fetch_add(1, std::memory_order_relaxed);
+    if (!behind)
+    {
+      stalls_.fetch_add(1, std::memory_order_relaxed);
+    }
+  }
+  behind = underrun;
+  atomicMax(max_late_ns_, late);
+  sum_late_ns_.fetch_add(std::max<int64_t>(late, 0), std::memory_order_relaxed);
+  if (last_write_ns_ != 0)
+  {
+    intervals_.record(now - last_write_ns_);
+  }
+  last_write_ns_ = now;
+  setpoints_.fetch_add(1, std::memory_order_relaxed);
+}
+
+void SetpointSender::endJob(Job& job, Job::State state, const std::string& message)
+{
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    // The epilogue was written (or the link is gone and the controller starts over anyway).
+    if (sequencer_.phase() == Phase::kOperation)
+    {
+      sequencer_.apply(EndOperation{});
+    }
+    if (sequencer_.phase() == Phase::kMachining)
+    {
+      sequencer_.apply(Machining{false});
+    }
+    running_.reset();
+  }
+  job.finish(state, message);
 }
 }  // namespace at_protocol
 }  // namespace cnc_bridge

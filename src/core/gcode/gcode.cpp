@@ -22,15 +22,20 @@ namespace gcode
 {
 namespace
 {
-// Scans one line into words. Returns false for a tape marker or a deleted block (block says which).
-bool scanLine(std::string_view text, const ParserOptions& options, uint32_t line, Scan& scan, Block& block)
+ParseError wordError(uint32_t line, size_t index, const std::string& reason)
 {
-  auto fail = [line](size_t index, const std::string& reason) -> ParseError
-  { return ParseError(line, static_cast<uint32_t>(index + 1), reason); };
+  return ParseError(line, static_cast<uint32_t>(index + 1), reason);
+}
 
+// The start of a line: its length bound, leading blanks, a tape marker ('%') or a block-delete
+// slash. Returns false for a tape marker or a deleted block (block says which), else true with
+// \p start at the first character of the words.
+bool scanLineStart(std::string_view text, const ParserOptions& options, uint32_t line, Block& block, size_t& start)
+{
   if (text.size() > options.max_line_length)
   {
-    throw fail(options.max_line_length, "line longer than " + std::to_string(options.max_line_length) + " bytes");
+    throw wordError(line, options.max_line_length,
+                    "line longer than " + std::to_string(options.max_line_length) + " bytes");
   }
   const char* const data = text.data();
   const size_t size = text.size();
@@ -54,62 +59,104 @@ bool scanLine(std::string_view text, const ParserOptions& options, uint32_t line
     }
     ++i;
   }
+  start = i;
+  return true;
+}
 
-  BlockLexer lexer(text, BlockLexer::Mode::kStrict, line, i);
+// G words are kept in tenths (G92.1 -> 921), several to a block.
+void scanGWord(const LexedWord& word, uint32_t line, Scan& scan)
+{
+  const size_t letter_index = word.column - 1;
+  if (scan.g_count == scan.g.size())
+  {
+    throw wordError(line, letter_index, "too many G words in one block");
+  }
+  const double tenths = word.value * 10.0;
+  const double rounded = std::round(tenths);
+  if (word.value < 0 || std::fabs(tenths - rounded) > 1e-6 || rounded > 10000)
+  {
+    throw wordError(line, letter_index, "malformed G number");
+  }
+  scan.g_column[scan.g_count] = static_cast<uint32_t>(letter_index + 1);
+  scan.g[scan.g_count++] = static_cast<int>(rounded);
+}
+
+void scanMWord(const LexedWord& word, uint32_t line, Scan& scan)
+{
+  const size_t letter_index = word.column - 1;
+  const double value = word.value;
+  if (scan.m_count == scan.m.size())
+  {
+    throw wordError(line, letter_index, "more than 4 M words in one block");
+  }
+  if (value < 0 || value != std::floor(value) || value > 65535)
+  {
+    throw wordError(line, letter_index, "malformed M number");
+  }
+  scan.m_column[scan.m_count] = static_cast<uint32_t>(letter_index + 1);
+  scan.m[scan.m_count++] = static_cast<uint16_t>(value);
+}
+
+// N (block number) and O (program number): whole numbers, kept in the block.
+int64_t scanLabelWord(const LexedWord& word, uint32_t line, const char* what)
+{
+  const double value = word.value;
+  if (value < 0 || value != std::floor(value) || value > 1e15)
+  {
+    throw wordError(line, word.column - 1, std::string("malformed ") + what);
+  }
+  return static_cast<int64_t>(value);
+}
+
+// The other letters: a Word of gcode_internal.h, at most once a block.
+void scanValueWord(const LexedWord& word, uint32_t line, Scan& scan)
+{
+  const char letter = word.letter;
+  const size_t letter_index = word.column - 1;
+  const int w = wordIndex(letter);
+  if (w < 0)
+  {
+    throw wordError(line, letter_index, std::string("word ") + letter + " is not supported");
+  }
+  if (scan.has(static_cast<Word>(w)))
+  {
+    throw wordError(line, letter_index, std::string("word ") + letter + " appears twice in one block");
+  }
+  scan.present |= 1u << w;
+  if (word.decimal)
+  {
+    scan.decimal |= 1u << w;
+  }
+  scan.value[w] = word.value;
+  scan.column[w] = static_cast<uint32_t>(letter_index + 1);
+}
+
+// Scans one line into words. Returns false for a tape marker or a deleted block (block says which).
+bool scanLine(std::string_view text, const ParserOptions& options, uint32_t line, Scan& scan, Block& block)
+{
+  size_t start = 0;
+  if (!scanLineStart(text, options, line, block, start))
+  {
+    return false;
+  }
+  BlockLexer lexer(text, BlockLexer::Mode::kStrict, line, start);
   LexedWord word;
   while (lexer.next(word))
   {
-    const char letter = word.letter;
-    const size_t letter_index = word.column - 1;
-    const double value = word.value;
-    const bool decimal = word.decimal;
     block.has_words = true;
-
-    switch (letter)
+    switch (word.letter)
     {
       case 'G':
-      {
-        if (scan.g_count == scan.g.size())
-        {
-          throw fail(letter_index, "too many G words in one block");
-        }
-        const double tenths = value * 10.0;
-        const double rounded = std::round(tenths);
-        if (value < 0 || std::fabs(tenths - rounded) > 1e-6 || rounded > 10000)
-        {
-          throw fail(letter_index, "malformed G number");
-        }
-        scan.g_column[scan.g_count] = static_cast<uint32_t>(letter_index + 1);
-        scan.g[scan.g_count++] = static_cast<int>(rounded);
+        scanGWord(word, line, scan);
         break;
-      }
       case 'M':
-      {
-        if (scan.m_count == scan.m.size())
-        {
-          throw fail(letter_index, "more than 4 M words in one block");
-        }
-        if (value < 0 || value != std::floor(value) || value > 65535)
-        {
-          throw fail(letter_index, "malformed M number");
-        }
-        scan.m_column[scan.m_count] = static_cast<uint32_t>(letter_index + 1);
-        scan.m[scan.m_count++] = static_cast<uint16_t>(value);
+        scanMWord(word, line, scan);
         break;
-      }
       case 'N':
-        if (value < 0 || value != std::floor(value) || value > 1e15)
-        {
-          throw fail(letter_index, "malformed N block number");
-        }
-        block.block_number = static_cast<int64_t>(value);
+        block.block_number = scanLabelWord(word, line, "N block number");
         break;
       case 'O':
-        if (value < 0 || value != std::floor(value) || value > 1e15)
-        {
-          throw fail(letter_index, "malformed O program number");
-        }
-        block.program_number = static_cast<int64_t>(value);
+        block.program_number = scanLabelWord(word, line, "O program number");
         break;
       case 'A':
       case 'B':
@@ -117,27 +164,10 @@ bool scanLine(std::string_view text, const ParserOptions& options, uint32_t line
       case 'U':
       case 'V':
       case 'W':
-        throw fail(letter_index, std::string("axis ") + letter + " is not supported (X, Y, Z only)");
+        throw wordError(line, word.column - 1, std::string("axis ") + word.letter + " is not supported (X, Y, Z only)");
       default:
-      {
-        const int w = wordIndex(letter);
-        if (w < 0)
-        {
-          throw fail(letter_index, std::string("word ") + letter + " is not supported");
-        }
-        if (scan.has(static_cast<Word>(w)))
-        {
-          throw fail(letter_index, std::string("word ") + letter + " appears twice in one block");
-        }
-        scan.present |= 1u << w;
-        if (decimal)
-        {
-          scan.decimal |= 1u << w;
-        }
-        scan.value[w] = value;
-        scan.column[w] = static_cast<uint32_t>(letter_index + 1);
+        scanValueWord(word, line, scan);
         break;
-      }
     }
   }
   return true;

@@ -90,6 +90,97 @@ Point arcTangent(double cu, double cv, const Vec3& p, bool cw)
   const double r = std::hypot(rx, ry);
   return cw ? Point{ry / r, -rx / r} : Point{-ry / r, rx / r};
 }
+
+// The arc of the tool radius round an outside corner, from the held move's offset end to the next
+// move's offset start, at the height of the former.
+Arc outsideCornerArc(const Vec3& corner, double r, double side, const Vec3& from, const Vec3& to)
+{
+  Arc arc;
+  arc.cu = corner.x;
+  arc.cv = corner.y;
+  arc.rs = arc.re = r;
+  arc.cw = side > 0;  // on the left of a right turn the tool goes round clockwise
+  arc.start = {from.x, from.y, from.z};
+  arc.end = {to.x, to.y, from.z};
+  arc.a0 = std::atan2(arc.start.y - arc.cv, arc.start.x - arc.cu);
+  arc.sweep = sweepBetween(arc.a0, std::atan2(arc.end.y - arc.cv, arc.end.x - arc.cu), arc.cw, false);
+  return arc;
+}
+
+// The next move's offset path: a line through its offset start along (tx, ty), or an arc about
+// (cu, cv) of radius rad.
+struct NextPath
+{
+  bool arc = false;
+  double cu = 0.0, cv = 0.0, rad = 0.0;
+  Point start{0.0, 0.0};
+  Point tangent{0.0, 0.0};
+};
+
+// Inside corner: where the offset paths cross, the crossing nearest the corner's offset points.
+// A held line's offset path is the programmed line moved by the radius: through its offset end
+// along the programmed direction. For the entry move that is not the way the tool goes (from the
+// uncompensated start), and rs274 intersects the offset line all the same.
+Point insideCrossing(const Parser::Comp& comp, const NextPath& next, uint32_t line)
+{
+  const Point mid{(comp.end.x + next.start.x) / 2, (comp.end.y + next.start.y) / 2};
+  Point candidates[2];
+  int n = 0;
+  const Point a0{comp.end.x, comp.end.y};
+  const Point ad{comp.tx, comp.ty};
+  if (!comp.held_arc && !next.arc)
+  {
+    n = lineLine(a0, ad, next.start, next.tangent, candidates[0]) ? 1 : 0;
+  }
+  else if (!comp.held_arc)
+  {
+    n = lineCircle(a0, ad, {next.cu, next.cv}, next.rad, candidates);
+  }
+  else if (!next.arc)
+  {
+    n = lineCircle(next.start, next.tangent, {comp.cu, comp.cv}, comp.rad, candidates);
+  }
+  else
+  {
+    n = circleCircle({comp.cu, comp.cv}, comp.rad, {next.cu, next.cv}, next.rad, candidates);
+  }
+  if (n == 0)
+  {
+    throw ParseError(line, 1,
+                     "cutter compensation: the offset paths do not meet at the inside corner before this block (tool "
+                     "radius " +
+                         std::to_string(comp.radius) + " mm too large for the contour); use a smaller tool");
+  }
+  Point best = candidates[0];
+  for (int k = 1; k < n; ++k)
+  {
+    if (std::hypot(candidates[k].x - mid.x, candidates[k].y - mid.y) < std::hypot(best.x - mid.x, best.y - mid.y))
+    {
+      best = candidates[k];
+    }
+  }
+  return best;
+}
+
+// The held move, shortened to the crossing, must still go the way it went, not back behind its
+// start (a gouge; rs274 checks the same, interp_queue.cc).
+void checkNoGouge(const Parser::Comp& comp, const Point& crossing, uint32_t line)
+{
+  if (comp.held_arc)
+  {
+    return;
+  }
+  const double gx = comp.end.x - comp.start.x, gy = comp.end.y - comp.start.y;
+  const double len2 = gx * gx + gy * gy;
+  const double t = len2 > 0 ? ((crossing.x - comp.start.x) * gx + (crossing.y - comp.start.y) * gy) / len2 : 0.0;
+  if (t < -1e-9)
+  {
+    throw ParseError(line, 1,
+                     "cutter compensation: the tool (radius " + std::to_string(comp.radius) +
+                         " mm) does not fit in the inside corner before this block (it would cut into the previous "
+                         "move's contour); use a smaller tool");
+  }
+}
 }  // namespace
 
 void Parser::compensationOn(Step& st)
@@ -186,15 +277,7 @@ void Parser::joinHeld(Step& st, Comp& comp, bool next_arc, double ncu, double nc
     const Vec3 corner_start = comp.end;
     Move round = comp.held;
     emitHeld(st, comp);
-    Arc arc;
-    arc.cu = corner.x;
-    arc.cv = corner.y;
-    arc.rs = arc.re = r;
-    arc.cw = comp.side > 0;  // on the left of a right turn the tool goes round clockwise
-    arc.start = {corner_start.x, corner_start.y, corner_start.z};
-    arc.end = {next_start.x, next_start.y, corner_start.z};
-    arc.a0 = std::atan2(arc.start.y - arc.cv, arc.start.x - arc.cu);
-    arc.sweep = sweepBetween(arc.a0, std::atan2(arc.end.y - arc.cv, arc.end.x - arc.cu), arc.cw, false);
+    const Arc arc = outsideCornerArc(corner, r, comp.side, corner_start, next_start);
     round.motion = arc.cw ? Motion::kArcCw : Motion::kArcCcw;
     round.line = st.line;
     round.block_number = st.block.block_number;
@@ -214,63 +297,15 @@ void Parser::joinHeld(Step& st, Comp& comp, bool next_arc, double ncu, double nc
     emitHeld(st, comp);
     return;
   }
-  // Inside corner: where the offset paths cross, the crossing nearest the corner's offset points.
-  // A held line's offset path is the programmed line moved by the radius: through its offset end
-  // along the programmed direction. For the entry move that is not the way the tool goes (from the
-  // uncompensated start), and rs274 intersects the offset line all the same.
-  const Point mid{(comp.end.x + next_start.x) / 2, (comp.end.y + next_start.y) / 2};
-  Point candidates[2];
-  int n = 0;
-  const Point a0{comp.end.x, comp.end.y};
-  const Point ad{comp.tx, comp.ty};
-  const Point b0{next_start.x, next_start.y};
-  const Point bd{ntx, nty};
-  if (!comp.held_arc && !next_arc)
-  {
-    n = lineLine(a0, ad, b0, bd, candidates[0]) ? 1 : 0;
-  }
-  else if (!comp.held_arc)
-  {
-    n = lineCircle(a0, ad, {ncu, ncv}, nrad, candidates);
-  }
-  else if (!next_arc)
-  {
-    n = lineCircle(b0, bd, {comp.cu, comp.cv}, comp.rad, candidates);
-  }
-  else
-  {
-    n = circleCircle({comp.cu, comp.cv}, comp.rad, {ncu, ncv}, nrad, candidates);
-  }
-  if (n == 0)
-  {
-    throw ParseError(st.line, 1,
-                     "cutter compensation: the offset paths do not meet at the inside corner before this block (tool "
-                     "radius " +
-                         std::to_string(r) + " mm too large for the contour); use a smaller tool");
-  }
-  Point best = candidates[0];
-  for (int k = 1; k < n; ++k)
-  {
-    if (std::hypot(candidates[k].x - mid.x, candidates[k].y - mid.y) < std::hypot(best.x - mid.x, best.y - mid.y))
-    {
-      best = candidates[k];
-    }
-  }
-  // The held move, shortened to the crossing, must still go the way it went, not back behind its
-  // start (a gouge; rs274 checks the same, interp_queue.cc).
-  if (!comp.held_arc)
-  {
-    const double gx = comp.end.x - comp.start.x, gy = comp.end.y - comp.start.y;
-    const double len2 = gx * gx + gy * gy;
-    const double t = len2 > 0 ? ((best.x - comp.start.x) * gx + (best.y - comp.start.y) * gy) / len2 : 0.0;
-    if (t < -1e-9)
-    {
-      throw ParseError(st.line, 1,
-                       "cutter compensation: the tool (radius " + std::to_string(r) +
-                           " mm) does not fit in the inside corner before this block (it would cut into the previous "
-                           "move's contour); use a smaller tool");
-    }
-  }
+  NextPath next;
+  next.arc = next_arc;
+  next.cu = ncu;
+  next.cv = ncv;
+  next.rad = nrad;
+  next.start = {next_start.x, next_start.y};
+  next.tangent = {ntx, nty};
+  const Point best = insideCrossing(comp, next, st.line);
+  checkNoGouge(comp, best, st.line);
   comp.end.x = best.x;
   comp.end.y = best.y;
   next_start.x = best.x;

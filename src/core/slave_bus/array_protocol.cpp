@@ -1,5 +1,5 @@
 // Serial array protocol: step encoder, the master's receive state machine and the uplink codec
-// (see array_protocol.h for the wire formats and how they read the paper).
+// (see array_protocol.h for the wire formats and how they read the universal-CNC paper).
 #include "cnc_bridge/slave_bus/array_protocol.h"
 
 #include <algorithm>
@@ -49,7 +49,8 @@ std::vector<uint8_t> encodeStep(const StepPayloads& payloads, size_t max_payload
   max_payload = std::min(max_payload, kMaxPayload);
   if (payloads.empty())
   {
-    throw ProtocolError("step frame with no slaves: the paper's master needs a slave count of at least 1");
+    throw ProtocolError(
+        "step frame with no slaves: the universal-CNC paper's master needs a slave count of at least 1");
   }
   if (payloads.size() > kMaxSlaves)
   {
@@ -113,7 +114,7 @@ void StepReceiver::feed(uint8_t byte)
     case State::kSlavesNum:
       if (byte == 0)
       {
-        // An empty frame. The paper's code would enter RS_SLAVE_LEN with slave_n = 0 and count down past
+        // An empty frame. The universal-CNC paper's code would enter RS_SLAVE_LEN with slave_n = 0 and count down past
         // zero; treating it as complete keeps a stray zero from desynchronising the stream.
         ++frames_;
         if (frame_done_)

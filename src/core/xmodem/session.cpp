@@ -1,7 +1,7 @@
 // XModem sender and receiver state machines (see session.h for the contract).
 //
-// Protocol as implemented (Forsberg's XMODEM/YMODEM reference, lrzsz, and the Haas capture in the
-// OpenDNC's RS-232 capture, test/data/xmodem/haas_xmodem_capture.json; docs/protocols/xmodem.md):
+// Protocol as implemented (Forsberg's XMODEM/YMODEM reference, lrzsz, and OpenDNC's Haas capture,
+// test/data/xmodem/haas_xmodem_capture.json; docs/protocols/xmodem.md#source):
 //
 //   receiver                         sender
 //   NAK | 'C'  (again every nak_interval; 'C' crc_attempts times, then NAK)
@@ -300,7 +300,8 @@ Stats Sender::send(const std::vector<uint8_t>& payload, const ProgressCallback& 
   {
     const uint8_t start = waitForStart();
     // NAKs (or 'C's) the receiver repeated while it waited are still queued: drop them so that
-    // none of them is read as the answer to block 1 (the capture's PC sent block 1 twice for this).
+    // none of them is read as the answer to block 1 (the PC in OpenDNC's Haas capture,
+    // test/data/xmodem/haas_xmodem_capture.json, sent block 1 twice for this).
     input_.discard();
     input_.purge(config_.turnaround, config_.turnaround * 10);
     const bool crc = start == kCrcStart;

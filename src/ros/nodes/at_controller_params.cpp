@@ -60,13 +60,13 @@ ap::TcpLinkSettings linkSettings(const ros::NodeHandle& pnh)
 {
   ap::TcpLinkSettings link;
   // ~host (required): address of the controller (both sockets in client mode); ~tcp_port: the
-  // controller's command server (the paper's server_recv); ~connect_timeout: s allowed for one
-  // TCP connect.
+  // controller's command server (the ESPRIT paper's server_recv, docs/protocols/at_protocol.md#source);
+  // ~connect_timeout: s allowed for one TCP connect.
   params::TcpLinkDefaults defaults;
   defaults.tcp_port = 5000;
   defaults.connect_timeout = 2.0;
   link.command = params::tcpLink(pnh, defaults);
-  // ~report_mode: "client" connects to the controller's report server (the paper's server_send,
+  // ~report_mode: "client" connects to the controller's report server (the ESPRIT paper's server_send,
   // like the add-in's ReceiveClient); "server" listens on ~listen_port for the controller.
   link.report_server = params::choice(pnh, "report_mode", "client", {"client", "server"}) == "server";
   // ~report_port: the controller's report server (client mode).

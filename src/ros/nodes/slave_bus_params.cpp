@@ -85,7 +85,7 @@ slave_bus::SlaveConfig slaveEntry(XmlRpc::XmlRpcValue& item, const std::string& 
 }
 
 /// ~slaves: list of {address, name, role (x|y|z|tool|generic), encoding (bytes|hundreds|be16|be16s),
-/// scale (device units per metre, axes only)}; ~bus_size: slaves in every frame (the paper's master
+/// scale (device units per metre, axes only)}; ~bus_size: slaves in every frame (the universal-CNC paper's master
 /// firmware is built for a fixed count, e.g. 8); 0 (default): the highest configured address.
 slave_bus::SlaveTable slaveTable(const ros::NodeHandle& pnh, const slave_bus::WireFormat& wire)
 {
@@ -115,7 +115,7 @@ slave_bus::BusSettings readBusSettings(const ros::NodeHandle& pnh)
   // ~port (required), ~baud (115200), ~data_bits, ~parity, ~stop_bits, ~flow_control: the master's
   // serial line (a device, or a device server's tcp:// or rfc2217:// address).
   const LinkSettings link = params::serialLink(pnh, 115200);
-  // ~framing: raw (the paper's bytes, for its stock master firmware) or framed (every frame in a
+  // ~framing: raw (the universal-CNC paper's bytes, for its stock master firmware) or framed (every frame in a
   // WirePacker frame with CRC-8, both directions; recommended where the firmware supports it).
   const slave_bus::Framing framing =
       params::naming(pnh, "framing", [&] { return slave_bus::parseFraming(pnh.param<std::string>("framing", "raw")); });

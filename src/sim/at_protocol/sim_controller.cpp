@@ -434,9 +434,7 @@ void SimController::controlLoop()
   const double alpha = 1.0 - std::exp(-dt / (options_.lag_ms * 1e-3));
   int64_t due = monotonicNs() + period;
   uint64_t tick = 0;
-  std::array<double, 3> last_reported{NAN, NAN, NAN};
-  uint64_t last_report_tick = 0;
-  bool was_moving = false;
+  ReportPacing pacing;
   while (!stop_.stopped())
   {
     timespec when{static_cast<time_t>(due / 1000000000LL), static_cast<long>(due % 1000000000LL)};
@@ -447,116 +445,145 @@ void SimController::controlLoop()
       due = monotonicNs() + period;  // the process was stopped: do not race to catch up
     }
     ++tick;
-
-    // Commands of this time loop: everything up to and including one setpoint.
-    std::deque<Command> now;
-    std::deque<std::string> console;
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      if (new_command_link_)
-      {
-        new_command_link_ = false;
-        sequencer_.reset();
-      }
-      while (!queue_.empty())
-      {
-        const bool setpoint = std::holds_alternative<Setpoint>(queue_.front());
-        now.push_back(std::move(queue_.front()));
-        queue_.pop_front();
-        if (setpoint)
-        {
-          break;
-        }
-      }
-      console.swap(console_);
-    }
-    for (const auto& line : console)
-    {
-      handleConsole(line);
-    }
-    for (const auto& command : now)
-    {
-      apply(command);
-    }
-
+    takeCommands();
     if (greet_.exchange(false))
     {
-      if (!options_.estop_unreported)
-      {
-        report(EStopReport{estop_});
-      }
-      reportMode();
-      report(positionReport());
-      last_report_tick = tick;
+      greet(tick, pacing);
     }
-    const int request = estop_request_.exchange(-1);
-    if (request >= 0 && (request == 1) != estop_)
-    {
-      estop_ = request == 1;
-      std::cerr << "sim_at_controller: emergency stop " << (estop_ ? "on" : "off") << std::endl;
-      if (estop_)
-      {
-        target_ = position_;  // the axes stop where they are
-        homing_ = false;
-      }
-      report(EStopReport{estop_});
-    }
+    takeEStopRequest();
+    moveAxes(dt, alpha);
+    reportPosition(tick, pacing);
+  }
+}
 
-    // Axes: first-order lag towards the target; homing moves the target at the homing speed,
-    // a jog at its feed.
-    if (jog_axis_ && sequencer_.jogFeed() > 0 && options_.jog_speed > 0.0 && !estop_)
+void SimController::takeCommands()
+{
+  // Commands of this time loop: everything up to and including one setpoint.
+  std::deque<Command> now;
+  std::deque<std::string> console;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (new_command_link_)
     {
-      target_[static_cast<int>(*jog_axis_)] +=
-          sequencer_.jogFeed() / double(kMaxFeed) * options_.jog_speed * kPulsesPerMm * dt;
+      new_command_link_ = false;
+      sequencer_.reset();
     }
-    if (homing_)
+    while (!queue_.empty())
     {
-      const double step = options_.home_speed * kPulsesPerMm * dt;
-      bool arrived = true;
-      for (int i = 0; i < 3; ++i)
+      const bool setpoint = std::holds_alternative<Setpoint>(queue_.front());
+      now.push_back(std::move(queue_.front()));
+      queue_.pop_front();
+      if (setpoint)
       {
-        const double error = options_.home[i] - target_[i];
-        target_[i] += std::clamp(error, -step, step);
-        arrived = arrived && std::fabs(options_.home[i] - position_[i]) < 0.5;
-      }
-      if (arrived && !at_home_reported_)
-      {
-        position_ = {double(options_.home[0]), double(options_.home[1]), double(options_.home[2])};
-        report(positionReport());
-        report(HomeReport{});
-        at_home_reported_ = true;
-        homing_ = false;
+        break;
       }
     }
-    if (!estop_)
+    console.swap(console_);
+  }
+  for (const auto& line : console)
+  {
+    handleConsole(line);
+  }
+  for (const auto& command : now)
+  {
+    apply(command);
+  }
+}
+
+void SimController::greet(uint64_t tick, ReportPacing& pacing)
+{
+  if (!options_.estop_unreported)
+  {
+    report(EStopReport{estop_});
+  }
+  reportMode();
+  report(positionReport());
+  pacing.last_tick = tick;
+}
+
+void SimController::takeEStopRequest()
+{
+  const int request = estop_request_.exchange(-1);
+  if (request >= 0 && (request == 1) != estop_)
+  {
+    estop_ = request == 1;
+    std::cerr << "sim_at_controller: emergency stop " << (estop_ ? "on" : "off") << std::endl;
+    if (estop_)
     {
-      for (int i = 0; i < 3; ++i)
-      {
-        position_[i] += (target_[i] - position_[i]) * alpha;
-        if (std::fabs(target_[i] - position_[i]) < 0.01)
-        {
-          position_[i] = target_[i];
-        }
-      }
+      target_ = position_;  // the axes stop where they are
+      homing_ = false;
     }
-    const PositionReport current = positionReport();
-    bool moved = false;
+    report(EStopReport{estop_});
+  }
+}
+
+// Axes: first-order lag towards the target; homing moves the target at the homing speed, a jog
+// at its feed.
+void SimController::moveAxes(double dt, double alpha)
+{
+  if (jog_axis_ && sequencer_.jogFeed() > 0 && options_.jog_speed > 0.0 && !estop_)
+  {
+    target_[static_cast<int>(*jog_axis_)] +=
+        sequencer_.jogFeed() / double(kMaxFeed) * options_.jog_speed * kPulsesPerMm * dt;
+  }
+  if (homing_)
+  {
+    homeStep(dt);
+  }
+  if (!estop_)
+  {
     for (int i = 0; i < 3; ++i)
     {
-      moved = moved || current.position[i] != last_reported[i];
-    }
-    const bool due_report = moved && tick - last_report_tick >= static_cast<uint64_t>(options_.report_period_ms);
-    const bool stopped_now = !moved && was_moving;
-    if (due_report || stopped_now || tick - last_report_tick >= static_cast<uint64_t>(options_.heartbeat_ms))
-    {
-      report(current);
-      for (int i = 0; i < 3; ++i)
+      position_[i] += (target_[i] - position_[i]) * alpha;
+      if (std::fabs(target_[i] - position_[i]) < 0.01)
       {
-        last_reported[i] = current.position[i];
+        position_[i] = target_[i];
       }
-      last_report_tick = tick;
-      was_moving = moved;
     }
+  }
+}
+
+void SimController::homeStep(double dt)
+{
+  const double step = options_.home_speed * kPulsesPerMm * dt;
+  bool arrived = true;
+  for (int i = 0; i < 3; ++i)
+  {
+    const double error = options_.home[i] - target_[i];
+    target_[i] += std::clamp(error, -step, step);
+    arrived = arrived && std::fabs(options_.home[i] - position_[i]) < 0.5;
+  }
+  if (arrived && !at_home_reported_)
+  {
+    position_ = {double(options_.home[0]), double(options_.home[1]), double(options_.home[2])};
+    report(positionReport());
+    report(HomeReport{});
+    at_home_reported_ = true;
+    homing_ = false;
+  }
+}
+
+// A position report every report period while moving, one when the axes come to rest, and a
+// heartbeat while idle.
+void SimController::reportPosition(uint64_t tick, ReportPacing& pacing)
+{
+  const PositionReport current = positionReport();
+  bool moved = false;
+  for (int i = 0; i < 3; ++i)
+  {
+    moved = moved || current.position[i] != pacing.last_reported[i];
+  }
+  const bool due_report = moved && tick - pacing.last_tick >= static_cast<uint64_t>(options_.report_period_ms);
+  const bool stopped_now = !moved && pacing.was_moving;
+  if (due_report || stopped_now || tick - pacing.last_tick >= static_cast<uint64_t>(options_.heartbeat_ms))
+  {
+    report(current);
+    for (int i = 0; i < 3; ++i)
+    {
+      pacing.last_reported[i] = current.position[i];
+    }
+    pacing.last_tick = tick;
+    pacing.was_moving = moved;
   }
 }
 }  // namespace at_protocol

@@ -1,7 +1,7 @@
-// The simulated '@' controller: the real-time Linux controller of docs/protocols/at_protocol.md
-// (its paper's sections 5 and 6) without the machine, as a class the sim_at_controller program runs
+// The simulated '@' controller: the real-time Linux controller of the ESPRIT paper's sections 5 and 6
+// (docs/protocols/at_protocol.md#source) without the machine, as a class the sim_at_controller program runs
 // (src/sim/sim_at_controller.cpp: options, signals, stdin). It serves the command socket
-// ('@'-terminated messages, the paper's server_recv) and sends reports one per line (server_send),
+// ('@'-terminated messages, the ESPRIT paper's server_recv) and sends reports one per line (server_send),
 // either as a server the node connects to or as a client of the node's report server. Every 1 ms
 // time loop it takes one setpoint and the axes follow it with a first-order lag; it reports
 // position, mode, home and emergency stop, and ignores jog requests while machining as the
@@ -13,6 +13,7 @@
 #include <cstdint>
 #include <deque>
 #include <fstream>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -109,6 +110,21 @@ class SimController
   // ---- the 1 ms time loop ----
   void apply(const Command& command);
   void controlLoop();
+  static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+  // What the time loop reported last, which paces the position reports.
+  struct ReportPacing
+  {
+    std::array<double, 3> last_reported{kNaN, kNaN, kNaN};
+    uint64_t last_tick = 0;
+    bool was_moving = false;
+  };
+  // One time loop's steps, in order.
+  void takeCommands();
+  void greet(uint64_t tick, ReportPacing& pacing);
+  void takeEStopRequest();
+  void moveAxes(double dt, double alpha);
+  void homeStep(double dt);
+  void reportPosition(uint64_t tick, ReportPacing& pacing);
 
   SimControllerOptions options_;
   StopSignal& stop_;

@@ -25,7 +25,7 @@ struct ModeInfo
 std::map<std::string, ModeInfo>& modes();
 
 /// \brief Registers a mode at static-initialisation time:
-///   static cnc_bridge::sim::SimMode xmodem("xmodem", "XModem peer as the Haas in the capture", &runXmodem);
+///   static cnc_bridge::sim::SimMode xmodem("xmodem", "XModem peer as the Haas of OpenDNC's capture", &runXmodem);
 struct SimMode
 {
   SimMode(const std::string& name, const std::string& summary, ModeMain run)

@@ -276,7 +276,7 @@ int runXmodem(const std::vector<std::string>& all_args)
   return 0;
 }
 
-const SimMode kXmodemMode("xmodem", "XModem peer as the Haas in the capture (checksum, NAKs, CAN answer to EOT)",
+const SimMode kXmodemMode("xmodem", "XModem peer as the Haas in OpenDNC's capture (checksum, NAKs, CAN answer to EOT)",
                           &runXmodem);
 }  // namespace
 }  // namespace sim

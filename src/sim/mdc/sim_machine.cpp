@@ -36,16 +36,34 @@ std::string hms(double seconds, int hour_digits)
                 total % 60);
   return buffer;
 }
+
+// The printable characters of a line from a client, without leading and trailing spaces.
+std::string printableTrimmed(const std::string& raw)
+{
+  std::string line;
+  for (char c : raw)
+    if (c >= 0x20 && c < 0x7F)
+      line.push_back(c);
+  while (!line.empty() && line.back() == ' ')
+    line.pop_back();
+  while (!line.empty() && line.front() == ' ')
+    line.erase(0, 1);
+  return line;
+}
 }  // namespace
 
-SimMachine SimMachine::fromScript(std::istream& in, const std::string& name)
+// A line of the script being read: where it is, for the errors that name it.
+struct SimMachine::ScriptLine
 {
-  SimMachine machine;
+  std::string name;
+  size_t number = 0;
   std::string text;
-  size_t line_number = 0;
-  auto fail = [&](const std::string& why)
-  { throw ConfigError(name + ":" + std::to_string(line_number) + ": " + why + ": \"" + text + "\""); };
-  auto to_double = [&](const std::string& value) -> double
+
+  [[noreturn]] void fail(const std::string& why) const
+  {
+    throw ConfigError(name + ":" + std::to_string(number) + ": " + why + ": \"" + text + "\"");
+  }
+  double toDouble(const std::string& value) const
   {
     try
     {
@@ -55,108 +73,127 @@ SimMachine SimMachine::fromScript(std::istream& in, const std::string& name)
     {
       fail("not a number");
     }
-    return 0;
-  };
-  while (std::getline(in, text))
+  }
+};
+
+SimMachine SimMachine::fromScript(std::istream& in, const std::string& name)
+{
+  SimMachine machine;
+  ScriptLine script;
+  script.name = name;
+  while (std::getline(in, script.text))
   {
-    ++line_number;
-    std::string line = text.substr(0, text.find('#'));
+    ++script.number;
+    std::string line = script.text.substr(0, script.text.find('#'));
     std::istringstream words(line);
     std::string keyword;
     if (!(words >> keyword))
       continue;
-    if (keyword == "serial")
-      words >> machine.serial_;
-    else if (keyword == "software")
-      words >> machine.software_;
-    else if (keyword == "model")
-      words >> machine.model_;
-    else if (keyword == "units")
-    {
-      std::string units;
-      words >> units;
-      if (units != "inch" && units != "mm")
-        fail("units must be inch or mm");
-      machine.inch_ = units == "inch";
-    }
-    else if (keyword == "work")
-    {
-      std::string x, y, z;
-      if (!(words >> x >> y >> z))
-        fail("work needs X Y Z");
-      machine.work_[0] = to_double(x);
-      machine.work_[1] = to_double(y);
-      machine.work_[2] = to_double(z);
-    }
-    else if (keyword == "var")
-    {
-      std::string n, value;
-      if (!(words >> n >> value))
-        fail("var needs N VALUE");
-      machine.variables_[static_cast<int>(to_double(n))] = to_double(value);
-    }
-    else if (keyword == "phase")
-    {
-      Phase phase;
-      phase.line = line_number;
-      std::string seconds;
-      if (!(words >> seconds))
-        fail("phase needs SECONDS");
-      phase.seconds = to_double(seconds);
-      if (!(phase.seconds > 0) || phase.seconds > 1e6)
-        fail("phase length must be positive");
-      std::string item;
-      while (words >> item)
-      {
-        if (item == "drop")
-        {
-          phase.drop = true;
-          continue;
-        }
-        const size_t eq = item.find('=');
-        if (eq == std::string::npos || eq == 0)
-          fail("expected key=value, not " + item);
-        std::string key = item.substr(0, eq), value = item.substr(eq + 1);
-        for (auto& c : value)
-          if (c == '_')
-            c = ' ';
-        if (key == "parts+")
-          phase.parts_increment = static_cast<long long>(to_double(value));
-        else if (key == "x")
-          phase.x = to_double(value);
-        else if (key == "y")
-          phase.y = to_double(value);
-        else if (key == "z")
-          phase.z = to_double(value);
-        else if (key == "mode" || key == "status" || key == "program")
-          phase.set[key] = upper(value);
-        else if (key == "tool" || key == "spindle" || key == "parts")
-        {
-          to_double(value);
-          phase.set[key] = value;
-        }
-        else if (key.size() > 3 && key.compare(0, 3, "var") == 0)
-        {
-          const double n = to_double(key.substr(3));
-          if (n != std::floor(n) || n < 1 || n > 99999)
-            fail("varN needs a variable number N, not " + key);
-          phase.variables[static_cast<int>(n)] = to_double(value);
-        }
-        else
-          fail("unknown key " + key);
-      }
-      machine.phases_.push_back(phase);
-    }
-    else
-      fail("unknown statement " + keyword);
+    machine.readStatement(keyword, words, script);
   }
   if (machine.phases_.empty())
   {
-    line_number = 0;
-    text.clear();
-    fail("no phase");
+    script.number = 0;
+    script.text.clear();
+    script.fail("no phase");
   }
   return machine;
+}
+
+void SimMachine::readStatement(const std::string& keyword, std::istream& words, const ScriptLine& script)
+{
+  if (keyword == "serial")
+    words >> serial_;
+  else if (keyword == "software")
+    words >> software_;
+  else if (keyword == "model")
+    words >> model_;
+  else if (keyword == "units")
+  {
+    std::string units;
+    words >> units;
+    if (units != "inch" && units != "mm")
+      script.fail("units must be inch or mm");
+    inch_ = units == "inch";
+  }
+  else if (keyword == "work")
+  {
+    std::string x, y, z;
+    if (!(words >> x >> y >> z))
+      script.fail("work needs X Y Z");
+    work_[0] = script.toDouble(x);
+    work_[1] = script.toDouble(y);
+    work_[2] = script.toDouble(z);
+  }
+  else if (keyword == "var")
+  {
+    std::string n, value;
+    if (!(words >> n >> value))
+      script.fail("var needs N VALUE");
+    variables_[static_cast<int>(script.toDouble(n))] = script.toDouble(value);
+  }
+  else if (keyword == "phase")
+    phases_.push_back(readPhase(words, script));
+  else
+    script.fail("unknown statement " + keyword);
+}
+
+SimMachine::Phase SimMachine::readPhase(std::istream& words, const ScriptLine& script)
+{
+  Phase phase;
+  phase.line = script.number;
+  std::string seconds;
+  if (!(words >> seconds))
+    script.fail("phase needs SECONDS");
+  phase.seconds = script.toDouble(seconds);
+  if (!(phase.seconds > 0) || phase.seconds > 1e6)
+    script.fail("phase length must be positive");
+  std::string item;
+  while (words >> item)
+  {
+    if (item == "drop")
+    {
+      phase.drop = true;
+      continue;
+    }
+    const size_t eq = item.find('=');
+    if (eq == std::string::npos || eq == 0)
+      script.fail("expected key=value, not " + item);
+    std::string value = item.substr(eq + 1);
+    for (auto& c : value)
+      if (c == '_')
+        c = ' ';
+    setPhaseKey(phase, item.substr(0, eq), value, script);
+  }
+  return phase;
+}
+
+void SimMachine::setPhaseKey(Phase& phase, const std::string& key, const std::string& value, const ScriptLine& script)
+{
+  if (key == "parts+")
+    phase.parts_increment = static_cast<long long>(script.toDouble(value));
+  else if (key == "x")
+    phase.x = script.toDouble(value);
+  else if (key == "y")
+    phase.y = script.toDouble(value);
+  else if (key == "z")
+    phase.z = script.toDouble(value);
+  else if (key == "mode" || key == "status" || key == "program")
+    phase.set[key] = upper(value);
+  else if (key == "tool" || key == "spindle" || key == "parts")
+  {
+    script.toDouble(value);
+    phase.set[key] = value;
+  }
+  else if (key.size() > 3 && key.compare(0, 3, "var") == 0)
+  {
+    const double n = script.toDouble(key.substr(3));
+    if (n != std::floor(n) || n < 1 || n > 99999)
+      script.fail("varN needs a variable number N, not " + key);
+    phase.variables[static_cast<int>(n)] = script.toDouble(value);
+  }
+  else
+    script.fail("unknown key " + key);
 }
 
 double SimMachine::timelineSeconds() const
@@ -298,15 +335,7 @@ bool SimMachine::dropDue(Clock::time_point now)
 
 std::string SimMachine::answer(const std::string& raw, Clock::time_point now)
 {
-  std::string line;
-  for (char c : raw)
-    if (c >= 0x20 && c < 0x7F)
-      line.push_back(c);
-  while (!line.empty() && line.back() == ' ')
-    line.pop_back();
-  while (!line.empty() && line.front() == ' ')
-    line.erase(0, 1);
-  const std::string command = upper(line);
+  const std::string command = upper(printableTrimmed(raw));
   if (command.empty())
     return "";
   if (query_log_)
@@ -315,28 +344,7 @@ std::string SimMachine::answer(const std::string& raw, Clock::time_point now)
 
   // A write: ?E<var> <value>.
   if (command.size() > 2 && command[0] == '?' && command[1] == 'E')
-  {
-    std::istringstream words(command.substr(2));
-    std::string var, value;
-    if (words >> var >> value)
-    {
-      try
-      {
-        const double n = parseNumber(var), v = parseNumber(value);
-        // System variables (#1000 and up here) are read-only on the control.
-        if (n == std::floor(n) && n >= 1 && n < 1000)
-        {
-          variables_[static_cast<int>(n)] = v;
-          written_at_[static_cast<int>(n)] = std::chrono::duration<double>(now - start_).count();
-          return "!";
-        }
-      }
-      catch (const ProtocolError&)
-      {
-      }
-    }
-    return "?, " + command;
-  }
+    return answerWrite(command, now);
   std::string unknown = classic_ ? "UNKNOWN" : "?, " + command;
   const auto query = parseReadOnlyQuery(command);
   if (!query)
@@ -371,33 +379,61 @@ std::string SimMachine::answer(const std::string& raw, Clock::time_point now)
         return "STATUS, BUSY";
       return "PROGRAM, " + s.program + ", " + s.status + ", PARTS, " + std::to_string(s.parts);
     case 600:
-    {
-      if (!query->argument || *query->argument != std::floor(*query->argument) || *query->argument < 0)
-        return unknown;
-      const int n = static_cast<int>(*query->argument);
-      double value = 0;
-      const double work[3] = {s.x - work_[0], s.y - work_[1], s.z - work_[2]};
-      if (n >= 5021 && n <= 5023)
-        value = n == 5021 ? s.x : n == 5022 ? s.y : s.z;
-      else if (n >= 5041 && n <= 5043)
-        value = work[n - 5041];
-      else if (n == 4006)
-        value = inch_ ? 20 : 21;
-      else if (n == 3027)
-        value = s.spindle;
-      else if (n == 3901)
-        value = static_cast<double>(s.parts);
-      else if (s.variables.count(n) && (!written_at_.count(n) || written_at_.at(n) < s.variables.at(n).second))
-        value = s.variables.at(n).first;  // set by the script's phase, after any write
-      else if (variables_.count(n))
-        value = variables_[n];
-      if (classic_)
-        return "MACRO, " + std::to_string(n) + ", " + number(value, 6);
-      return "MACRO, " + number(value, 6);
-    }
+      return answerMacro(query->argument, s, unknown);
     default:
       return unknown;
   }
+}
+
+std::string SimMachine::answerWrite(const std::string& command, Clock::time_point now)
+{
+  std::istringstream words(command.substr(2));
+  std::string var, value;
+  if (words >> var >> value)
+  {
+    try
+    {
+      const double n = parseNumber(var), v = parseNumber(value);
+      // System variables (#1000 and up here) are read-only on the control.
+      if (n == std::floor(n) && n >= 1 && n < 1000)
+      {
+        variables_[static_cast<int>(n)] = v;
+        written_at_[static_cast<int>(n)] = std::chrono::duration<double>(now - start_).count();
+        return "!";
+      }
+    }
+    catch (const ProtocolError&)
+    {
+    }
+  }
+  return "?, " + command;
+}
+
+std::string SimMachine::answerMacro(const std::optional<double>& argument, const State& s,
+                                    const std::string& unknown) const
+{
+  if (!argument || *argument != std::floor(*argument) || *argument < 0)
+    return unknown;
+  const int n = static_cast<int>(*argument);
+  double value = 0;
+  const double work[3] = {s.x - work_[0], s.y - work_[1], s.z - work_[2]};
+  if (n >= 5021 && n <= 5023)
+    value = n == 5021 ? s.x : n == 5022 ? s.y : s.z;
+  else if (n >= 5041 && n <= 5043)
+    value = work[n - 5041];
+  else if (n == 4006)
+    value = inch_ ? 20 : 21;
+  else if (n == 3027)
+    value = s.spindle;
+  else if (n == 3901)
+    value = static_cast<double>(s.parts);
+  else if (s.variables.count(n) && (!written_at_.count(n) || written_at_.at(n) < s.variables.at(n).second))
+    value = s.variables.at(n).first;  // set by the script's phase, after any write
+  else if (variables_.count(n))
+    value = variables_.at(n);
+  if (classic_)
+    return "MACRO, " + std::to_string(n) + ", " + number(value, 6);
+  return "MACRO, " + number(value, 6);
 }
 }  // namespace mdc
 }  // namespace cnc_bridge

@@ -99,6 +99,15 @@ class SimMachine
     bool drop = false;
     size_t line = 0;
   };
+  struct ScriptLine;  // the script line being read, for errors (sim_machine.cpp)
+
+  // Reading a script (fromScript): one statement, a phase, one key=value of a phase.
+  void readStatement(const std::string& keyword, std::istream& words, const ScriptLine& script);
+  static Phase readPhase(std::istream& words, const ScriptLine& script);
+  static void setPhaseKey(Phase& phase, const std::string& key, const std::string& value, const ScriptLine& script);
+  // Answering (answer): a ?E write, a Q600 macro variable read.
+  std::string answerWrite(const std::string& command, Clock::time_point now);
+  std::string answerMacro(const std::optional<double>& argument, const State& s, const std::string& unknown) const;
 
   std::string serial_ = "1234567", software_ = "100.20.000.1200", model_ = "VF2D";
   bool inch_ = true;

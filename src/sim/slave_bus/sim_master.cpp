@@ -65,8 +65,8 @@ void SimSlave::receive(const std::vector<uint8_t>& i2c_frame)
       reply_ = encodeValues({tool_on_ ? 1 : 0}, encoding_);
       break;
     case SimRole::kGeneric:
-      // Echo, as the paper's slave sketch does, but no more than the master reads (nor than one of
-      // the bus's frames carries).
+      // Echo, as the universal-CNC paper's slave sketch does (docs/protocols/slave_bus.md#source), but no more than the
+      // master reads (nor than one of the bus's frames carries).
       reply_.assign(payload.begin(), payload.begin() + static_cast<std::ptrdiff_t>(
                                                            std::min({payload.size(), kMaxReply, wire_.max_data})));
       break;
@@ -248,7 +248,7 @@ Milliseconds SimMaster::resyncGap() const
   {
     return kFramedResyncGap;
   }
-  return options_.resync_gap;  // raw: 0 = never, as the paper's firmware (it has no timeout)
+  return options_.resync_gap;  // raw: 0 = never, as the universal-CNC paper's firmware (it has no timeout)
 }
 
 void SimMaster::onSilence()
@@ -306,7 +306,7 @@ void SimMaster::serveOnce(std::vector<uint8_t>& buffer, std::chrono::steady_cloc
       onSilence();
     }
   }
-  // The paper's master polls its slaves only between frames.
+  // The universal-CNC paper's master polls its slaves only between frames.
   if (receiver_.idle())
   {
     pollSlaves();

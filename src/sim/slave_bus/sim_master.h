@@ -1,8 +1,8 @@
 // A simulated universal-CNC master with its I2C slaves, for tests, benchmarks and sim_slave_bus.
-// The master runs the paper's receive state machine on its serial link, hands every payload to its
-// slave as a real WirePacker frame (CRC-8 checked by the slave), and while idle polls the slaves
-// and writes their answers on the uplink. Slaves act on what they get: axes move, the tool toggles,
-// generic slaves echo (as the paper's slave sketch does).
+// The master runs the receive state machine of the universal-CNC paper (docs/protocols/slave_bus.md#source) on its
+// serial link, hands every payload to its slave as a real WirePacker frame (CRC-8 checked by the slave), and while idle
+// polls the slaves and writes their answers on the uplink. Slaves act on what they get: axes move, the tool toggles,
+// generic slaves echo (as the universal-CNC paper's slave sketch does).
 #pragma once
 
 #include <chrono>
@@ -21,7 +21,7 @@ namespace cnc_bridge
 {
 namespace slave_bus
 {
-/// \brief The most a master reads from one slave: the paper's master calls read_I2C(addr, 32).
+/// \brief The most a master reads from one slave: the universal-CNC paper's master calls read_I2C(addr, 32).
 constexpr size_t kMaxReply = 32;
 
 /// \brief What a slave board does with its payload.
@@ -79,7 +79,7 @@ class SimMaster
   struct Options
   {
     Framing framing = Framing::kRaw;
-    /// Raw mode: drop a partial frame after this much silence (0 = never, as the paper's firmware).
+    /// Raw mode: drop a partial frame after this much silence (0 = never, as the universal-CNC paper's firmware).
     /// Framed mode always resynchronises after a silence inside a frame: after this gap, or
     /// kFramedResyncGap if it is 0.
     Milliseconds resync_gap{0};
@@ -116,7 +116,7 @@ class SimMaster
   void run(StopSignal& stop);
   /// \brief Processes bytes from the PC as if they had arrived on the link.
   void processInput(const uint8_t* data, size_t size);
-  /// \brief Polls every slave once and writes what they answer (the paper's idle loop).
+  /// \brief Polls every slave once and writes what they answer (the universal-CNC paper's idle loop).
   void pollSlaves();
   /// \brief The link has been silent for the resync gap: raw mode drops a partial frame if a gap is
   /// configured; framed mode always abandons a partial candidate (a stray start byte with a large
