@@ -245,7 +245,7 @@ void EthernutNode::finishJob(const JobProgress& p, const std::optional<gcode::Pr
 
 // Starts the next segment of moves once motion is allowed: enabled, and no hold left from a
 // disable during this job (~resume, refused while motion is disabled, ends the hold). The check
-// and the start are one step under motion_mutex_, so a disable either comes before (the job is
+// and the start are one step under the motion switch's gate, so a disable either comes before (the job is
 // held here) or after (it pauses the board). \returns false if the goal was cancelled while held.
 // \throws Error from Client::startJob.
 bool EthernutNode::startSegment(ethernut::Client& c, const std::shared_ptr<ethernut::Job>& job,
@@ -256,7 +256,7 @@ bool EthernutNode::startSegment(ethernut::Client& c, const std::shared_ptr<ether
     std::string hold;
     uint64_t resumes = 0;
     {
-      std::lock_guard<std::mutex> gate(motion_mutex_);
+      const auto gate = motion_->core().gate();
       const ethernut::MotionHold::Snapshot now = motion_hold_.snapshot();
       hold = now.hold;
       resumes = now.resumes;

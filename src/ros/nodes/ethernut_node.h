@@ -112,7 +112,7 @@ class EthernutNode : public ethernut::ClientListener
   template <typename Response, typename F>
   bool command(Response& res, const std::string& what, F f);
   /// Fills \p res with the refusal of \p service when motion is disabled (the caller holds
-  /// motion_mutex_, so the switch cannot change before the command goes out). \returns true then.
+  /// the switch's gate, so the switch cannot change before the command goes out). \returns true then.
   template <typename Response>
   bool motionRefused(Response& res, const std::string& service) const;
   bool onPause(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
@@ -155,7 +155,6 @@ class EthernutNode : public ethernut::ClientListener
   std::string settings_file_;
   std::unique_ptr<RuntimeSwitch> kill_;
   std::unique_ptr<RuntimeSwitch> motion_;
-  std::mutex motion_mutex_;  // a segment's start, a disable's pause and ~resume: one at a time
   std::unique_ptr<ProgramDirectory> program_dir_;
   std::unique_ptr<ToMachineFrame> to_machine_;
   gcode::ParserOptions parser_options_;

@@ -172,7 +172,7 @@ bool EthernutNode::onPause(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigge
 // after the program's M00/M01 or after a disable; refused while motion is disabled.
 bool EthernutNode::onResume(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigger::Response& res)
 {
-  std::lock_guard<std::mutex> gate(motion_mutex_);
+  const auto gate = motion_->core().gate();
   if (motionRefused(res, "resume"))
     return true;
   const std::string held = releaseHolds();
@@ -215,8 +215,8 @@ std::string EthernutNode::releaseHolds()
 // as for a cancel) and holds the goal until motion is enabled again and ~resume is called.
 void EthernutNode::onMotionSwitched(bool enabled, const std::string& caller)
 {
+  // Called under the switch's gate: a segment's start or a gated service comes wholly before or after.
   std::string what = std::string("motion ") + (enabled ? "enabled" : "disabled") + " by " + caller;
-  std::lock_guard<std::mutex> gate(motion_mutex_);
   bool running = false;
   if (!enabled)
   {
@@ -256,7 +256,7 @@ void EthernutNode::onMotionSwitched(bool enabled, const std::string& caller)
 // connection and the link reconnects. Both move the axes, so both are behind the motion switch.
 bool EthernutNode::onClear(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigger::Response& res)
 {
-  std::lock_guard<std::mutex> gate(motion_mutex_);
+  const auto gate = motion_->core().gate();
   if (motionRefused(res, "clear"))
     return true;
   return command(res, "clear: job cancelled, board cleared to 0/0/0; the connection kept",
@@ -265,7 +265,7 @@ bool EthernutNode::onClear(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigge
 
 bool EthernutNode::onReset(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigger::Response& res)
 {
-  std::lock_guard<std::mutex> gate(motion_mutex_);
+  const auto gate = motion_->core().gate();
   if (motionRefused(res, "reset"))
     return true;
   return command(res, "reset: job cancelled, board cleared to 0/0/0; the connection closed, reconnecting",
@@ -309,7 +309,7 @@ bool EthernutNode::onSyncOled(EthernutCoordinates::Request& req, EthernutCoordin
 // motion switch, as anything that may move the machine is.
 bool EthernutNode::onBoardCommand(EthernutCoordinates::Request& req, EthernutCoordinates::Response& res)
 {
-  std::lock_guard<std::mutex> gate(motion_mutex_);
+  const auto gate = motion_->core().gate();
   if (motionRefused(res, "board_command"))
     return true;
   res.message = floatRefusal("board_command", req);
@@ -342,7 +342,7 @@ bool EthernutNode::onSetMode(EthernutSetMode::Request& req, EthernutSetMode::Res
   }
   // A mode change changes what drives the machine (standalone: the board runs on its own), and the
   // mode is also the one selected on every reconnection: gated like motion, nothing changed if refused.
-  std::lock_guard<std::mutex> gate(motion_mutex_);
+  const auto gate = motion_->core().gate();
   if (motionRefused(res, "set_mode"))
     return true;
   if (leaveStandalone(mode, res))
