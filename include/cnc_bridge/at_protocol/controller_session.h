@@ -217,6 +217,8 @@ class ControllerSession
   /// a stop; runOperation() reports who disabled it), and stops a jog (F0@).
   void setMotionEnabled(bool enabled, const std::string& by);
   bool motionEnabled() const { return motion_->enabled(); }
+  /// \returns the motion switch the session gates on (Options::motion, or its own).
+  SafetySwitch& motionSwitch() { return *motion_; }
   /// \returns who disabled motion last ("" if nobody has).
   std::string motionDisabledBy() const;
   /// \returns why \p what may not move now (motion disabled, e-stop on or unknown), or "".
