@@ -24,6 +24,7 @@
 #include <string>
 
 #include "cnc_bridge/common/job_hold.h"
+#include "cnc_bridge/common/motion_hold.h"
 #include "cnc_bridge/common/safety_switch.h"
 #include "cnc_bridge/gcode/program_steps.h"
 
@@ -157,25 +158,18 @@ class JobRunner
   /// \returns what the job is held at by holdUntilResume() ("" when it is not).
   std::string held() const { return hold_.held(); }
 
-  /// \brief Makes a waiting job ask cancelRequested() at once (shutdown).
+  /// \brief Makes a job waiting at a program step ask cancelRequested() at once (shutdown); a
+  /// segment held by a disable asks at the next poll.
   void wake();
 
   const Names& names() const { return names_; }
 
  private:
-  bool waitForMotionResume(uint64_t resumes, JobListener& listener);
-
   SafetySwitch& motion_;
   const Names names_;
   ResumeRefusal resume_refusal_;
-  std::chrono::milliseconds cancel_poll_;
   JobHold hold_;  ///< the program's stop (and awaitMotion()'s hold)
 
-  mutable std::mutex mutex_;  ///< the disable's hold: job_running_, motion_hold_, motion_resumes_, wakes_
-  std::condition_variable motion_resumed_;
-  bool job_running_ = false;
-  std::string motion_hold_;
-  uint64_t motion_resumes_ = 0;
-  uint64_t wakes_ = 0;
+  MotionHold motion_hold_;  ///< a disable's hold of the running job
 };
 }  // namespace cnc_bridge

@@ -10,8 +10,8 @@ JobRunner::JobRunner(SafetySwitch& motion, Names names, ResumeRefusal resume_ref
     : motion_(motion),
       names_(std::move(names)),
       resume_refusal_(std::move(resume_refusal)),
-      cancel_poll_(cancel_poll),
-      hold_(cancel_poll)
+      hold_(cancel_poll),
+      motion_hold_(cancel_poll)
 {
   if (!resume_refusal_)
   {
@@ -21,16 +21,12 @@ JobRunner::JobRunner(SafetySwitch& motion, Names names, ResumeRefusal resume_ref
 
 JobRunner::Scope::Scope(JobRunner& runner) : runner_(runner)
 {
-  std::lock_guard<std::mutex> lock(runner_.mutex_);
-  runner_.job_running_ = true;
-  runner_.motion_hold_.clear();
+  runner_.motion_hold_.setGoalRunning(true);
 }
 
 JobRunner::Scope::~Scope()
 {
-  std::lock_guard<std::mutex> lock(runner_.mutex_);
-  runner_.job_running_ = false;
-  runner_.motion_hold_.clear();
+  runner_.motion_hold_.setGoalRunning(false);
 }
 
 // ---- between two segments -------------------------------------------------------------------------
@@ -101,69 +97,37 @@ bool JobRunner::awaitMotion(JobFeedback& feedback, JobListener& listener, std::s
 
 bool JobRunner::holdOnDisable(const std::string& what)
 {
-  std::lock_guard<std::mutex> lock(mutex_);
-  if (job_running_ && motion_hold_.empty())
-  {
-    motion_hold_ = what;
-  }
-  return job_running_;
+  return motion_hold_.disable(what);
 }
 
 std::string JobRunner::motionHold() const
 {
-  std::lock_guard<std::mutex> lock(mutex_);
-  return motion_hold_;
+  return motion_hold_.hold();
 }
 
 bool JobRunner::startSegment(const std::function<void()>& start, JobListener& listener)
 {
   for (;;)
   {
-    std::string hold;
-    uint64_t resumes = 0;
+    MotionHold::Snapshot now;
     {
       const auto gate = motion_.gate();
-      {
-        std::lock_guard<std::mutex> lock(mutex_);
-        hold = motion_hold_;
-        resumes = motion_resumes_;
-      }
-      if (motion_.enabled() && hold.empty())
+      now = motion_hold_.snapshot();
+      if (motion_.enabled() && now.hold.empty())
       {
         start();
         return true;
       }
     }
-    if (hold.empty())
-    {
-      hold = "motion disabled";  // the switch's listener has not named the caller yet
-    }
+    // The switch's listener has not named the caller yet when the hold is still empty.
+    const std::string hold = now.hold.empty() ? "motion disabled" : now.hold;
     listener.motionHeld(hold);
-    if (!waitForMotionResume(resumes, listener))
+    if (!motion_hold_.waitForResume(now.resumes, [&] { return listener.cancelRequested(); }))
     {
       return false;
     }
     listener.motionResumed(hold);
   }
-}
-
-// Waits until a resume after \p resumes (a count read with the hold).
-bool JobRunner::waitForMotionResume(uint64_t resumes, JobListener& listener)
-{
-  std::unique_lock<std::mutex> lock(mutex_);
-  while (motion_resumes_ == resumes)
-  {
-    const uint64_t wakes = wakes_;
-    lock.unlock();
-    if (listener.cancelRequested())
-    {
-      return false;
-    }
-    lock.lock();
-    // A cancel comes without a notification: look again at least every poll period.
-    motion_resumed_.wait_for(lock, cancel_poll_, [&] { return motion_resumes_ != resumes || wakes_ != wakes; });
-  }
-  return true;
 }
 
 // ---- from other threads ---------------------------------------------------------------------------
@@ -175,13 +139,7 @@ std::string JobRunner::releaseHolds()
   {
     held = "the " + *stop;
   }
-  std::string motion;
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    motion.swap(motion_hold_);
-    ++motion_resumes_;
-  }
-  motion_resumed_.notify_all();
+  const std::string motion = motion_hold_.resume();
   if (!motion.empty())
   {
     held += (held.empty() ? "the hold (" : " and the hold (") + motion + ")";
@@ -207,10 +165,5 @@ ResumeAnswer JobRunner::resume(const std::string& nothing_held)
 void JobRunner::wake()
 {
   hold_.wake();
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    ++wakes_;
-  }
-  motion_resumed_.notify_all();
 }
 }  // namespace cnc_bridge

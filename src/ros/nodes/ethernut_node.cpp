@@ -104,9 +104,12 @@ EthernutNode::EthernutNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   // ~enable_motion (bool, false) at start-up, ~set_motion_enabled at run time: ~run_job (and
   // ~resume, which lets a held move go on) only while motion is enabled; disabling it pauses a
   // running job (the board holds the move in progress).
-  motion_ = std::make_unique<RuntimeSwitch>(pnh_, "motion", "enable_motion", "set_motion_enabled",
-                                            [this](bool enabled, const std::string& caller)
-                                            { onMotionSwitched(enabled, caller); });
+  motion_ = std::make_unique<RuntimeSwitch>(pnh_, "motion", "enable_motion", "set_motion_enabled");
+  jobs_ = std::make_unique<ethernut::JobStreamer>(
+      motion_->core(), JobRunner::Names{pnh_.resolveName("resume"), pnh_.resolveName("set_motion_enabled"),
+                                        pnh_.resolveName("optional_stop")});
+  // Once the job streamer exists: a disable pauses a running job and holds it.
+  motion_->core().subscribe([this](bool enabled, const std::string& caller) { onMotionSwitched(enabled, caller); });
   state_->diagnostics().add("ethernut protocol", this, &EthernutNode::protocolDiagnostics);
   path_pub_ = nh_.advertise<nav_msgs::Path>("job/path", 1, true);
   markers_pub_ = nh_.advertise<visualization_msgs::MarkerArray>("job/markers", 1, true);

@@ -3,10 +3,11 @@
 // from G-code files or point lists through the ~run_job action, carries pause/resume/reset/kill/mode
 // requests, publishes the machine's reported and commanded position as state (the reported one as
 // joint_states/tf), and a preview of each job for rviz before it runs. The protocol and the jobs
-// (coordinates, segments, preview) live in the ROS-free cnc_bridge_ethernut library; the program's
-// stops and dwells wait through JobHold. src/ros/nodes/ethernut_node.cpp: parameters, link, preview,
-// diagnostics; src/ros/nodes/ethernut_services.cpp: the client's events and the services;
-// src/ros/nodes/ethernut_jobs.cpp: the ~run_job action.
+// (coordinates, segments, preview, streaming: ethernut::JobStreamer, whose program steps and
+// holds are the common JobRunner's) live in the ROS-free cnc_bridge_ethernut library.
+// src/ros/nodes/ethernut_node.cpp: parameters, link, preview, diagnostics;
+// src/ros/nodes/ethernut_services.cpp: the client's events and the services;
+// src/ros/nodes/ethernut_jobs.cpp: the ~run_job action (the streamer's calls as feedback and state).
 #pragma once
 
 #include <ros/ros.h>
@@ -22,11 +23,10 @@
 #include "cnc_bridge/EthernutCoordinates.h"
 #include "cnc_bridge/EthernutSetMode.h"
 #include "cnc_bridge/RunJobAction.h"
-#include "cnc_bridge/common/job_hold.h"
 #include "cnc_bridge/common/program_dir.h"
 #include "cnc_bridge/ethernut/client.h"
 #include "cnc_bridge/ethernut/job.h"
-#include "cnc_bridge/ethernut/motion_hold.h"
+#include "cnc_bridge/ethernut/job_streamer.h"
 #include "cnc_bridge/ethernut/settings.h"
 #include "cnc_bridge/gcode/gcode.h"
 #include "cnc_bridge/ros/machine_frame.h"
@@ -57,36 +57,7 @@ class EthernutNode : public ethernut::ClientListener
     std::shared_ptr<ethernut::Client> client;
   };
 
-  // What the client reported of the segment streaming now (listener thread -> job thread).
-  struct JobProgress
-  {
-    uint64_t done = 0;
-    uint32_t line = 0;
-    uint32_t resends = 0;
-    ethernut::Coordinate last;
-    bool finished = false;
-    ethernut::JobOutcome outcome = ethernut::JobOutcome::kFailed;
-    std::string message;
-  };
-
-  struct Totals
-  {
-    uint64_t done = 0;  // sets acknowledged in the segments before this one
-    uint32_t resends = 0;
-  };
-
-  // Marks the node's one goal as running (a disable then holds it) for the scope of execute().
-  class GoalScope
-  {
-   public:
-    explicit GoalScope(EthernutNode& node);
-    ~GoalScope();
-    GoalScope(const GoalScope&) = delete;
-    GoalScope& operator=(const GoalScope&) = delete;
-
-   private:
-    EthernutNode& node_;
-  };
+  class JobView;  // ethernut_jobs.cpp: a job's calls as feedback and state
 
   // ethernut_node.cpp: parameters, link, preview, diagnostics.
   void readParameters();
@@ -117,7 +88,6 @@ class EthernutNode : public ethernut::ClientListener
   bool motionRefused(Response& res, const std::string& service) const;
   bool onPause(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   bool onResume(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
-  std::string releaseHolds();
   void onMotionSwitched(bool enabled, const std::string& caller);
   bool onClear(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   bool onReset(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
@@ -133,18 +103,7 @@ class EthernutNode : public ethernut::ClientListener
   std::shared_ptr<ethernut::Job> loadJob(const RunJobGoal& goal, std::string& program, std::string& refusal);
   std::shared_ptr<ethernut::Job> loadProgram(const RunJobGoal& goal, std::string& refusal);
   std::shared_ptr<ethernut::Job> loadPoints(const RunJobGoal& goal, std::string& refusal);
-  void runJob(ethernut::Client& c, const std::shared_ptr<ethernut::Job>& job);
-  void finishJob(const JobProgress& p, const std::optional<gcode::ProgramStep>& step, bool cancelled,
-                 const std::string& skipped, RunJobResult& result);
-  bool startSegment(ethernut::Client& c, const std::shared_ptr<ethernut::Job>& job, RunJobFeedback& feedback,
-                    bool& cancelled);
-  void showMotionHold(const std::string& hold, const std::string& ended, bool board_holds, RunJobFeedback& feedback);
-  JobProgress followSegment(ethernut::Client& c, RunJobFeedback& feedback, uint64_t count, const Totals& totals,
-                            bool& cancelled);
-  void cancelSegment(ethernut::Client& c);
-  bool carryOut(const gcode::ProgramStep& step, RunJobFeedback& feedback, bool& cancelled);
-  bool holdAtStop(const gcode::ProgramStep& step, RunJobFeedback& feedback, bool& cancelled);
-  JobHold::Cancelled goalCancelled(bool& cancelled);
+  void endGoal(const ethernut::StreamOutcome& outcome);
 
   ros::NodeHandle nh_;
   ros::NodeHandle pnh_;
@@ -178,12 +137,7 @@ class EthernutNode : public ethernut::ClientListener
   bool standalone_ = false;                 // the board dropped us in standalone mode: no reconnecting
   bool stopping_ = false;
 
-  JobHold program_stop_;  // the program's M00/M01/G04 between two segments
-  std::mutex job_mutex_;
-  std::condition_variable job_cv_;
-  JobProgress job_;
-  std::shared_ptr<const ethernut::Job> running_job_;  // execute()'s job, under job_mutex_
-  ethernut::MotionHold motion_hold_;                  // a disable holding the running goal until ~resume
+  std::unique_ptr<ethernut::JobStreamer> jobs_;  // the running job: its segments, steps and holds
 
   std::unique_ptr<ReconnectingLink> link_;
 };

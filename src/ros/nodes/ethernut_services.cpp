@@ -77,12 +77,7 @@ void EthernutNode::onPosition(float x, float y, float z)
 
 void EthernutNode::onCoordinateDone(uint64_t index, const ethernut::Coordinate& c)
 {
-  {
-    std::lock_guard<std::mutex> lock(job_mutex_);
-    job_.done = index + 1;
-    job_.line = c.tag;
-    job_.last = c;
-  }
+  jobs_->onCoordinateDone(index, c);
   // The set the board acknowledged (NEXT) is the commanded position; status-4 reports are where
   // the machine is.
   state_->setCommandedPosition(c.x * kMetresPerMm, c.y * kMetresPerMm, c.z * kMetresPerMm);
@@ -90,22 +85,12 @@ void EthernutNode::onCoordinateDone(uint64_t index, const ethernut::Coordinate& 
 
 void EthernutNode::onResend(uint64_t /*index*/, unsigned /*count*/)
 {
-  std::lock_guard<std::mutex> lock(job_mutex_);
-  ++job_.resends;
+  jobs_->onResend();
 }
 
 void EthernutNode::onJobFinished(ethernut::JobOutcome outcome, const std::string& message)
 {
-  bool segment_continues = false;
-  {
-    std::lock_guard<std::mutex> lock(job_mutex_);
-    job_.finished = true;
-    job_.outcome = outcome;
-    job_.message = message;
-    segment_continues = running_job_ && running_job_->segmentContinues();
-  }
-  job_cv_.notify_all();
-  if (outcome == ethernut::JobOutcome::kCompleted && segment_continues)
+  if (jobs_->onJobFinished(outcome, message))
   {
     return;  // the program goes on after one of its own steps: the job runs on
   }
@@ -175,7 +160,7 @@ bool EthernutNode::onResume(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigg
   const auto gate = motion_->core().gate();
   if (motionRefused(res, "resume"))
     return true;
-  const std::string held = releaseHolds();
+  const std::string held = jobs_->releaseHolds();
   std::string why;
   const auto c = client(why);
   if (held.empty() || (c && c->state() == ethernut::SessionState::kPaused))
@@ -194,23 +179,6 @@ bool EthernutNode::onResume(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigg
   return true;
 }
 
-// Ends the job's holds (the program's stop, a disable's hold); \returns what they were, "" for none.
-std::string EthernutNode::releaseHolds()
-{
-  std::string held;
-  if (const std::optional<std::string> stop = program_stop_.resume())
-  {
-    held = "the " + *stop;  // the board itself was never paused at a program stop
-  }
-  const std::string motion = motion_hold_.resume();
-  if (!motion.empty())
-  {
-    held += (held.empty() ? "the hold (" : " and the hold (") + motion + ")";
-  }
-  job_cv_.notify_all();  // followSegment() shows the hold's end
-  return held;
-}
-
 // ~set_motion_enabled: disabling pauses a running job (the board holds the move in progress,
 // as for a cancel) and holds the goal until motion is enabled again and ~resume is called.
 void EthernutNode::onMotionSwitched(bool enabled, const std::string& caller)
@@ -220,13 +188,13 @@ void EthernutNode::onMotionSwitched(bool enabled, const std::string& caller)
   bool running = false;
   if (!enabled)
   {
-    running = motion_hold_.disable(what);
+    running = jobs_->runner().holdOnDisable(what);
   }
-  else if (!motion_hold_.hold().empty())
+  else if (!jobs_->runner().motionHold().empty())
   {
     what += "; the job stays held until " + pnh_.resolveName("resume");  // enabling alone moves nothing
   }
-  job_cv_.notify_all();  // followSegment() shows the hold
+  jobs_->notify();  // the running job shows the hold
   state_->update([&](MachineState& m) { m.message = what; });
   if (enabled || !running)
   {
