@@ -219,11 +219,12 @@ std::shared_ptr<ethernut::Job> EthernutNode::loadProgram(const RunJobGoal& goal,
   try
   {
     std::shared_ptr<ethernut::Job> job =
-        ethernut::Job::fromProgram(program_dir_->resolveExisting(goal.file), parser_options_, g53_,
-                                   static_cast<size_t>(max_preview_points_), soft_limits_);
+        ethernut::Job::fromProgram(program_dir_->resolveExisting(goal.file), settings_.jobs.parser, settings_.jobs.g53,
+                                   settings_.jobs.max_preview_points, settings_.jobs.soft_limits);
     if (!job->skippedSummary().empty())
     {
-      ROS_WARN_STREAM("run_job: " << goal.file << ": " << job->skippedSummary() << " (" << g53_.setting << ": skip)");
+      ROS_WARN_STREAM("run_job: " << goal.file << ": " << job->skippedSummary() << " (" << settings_.jobs.g53.setting
+                                  << ": skip)");
     }
     return job;
   }
@@ -260,7 +261,7 @@ std::shared_ptr<ethernut::Job> EthernutNode::loadPoints(const RunJobGoal& goal, 
     {
       // Every point is checked before the first is sent.
       points.push_back(ethernut::boardCoordinate(p.x / kMetresPerMm, p.y / kMetresPerMm, p.z / kMetresPerMm,
-                                                 soft_limits_, "point " + std::to_string(points.size())));
+                                                 settings_.jobs.soft_limits, "point " + std::to_string(points.size())));
     }
     catch (const Error& e)
     {
@@ -268,7 +269,7 @@ std::shared_ptr<ethernut::Job> EthernutNode::loadPoints(const RunJobGoal& goal, 
       return nullptr;
     }
   }
-  return ethernut::Job::fromPoints(std::move(points), static_cast<size_t>(max_preview_points_));
+  return ethernut::Job::fromPoints(std::move(points), settings_.jobs.max_preview_points);
 }
 
 }  // namespace cnc_bridge

@@ -5,7 +5,9 @@
 // joint_states/tf), and a preview of each job for rviz before it runs. The protocol and the jobs
 // (coordinates, segments, preview, streaming: ethernut::JobStreamer, whose program steps and
 // holds are the common JobRunner's) live in the ROS-free cnc_bridge_ethernut library.
-// src/ros/nodes/ethernut_node.cpp: parameters, link, preview, diagnostics;
+// The connection (link, reconnection, the protocol loop) is the core ethernut::BoardSession.
+// src/ros/nodes/ethernut_params.cpp: every parameter, into the core's settings;
+// src/ros/nodes/ethernut_node.cpp: the session, preview, diagnostics;
 // src/ros/nodes/ethernut_services.cpp: the client's events and the services;
 // src/ros/nodes/ethernut_jobs.cpp: the ~run_job action (the streamer's calls as feedback and state).
 #pragma once
@@ -24,6 +26,7 @@
 #include "cnc_bridge/EthernutSetMode.h"
 #include "cnc_bridge/RunJobAction.h"
 #include "cnc_bridge/common/program_dir.h"
+#include "cnc_bridge/ethernut/board_session.h"
 #include "cnc_bridge/ethernut/client.h"
 #include "cnc_bridge/ethernut/job.h"
 #include "cnc_bridge/ethernut/job_streamer.h"
@@ -33,11 +36,24 @@
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/runtime_switch.h"
 #include "cnc_bridge/ros/single_goal_action_server.h"
-#include "cnc_bridge/transport/reconnecting_link.h"
-#include "cnc_bridge/transport/tcp.h"
 
 namespace cnc_bridge
 {
+namespace ethernut_params
+{
+/// \brief Every parameter of ethernut_node (ethernut_params.cpp), validated.
+struct Settings
+{
+  ethernut::SessionSettings session;  ///< ~host, ~tcp_port, ~connect_timeout, the client's timeouts, ~mode
+  ethernut::JobSettings jobs;         ///< ~program_dir, the G-code options, ~g53_moves, ~soft_limits, ...
+  double transform_timeout = 0.5;     ///< s, ~transform_timeout
+  std::string kill_enabled_by;        ///< "PROG_CNCkill|1 in <file>" when the settings file enables ~kill
+};
+
+/// \brief Reads them. \throws ConfigError naming the parameter (or the settings file's line).
+Settings read(const ros::NodeHandle& pnh);
+}  // namespace ethernut_params
+
 class EthernutNode : public ethernut::ClientListener
 {
  public:
@@ -51,24 +67,10 @@ class EthernutNode : public ethernut::ClientListener
   EthernutNode& operator=(const EthernutNode&) = delete;
 
  private:
-  struct Session
-  {
-    std::shared_ptr<TcpConnection> link;  // declared first: destroyed after the client
-    std::shared_ptr<ethernut::Client> client;
-  };
-
   class JobView;  // ethernut_jobs.cpp: a job's calls as feedback and state
 
-  // ethernut_node.cpp: parameters, link, preview, diagnostics.
-  void readParameters();
-  void readLinkParameters(const ethernut::Settings& settings);
-  void readJobParameters();
-  void startLink();
-  std::shared_ptr<Transport> connect();
-  void runSession();
-  Session session();
-  std::shared_ptr<ethernut::Client> client(std::string& why);
-
+  // ethernut_node.cpp: the session, preview, diagnostics.
+  std::shared_ptr<ethernut::Client> client(std::string& why) { return board_->client(why); }
   void publishPreview(const ethernut::Preview& preview);
   void protocolDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& status);
 
@@ -95,7 +97,6 @@ class EthernutNode : public ethernut::ClientListener
   bool onBoardCommand(EthernutCoordinates::Request& req, EthernutCoordinates::Response& res);
   bool onKill(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   bool onSetMode(EthernutSetMode::Request& req, EthernutSetMode::Response& res);
-  bool leaveStandalone(ethernut::BoardMode mode, EthernutSetMode::Response& res);
 
   // ethernut_jobs.cpp: the ~run_job action.
   void execute(const RunJobGoalConstPtr& goal);
@@ -107,38 +108,19 @@ class EthernutNode : public ethernut::ClientListener
 
   ros::NodeHandle nh_;
   ros::NodeHandle pnh_;
-  std::string host_;
-  uint16_t port_ = 6666;
-  Milliseconds connect_timeout_{3000};
-  ethernut::ClientOptions options_;
-  std::string settings_file_;
+  const ethernut_params::Settings settings_;
   std::unique_ptr<RuntimeSwitch> kill_;
   std::unique_ptr<RuntimeSwitch> motion_;
-  std::unique_ptr<ProgramDirectory> program_dir_;
+  std::unique_ptr<ProgramDirectory> program_dir_;  // ~program_dir; none: point jobs only
   std::unique_ptr<ToMachineFrame> to_machine_;
-  gcode::ParserOptions parser_options_;
-  ethernut::G53Policy g53_;
-  int max_preview_points_ = 100000;
-  SoftLimits soft_limits_;  // ~soft_limits
 
   std::unique_ptr<MachineStatePublisher> state_;
   ros::Publisher path_pub_;
   ros::Publisher markers_pub_;
   ros::ServiceServer pause_srv_, resume_srv_, clear_srv_, reset_srv_, kill_srv_, mode_srv_, sync_oled_srv_,
       board_command_srv_;
-  /// ~reset asked for the connection to be closed: the session's end is that, not a failure.
-  std::atomic<bool> reset_requested_{false};
   SingleGoalActionServer<RunJobAction> action_;
-
-  std::mutex mutex_;  // session_, standalone_, stopping_, options_.initial_mode
-  std::condition_variable standalone_cv_;
-  Session session_;
-  ethernut::ClientStats earlier_sessions_;  // counters of the connections before session_
-  bool standalone_ = false;                 // the board dropped us in standalone mode: no reconnecting
-  bool stopping_ = false;
-
-  std::unique_ptr<ethernut::JobStreamer> jobs_;  // the running job: its segments, steps and holds
-
-  std::unique_ptr<ReconnectingLink> link_;
+  std::unique_ptr<ethernut::JobStreamer> jobs_;    // the running job: its segments, steps and holds
+  std::unique_ptr<ethernut::BoardSession> board_;  // the connection; last: its events use the rest
 };
 }  // namespace cnc_bridge

@@ -49,9 +49,9 @@ uint8_t stateExecution(ethernut::SessionState st, bool job_active)
 // ------------------------------------------------------------------------- listener (run() thread)
 void EthernutNode::onState(ethernut::SessionState st, ethernut::SessionState /*previous*/)
 {
-  const Session s = session();
-  const ethernut::BoardMode mode = s.client ? s.client->mode() : ethernut::BoardMode::kUnknown;
-  const bool job_active = s.client && s.client->jobActive();
+  const std::shared_ptr<ethernut::Client> client = board_->latest();
+  const ethernut::BoardMode mode = client ? client->mode() : ethernut::BoardMode::kUnknown;
+  const bool job_active = client && client->jobActive();
   state_->update(
       [&](MachineState& m)
       {
@@ -95,8 +95,8 @@ void EthernutNode::onJobFinished(ethernut::JobOutcome outcome, const std::string
     return;  // the program goes on after one of its own steps: the job runs on
   }
   // A job cancelled by ~run_job's cancel leaves the board paused (the held move): say so.
-  const Session s = session();
-  const bool paused = s.client && s.client->state() == ethernut::SessionState::kPaused;
+  const std::shared_ptr<ethernut::Client> client = board_->latest();
+  const bool paused = client && client->state() == ethernut::SessionState::kPaused;
   state_->update(
       [&](MachineState& m)
       {
@@ -240,8 +240,7 @@ bool EthernutNode::onReset(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigge
                  [this](ethernut::Client& c)
                  {
                    c.reset();
-                   reset_requested_ = true;
-                   c.stop();  // the session ends and its connection closes
+                   board_->closeAfterReset(c);  // the session ends and its connection closes
                  });
 }
 
@@ -313,8 +312,12 @@ bool EthernutNode::onSetMode(EthernutSetMode::Request& req, EthernutSetMode::Res
   const auto gate = motion_->core().gate();
   if (motionRefused(res, "set_mode"))
     return true;
-  if (leaveStandalone(mode, res))
+  // The mode of every later connection; while the board is in standalone mode, the session
+  // reconnects in it, which answers the request.
+  if (const std::optional<std::string> answer = board_->selectMode(mode))
   {
+    res.success = true;
+    res.message = *answer;
     return true;
   }
   return command(res, std::string("mode ") + ethernut::toString(mode),
@@ -325,25 +328,4 @@ bool EthernutNode::onSetMode(EthernutSetMode::Request& req, EthernutSetMode::Res
                  });
 }
 
-// Makes \p mode the mode of the next connection; while the board is in standalone mode (and the
-// node not connected), lets the node reconnect in it. \returns true if that answered the request.
-bool EthernutNode::leaveStandalone(ethernut::BoardMode mode, EthernutSetMode::Response& res)
-{
-  std::lock_guard<std::mutex> lock(mutex_);
-  options_.initial_mode = mode;  // also the mode after the next reconnection
-  if (!standalone_)
-  {
-    return false;
-  }
-  res.success = true;
-  if (mode == ethernut::BoardMode::kStandalone)
-  {
-    res.message = "already in standalone mode";
-    return true;
-  }
-  standalone_ = false;
-  standalone_cv_.notify_all();
-  res.message = std::string("reconnecting in ") + ethernut::toString(mode) + " mode";
-  return true;
-}
 }  // namespace cnc_bridge
