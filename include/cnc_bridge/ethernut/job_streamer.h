@@ -109,8 +109,8 @@ class JobStreamer
   bool startSegment(Run& run);
   Segment followSegment(Run& run);
   void showMotionHold(Run& run, const std::string& hold, const std::string& ended, bool board_holds);
-  void cancelSegment(Client& client);
-  StreamOutcome finish(Run& run, const Segment& last, const std::optional<gcode::ProgramStep>& step);
+  static void cancelSegment(Client& client);
+  static StreamOutcome finish(Run& run, const Segment& last, const std::optional<gcode::ProgramStep>& step);
 
   JobRunner runner_;
   std::mutex mutex_;  ///< segment_, job_

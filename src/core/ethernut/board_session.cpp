@@ -57,7 +57,7 @@ std::shared_ptr<Transport> BoardSession::connect()
     }
     options = settings_.client;
   }
-  const std::shared_ptr<Transport> link = open_();
+  std::shared_ptr<Transport> link = open_();
   auto client = std::make_shared<Client>(*link, options, listener_);
   std::lock_guard<std::mutex> lock(mutex_);
   if (connection_.client)

@@ -140,7 +140,7 @@ JobStreamer::Segment JobStreamer::followSegment(Run& run)
   {
     std::unique_lock<std::mutex> lock(mutex_);
     changed_.wait_for(lock, std::chrono::milliseconds(50), [&] { return segment_.finished; });
-    const Segment segment = segment_;
+    Segment segment = segment_;
     lock.unlock();
     const std::string hold = runner_.motionHold();
     if (hold != shown_hold && !segment.finished)
@@ -208,7 +208,7 @@ StreamOutcome JobStreamer::finish(Run& run, const Segment& last, const std::opti
 
 std::string JobStreamer::releaseHolds()
 {
-  const std::string held = runner_.releaseHolds();
+  std::string held = runner_.releaseHolds();
   changed_.notify_all();  // followSegment() shows the hold's end
   return held;
 }
