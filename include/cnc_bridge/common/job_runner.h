@@ -16,11 +16,8 @@
 #pragma once
 
 #include <chrono>
-#include <condition_variable>
 #include <cstdint>
 #include <functional>
-#include <mutex>
-#include <optional>
 #include <string>
 
 #include "cnc_bridge/common/job_hold.h"

@@ -1,6 +1,7 @@
 // A machine's jobs between and around their segments (job_runner.h).
 #include "cnc_bridge/common/job_runner.h"
 
+#include <optional>
 #include <utility>
 
 namespace cnc_bridge
