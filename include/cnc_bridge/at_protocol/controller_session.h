@@ -23,6 +23,7 @@
 #include "cnc_bridge/at_protocol/program_path.h"
 #include "cnc_bridge/at_protocol/sender.h"
 #include "cnc_bridge/common/program_dir.h"
+#include "cnc_bridge/common/safety_switch.h"
 #include "cnc_bridge/common/soft_limits.h"
 #include "cnc_bridge/gcode/gcode.h"
 #include "cnc_bridge/transport/link_factory.h"
@@ -175,8 +176,11 @@ class ControllerSession
     SoftLimits soft_limits;            ///< every point of a goal must lie inside (m, machine frame)
     double default_feed = 0.01;        ///< m/s when neither goal nor program gives one
     double jog_timeout = 0.5;          ///< s, the jog deadman (0: off)
-    bool motion_enabled = false;       ///< the motion switch's start value
-    bool coolant = false;              ///< coolant of operations unless a goal says otherwise
+    bool motion_enabled = false;       ///< the motion switch's start value, when `motion` is not given
+    /// The node's motion switch: the session gates motion on it and acts on its changes (a
+    /// disable decelerates a running path, stops a jog); none: a switch of its own.
+    std::shared_ptr<SafetySwitch> motion;
+    bool coolant = false;  ///< coolant of operations unless a goal says otherwise
     gcode::ParserOptions gcode;
     std::string program_dir;                          ///< G-code goals are read here only; empty refuses them
     std::string program_dir_setting = "program_dir";  ///< named in that refusal
@@ -213,10 +217,13 @@ class ControllerSession
 
   // ---- the motion gate --------------------------------------------------------------------------
 
-  /// \brief The motion switch changed. Disabling cancels a running operation (it decelerates
-  /// along the path to a stop; runOperation() reports who disabled it), and stops a jog (F0@).
+  /// \brief Switches the motion switch (Options::motion). On each change, by this call or by
+  /// the switch's owner, disabling cancels a running operation (it decelerates along the path to
+  /// a stop; runOperation() reports who disabled it), and stops a jog (F0@).
   void setMotionEnabled(bool enabled, const std::string& by);
-  bool motionEnabled() const { return motion_enabled_.load(); }
+  bool motionEnabled() const { return motion_->enabled(); }
+  /// \returns the motion switch the session gates on (Options::motion, or its own).
+  SafetySwitch& motionSwitch() { return *motion_; }
   /// \returns who disabled motion last ("" if nobody has).
   std::string motionDisabledBy() const;
   /// \returns why \p what may not move now (motion disabled, e-stop on or unknown), or "".
@@ -279,6 +286,7 @@ class ControllerSession
   OperationResult runOperation(const OperationPlan& plan, const Operation& operation, const OperationWatch& watch);
 
  private:
+  void onMotionSwitched(bool enabled, const std::string& by);
   /// \brief The tool change and spindle value of \p plan into \p operation (if given).
   /// \throws ProtocolError if one cannot be sent exactly (toolChangeFor, scaledValue).
   void operationCommands(const OperationPlan& plan, int32_t goal_tool, double goal_tool_length,
@@ -298,7 +306,8 @@ class ControllerSession
   std::unique_ptr<SetpointSender> sender_;
   Deadman jog_deadman_;
   std::atomic<bool> coolant_;
-  std::atomic<bool> motion_enabled_;
+  std::shared_ptr<SafetySwitch> motion_;
+  SafetySwitch::Subscription motion_subscription_ = 0;
   std::atomic<uint64_t> report_errors_{0};
 
   mutable std::mutex snapshot_mutex_;            // guards snapshot_, link_states_
@@ -313,10 +322,9 @@ class ControllerSession
   bool command_interrupted_ = false;  // the reconnecting link interrupted the link (stop)
   std::string command_error_;
 
-  mutable std::mutex job_mutex_;  // guards running_job_, disabled_by_, motion_disabled_by_
+  mutable std::mutex job_mutex_;  // guards running_job_, disabled_by_
   std::shared_ptr<Job> running_job_;
-  std::string disabled_by_;         // who disabled motion while running_job_ ran
-  std::string motion_disabled_by_;  // who disabled motion last
+  std::string disabled_by_;  // who disabled motion while running_job_ ran
 
   mutable std::mutex jog_stop_mutex_;  // guards last_jog_stop_
   std::string last_jog_stop_;

@@ -15,7 +15,7 @@
 #include <vector>
 
 #include "cnc_bridge/at_protocol/controller_session.h"
-#include "cnc_bridge/common/job_hold.h"
+#include "cnc_bridge/common/job_runner.h"
 #include "cnc_bridge/gcode/program_steps.h"
 
 namespace cnc_bridge
@@ -23,11 +23,7 @@ namespace cnc_bridge
 namespace at_protocol
 {
 /// \brief What the goal shows besides its progress (the action's feedback fields of that name).
-struct GoalFeedback
-{
-  std::string event;  ///< the last program step, hold or pause, in words ("" before any)
-  bool paused = false;
-};
+using GoalFeedback = JobFeedback;
 
 /// \brief When an operation counts as ended (docs/at_controller_node.md, ~end_tolerance and ~end_timeout).
 struct EndCheck
@@ -74,15 +70,11 @@ class EndConfirmation
   bool moves_;
 };
 
-/// \brief Calls of a running goal, on the goal's thread.
-class GoalListener
+/// \brief Calls of a running goal, on the goal's thread; the program's steps and holds are the
+/// job runner's (JobListener: cancelRequested, optionalStop, dwelling, optionalStopPassed, holding).
+class GoalListener : public JobListener
 {
  public:
-  virtual ~GoalListener() = default;
-  /// Whether the goal is to stop (a cancel, shutdown); polled while it streams or waits.
-  virtual bool cancelRequested() = 0;
-  /// Whether M01 stops (the operator's OPT STOP switch), asked at each M01.
-  virtual bool optionalStop() { return true; }
   /// An operation was taken by the sender and streams.
   virtual void operationStarted(const Operation& operation) {}
   /// Every 100 ms while an operation streams, and once at its end.
@@ -92,13 +84,6 @@ class GoalListener
   /// Its last setpoint sent, the goal waits for the controller to report the operation's end point
   /// (feedback.event says how far it is): when the wait starts and at each report outside the tolerance.
   virtual void awaitingEnd(const GoalFeedback& feedback) {}
-  /// A G04 dwell starts (feedback.event names it).
-  virtual void dwelling(const GoalFeedback& feedback) {}
-  /// An M01 passed because optionalStop() said no (feedback.event says so).
-  virtual void optionalStopPassed(const GoalFeedback& feedback) {}
-  /// The goal holds until resume (feedback.paused, event ends "waiting for <resume>"); \p line is
-  /// the program line of a stop (M00, M01), 0 for a pause by a disable.
-  virtual void holding(const GoalFeedback& feedback, uint32_t line) {}
 };
 
 /// \brief How a goal ended.
@@ -122,8 +107,9 @@ struct GoalOutcome
   std::optional<std::array<int32_t, 3>> final_position;
 };
 
-/// \brief Runs follow_path goals on a session, one at a time, and answers resume. Thread-safe:
-/// run() on the goal's thread, resume() and wake() from any other.
+/// \brief Runs follow_path goals on a session, one at a time, and answers resume; the program's
+/// steps, the holds and resume are the JobRunner's. Thread-safe: run() on the goal's thread,
+/// resume() and wake() from any other.
 class GoalRunner
 {
  public:
@@ -149,20 +135,18 @@ class GoalRunner
   /// start. \returns "resumed after the M00 program stop at line 7", or the refusal.
   Answer resume();
   /// \brief Makes a waiting goal ask cancelRequested() at once (shutdown).
-  void wake() { hold_.wake(); }
+  void wake() { jobs_.wake(); }
 
  private:
   struct Run;
   bool runPlan(Run& run, const OperationPlan& plan);
   bool runOperation(Run& run, const OperationPlan& plan, std::optional<DisabledStop>& stop);
   bool confirmEnd(Run& run, const OperationPlan& plan, const Job& job);
-  bool carryOut(Run& run, const gcode::ProgramStep& step);
-  bool holdUntilResume(Run& run, const std::string& what, const std::string& event, uint32_t line);
 
   ControllerSession& session_;
   const Names names_;
   const EndCheck end_check_;
-  JobHold hold_;
+  JobRunner jobs_;
 };
 }  // namespace at_protocol
 }  // namespace cnc_bridge

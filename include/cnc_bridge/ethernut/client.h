@@ -236,8 +236,18 @@ class Client
   void send(const Message& message);
   void sendRequest(std::unique_lock<std::mutex>& lock, Request request);
   void handle(std::unique_lock<std::mutex>& lock, const Message& message);
+  void onBoardError(std::unique_lock<std::mutex>& lock, float code);
   void onAck(std::unique_lock<std::mutex>& lock, const Message& message);
   void onNext(std::unique_lock<std::mutex>& lock);
+  void onResend(std::unique_lock<std::mutex>& lock);
+  void onPauseAchieved(std::unique_lock<std::mutex>& lock);
+  void onAliveResponse();
+  void onPosition(std::unique_lock<std::mutex>& lock, const Message& message);
+  void beginRun();
+  void serve(std::unique_lock<std::mutex>& lock);
+  void receive(std::unique_lock<std::mutex>& lock, StreamDecoder& decoder, const uint8_t* data, size_t n,
+               unsigned& bad_in_a_row);
+  void endRun(std::unique_lock<std::mutex>& lock, const std::string& failure);
   /// A NEXT/RESEND with no job set in flight: the answer to the set of a cancelled job, if one
   /// was still in flight (the session leaves kSending); false otherwise.
   bool orphanAnswered(std::unique_lock<std::mutex>& lock);

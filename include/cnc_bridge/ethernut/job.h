@@ -40,6 +40,17 @@ struct G53Policy
   std::string setting = "g53_moves";
 };
 
+/// \brief How jobs are loaded (ethernut_node's ~program_dir, ~chord_tolerance, ~gcode_dialect,
+/// ~tool_table, ~g53_moves, ~max_preview_points, ~soft_limits).
+struct JobSettings
+{
+  std::string program_dir;  ///< G-code jobs are read from here only; "": point jobs only
+  gcode::ParserOptions parser;
+  G53Policy g53;
+  size_t max_preview_points = 100000;
+  SoftLimits soft_limits;  ///< every coordinate of a job is checked against them first (m, machine frame)
+};
+
 /// \brief The moves of a G-code program as the board gets them: G53 moves refused or left out.
 /// Reads the program as it goes (one block at a time). Not thread-safe.
 class GcodeJob

@@ -108,7 +108,8 @@ ControllerSession::ControllerSession(ControllerLinks links, Options options, Con
       links_(std::move(links)),
       jog_deadman_(options_.jog_timeout),
       coolant_(options_.coolant),
-      motion_enabled_(options_.motion_enabled),
+      motion_(options_.motion ? options_.motion
+                              : std::make_shared<SafetySwitch>(SafetySwitch::Names{}, options_.motion_enabled)),
       command_link_(links_.command_name, [this] { return openCommandLink(); }),
       report_link_(links_.report_name, links_.open_report),
       jog_timer_([this] { return checkJogDeadman(); })
@@ -116,8 +117,10 @@ ControllerSession::ControllerSession(ControllerLinks links, Options options, Con
   options_.limits.validate();
   if (!options_.disabled_refusal)
   {
-    options_.disabled_refusal = [](const std::string& what) { return what + " refused: motion is disabled"; };
+    options_.disabled_refusal = [this](const std::string& what) { return motion_->refusal(what); };
   }
+  motion_subscription_ =
+      motion_->subscribe([this](bool enabled, const std::string& by) { onMotionSwitched(enabled, by); });
   if (!options_.program_dir.empty())
   {
     program_dir_ = std::make_unique<ProgramDirectory>(options_.program_dir);
@@ -138,6 +141,7 @@ ControllerSession::ControllerSession(ControllerLinks links, Options options, Con
 
 ControllerSession::~ControllerSession()
 {
+  motion_->unsubscribe(motion_subscription_);  // the switch may outlive the session
   stop();
 }
 
@@ -357,14 +361,18 @@ ControllerSnapshot ControllerSession::waitForReport(const std::function<bool(con
 
 void ControllerSession::setMotionEnabled(bool enabled, const std::string& by)
 {
-  motion_enabled_ = enabled;
+  motion_->set(enabled, by);
+}
+
+// The switch's listener, under its gate.
+void ControllerSession::onMotionSwitched(bool enabled, const std::string& by)
+{
   if (enabled)
   {
     return;
   }
   {
     std::lock_guard<std::mutex> lock(job_mutex_);
-    motion_disabled_by_ = by;
     if (running_job_ && !running_job_->done())
     {
       disabled_by_ = by;
@@ -387,13 +395,12 @@ void ControllerSession::setMotionEnabled(bool enabled, const std::string& by)
 
 std::string ControllerSession::motionDisabledBy() const
 {
-  std::lock_guard<std::mutex> lock(job_mutex_);
-  return motion_disabled_by_;
+  return motion_->disabledBy();
 }
 
 std::string ControllerSession::motionRefusal(const std::string& what) const
 {
-  if (!motion_enabled_)
+  if (!motion_->enabled())
   {
     return options_.disabled_refusal(what);
   }
@@ -746,10 +753,10 @@ OperationResult ControllerSession::runOperation(const OperationPlan& plan, const
     std::lock_guard<std::mutex> lock(job_mutex_);
     running_job_ = job;
     disabled_by_.clear();
-    if (!motion_enabled_)
+    if (!motion_->enabled())
     {
       // Disabled between the caller's check and the start: stop at once.
-      disabled_by_ = motion_disabled_by_;
+      disabled_by_ = motion_->disabledBy();
       job->cancel();
     }
   }

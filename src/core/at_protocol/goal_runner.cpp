@@ -135,7 +135,12 @@ std::string EndConfirmation::failure(const ControllerSnapshot& now, const std::s
 // ---- GoalRunner -----------------------------------------------------------------------------------
 
 GoalRunner::GoalRunner(ControllerSession& session, Names names, EndCheck end_check)
-    : session_(session), names_(std::move(names)), end_check_(end_check)
+    : session_(session),
+      names_(std::move(names)),
+      end_check_(end_check),
+      jobs_(session.motionSwitch(), JobRunner::Names{names_.resume, names_.set_motion_enabled, names_.optional_stop},
+            // The e-stop (on or unknown) refuses a resume too, not only the switch.
+            [this] { return session_.motionRefusal("resume"); })
 {
 }
 
@@ -163,7 +168,7 @@ GoalOutcome GoalRunner::run(const std::vector<OperationPlan>& plans, int32_t goa
         run.outcome.program_end = true;
         break;
       }
-      if (!carryOut(run, *plan.after))
+      if (!jobs_.carryOut(*plan.after, run.feedback, run.listener))
       {
         cancelledWhileHeld(run.outcome, "cancelled at the " + plan.after->describe());
         return run.outcome;
@@ -189,16 +194,10 @@ bool GoalRunner::runPlan(Run& run, const OperationPlan& plan)
   OperationPlan rest = plan;
   for (;;)
   {
-    while (!session_.motionEnabled())
+    std::string held_at;
+    if (!jobs_.awaitMotion(run.feedback, run.listener, held_at))
     {
-      // Disabled between operations (during a dwell or a program stop): nothing is moving.
-      const std::string by = session_.motionDisabledBy();
-      const std::string event =
-          "motion disabled by " + by + " (" + names_.set_motion_enabled + ") before the next operation";
-      if (!holdUntilResume(run, "stop when motion was disabled by " + by, event, 0))
-      {
-        return cancelledWhileHeld(run.outcome, "cancelled while held: " + event);
-      }
+      return cancelledWhileHeld(run.outcome, "cancelled while held: " + held_at);
     }
     const std::string refusal = session_.motionRefusal("follow_path");
     if (!refusal.empty())
@@ -224,7 +223,8 @@ bool GoalRunner::runPlan(Run& run, const OperationPlan& plan)
           << stop->position[1] / kPulsesPerMm << " Z" << stop->position[2] / kPulsesPerMm << " mm after " << stop->sent
           << " of " << stop->planned << " planned setpoints";
     CNC_LOG_WARN("at_controller: follow_path: " << event.str() << "; holding");
-    if (!holdUntilResume(run, "stop when motion was disabled by " + stop->by, event.str(), 0))
+    if (!jobs_.holdUntilResume("stop when motion was disabled by " + stop->by, event.str(), 0, run.feedback,
+                               run.listener))
     {
       return cancelledWhileHeld(run.outcome, "cancelled while held: " + event.str());
     }
@@ -342,56 +342,11 @@ bool GoalRunner::confirmEnd(Run& run, const OperationPlan& plan, const Job& job)
   return true;
 }
 
-/// Carries out the program's stop, optional stop or dwell between two operations.
-/// \returns false if the goal was cancelled meanwhile.
-bool GoalRunner::carryOut(Run& run, const gcode::ProgramStep& step)
-{
-  using Kind = gcode::ProgramStep::Kind;
-  run.feedback.event = step.describe();
-  run.feedback.paused = false;
-  if (step.kind == Kind::kDwell)
-  {
-    run.listener.dwelling(run.feedback);
-    return hold_.waitFor(std::chrono::duration<double>(step.dwell_s), run.cancelled);
-  }
-  // Asked at each M01, as an operator flips the control's OPT STOP switch during a job.
-  if (step.kind == Kind::kOptionalStop && !run.listener.optionalStop())
-  {
-    run.feedback.event += " passed (" + names_.optional_stop + " false)";
-    run.listener.optionalStopPassed(run.feedback);
-    return true;
-  }
-  return holdUntilResume(run, step.describe(), step.describe(), step.line);
-}
-
-/// Holds the goal (nothing is sent) until resume: paused, "<event>: waiting for <resume>". \p what
-/// completes "resumed after the ..." in resume's answer. \returns false if cancelled meanwhile.
-bool GoalRunner::holdUntilResume(Run& run, const std::string& what, const std::string& event, uint32_t line)
-{
-  run.feedback.event = event + ": waiting for " + names_.resume;
-  run.feedback.paused = true;
-  hold_.hold(what);  // before anyone hears of the hold, so that a resume in answer finds it
-  run.listener.holding(run.feedback, line);
-  const bool resumed = hold_.waitForResume(run.cancelled);
-  run.feedback.paused = false;
-  return resumed;
-}
-
 Answer GoalRunner::resume()
 {
-  const std::string nothing =
-      "nothing to resume: no follow_path goal is held (at a program stop M00/M01, or paused by motion disabled)";
-  if (hold_.held().empty())
-  {
-    return Answer{false, nothing};
-  }
-  const std::string refusal = session_.motionRefusal("resume");
-  if (!refusal.empty())
-  {
-    return Answer{false, refusal};
-  }
-  const std::optional<std::string> what = hold_.resume();
-  return what ? Answer{true, "resumed after the " + *what} : Answer{false, nothing};
+  const ResumeAnswer answer = jobs_.resume(
+      "nothing to resume: no follow_path goal is held (at a program stop M00/M01, or paused by motion disabled)");
+  return Answer{answer.success, answer.message};
 }
 }  // namespace at_protocol
 }  // namespace cnc_bridge

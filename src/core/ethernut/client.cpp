@@ -580,16 +580,9 @@ void Client::handle(std::unique_lock<std::mutex>& lock, const Message& message)
 {
   if (message.error != 0.0f)
   {
-    stats_.last_board_error = message.error;
-    if (listener_)
-    {
-      lock.unlock();
-      listener_->onBoardError(message.error);
-      lock.lock();
-    }
+    onBoardError(lock, message.error);
   }
-  const Opcode op = classify(message);
-  switch (op)
+  switch (classify(message))
   {
     case Opcode::kAck:
       onAck(lock, message);
@@ -598,105 +591,135 @@ void Client::handle(std::unique_lock<std::mutex>& lock, const Message& message)
       onNext(lock);
       break;
     case Opcode::kResend:
-    {
-      if (!job_ || !job_->in_flight)
-      {
-        // A cancelled job's set is not sent again; the board waits for the next one.
-        if (!orphanAnswered(lock))
-        {
-          ++stats_.unexpected_messages;
-        }
-        break;
-      }
-      ++stats_.resends;
-      ++job_->resends;
-      const uint64_t index = job_->index;
-      const unsigned count = job_->resends;
-      if (listener_)
-      {
-        lock.unlock();
-        listener_->onResend(index, count);
-        lock.lock();
-      }
-      if (!job_)
-      {
-        break;
-      }
-      job_->in_flight = false;
-      if (count > options_.max_resends)
-      {
-        std::ostringstream what;
-        what << "coordinate #" << index << " (tag " << job_->current.tag << ") rejected by the board " << count
-             << " times (RESEND)";
-        if (state_ == SessionState::kSending)
-        {
-          setState(lock, SessionState::kReadyToSend);
-        }
-        finishJob(lock, JobOutcome::kFailed, what.str());
-        break;
-      }
-      job_->resend_pending = true;
-      if (state_ == SessionState::kSending)
-      {
-        setState(lock, SessionState::kReadyToSend);  // pump() sends the same set again
-      }
-      else if (state_ == SessionState::kPaused)
-      {
-        before_pause_ = SessionState::kReadyToSend;
-      }
+      onResend(lock);
       break;
-    }
     case Opcode::kPauseAchieved:
-      if (state_ != SessionState::kPaused)
-      {
-        before_pause_ = state_;
-        setState(lock, SessionState::kPaused);
-      }
-      if (has_pending_ && pending_.opcode == Opcode::kPauseRequest)
-      {
-        completePending(lock, "");
-      }
+      onPauseAchieved(lock);
       break;
     case Opcode::kAliveResponse:
-      if (alive_outstanding_)
-      {
-        // The answer to the latest request (after a miss, an earlier one's late answer reads short).
-        const double rtt = toMs(Clock::now() - last_alive_sent_);
-        stats_.last_link_rtt_ms = rtt;
-        stats_.mean_link_rtt_ms =
-            stats_.alive_responses == 0 ? rtt : stats_.mean_link_rtt_ms + (rtt - stats_.mean_link_rtt_ms) / 16.0;
-        stats_.max_link_rtt_ms = std::max(stats_.max_link_rtt_ms, rtt);
-        ++stats_.alive_responses;
-      }
-      alive_outstanding_ = false;
+      onAliveResponse();
       break;
     case Opcode::kAliveRequest:
-    {
       lock.unlock();
       send(makeMessage(Opcode::kAliveResponse));
       lock.lock();
       break;
-    }
     case Opcode::kPosition:
-    {
-      if (listener_)
-      {
-        lock.unlock();
-        listener_->onPosition(message.x, message.y, message.z);
-        lock.lock();
-      }
-      if (options_.ack_position_reports)
-      {
-        lock.unlock();
-        send(makeMessage(Opcode::kAck));
-        lock.lock();
-      }
+      onPosition(lock, message);
       break;
-    }
     default:
       ++stats_.unexpected_messages;
       CNC_LOG_WARN("ethernut: unexpected message from " << transport_.describe() << ": " << describe(message));
       break;
+  }
+}
+
+// A message carried a non-zero error field (the board's 0-9 error code).
+void Client::onBoardError(std::unique_lock<std::mutex>& lock, float code)
+{
+  stats_.last_board_error = code;
+  if (listener_)
+  {
+    lock.unlock();
+    listener_->onBoardError(code);
+    lock.lock();
+  }
+}
+
+// RESEND: the set in flight goes out again (pump()), up to max_resends times.
+void Client::onResend(std::unique_lock<std::mutex>& lock)
+{
+  if (!job_ || !job_->in_flight)
+  {
+    // A cancelled job's set is not sent again; the board waits for the next one.
+    if (!orphanAnswered(lock))
+    {
+      ++stats_.unexpected_messages;
+    }
+    return;
+  }
+  ++stats_.resends;
+  ++job_->resends;
+  const uint64_t index = job_->index;
+  const unsigned count = job_->resends;
+  if (listener_)
+  {
+    lock.unlock();
+    listener_->onResend(index, count);
+    lock.lock();
+  }
+  if (!job_)
+  {
+    return;
+  }
+  job_->in_flight = false;
+  if (count > options_.max_resends)
+  {
+    std::ostringstream what;
+    what << "coordinate #" << index << " (tag " << job_->current.tag << ") rejected by the board " << count
+         << " times (RESEND)";
+    if (state_ == SessionState::kSending)
+    {
+      setState(lock, SessionState::kReadyToSend);
+    }
+    finishJob(lock, JobOutcome::kFailed, what.str());
+    return;
+  }
+  job_->resend_pending = true;
+  if (state_ == SessionState::kSending)
+  {
+    setState(lock, SessionState::kReadyToSend);  // pump() sends the same set again
+  }
+  else if (state_ == SessionState::kPaused)
+  {
+    before_pause_ = SessionState::kReadyToSend;
+  }
+}
+
+// Pause achieved: asked for (it answers the pending request) or the board's own (row 11 unasked).
+void Client::onPauseAchieved(std::unique_lock<std::mutex>& lock)
+{
+  if (state_ != SessionState::kPaused)
+  {
+    before_pause_ = state_;
+    setState(lock, SessionState::kPaused);
+  }
+  if (has_pending_ && pending_.opcode == Opcode::kPauseRequest)
+  {
+    completePending(lock, "");
+  }
+}
+
+// The link's round trip: alive request -> alive response.
+void Client::onAliveResponse()
+{
+  if (alive_outstanding_)
+  {
+    // The answer to the latest request (after a miss, an earlier one's late answer reads short).
+    const double rtt = toMs(Clock::now() - last_alive_sent_);
+    stats_.last_link_rtt_ms = rtt;
+    stats_.mean_link_rtt_ms =
+        stats_.alive_responses == 0 ? rtt : stats_.mean_link_rtt_ms + (rtt - stats_.mean_link_rtt_ms) / 16.0;
+    stats_.max_link_rtt_ms = std::max(stats_.max_link_rtt_ms, rtt);
+    ++stats_.alive_responses;
+  }
+  alive_outstanding_ = false;
+}
+
+// A status-4 position report: to the listener, acknowledged if the board expects it (row 4).
+void Client::onPosition(std::unique_lock<std::mutex>& lock, const Message& message)
+{
+  if (listener_)
+  {
+    lock.unlock();
+    listener_->onPosition(message.x, message.y, message.z);
+    lock.lock();
+  }
+  if (options_.ack_position_reports)
+  {
+    lock.unlock();
+    send(makeMessage(Opcode::kAck));
+    lock.lock();
   }
 }
 
@@ -752,81 +775,11 @@ void Client::run()
   {
     throw ProtocolError("ethernut: run() is already running");
   }
-  running_ = true;
-  stop_ = false;
-  finished_ = false;
-  has_pending_ = false;
-  alive_outstanding_ = false;
-  mode_ = BoardMode::kUnknown;
-  last_rx_ = Clock::now();
-  last_alive_sent_ = last_rx_;
-  ++stats_.connections;
-  StreamDecoder decoder;
-  uint8_t buffer[512];
-  unsigned bad_in_a_row = 0;
+  beginRun();
   std::string failure;
   try
   {
-    setState(lock, SessionState::kInitialising);
-    sendRequest(lock, Request{makeMessage(Opcode::kInitRequest), Opcode::kInitRequest, Opcode::kAck, nullptr});
-    bool initialised = false;
-    while (!stop_ && !finished_)
-    {
-      if (!initialised && !has_pending_)
-      {
-        // Init acknowledged; the handshake ends with the mode's acknowledge (onAck), so that a
-        // connected session always knows the board's mode (a job needs file mode).
-        initialised = true;
-        sendRequest(lock, Request{makeMessage(modeOpcode(options_.initial_mode)), modeOpcode(options_.initial_mode),
-                                  Opcode::kAck, nullptr});
-      }
-      if (initialised)
-      {
-        pump(lock);
-      }
-      if (stop_ || finished_)
-      {
-        break;
-      }
-      lock.unlock();
-      const size_t n = transport_.read(buffer, sizeof buffer, options_.poll_interval);
-      lock.lock();
-      if (n > 0)
-      {
-        last_rx_ = Clock::now();
-        size_t offset = 0;
-        while (offset < n)
-        {
-          offset += decoder.feed(buffer + offset, n - offset);
-          for (;;)
-          {
-            Message message;
-            try
-            {
-              if (!decoder.next(message))
-              {
-                break;
-              }
-            }
-            catch (const ProtocolError& e)
-            {
-              ++stats_.bad_frames;
-              CNC_LOG_WARN(e.what() << " (from " << transport_.describe() << ")");
-              // No sync marker: several bad frames in a row mean we lost the frame boundary.
-              if (++bad_in_a_row >= 3)
-              {
-                throw LinkError("ethernut: " + transport_.describe() +
-                                ": three invalid messages in a row, stream out of step");
-              }
-              continue;
-            }
-            bad_in_a_row = 0;
-            handle(lock, message);
-          }
-        }
-      }
-      checkTimers(lock);
-    }
+    serve(lock);
   }
   catch (const std::exception& e)
   {
@@ -837,6 +790,106 @@ void Client::run()
   {
     lock.lock();
   }
+  endRun(lock, failure);
+}
+
+// A new connection's session: nothing pending, the mode unknown until the handshake says it.
+void Client::beginRun()
+{
+  running_ = true;
+  stop_ = false;
+  finished_ = false;
+  has_pending_ = false;
+  alive_outstanding_ = false;
+  mode_ = BoardMode::kUnknown;
+  last_rx_ = Clock::now();
+  last_alive_sent_ = last_rx_;
+  ++stats_.connections;
+}
+
+// The protocol loop: the handshake (init, then the initial mode), then sending what is due,
+// reading and handling the board's messages, and the timers, until stopped or finished.
+// 	hrows LinkError (a dead or garbled link, an unanswered handshake), as the transport.
+void Client::serve(std::unique_lock<std::mutex>& lock)
+{
+  StreamDecoder decoder;
+  uint8_t buffer[512];
+  unsigned bad_in_a_row = 0;
+  setState(lock, SessionState::kInitialising);
+  sendRequest(lock, Request{makeMessage(Opcode::kInitRequest), Opcode::kInitRequest, Opcode::kAck, nullptr});
+  bool initialised = false;
+  while (!stop_ && !finished_)
+  {
+    if (!initialised && !has_pending_)
+    {
+      // Init acknowledged; the handshake ends with the mode's acknowledge (onAck), so that a
+      // connected session always knows the board's mode (a job needs file mode).
+      initialised = true;
+      sendRequest(lock, Request{makeMessage(modeOpcode(options_.initial_mode)), modeOpcode(options_.initial_mode),
+                                Opcode::kAck, nullptr});
+    }
+    if (initialised)
+    {
+      pump(lock);
+    }
+    if (stop_ || finished_)
+    {
+      break;
+    }
+    lock.unlock();
+    const size_t n = transport_.read(buffer, sizeof buffer, options_.poll_interval);
+    lock.lock();
+    if (n > 0)
+    {
+      last_rx_ = Clock::now();
+      receive(lock, decoder, buffer, n, bad_in_a_row);
+    }
+    checkTimers(lock);
+  }
+}
+
+// Decodes \p n bytes read and handles every whole message in them.
+// \throws LinkError after three invalid messages in a row (the frame boundary is lost).
+void Client::receive(std::unique_lock<std::mutex>& lock, StreamDecoder& decoder, const uint8_t* data, size_t n,
+                     unsigned& bad_in_a_row)
+{
+  size_t offset = 0;
+  while (offset < n)
+  {
+    offset += decoder.feed(data + offset, n - offset);
+    for (;;)
+    {
+      Message message;
+      try
+      {
+        if (!decoder.next(message))
+        {
+          break;
+        }
+      }
+      catch (const ProtocolError& e)
+      {
+        ++stats_.bad_frames;
+        CNC_LOG_WARN(e.what() << " (from " << transport_.describe() << ")");
+        // No sync marker: several bad frames in a row mean we lost the frame boundary.
+        if (++bad_in_a_row >= 3)
+        {
+          throw LinkError("ethernut: " + transport_.describe() +
+                          ": three invalid messages in a row, stream out of step");
+        }
+        continue;
+      }
+      bad_in_a_row = 0;
+      handle(lock, message);
+    }
+  }
+}
+
+// The session's end: every waiting command and the job fail (or are cancelled when stopped), the
+// state says disconnected unless the board ended it on purpose (kill, standalone).
+// \throws LinkError with \p failure, if any.
+void Client::endRun(std::unique_lock<std::mutex>& lock, const std::string& failure)
+{
   running_ = false;
   const std::string why = failure.empty() ? std::string("ethernut: session ended") : failure;
   failAll(lock, why);

@@ -68,8 +68,7 @@ AtControllerNode::AtControllerNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   motion_ = std::make_unique<RuntimeSwitch>(pnh, "motion", "enable_motion", "set_motion_enabled",
                                             [this](bool enabled, const std::string& caller)
                                             { onMotionSwitched(enabled, caller); });
-  options.motion_enabled = motion_->enabled();
-  options.disabled_refusal = [this](const std::string& what) { return motion_->refusal(what); };
+  options.motion = motion_->shared();  // the session acts on its changes (a disable stops what moves)
   state_->diagnostics().add("streaming", this, &AtControllerNode::streamingDiagnostics);
   // job/path: the planned path of the last accepted follow_path goal (latched), for rviz and bags.
   path_pub_ = nh.advertise<nav_msgs::Path>("job/path", 1, true);
@@ -177,14 +176,13 @@ void AtControllerNode::onJogStopped(const ap::JogStop& stop)
 
 // ---- services ------------------------------------------------------------------------------------
 
-/// ~set_motion_enabled: disabling stops what moves (a running path decelerates along the path to
-/// a stop and holds, its goal paused until enabled and ~resume; a jog gets feed 0) and says so in
-/// state.
+/// ~set_motion_enabled: says so in state; the session, a listener of the same switch, stops what
+/// moves (a running path decelerates along the path to a stop and holds, its goal paused until
+/// enabled and ~resume; a jog gets feed 0).
 void AtControllerNode::onMotionSwitched(bool enabled, const std::string& caller)
 {
   state_->update([&](MachineState& s)
                  { s.message = std::string("motion ") + (enabled ? "enabled" : "disabled") + " by " + caller; });
-  session_->setMotionEnabled(enabled, caller);
 }
 
 bool AtControllerNode::setAuto(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res)

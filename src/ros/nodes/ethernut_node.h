@@ -3,10 +3,13 @@
 // from G-code files or point lists through the ~run_job action, carries pause/resume/reset/kill/mode
 // requests, publishes the machine's reported and commanded position as state (the reported one as
 // joint_states/tf), and a preview of each job for rviz before it runs. The protocol and the jobs
-// (coordinates, segments, preview) live in the ROS-free cnc_bridge_ethernut library; the program's
-// stops and dwells wait through JobHold. src/ros/nodes/ethernut_node.cpp: parameters, link, preview,
-// diagnostics; src/ros/nodes/ethernut_services.cpp: the client's events and the services;
-// src/ros/nodes/ethernut_jobs.cpp: the ~run_job action.
+// (coordinates, segments, preview, streaming: ethernut::JobStreamer, whose program steps and
+// holds are the common JobRunner's) live in the ROS-free cnc_bridge_ethernut library.
+// The connection (link, reconnection, the protocol loop) is the core ethernut::BoardSession.
+// src/ros/nodes/ethernut_params.cpp: every parameter, into the core's settings;
+// src/ros/nodes/ethernut_node.cpp: the session, preview, diagnostics;
+// src/ros/nodes/ethernut_services.cpp: the client's events and the services;
+// src/ros/nodes/ethernut_jobs.cpp: the ~run_job action (the streamer's calls as feedback and state).
 #pragma once
 
 #include <ros/ros.h>
@@ -22,22 +25,35 @@
 #include "cnc_bridge/EthernutCoordinates.h"
 #include "cnc_bridge/EthernutSetMode.h"
 #include "cnc_bridge/RunJobAction.h"
-#include "cnc_bridge/common/job_hold.h"
 #include "cnc_bridge/common/program_dir.h"
+#include "cnc_bridge/ethernut/board_session.h"
 #include "cnc_bridge/ethernut/client.h"
 #include "cnc_bridge/ethernut/job.h"
-#include "cnc_bridge/ethernut/motion_hold.h"
+#include "cnc_bridge/ethernut/job_streamer.h"
 #include "cnc_bridge/ethernut/settings.h"
 #include "cnc_bridge/gcode/gcode.h"
 #include "cnc_bridge/ros/machine_frame.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/runtime_switch.h"
 #include "cnc_bridge/ros/single_goal_action_server.h"
-#include "cnc_bridge/transport/reconnecting_link.h"
-#include "cnc_bridge/transport/tcp.h"
 
 namespace cnc_bridge
 {
+namespace ethernut_params
+{
+/// \brief Every parameter of ethernut_node (ethernut_params.cpp), validated.
+struct Settings
+{
+  ethernut::SessionSettings session;  ///< ~host, ~tcp_port, ~connect_timeout, the client's timeouts, ~mode
+  ethernut::JobSettings jobs;         ///< ~program_dir, the G-code options, ~g53_moves, ~soft_limits, ...
+  double transform_timeout = 0.5;     ///< s, ~transform_timeout
+  std::string kill_enabled_by;        ///< "PROG_CNCkill|1 in <file>" when the settings file enables ~kill
+};
+
+/// \brief Reads them. \throws ConfigError naming the parameter (or the settings file's line).
+Settings read(const ros::NodeHandle& pnh);
+}  // namespace ethernut_params
+
 class EthernutNode : public ethernut::ClientListener
 {
  public:
@@ -51,53 +67,10 @@ class EthernutNode : public ethernut::ClientListener
   EthernutNode& operator=(const EthernutNode&) = delete;
 
  private:
-  struct Session
-  {
-    std::shared_ptr<TcpConnection> link;  // declared first: destroyed after the client
-    std::shared_ptr<ethernut::Client> client;
-  };
+  class JobView;  // ethernut_jobs.cpp: a job's calls as feedback and state
 
-  // What the client reported of the segment streaming now (listener thread -> job thread).
-  struct JobProgress
-  {
-    uint64_t done = 0;
-    uint32_t line = 0;
-    uint32_t resends = 0;
-    ethernut::Coordinate last;
-    bool finished = false;
-    ethernut::JobOutcome outcome = ethernut::JobOutcome::kFailed;
-    std::string message;
-  };
-
-  struct Totals
-  {
-    uint64_t done = 0;  // sets acknowledged in the segments before this one
-    uint32_t resends = 0;
-  };
-
-  // Marks the node's one goal as running (a disable then holds it) for the scope of execute().
-  class GoalScope
-  {
-   public:
-    explicit GoalScope(EthernutNode& node);
-    ~GoalScope();
-    GoalScope(const GoalScope&) = delete;
-    GoalScope& operator=(const GoalScope&) = delete;
-
-   private:
-    EthernutNode& node_;
-  };
-
-  // ethernut_node.cpp: parameters, link, preview, diagnostics.
-  void readParameters();
-  void readLinkParameters(const ethernut::Settings& settings);
-  void readJobParameters();
-  void startLink();
-  std::shared_ptr<Transport> connect();
-  void runSession();
-  Session session();
-  std::shared_ptr<ethernut::Client> client(std::string& why);
-
+  // ethernut_node.cpp: the session, preview, diagnostics.
+  std::shared_ptr<ethernut::Client> client(std::string& why) { return board_->client(why); }
   void publishPreview(const ethernut::Preview& preview);
   void protocolDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& status);
 
@@ -112,12 +85,11 @@ class EthernutNode : public ethernut::ClientListener
   template <typename Response, typename F>
   bool command(Response& res, const std::string& what, F f);
   /// Fills \p res with the refusal of \p service when motion is disabled (the caller holds
-  /// motion_mutex_, so the switch cannot change before the command goes out). \returns true then.
+  /// the switch's gate, so the switch cannot change before the command goes out). \returns true then.
   template <typename Response>
   bool motionRefused(Response& res, const std::string& service) const;
   bool onPause(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   bool onResume(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
-  std::string releaseHolds();
   void onMotionSwitched(bool enabled, const std::string& caller);
   bool onClear(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   bool onReset(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
@@ -125,7 +97,6 @@ class EthernutNode : public ethernut::ClientListener
   bool onBoardCommand(EthernutCoordinates::Request& req, EthernutCoordinates::Response& res);
   bool onKill(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   bool onSetMode(EthernutSetMode::Request& req, EthernutSetMode::Response& res);
-  bool leaveStandalone(ethernut::BoardMode mode, EthernutSetMode::Response& res);
 
   // ethernut_jobs.cpp: the ~run_job action.
   void execute(const RunJobGoalConstPtr& goal);
@@ -133,59 +104,23 @@ class EthernutNode : public ethernut::ClientListener
   std::shared_ptr<ethernut::Job> loadJob(const RunJobGoal& goal, std::string& program, std::string& refusal);
   std::shared_ptr<ethernut::Job> loadProgram(const RunJobGoal& goal, std::string& refusal);
   std::shared_ptr<ethernut::Job> loadPoints(const RunJobGoal& goal, std::string& refusal);
-  void runJob(ethernut::Client& c, const std::shared_ptr<ethernut::Job>& job);
-  void finishJob(const JobProgress& p, const std::optional<gcode::ProgramStep>& step, bool cancelled,
-                 const std::string& skipped, RunJobResult& result);
-  bool startSegment(ethernut::Client& c, const std::shared_ptr<ethernut::Job>& job, RunJobFeedback& feedback,
-                    bool& cancelled);
-  void showMotionHold(const std::string& hold, const std::string& ended, bool board_holds, RunJobFeedback& feedback);
-  JobProgress followSegment(ethernut::Client& c, RunJobFeedback& feedback, uint64_t count, const Totals& totals,
-                            bool& cancelled);
-  void cancelSegment(ethernut::Client& c);
-  bool carryOut(const gcode::ProgramStep& step, RunJobFeedback& feedback, bool& cancelled);
-  bool holdAtStop(const gcode::ProgramStep& step, RunJobFeedback& feedback, bool& cancelled);
-  JobHold::Cancelled goalCancelled(bool& cancelled);
+  void endGoal(const ethernut::StreamOutcome& outcome);
 
   ros::NodeHandle nh_;
   ros::NodeHandle pnh_;
-  std::string host_;
-  uint16_t port_ = 6666;
-  Milliseconds connect_timeout_{3000};
-  ethernut::ClientOptions options_;
-  std::string settings_file_;
+  const ethernut_params::Settings settings_;
   std::unique_ptr<RuntimeSwitch> kill_;
   std::unique_ptr<RuntimeSwitch> motion_;
-  std::mutex motion_mutex_;  // a segment's start, a disable's pause and ~resume: one at a time
-  std::unique_ptr<ProgramDirectory> program_dir_;
+  std::unique_ptr<ProgramDirectory> program_dir_;  // ~program_dir; none: point jobs only
   std::unique_ptr<ToMachineFrame> to_machine_;
-  gcode::ParserOptions parser_options_;
-  ethernut::G53Policy g53_;
-  int max_preview_points_ = 100000;
-  SoftLimits soft_limits_;  // ~soft_limits
 
   std::unique_ptr<MachineStatePublisher> state_;
   ros::Publisher path_pub_;
   ros::Publisher markers_pub_;
   ros::ServiceServer pause_srv_, resume_srv_, clear_srv_, reset_srv_, kill_srv_, mode_srv_, sync_oled_srv_,
       board_command_srv_;
-  /// ~reset asked for the connection to be closed: the session's end is that, not a failure.
-  std::atomic<bool> reset_requested_{false};
   SingleGoalActionServer<RunJobAction> action_;
-
-  std::mutex mutex_;  // session_, standalone_, stopping_, options_.initial_mode
-  std::condition_variable standalone_cv_;
-  Session session_;
-  ethernut::ClientStats earlier_sessions_;  // counters of the connections before session_
-  bool standalone_ = false;                 // the board dropped us in standalone mode: no reconnecting
-  bool stopping_ = false;
-
-  JobHold program_stop_;  // the program's M00/M01/G04 between two segments
-  std::mutex job_mutex_;
-  std::condition_variable job_cv_;
-  JobProgress job_;
-  std::shared_ptr<const ethernut::Job> running_job_;  // execute()'s job, under job_mutex_
-  ethernut::MotionHold motion_hold_;                  // a disable holding the running goal until ~resume
-
-  std::unique_ptr<ReconnectingLink> link_;
+  std::unique_ptr<ethernut::JobStreamer> jobs_;    // the running job: its segments, steps and holds
+  std::unique_ptr<ethernut::BoardSession> board_;  // the connection; last: its events use the rest
 };
 }  // namespace cnc_bridge

@@ -49,9 +49,9 @@ uint8_t stateExecution(ethernut::SessionState st, bool job_active)
 // ------------------------------------------------------------------------- listener (run() thread)
 void EthernutNode::onState(ethernut::SessionState st, ethernut::SessionState /*previous*/)
 {
-  const Session s = session();
-  const ethernut::BoardMode mode = s.client ? s.client->mode() : ethernut::BoardMode::kUnknown;
-  const bool job_active = s.client && s.client->jobActive();
+  const std::shared_ptr<ethernut::Client> client = board_->latest();
+  const ethernut::BoardMode mode = client ? client->mode() : ethernut::BoardMode::kUnknown;
+  const bool job_active = client && client->jobActive();
   state_->update(
       [&](MachineState& m)
       {
@@ -77,12 +77,7 @@ void EthernutNode::onPosition(float x, float y, float z)
 
 void EthernutNode::onCoordinateDone(uint64_t index, const ethernut::Coordinate& c)
 {
-  {
-    std::lock_guard<std::mutex> lock(job_mutex_);
-    job_.done = index + 1;
-    job_.line = c.tag;
-    job_.last = c;
-  }
+  jobs_->onCoordinateDone(index, c);
   // The set the board acknowledged (NEXT) is the commanded position; status-4 reports are where
   // the machine is.
   state_->setCommandedPosition(c.x * kMetresPerMm, c.y * kMetresPerMm, c.z * kMetresPerMm);
@@ -90,28 +85,18 @@ void EthernutNode::onCoordinateDone(uint64_t index, const ethernut::Coordinate& 
 
 void EthernutNode::onResend(uint64_t /*index*/, unsigned /*count*/)
 {
-  std::lock_guard<std::mutex> lock(job_mutex_);
-  ++job_.resends;
+  jobs_->onResend();
 }
 
 void EthernutNode::onJobFinished(ethernut::JobOutcome outcome, const std::string& message)
 {
-  bool segment_continues = false;
-  {
-    std::lock_guard<std::mutex> lock(job_mutex_);
-    job_.finished = true;
-    job_.outcome = outcome;
-    job_.message = message;
-    segment_continues = running_job_ && running_job_->segmentContinues();
-  }
-  job_cv_.notify_all();
-  if (outcome == ethernut::JobOutcome::kCompleted && segment_continues)
+  if (jobs_->onJobFinished(outcome, message))
   {
     return;  // the program goes on after one of its own steps: the job runs on
   }
   // A job cancelled by ~run_job's cancel leaves the board paused (the held move): say so.
-  const Session s = session();
-  const bool paused = s.client && s.client->state() == ethernut::SessionState::kPaused;
+  const std::shared_ptr<ethernut::Client> client = board_->latest();
+  const bool paused = client && client->state() == ethernut::SessionState::kPaused;
   state_->update(
       [&](MachineState& m)
       {
@@ -172,10 +157,10 @@ bool EthernutNode::onPause(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigge
 // after the program's M00/M01 or after a disable; refused while motion is disabled.
 bool EthernutNode::onResume(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigger::Response& res)
 {
-  std::lock_guard<std::mutex> gate(motion_mutex_);
+  const auto gate = motion_->core().gate();
   if (motionRefused(res, "resume"))
     return true;
-  const std::string held = releaseHolds();
+  const std::string held = jobs_->releaseHolds();
   std::string why;
   const auto c = client(why);
   if (held.empty() || (c && c->state() == ethernut::SessionState::kPaused))
@@ -194,39 +179,22 @@ bool EthernutNode::onResume(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigg
   return true;
 }
 
-// Ends the job's holds (the program's stop, a disable's hold); \returns what they were, "" for none.
-std::string EthernutNode::releaseHolds()
-{
-  std::string held;
-  if (const std::optional<std::string> stop = program_stop_.resume())
-  {
-    held = "the " + *stop;  // the board itself was never paused at a program stop
-  }
-  const std::string motion = motion_hold_.resume();
-  if (!motion.empty())
-  {
-    held += (held.empty() ? "the hold (" : " and the hold (") + motion + ")";
-  }
-  job_cv_.notify_all();  // followSegment() shows the hold's end
-  return held;
-}
-
 // ~set_motion_enabled: disabling pauses a running job (the board holds the move in progress,
 // as for a cancel) and holds the goal until motion is enabled again and ~resume is called.
 void EthernutNode::onMotionSwitched(bool enabled, const std::string& caller)
 {
+  // Called under the switch's gate: a segment's start or a gated service comes wholly before or after.
   std::string what = std::string("motion ") + (enabled ? "enabled" : "disabled") + " by " + caller;
-  std::lock_guard<std::mutex> gate(motion_mutex_);
   bool running = false;
   if (!enabled)
   {
-    running = motion_hold_.disable(what);
+    running = jobs_->runner().holdOnDisable(what);
   }
-  else if (!motion_hold_.hold().empty())
+  else if (!jobs_->runner().motionHold().empty())
   {
     what += "; the job stays held until " + pnh_.resolveName("resume");  // enabling alone moves nothing
   }
-  job_cv_.notify_all();  // followSegment() shows the hold
+  jobs_->notify();  // the running job shows the hold
   state_->update([&](MachineState& m) { m.message = what; });
   if (enabled || !running)
   {
@@ -256,7 +224,7 @@ void EthernutNode::onMotionSwitched(bool enabled, const std::string& caller)
 // connection and the link reconnects. Both move the axes, so both are behind the motion switch.
 bool EthernutNode::onClear(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigger::Response& res)
 {
-  std::lock_guard<std::mutex> gate(motion_mutex_);
+  const auto gate = motion_->core().gate();
   if (motionRefused(res, "clear"))
     return true;
   return command(res, "clear: job cancelled, board cleared to 0/0/0; the connection kept",
@@ -265,15 +233,14 @@ bool EthernutNode::onClear(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigge
 
 bool EthernutNode::onReset(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigger::Response& res)
 {
-  std::lock_guard<std::mutex> gate(motion_mutex_);
+  const auto gate = motion_->core().gate();
   if (motionRefused(res, "reset"))
     return true;
   return command(res, "reset: job cancelled, board cleared to 0/0/0; the connection closed, reconnecting",
                  [this](ethernut::Client& c)
                  {
                    c.reset();
-                   reset_requested_ = true;
-                   c.stop();  // the session ends and its connection closes
+                   board_->closeAfterReset(c);  // the session ends and its connection closes
                  });
 }
 
@@ -309,7 +276,7 @@ bool EthernutNode::onSyncOled(EthernutCoordinates::Request& req, EthernutCoordin
 // motion switch, as anything that may move the machine is.
 bool EthernutNode::onBoardCommand(EthernutCoordinates::Request& req, EthernutCoordinates::Response& res)
 {
-  std::lock_guard<std::mutex> gate(motion_mutex_);
+  const auto gate = motion_->core().gate();
   if (motionRefused(res, "board_command"))
     return true;
   res.message = floatRefusal("board_command", req);
@@ -342,11 +309,15 @@ bool EthernutNode::onSetMode(EthernutSetMode::Request& req, EthernutSetMode::Res
   }
   // A mode change changes what drives the machine (standalone: the board runs on its own), and the
   // mode is also the one selected on every reconnection: gated like motion, nothing changed if refused.
-  std::lock_guard<std::mutex> gate(motion_mutex_);
+  const auto gate = motion_->core().gate();
   if (motionRefused(res, "set_mode"))
     return true;
-  if (leaveStandalone(mode, res))
+  // The mode of every later connection; while the board is in standalone mode, the session
+  // reconnects in it, which answers the request.
+  if (const std::optional<std::string> answer = board_->selectMode(mode))
   {
+    res.success = true;
+    res.message = *answer;
     return true;
   }
   return command(res, std::string("mode ") + ethernut::toString(mode),
@@ -357,25 +328,4 @@ bool EthernutNode::onSetMode(EthernutSetMode::Request& req, EthernutSetMode::Res
                  });
 }
 
-// Makes \p mode the mode of the next connection; while the board is in standalone mode (and the
-// node not connected), lets the node reconnect in it. \returns true if that answered the request.
-bool EthernutNode::leaveStandalone(ethernut::BoardMode mode, EthernutSetMode::Response& res)
-{
-  std::lock_guard<std::mutex> lock(mutex_);
-  options_.initial_mode = mode;  // also the mode after the next reconnection
-  if (!standalone_)
-  {
-    return false;
-  }
-  res.success = true;
-  if (mode == ethernut::BoardMode::kStandalone)
-  {
-    res.message = "already in standalone mode";
-    return true;
-  }
-  standalone_ = false;
-  standalone_cv_.notify_all();
-  res.message = std::string("reconnecting in ") + ethernut::toString(mode) + " mode";
-  return true;
-}
 }  // namespace cnc_bridge

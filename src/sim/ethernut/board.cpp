@@ -49,194 +49,238 @@ void Board::logMessage(Opcode opcode)
   }
 }
 
-void Board::serve(Transport& link, StopSignal& stop)
+/// One connection's state while the board serves it.
+struct Board::Connection
 {
   using Clock = std::chrono::steady_clock;
-  StreamDecoder decoder;
-  uint8_t buffer[512];
-  bool silent = false;
-  bool paused = false;
-  bool moving = false;        // a coordinate is accepted and not yet answered with NEXT
-  bool first_receipt = true;  // the coordinate in the next message has not been asked again yet
-  float target[3] = {0, 0, 0};
-  auto last_tick = Clock::now();
-  auto last_report = Clock::time_point();
-  bool position_changed = true;
 
-  auto reply = [&](Opcode op, float x = 0, float y = 0, float z = 0)
+  explicit Connection(Transport& l) : link(l) {}
+
+  /// Answers \p op (unless the board went silent).
+  void reply(Opcode op, float x = 0, float y = 0, float z = 0)
   {
     if (!silent)
     {
       const Frame f = encode(makeMessage(op, x, y, z));
       link.write(f.data(), f.size(), Milliseconds(2000));
     }
-  };
+  }
 
+  Transport& link;
+  StreamDecoder decoder;
+  bool silent = false;
+  bool paused = false;
+  bool moving = false;        // a coordinate is accepted and not yet answered with NEXT
+  bool first_receipt = true;  // the coordinate in the next message has not been asked again yet
+  bool closed = false;        // the board dropped the connection
+  float target[3] = {0, 0, 0};
+  Clock::time_point last_tick = Clock::now();
+  Clock::time_point last_report;
+  bool position_changed = true;
+};
+
+void Board::serve(Transport& link, StopSignal& stop)
+{
+  Connection c(link);
+  uint8_t buffer[512];
   try
   {
-    while (!stop.stopped())
+    while (!stop.stopped() && !c.closed)
     {
-      // Motion: advance towards the target by speed * elapsed time.
-      const auto now = Clock::now();
-      const double dt = std::chrono::duration<double>(now - last_tick).count();
-      last_tick = now;
-      if (moving && !paused)
-      {
-        double d[3], length = 0;
-        for (int i = 0; i < 3; ++i)
-        {
-          d[i] = static_cast<double>(target[i]) - position_[i];
-          length += d[i] * d[i];
-        }
-        length = std::sqrt(length);
-        const double step = options_.speed_mm_per_s <= 0 ? length : options_.speed_mm_per_s * dt;
-        if (step >= length)
-        {
-          for (int i = 0; i < 3; ++i)
-          {
-            position_[i] = target[i];
-          }
-          moving = false;
-          ++accepted_;
-          log(target[0], target[1], target[2]);
-          reply(Opcode::kNext);
-        }
-        else if (length > 0)
-        {
-          for (int i = 0; i < 3; ++i)
-          {
-            position_[i] = static_cast<float>(position_[i] + d[i] * step / length);
-          }
-        }
-        position_changed = true;
-      }
-      if (options_.report_period.count() > 0 && position_changed && now - last_report >= options_.report_period)
-      {
-        last_report = now;
-        position_changed = false;
-        reply(Opcode::kPosition, position_[0], position_[1], position_[2]);
-      }
-
-      const Milliseconds wait = (moving && !paused) ? Milliseconds(options_.speed_mm_per_s <= 0 ? 0 : 2)
-                                                    : Milliseconds(options_.report_period.count() > 0 ? 20 : 50);
+      advance(c);
+      const Milliseconds wait = (c.moving && !c.paused) ? Milliseconds(options_.speed_mm_per_s <= 0 ? 0 : 2)
+                                                        : Milliseconds(options_.report_period.count() > 0 ? 20 : 50);
       const size_t n = link.read(buffer, sizeof buffer, wait);
-      size_t offset = 0;
-      while (offset < n)
-      {
-        offset += decoder.feed(buffer + offset, n - offset);
-        for (;;)
-        {
-          Message m;
-          try
-          {
-            if (!decoder.next(m))
-            {
-              break;
-            }
-          }
-          catch (const ProtocolError& e)
-          {
-            CNC_LOG_WARN("sim_ethernut: " << e.what());
-            continue;
-          }
-          logMessage(classify(m));
-          switch (classify(m))
-          {
-            case Opcode::kInitRequest:
-            case Opcode::kFileMode:
-            case Opcode::kGuiControlMode:
-            case Opcode::kSyncOled:
-            case Opcode::kCommand:
-              reply(Opcode::kAck);
-              break;
-            case Opcode::kStandaloneMode:
-              reply(Opcode::kAck);
-              link.close();  // standalone: the board drops its TCP clients
-              return;
-            case Opcode::kKill:
-              reply(Opcode::kAck);
-              moving = false;
-              link.close();  // kill: stop everything and disconnect
-              return;
-            case Opcode::kReset:
-              moving = false;
-              paused = false;
-              position_[0] = position_[1] = position_[2] = 0.0f;
-              position_changed = true;
-              reply(Opcode::kAck);
-              break;
-            case Opcode::kPauseRequest:
-              paused = true;  // the simulated axes stop at once, so pause is achieved at once
-              reply(Opcode::kPauseAchieved);
-              break;
-            case Opcode::kReadyToSend:
-              paused = false;  // READYTOSEND also resumes a paused board
-              reply(Opcode::kAck);
-              break;
-            case Opcode::kAliveRequest:
-              if (options_.mute_keepalive_after == 0 || accepted_ < options_.mute_keepalive_after)
-              {
-                reply(Opcode::kAliveResponse);
-              }
-              break;
-            case Opcode::kAck:
-              break;  // the PC acknowledging a position report
-            case Opcode::kCoordinates:
-            {
-              if (moving)
-              {
-                CNC_LOG_WARN("sim_ethernut: coordinates while the previous set is still moving");
-                ++resends_;
-                reply(Opcode::kResend);
-                break;
-              }
-              const uint64_t number = ++received_;
-              bool resend = false;
-              if (first_receipt)
-              {
-                resend = (options_.resend_every > 0 && number % options_.resend_every == 0) ||
-                         (options_.resend_probability > 0 &&
-                          std::uniform_real_distribution<double>(0, 1)(rng_) < options_.resend_probability);
-              }
-              if (resend)
-              {
-                first_receipt = false;
-                ++resends_;
-                reply(Opcode::kResend);
-                break;
-              }
-              first_receipt = true;
-              target[0] = m.x;
-              target[1] = m.y;
-              target[2] = m.z;
-              moving = true;
-              const uint64_t taken = accepted_ + 1;
-              if (options_.drop_after > 0 && !dropped_ && taken >= options_.drop_after)
-              {
-                dropped_ = true;
-                link.close();
-                return;
-              }
-              if (options_.silent_after > 0 && !silenced_ && taken >= options_.silent_after)
-              {
-                silenced_ = true;
-                silent = true;
-                moving = false;
-              }
-              break;
-            }
-            default:
-              CNC_LOG_WARN("sim_ethernut: unexpected " << describe(m));
-              break;
-          }
-        }
-      }
+      receive(c, buffer, n);
     }
   }
   catch (const Error& e)
   {
     CNC_LOG_INFO("sim_ethernut: connection ended: " << e.what());
   }
+}
+
+// Motion: advances towards the target by speed * elapsed time (NEXT on arrival), and reports the
+// position (status 4) at most every report period.
+void Board::advance(Connection& c)
+{
+  const auto now = Connection::Clock::now();
+  const double dt = std::chrono::duration<double>(now - c.last_tick).count();
+  c.last_tick = now;
+  if (c.moving && !c.paused)
+  {
+    double d[3], length = 0;
+    for (int i = 0; i < 3; ++i)
+    {
+      d[i] = static_cast<double>(c.target[i]) - position_[i];
+      length += d[i] * d[i];
+    }
+    length = std::sqrt(length);
+    const double step = options_.speed_mm_per_s <= 0 ? length : options_.speed_mm_per_s * dt;
+    if (step >= length)
+    {
+      for (int i = 0; i < 3; ++i)
+      {
+        position_[i] = c.target[i];
+      }
+      c.moving = false;
+      ++accepted_;
+      log(c.target[0], c.target[1], c.target[2]);
+      c.reply(Opcode::kNext);
+    }
+    else if (length > 0)
+    {
+      for (int i = 0; i < 3; ++i)
+      {
+        position_[i] = static_cast<float>(position_[i] + d[i] * step / length);
+      }
+    }
+    c.position_changed = true;
+  }
+  if (options_.report_period.count() > 0 && c.position_changed && now - c.last_report >= options_.report_period)
+  {
+    c.last_report = now;
+    c.position_changed = false;
+    c.reply(Opcode::kPosition, position_[0], position_[1], position_[2]);
+  }
+}
+
+// Decodes \p n bytes read and answers every whole message, until the board drops the connection.
+void Board::receive(Connection& c, const uint8_t* data, size_t n)
+{
+  size_t offset = 0;
+  while (offset < n && !c.closed)
+  {
+    offset += c.decoder.feed(data + offset, n - offset);
+    Message m;
+    for (;;)
+    {
+      try
+      {
+        if (!c.decoder.next(m))
+        {
+          break;
+        }
+      }
+      catch (const ProtocolError& e)
+      {
+        CNC_LOG_WARN("sim_ethernut: " << e.what());
+        continue;
+      }
+      if (!answer(c, m))
+      {
+        c.closed = true;
+        return;
+      }
+    }
+  }
+}
+
+// Answers one message per Table 1. \returns false when the board drops the connection (standalone,
+// kill, drop_after).
+bool Board::answer(Connection& c, const Message& m)
+{
+  logMessage(classify(m));
+  switch (classify(m))
+  {
+    case Opcode::kInitRequest:
+    case Opcode::kFileMode:
+    case Opcode::kGuiControlMode:
+    case Opcode::kSyncOled:
+    case Opcode::kCommand:
+      c.reply(Opcode::kAck);
+      return true;
+    case Opcode::kStandaloneMode:
+      c.reply(Opcode::kAck);
+      c.link.close();  // standalone: the board drops its TCP clients
+      return false;
+    case Opcode::kKill:
+      c.reply(Opcode::kAck);
+      c.moving = false;
+      c.link.close();  // kill: stop everything and disconnect
+      return false;
+    case Opcode::kReset:
+      c.moving = false;
+      c.paused = false;
+      position_[0] = position_[1] = position_[2] = 0.0f;
+      c.position_changed = true;
+      c.reply(Opcode::kAck);
+      return true;
+    case Opcode::kPauseRequest:
+      c.paused = true;  // the simulated axes stop at once, so pause is achieved at once
+      c.reply(Opcode::kPauseAchieved);
+      return true;
+    case Opcode::kReadyToSend:
+      c.paused = false;  // READYTOSEND also resumes a paused board
+      c.reply(Opcode::kAck);
+      return true;
+    case Opcode::kAliveRequest:
+      if (options_.mute_keepalive_after == 0 || accepted_ < options_.mute_keepalive_after)
+      {
+        c.reply(Opcode::kAliveResponse);
+      }
+      return true;
+    case Opcode::kAck:
+      return true;  // the PC acknowledging a position report
+    case Opcode::kCoordinates:
+      return takeCoordinates(c, m);
+    default:
+      CNC_LOG_WARN("sim_ethernut: unexpected " << describe(m));
+      return true;
+  }
+}
+
+// A set of coordinates: asked again (RESEND) as the fault options say, else the new target.
+// \returns false when drop_after closes the connection.
+bool Board::takeCoordinates(Connection& c, const Message& m)
+{
+  if (c.moving)
+  {
+    CNC_LOG_WARN("sim_ethernut: coordinates while the previous set is still moving");
+    ++resends_;
+    c.reply(Opcode::kResend);
+    return true;
+  }
+  if (resendOnFirstReceipt(c))
+  {
+    ++resends_;
+    c.reply(Opcode::kResend);
+    return true;
+  }
+  c.target[0] = m.x;
+  c.target[1] = m.y;
+  c.target[2] = m.z;
+  c.moving = true;
+  const uint64_t taken = accepted_ + 1;
+  if (options_.drop_after > 0 && !dropped_ && taken >= options_.drop_after)
+  {
+    dropped_ = true;
+    c.link.close();
+    return false;
+  }
+  if (options_.silent_after > 0 && !silenced_ && taken >= options_.silent_after)
+  {
+    silenced_ = true;
+    c.silent = true;
+    c.moving = false;
+  }
+  return true;
+}
+
+// Whether this receipt of a set is answered with RESEND (resend_every, resend_probability): only
+// a first receipt is; the set sent again is taken.
+bool Board::resendOnFirstReceipt(Connection& c)
+{
+  const uint64_t number = ++received_;
+  bool resend = false;
+  if (c.first_receipt)
+  {
+    resend = (options_.resend_every > 0 && number % options_.resend_every == 0) ||
+             (options_.resend_probability > 0 &&
+              std::uniform_real_distribution<double>(0, 1)(rng_) < options_.resend_probability);
+  }
+  c.first_receipt = !resend;
+  return resend;
 }
 }  // namespace ethernut
 }  // namespace cnc_bridge

@@ -51,6 +51,13 @@ class Board
   uint64_t resendsSent() const { return resends_; }
 
  private:
+  struct Connection;  // one served connection's state (board.cpp)
+
+  void advance(Connection& c);
+  void receive(Connection& c, const uint8_t* data, size_t n);
+  bool answer(Connection& c, const Message& m);
+  bool takeCoordinates(Connection& c, const Message& m);
+  bool resendOnFirstReceipt(Connection& c);
   void log(float x, float y, float z);
   void logMessage(Opcode opcode);
 

@@ -1,8 +1,6 @@
-#include "cnc_bridge/ethernut/motion_hold.h"
+#include "cnc_bridge/common/motion_hold.h"
 
 namespace cnc_bridge
-{
-namespace ethernut
 {
 MotionHold::MotionHold(std::chrono::milliseconds cancel_poll) : cancel_poll_(cancel_poll) {}
 
@@ -63,5 +61,4 @@ bool MotionHold::waitForResume(uint64_t resumes, const JobHold::Cancelled& cance
   }
   return true;
 }
-}  // namespace ethernut
 }  // namespace cnc_bridge
