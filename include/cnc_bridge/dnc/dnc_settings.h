@@ -6,7 +6,7 @@
 
 #include <string>
 
-#include "cnc_bridge/transport/serial_settings.h"
+#include "cnc_bridge/transport/link_factory.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
 #include "cnc_bridge/xmodem/session.h"
 
@@ -14,7 +14,9 @@ namespace cnc_bridge::dnc
 {
 struct TransferSettings
 {
-  SerialSettings serial;
+  /// The control's serial line (a port or a device server), opened keeping what the control sent
+  /// while it was closed (InputOnOpen::kKeep: a receiving control's NAK is its start request).
+  LinkSettings link;
   std::string lock_dir;  ///< of the port lock shared with a status poller on the same line
   std::string program_dir;
   std::string protected_programs = "O08000-O09999";  ///< "" for none

@@ -28,13 +28,14 @@ DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh) : DncNode(nh, pnh, dnc
 DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh, const dnc::TransferSettings& settings)
     : nh_(nh),
       pnh_(pnh),
-      serial_(settings.serial),
+      serial_(settings.link.serial),
       default_protocol_(settings.default_protocol),
       keep_open_(settings.keep_open),
       xmodem_config_(settings.xmodem),
       text_options_(settings.text),
       feedback_period_(ros::Duration(settings.feedback_period)),
-      port_lock_(serial_.device, settings.lock_dir)
+      open_link_(linkFactory(settings.link)),
+      port_lock_(settings.link.lockDevice(), settings.lock_dir)
 {
   std::error_code ignored;
   std::filesystem::create_directories(settings.program_dir, ignored);  // ProgramDirectory reports what fails
@@ -55,7 +56,7 @@ DncNode::DncNode(ros::NodeHandle nh, ros::NodeHandle pnh, const dnc::TransferSet
                      { return runXmodem(link, job, feedback, cancel); });
   }
 
-  state_ = std::make_unique<MachineStatePublisher>(nh, pnh, serial_.describe());
+  state_ = std::make_unique<MachineStatePublisher>(nh, pnh, settings.link.hardwareId());
   state_->update(
       [&](MachineState& s)
       {
@@ -124,9 +125,10 @@ Transport& DncNode::openLink()
     state_->setLink(LinkState::kConnecting, "opening " + serial_.describe());
     try
     {
-      // What the control sent while the port was closed stays, as it does in a port kept open
-      // (~keep_open): a receiving control's NAK, queued before a send starts, is its start request.
-      link_ = openSerialLine(serial_, InputOnOpen::kKeep);
+      // What the control sent while the port was closed stays (TransferSettings::link), as it does
+      // in a port kept open (~keep_open): a receiving control's NAK, queued before a send starts,
+      // is its start request.
+      link_ = open_link_();
       ++link_generation_;
     }
     catch (const Error& e)

@@ -35,6 +35,7 @@
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/runtime_switch.h"
 #include "cnc_bridge/ros/single_goal_action_server.h"
+#include "cnc_bridge/transport/link_factory.h"
 #include "cnc_bridge/transport/serial_line.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
 
@@ -146,13 +147,14 @@ class DncNode
 
   std::map<std::string, ProtocolHandler> protocols_;
   std::unique_ptr<MachineStatePublisher> state_;
+  LinkFactory open_link_;  ///< the only way the link is opened (openLink())
   PortLock port_lock_;
 
   /// One transfer at a time (an admitted goal holds it until its result goes out), the
   /// request listener only while none runs; its cancel flag stops the running transfer.
   dnc::TransferGate gate_;
   std::mutex link_mutex_;  ///< guards link_ for cancelRunning()
-  std::unique_ptr<SerialLine> link_;
+  std::unique_ptr<Transport> link_;
   uint64_t link_generation_ = 0;  ///< counts the links opened (guarded by link_mutex_)
 
   dnc::TransferCounters counters_;

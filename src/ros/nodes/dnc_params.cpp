@@ -6,7 +6,6 @@
 
 #include "cnc_bridge/common/port_lock.h"
 #include "cnc_bridge/ros/params.h"
-#include "cnc_bridge/transport/serial_line.h"
 #include "cnc_bridge/xmodem/network_waits.h"
 #include "dnc_node.h"
 
@@ -59,7 +58,8 @@ dnc::XmodemWaits xmodemWaits(const ros::NodeHandle& pnh, bool networked)
 dnc::TransferSettings dncSettings(const ros::NodeHandle& pnh)
 {
   dnc::TransferSettings settings;
-  settings.serial = params::serialSettings(pnh, 115200);
+  // ~port, ~baud (default 115200), ~data_bits, ~parity, ~stop_bits, ~flow_control (params.h).
+  settings.link = params::serialLink(pnh, 115200, InputOnOpen::kKeep);
   // ~lock_dir (string, default /run/lock/cnc_bridge): directory of the serial-port lock shared with a status
   // poller on the same line (haas_mdc_node ~lock_dir; both must name the same directory).
   settings.lock_dir = pnh.param<std::string>("lock_dir", kDefaultLockDir);
@@ -97,8 +97,8 @@ dnc::TransferSettings dncSettings(const ros::NodeHandle& pnh)
   // ~binary (bool, default false): move bytes exactly (no EOB conversion; received files keep the
   // SUB padding of the last block).
   settings.text.binary = pnh.param("binary", false);
-  settings.xmodem = dnc::xmodemConfig(xmodemWaits(pnh, parseSerialAddress(settings.serial.device).networked()),
-                                      settings.serial.charactersPerSecond());
+  settings.xmodem =
+      dnc::xmodemConfig(xmodemWaits(pnh, settings.link.networked()), settings.link.serial.charactersPerSecond());
   settings.xmodem.eob_checksum_name = pnh.resolveName("eob_checksum");
   // ~max_program_bytes (int, default 16 MiB): the longest program moved by XModem.
   dnc::setMaxProgramBytes(settings.xmodem,
