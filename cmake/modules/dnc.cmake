@@ -36,6 +36,7 @@ target_link_libraries(dnc_drip_bench cnc_bridge_dnc_sim cnc_bridge_testing)
 if(NOT CNC_BRIDGE_CORE_ONLY)
   cnc_node(dnc_node
     src/ros/nodes/dnc_node.cpp
+    src/ros/nodes/dnc_params.cpp
     src/ros/nodes/dnc_transfer_action.cpp
     src/ros/nodes/dnc_drip_handlers.cpp
     src/ros/nodes/dnc_requests.cpp)

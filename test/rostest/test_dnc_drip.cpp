@@ -229,6 +229,12 @@ TEST(DncDrip, PlanDripShowsThePreambleAndResumeLineBeforeAnythingIsSent)
   ASSERT_EQ(1u, srv.response.character_issue_count);
   EXPECT_NE(srv.response.character_issues.at(0).find("restart preamble line 2"), std::string::npos)
       << srv.response.character_issues.at(0);
+  // Checked as a feed sends it: an edit with CR LF line ends and a blank line would go (the feed
+  // sends its own end of block), so the plan does not call it refused.
+  srv.request.restart_preamble = "G21 G90 G54\r\n\r\nT4 M6\r\n";
+  ASSERT_TRUE(plan.call(srv));
+  EXPECT_EQ(0u, srv.response.character_issue_count) << srv.response.message;
+  EXPECT_GT(srv.response.total_bytes, 0u) << srv.response.message;
 
   // A file with a character an ISO control cannot take: reported with its line; a feed is refused.
   cnc_bridge::PlanDrip bad;

@@ -10,7 +10,10 @@
 #include <std_srvs/Trigger.h>
 
 #include <atomic>
+#include <memory>
+#include <mutex>
 #include <stdexcept>
+#include <string>
 
 #include "cnc_bridge/SendProgram.h"
 #include "cnc_bridge/TransferAction.h"
@@ -145,6 +148,80 @@ TEST(RequestBoundary, AnExceptionInAGoalAbortsItWithTheMessageAndTheNextGoalRuns
   client.sendGoal(goal);
   ASSERT_TRUE(client.waitForResult(ros::Duration(10)));
   EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client.getResult()->message;
+  server->shutdown();
+}
+
+// A node whose goals share a resource with its services (dnc_node's port) admits a goal only once
+// it has reserved it: a goal while the resource is held is rejected with the node's own refusal
+// and never runs; an admitted goal holds the resource while it runs and frees it before its result.
+TEST(SingleGoalActionServer, AGoalIsAdmittedByItsReservationAndReleasedBeforeItsResult)
+{
+  ros::NodeHandle pnh("~");
+  using Server = cnc_bridge::SingleGoalActionServer<cnc_bridge::TransferAction>;
+  std::mutex port_mutex;
+  std::string port_holder;  // "" while the port is free
+  std::atomic<int> executed{0};
+  std::atomic<bool> held_while_running{false};
+  std::unique_ptr<Server> server;
+  server = std::make_unique<Server>(
+      pnh, "admitted_transfer",
+      [&](const cnc_bridge::TransferGoalConstPtr& goal)
+      {
+        ++executed;
+        {
+          std::lock_guard<std::mutex> lock(port_mutex);
+          held_while_running = port_holder == "goal " + goal->file;
+        }
+        cnc_bridge::TransferResult result;
+        result.success = true;
+        result.message = "sent " + goal->file;
+        server->setSucceeded(result, result.message);
+      },
+      [](const cnc_bridge::TransferGoal& goal) { return goal.direction + " " + goal.file; });
+  server->setAdmission(
+      [&](const std::string&, const cnc_bridge::TransferGoal& goal)
+      {
+        std::lock_guard<std::mutex> lock(port_mutex);
+        if (!port_holder.empty())
+          return "refused: the port is held by " + port_holder;
+        port_holder = "goal " + goal.file;
+        return std::string();
+      },
+      [&]
+      {
+        std::lock_guard<std::mutex> lock(port_mutex);
+        port_holder.clear();
+      });
+  server->start();
+
+  actionlib::SimpleActionClient<cnc_bridge::TransferAction> client(pnh, "admitted_transfer", false);
+  ASSERT_TRUE(client.waitForServer(ros::Duration(10)));
+  {
+    std::lock_guard<std::mutex> lock(port_mutex);
+    port_holder = "a service call";
+  }
+  cnc_bridge::TransferGoal goal;
+  goal.direction = "send";
+  goal.file = "O01234.nc";
+  client.sendGoal(goal);
+  ASSERT_TRUE(client.waitForResult(ros::Duration(10)));
+  EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::REJECTED);
+  EXPECT_EQ(client.getResult()->message, "refused: the port is held by a service call");
+  EXPECT_EQ(executed, 0);
+
+  {
+    std::lock_guard<std::mutex> lock(port_mutex);
+    port_holder.clear();
+  }
+  client.sendGoal(goal);
+  ASSERT_TRUE(client.waitForResult(ros::Duration(10)));
+  EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client.getResult()->message;
+  EXPECT_EQ(executed, 1);
+  EXPECT_TRUE(held_while_running);
+  {
+    std::lock_guard<std::mutex> lock(port_mutex);
+    EXPECT_EQ(port_holder, "");  // freed before the result went out
+  }
   server->shutdown();
 }
 

@@ -256,6 +256,21 @@ TEST(PlanDrip, ChecksAnEditedPreambleToo)
   EXPECT_THROW(planDrip(dir.write("p.nc", kProgram), DripOptions{}, restart, "g90\n"), ConfigError);
 }
 
+// The one preamble check (~plan_drip and every feed): lines as the feed sends them.
+TEST(PlanDrip, APreambleIsCheckedAsItIsSent)
+{
+  EXPECT_TRUE(checkPreamble("G21 G90 G54\r\n\r\nT4 M6\r\n", CharacterRules{}).empty());  // CR LF, a blank line
+  const auto issues = checkPreamble("G90\n\n  \nt4 M6\n", CharacterRules{});
+  ASSERT_EQ(1u, issues.size());
+  EXPECT_EQ(2u, issues[0].line);  // the second line sent
+  EXPECT_EQ(1u, issues[0].column);
+  TempDir dir("test_drip_program");
+  RestartPoint restart;
+  restart.line = 3;
+  const auto plan = planDrip(dir.write("p.nc", kProgram), DripOptions{}, restart, "G90\r\nT3 M6\r\n");
+  EXPECT_EQ("G90\r\nT3 M6\r\n", plan.preamble);
+}
+
 TEST(Eob, NamesRoundTrip)
 {
   for (const char* name : {"lf", "cr", "crlf", "lfcr", "lfcrcr"})

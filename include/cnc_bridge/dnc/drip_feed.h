@@ -101,6 +101,12 @@ struct DripPlan
   uint64_t total_bytes = 0;  ///< everything that will go on the wire, framing included
 };
 
+/// \brief The characters of restart blocks \p preamble the control cannot take, as planDrip() sends
+/// them: blank lines left out, a CR ending a line dropped (the feed sends its own end of block);
+/// lines numbered from 1 among those sent. The one check of a preamble, for dnc_node's ~plan_drip
+/// and every feed (cnc_dnc drip, dnc_node's drip protocol).
+std::vector<CharacterIssue> checkPreamble(const std::string& preamble, const CharacterRules& rules);
+
 /// \brief Checks the program and works out what to send.
 /// \param restart where to start (inactive: from the top).
 /// \param preamble the user's restart blocks; when empty and restarting, the computed ones are used.
@@ -187,6 +193,23 @@ class DripSender
 
  private:
   class Stopped;  // thrown inside send() to unwind on cancel
+  /// What of the program went out, for the result of a feed however it ends.
+  struct SentSoFar
+  {
+    uint64_t last_line = 0;  ///< the last line sent whole
+    std::string last_block;  ///< its sequence number, or the last one before it
+  };
+  // The parts of send(), in order.
+  void startFeed(const DripPlan& plan, const ProgressCallback& progress);
+  /// DC2, the leader, the leading '%' and the restart preamble.
+  void sendOpening(const DripPlan& plan);
+  /// The program's lines from the start line to its last text line.
+  void sendBody(const DripPlan& plan, LineReader& reader, std::deque<std::pair<uint64_t, std::string>>& head,
+                const LineCallback& line_sent, SentSoFar& sent);
+  /// The trailing '%', the trailer and DC4, then waits until they are on the wire.
+  void sendClosing(const DripPlan& plan);
+  std::string cancelMessage(const SentSoFar& sent) const;
+  DripResult endFeed(DripResult result, const SentSoFar& sent);
   void emit(const char* data, size_t size);
   /// The lines before the program's first block and that block, read and handed to
   /// DripOptions::check_head (nothing when it is not set). \throws what the check throws.

@@ -121,6 +121,12 @@ class ModalTracker
   std::string restartPreamble(uint64_t line_number, std::vector<std::string>* warnings = nullptr) const;
 
  private:
+  struct Block;  ///< what one block says that is settled once all its words are read
+  void applyG(double value, Block& block);
+  void applyM(double value, Block& block);
+  /// The words that complete others (G54.1 P, G43 H) and the tool change (T with or before M6).
+  void settle(const Block& block);
+
   bool pending_m6_ = false;
   std::string last_t_;
   ModalState state_;

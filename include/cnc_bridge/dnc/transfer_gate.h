@@ -1,20 +1,20 @@
 // One transfer at a time on a serial port, and the idle listener that steps aside for it
 // (docs/dnc_node.md, "Program requests from the control"): a transfer (a service call, an action
-// goal, a program request being served) reserves the port or is refused with what holds it; the
-// listener reads the port only while nothing is reserved, and leaves it (within its poll period)
-// when a transfer asks for it.
+// goal, a program request being served) reserves the port or is refused with what holds it (the
+// transfer core's TransferSlot, programs/transfer_core.h); the listener reads the port only while
+// nothing is reserved, and leaves it (within its poll period) when a transfer asks for it.
 #pragma once
 
 #include <atomic>
 #include <chrono>
-#include <condition_variable>
-#include <mutex>
 #include <string>
+
+#include "cnc_bridge/programs/transfer_core.h"
 
 namespace cnc_bridge::dnc
 {
 /// \brief Thread-safe.
-class TransferGate
+class TransferGate : public programs::TransferSlot
 {
  public:
   /// \brief Reserves the port for a transfer, \p what (named in the refusal of another); tells the
@@ -24,10 +24,6 @@ class TransferGate
   /// \brief As tryReserve(), for the listener that found a punch starting: it does not tell itself
   /// to leave. \param running set to what holds the port when it is refused.
   bool tryReserveForPunch(const std::string& what, std::string& running);
-  /// \brief Frees the port; the listener may take it again.
-  void release();
-  /// \brief What holds the port (the last reservation's \p what).
-  std::string running() const;
 
   /// \brief The listener: waits until the port is free, then marks it as listening.
   /// \returns false when the listener is to stop for good.
@@ -43,17 +39,11 @@ class TransferGate
 
   /// \brief Set when the listener is to leave the port (read by its listen loop).
   const std::atomic<bool>& listenStop() const { return listen_stop_; }
-  /// \brief Set to cancel the running transfer; cleared by each reservation.
-  std::atomic<bool>& cancelFlag() { return cancel_; }
 
  private:
-  mutable std::mutex mutex_;
-  std::condition_variable idle_;  ///< a change of busy_ or listening_
-  bool busy_ = false;
-  std::string running_;
+  // Guarded by the slot's mutex_; its changed_ is notified on a change of busy_ or listening_.
   bool listening_ = false;
   bool stop_listener_ = false;
   std::atomic<bool> listen_stop_{false};
-  std::atomic<bool> cancel_{false};
 };
 }  // namespace cnc_bridge::dnc

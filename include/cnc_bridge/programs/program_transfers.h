@@ -1,29 +1,23 @@
 // Moving programs between a program folder and a store (a machine's share), one transfer at a
 // time, each program kept in the archive, with the counts share_node shows in its diagnostics
-// (docs/share_node.md). ROS-free: the node maps goals and services onto run().
+// (docs/share_node.md). The slot, the counters and the file rules are the transfer core's, shared
+// with dnc_node (transfer_core.h). ROS-free: the node maps goals and services onto run().
 #pragma once
 
-#include <atomic>
 #include <cstdint>
 #include <functional>
-#include <mutex>
 #include <string>
 
 #include "cnc_bridge/common/program_dir.h"
 #include "cnc_bridge/programs/archive.h"
 #include "cnc_bridge/programs/program_name.h"
 #include "cnc_bridge/programs/program_store.h"
+#include "cnc_bridge/programs/transfer_core.h"
 
 namespace cnc_bridge::programs
 {
 /// \brief What the transfers and the store's checks came to so far.
-struct TransferCounts
-{
-  uint64_t transfers = 0, completed = 0, failed = 0, refused = 0, bytes = 0, checks = 0, check_failures = 0;
-  double round_trip = 0;  ///< s, the last check's
-  std::string last_error;
-  std::string last_result;
-};
+using TransferCounts = TransferTotals;
 
 /// \brief What one transfer did.
 struct TransferOutcome
@@ -55,29 +49,25 @@ class ProgramTransfers
   TransferOutcome run(Direction direction, const std::string& file, const StoreProgress& progress = nullptr,
                       const std::function<void()>& started = nullptr);
   /// \brief Stops a running transfer between two chunks (it fails as cancelled).
-  void cancel() { cancel_ = true; }
+  void cancel() { slot_.cancelFlag() = true; }
   /// \brief Whether the running (or last) transfer was asked to stop.
-  bool cancelled() const { return cancel_; }
-  bool busy() const;
+  bool cancelled() const { return slot_.cancelFlag(); }
+  bool busy() const { return slot_.busy(); }
   /// \brief Counts one check of the store (a listing) and its round trip; \p error "" if it answered.
   /// \returns whether the error differs from the last one (worth a log line).
-  bool countCheck(double round_trip, const std::string& error);
-  TransferCounts counts() const;
+  bool countCheck(double round_trip, const std::string& error) { return counters_.countCheck(round_trip, error); }
+  TransferCounts counts() const { return counters_.totals(); }
 
  private:
   TransferOutcome transfer(Direction direction, const std::string& file, const StoreProgress& progress);
   void keep(const std::string& name, const std::string& path, const std::string& direction);
 
   ProgramStore& store_;
-  const ProgramDirectory& folder_;
   const ProtectedRange range_;
   const NamePattern pattern_;
-  ProgramArchive& archive_;
   const VersionSource source_;
-  mutable std::mutex busy_mutex_;
-  bool busy_ = false;
-  std::atomic<bool> cancel_{false};
-  mutable std::mutex counts_mutex_;
-  TransferCounts counts_;
+  const TransferFiles files_;  ///< over the folder, range_, pattern_ and the archive
+  TransferSlot slot_;
+  TransferCounters counters_;
 };
 }  // namespace cnc_bridge::programs

@@ -4,6 +4,8 @@
 // `rostopic pub`) could replace a cutting job without anyone cancelling it. This server is built
 // on actionlib's ActionServer instead: while a goal runs, a new goal is rejected with a result
 // that names the running goal and how to stop it; replacing a job takes an explicit cancel first.
+// A node whose goals share a resource with other requests (dnc_node's serial port, also taken by
+// its services) admits a goal only once it has reserved that resource (setAdmission()).
 #pragma once
 
 #include <actionlib/server/action_server.h>
@@ -38,6 +40,9 @@ class SingleGoalActionServer
   using Execute = std::function<void(const GoalConstPtr&)>;
   /// Says in a few words what a goal does ("job part.nc"), for the rejection of another.
   using Describe = std::function<std::string(const Goal&)>;
+  /// Takes what a goal needs before it is accepted (e.g. reserves a port shared with services):
+  /// returns "" to accept the goal with \p goal_id, else the text it is rejected with.
+  using Admit = std::function<std::string(const std::string& goal_id, const Goal& goal)>;
 
   /// \param pnh node handle the action lives under (the action is <pnh>/<name>).
   SingleGoalActionServer(ros::NodeHandle pnh, const std::string& name, Execute execute, Describe describe)
@@ -87,6 +92,16 @@ class SingleGoalActionServer
   /// interrupt a blocking read. Set before start().
   void setCancelCallback(std::function<void()> on_cancel) { on_cancel_ = std::move(on_cancel); }
 
+  /// \brief Admits each goal by \p admit (called under the server's lock, so it must not call
+  /// back into the server) instead of the rejection of a goal while another runs; \p release
+  /// frees what it took once the admitted goal has ended, before its result goes out (a client
+  /// may send its next goal as soon as it has the result). Set before start().
+  void setAdmission(Admit admit, std::function<void()> release)
+  {
+    admit_ = std::move(admit);
+    release_ = std::move(release);
+  }
+
   void publishFeedback(const Feedback& feedback)
   {
     std::lock_guard<std::mutex> lock(mutex_);
@@ -119,12 +134,12 @@ class SingleGoalActionServer
   void onGoal(GoalHandle goal)
   {
     std::unique_lock<std::mutex> lock(mutex_);
-    if (current_ || stopping_)
+    const std::string refusal = admission(goal);
+    if (!refusal.empty())
     {
       Result result;
       result.success = false;
-      result.message =
-          stopping_ ? "rejected: the node is shutting down" : rejection(name_, current_->getGoalID().id, running_what_);
+      result.message = refusal;
       lock.unlock();
       ROS_WARN_STREAM(name_ << ": goal " << goal.getGoalID().id << " " << result.message);
       goal.setRejected(result, result.message);
@@ -137,6 +152,25 @@ class SingleGoalActionServer
     goal.setAccepted();
     lock.unlock();
     cv_.notify_all();
+  }
+
+  // Why \p goal is rejected, "" if it is accepted (mutex_ held): the node is stopping, admit_
+  // refuses it, or another goal runs.
+  std::string admission(const GoalHandle& goal)
+  {
+    if (stopping_)
+      return "rejected: the node is shutting down";
+    if (admit_)
+    {
+      const std::string refusal = admit_(goal.getGoalID().id, *goal.getGoal());
+      if (!refusal.empty())
+        return refusal;
+      if (!current_)
+        return "";
+      if (release_)  // admitted while a goal runs: not for this server's one goal at a time
+        release_();
+    }
+    return current_ ? rejection(name_, current_->getGoalID().id, running_what_) : "";
   }
 
   void onCancel(GoalHandle goal)
@@ -223,6 +257,8 @@ class SingleGoalActionServer
     }
     if (!goal)
       return;
+    if (release_)
+      release_();
     switch (outcome)
     {
       case kSucceeded:
@@ -240,6 +276,8 @@ class SingleGoalActionServer
   Execute execute_;
   Describe describe_;
   std::function<void()> on_cancel_;
+  Admit admit_;
+  std::function<void()> release_;
   const std::string name_;
   mutable std::mutex mutex_;
   std::condition_variable cv_;

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <string>
@@ -180,6 +181,11 @@ class Sender
     kTimeout
   };
   uint8_t waitForStart();
+  /// Sends one block until it is acknowledged; aborts after too many tries. \returns when it was.
+  std::chrono::steady_clock::time_point sendBlock(const std::vector<uint8_t>& packet, uint32_t block, size_t block_size,
+                                                  Progress& state);
+  /// Ends the transfer: EOT until acknowledged (or answered as a Haas does, or met by silence).
+  void sendEot();
   /// \param after_eot the reply to EOT is awaited (no data packet outstanding).
   Reply waitForReply(bool first_block, Milliseconds timeout, bool after_eot = false);
   /// Reads what follows a CAN CAN until the line is quiet; \returns the further CANs among it.
@@ -224,6 +230,26 @@ class Receiver
   /// control uses that one, which the failure message says (every block holding an end of block
   /// fails alike, so the transfer does fail).
   void noteOtherReading(const Packet& packet);
+
+  // The steps of receive(), one per thing the sender can do next.
+  struct ReceiveState;
+  /// The next byte: one read ahead, else from the line within the wait of the receive's stage (-1: none).
+  int nextByte(ReceiveState& r);
+  /// Nothing came: repeat the start request on its schedule, or NAK the block awaited.
+  void onSilence(ReceiveState& r);
+  /// SOH or STX: reads and checks the packet.
+  void onPacket(ReceiveState& r, uint8_t first);
+  /// A packet that passed its check: the next block, a repeat, or out of sequence.
+  void onGoodPacket(ReceiveState& r, const Packet& packet, CheckType check,
+                    std::chrono::steady_clock::time_point packet_start);
+  void acceptBlock(ReceiveState& r, const Packet& packet, CheckType check,
+                   std::chrono::steady_clock::time_point packet_start);
+  /// \returns true when the EOT ends the transfer (answered).
+  bool onEot(ReceiveState& r);
+  void onCan(ReceiveState& r);
+  void onNoise(ReceiveState& r, uint8_t c);
+  /// A damaged packet or noise: counted, NAKed after a purge; aborts after too many in a row.
+  void receiveError(ReceiveState& r, const std::string& what, Milliseconds already_quiet = Milliseconds(0));
 
   Transport& link_;
   BufferedInput input_;  ///< packets are read through this (a whole packet per read when it is there)

@@ -125,6 +125,17 @@ bool leadingSequence(const std::string& line, std::string& out)
 }
 }  // namespace
 
+std::vector<CharacterIssue> checkPreamble(const std::string& preamble, const CharacterRules& rules)
+{
+  std::vector<CharacterIssue> issues;
+  const auto lines = splitPreamble(preamble);
+  for (size_t i = 0; i < lines.size(); ++i)
+  {
+    checkLine(lines[i], i + 1, rules, issues);
+  }
+  return issues;
+}
+
 DripPlan planDrip(const std::string& path, const DripOptions& options, const RestartPoint& restart,
                   const std::string& preamble)
 {
@@ -139,12 +150,7 @@ DripPlan planDrip(const std::string& path, const DripOptions& options, const Res
   }
   std::vector<CharacterIssue> issues = scan.issues;
   uint64_t issue_count = scan.issue_count;
-  const auto preamble_lines = splitPreamble(plan.preamble);
-  std::vector<CharacterIssue> preamble_issues;
-  for (size_t i = 0; i < preamble_lines.size(); ++i)
-  {
-    checkLine(preamble_lines[i], i + 1, options.rules, preamble_issues);
-  }
+  const std::vector<CharacterIssue> preamble_issues = checkPreamble(plan.preamble, options.rules);
   if (issue_count > 0 || !preamble_issues.empty())
   {
     std::ostringstream out;
@@ -182,7 +188,7 @@ DripPlan planDrip(const std::string& path, const DripOptions& options, const Res
   total += options.dc_codes ? 2 : 0;
   total += plan.send_leading_percent ? 1 + eob : 0;
   total += plan.send_trailing_percent ? 1 + eob : 0;
-  for (const auto& line : preamble_lines)
+  for (const auto& line : splitPreamble(plan.preamble))
   {
     total += line.size() + eob;
   }
@@ -413,109 +419,20 @@ std::deque<std::pair<uint64_t, std::string>> DripSender::readAndCheckHead(LineRe
 DripResult DripSender::send(const DripPlan& plan, const ProgressCallback& progress, const LineCallback& line_sent)
 {
   const RealtimeScope realtime(options_.realtime_priority);
-  callback_ = progress;
-  progress_ = DripProgress{};
-  progress_.total = plan.total_bytes;
-  held_ = false;
-  cancelled_ = false;
-  max_queued_at_xoff_ = 0;
-  waiting_for_dc1_ = options_.wait_for_dc1;
-  held_since_ = Clock::now();
-  line_free_at_ = Clock::now();
-  last_report_ = Clock::time_point();
-
+  startFeed(plan, progress);
   DripResult result;
-  uint64_t last_line = 0;
-  std::string last_block;
+  SentSoFar sent;
   try
   {
     // One open file for the check and the feed: the head checked is the head sent.
     LineReader reader(plan.path, options_.max_line_length);
     std::deque<std::pair<uint64_t, std::string>> head = readAndCheckHead(reader);
-    const auto next_line = [&](uint64_t& number, std::string& text)
-    {
-      if (!head.empty())
-      {
-        number = head.front().first;
-        text = std::move(head.front().second);
-        head.pop_front();
-        return true;
-      }
-      if (!reader.next(text))
-        return false;
-      number = reader.lineNumber();
-      return true;
-    };
-    const char dc2 = static_cast<char>(kDc2);
-    const char dc4 = static_cast<char>(kDc4);
-    if (options_.dc_codes)
-    {
-      emit(&dc2, 1);
-    }
-    const std::string leader(options_.leader_length, static_cast<char>(options_.leader_char));
-    emit(leader.data(), leader.size());
-    const std::string percent = "%" + options_.eob;
-    if (plan.send_leading_percent)
-    {
-      emit(percent.data(), percent.size());
-    }
-    for (auto line : splitPreamble(plan.preamble))
-    {
-      line += options_.eob;
-      emit(line.data(), line.size());
-    }
-    std::string line;
-    std::string sequence;
-    uint64_t n = 0;
-    while (next_line(n, line))
-    {
-      if (n < plan.scan.start_line)
-      {
-        continue;
-      }
-      if (n > plan.scan.last_text_line)
-      {
-        break;  // trailing blank lines
-      }
-      progress_.line = n;
-      if (leadingSequence(line, sequence))
-      {
-        progress_.block = sequence;
-      }
-      const size_t text_size = line.size();
-      line += options_.eob;
-      emit(line.data(), line.size());
-      last_line = n;
-      if (line_sent)
-      {
-        line.resize(text_size);
-        line_sent(n, line);
-      }
-      if (!sequence.empty())
-      {
-        last_block = sequence;
-      }
-      report(false);
-    }
-    if (plan.send_trailing_percent)
-    {
-      emit(percent.data(), percent.size());
-    }
-    const std::string trailer(options_.trailer_length, static_cast<char>(options_.leader_char));
-    emit(trailer.data(), trailer.size());
-    if (options_.dc_codes)
-    {
-      emit(&dc4, 1);
-    }
-    // Done means on the wire, not in a queue.
-    if (options_.pace_cps > 0)
-    {
-      std::this_thread::sleep_until(line_free_at_);
-    }
-    link_.drain();
+    sendOpening(plan);
+    sendBody(plan, reader, head, line_sent, sent);
+    sendClosing(plan);
     result.outcome = DripResult::Outcome::kCompleted;
     std::ostringstream out;
-    out << "sent " << progress_.bytes << " bytes (lines " << plan.scan.start_line << ".." << last_line << ") to "
+    out << "sent " << progress_.bytes << " bytes (lines " << plan.scan.start_line << ".." << sent.last_line << ") to "
         << link_.describe() << ", " << progress_.xoff_events << " XOFF";
     result.message = out.str();
   }
@@ -532,32 +449,152 @@ DripResult DripSender::send(const DripPlan& plan, const ProgressCallback& progre
   {
     result.outcome = DripResult::Outcome::kFailed;
     std::ostringstream out;
-    out << e.what() << " (after " << progress_.bytes << " bytes; last complete line " << last_line;
-    if (!last_block.empty())
+    out << e.what() << " (after " << progress_.bytes << " bytes; last complete line " << sent.last_line;
+    if (!sent.last_block.empty())
     {
-      out << " " << last_block;
+      out << " " << sent.last_block;
     }
     out << ")";
     result.message = out.str();
   }
   if (result.outcome == DripResult::Outcome::kCancelled)
   {
-    std::ostringstream out;
-    out << "cancelled after " << progress_.bytes << " bytes; last complete line " << last_line;
-    if (!last_block.empty())
-    {
-      out << " (" << last_block << ")";
-    }
-    if (progress_.line > last_line)
-    {
-      out << "; line " << progress_.line << " was sent in part: restart from it";
-    }
-    result.message = out.str();
+    result.message = cancelMessage(sent);
   }
+  return endFeed(result, sent);
+}
+
+void DripSender::startFeed(const DripPlan& plan, const ProgressCallback& progress)
+{
+  callback_ = progress;
+  progress_ = DripProgress{};
+  progress_.total = plan.total_bytes;
+  held_ = false;
+  cancelled_ = false;
+  max_queued_at_xoff_ = 0;
+  waiting_for_dc1_ = options_.wait_for_dc1;
+  held_since_ = Clock::now();
+  line_free_at_ = Clock::now();
+  last_report_ = Clock::time_point();
+}
+
+void DripSender::sendOpening(const DripPlan& plan)
+{
+  if (options_.dc_codes)
+  {
+    const char dc2 = static_cast<char>(kDc2);
+    emit(&dc2, 1);
+  }
+  const std::string leader(options_.leader_length, static_cast<char>(options_.leader_char));
+  emit(leader.data(), leader.size());
+  if (plan.send_leading_percent)
+  {
+    const std::string percent = "%" + options_.eob;
+    emit(percent.data(), percent.size());
+  }
+  for (auto line : splitPreamble(plan.preamble))
+  {
+    line += options_.eob;
+    emit(line.data(), line.size());
+  }
+}
+
+void DripSender::sendBody(const DripPlan& plan, LineReader& reader, std::deque<std::pair<uint64_t, std::string>>& head,
+                          const LineCallback& line_sent, SentSoFar& sent)
+{
+  // The head read for its check first, then the rest of the file.
+  const auto next_line = [&](uint64_t& number, std::string& text)
+  {
+    if (!head.empty())
+    {
+      number = head.front().first;
+      text = std::move(head.front().second);
+      head.pop_front();
+      return true;
+    }
+    if (!reader.next(text))
+      return false;
+    number = reader.lineNumber();
+    return true;
+  };
+  std::string line;
+  std::string sequence;
+  uint64_t n = 0;
+  while (next_line(n, line))
+  {
+    if (n < plan.scan.start_line)
+    {
+      continue;
+    }
+    if (n > plan.scan.last_text_line)
+    {
+      break;  // trailing blank lines
+    }
+    progress_.line = n;
+    if (leadingSequence(line, sequence))
+    {
+      progress_.block = sequence;
+    }
+    const size_t text_size = line.size();
+    line += options_.eob;
+    emit(line.data(), line.size());
+    sent.last_line = n;
+    if (line_sent)
+    {
+      line.resize(text_size);
+      line_sent(n, line);
+    }
+    if (!sequence.empty())
+    {
+      sent.last_block = sequence;
+    }
+    report(false);
+  }
+}
+
+void DripSender::sendClosing(const DripPlan& plan)
+{
+  if (plan.send_trailing_percent)
+  {
+    const std::string percent = "%" + options_.eob;
+    emit(percent.data(), percent.size());
+  }
+  const std::string trailer(options_.trailer_length, static_cast<char>(options_.leader_char));
+  emit(trailer.data(), trailer.size());
+  if (options_.dc_codes)
+  {
+    const char dc4 = static_cast<char>(kDc4);
+    emit(&dc4, 1);
+  }
+  // Done means on the wire, not in a queue.
+  if (options_.pace_cps > 0)
+  {
+    std::this_thread::sleep_until(line_free_at_);
+  }
+  link_.drain();
+}
+
+std::string DripSender::cancelMessage(const SentSoFar& sent) const
+{
+  std::ostringstream out;
+  out << "cancelled after " << progress_.bytes << " bytes; last complete line " << sent.last_line;
+  if (!sent.last_block.empty())
+  {
+    out << " (" << sent.last_block << ")";
+  }
+  if (progress_.line > sent.last_line)
+  {
+    out << "; line " << progress_.line << " was sent in part: restart from it";
+  }
+  return out.str();
+}
+
+DripResult DripSender::endFeed(DripResult result, const SentSoFar& sent)
+{
   held_ = false;
   result.bytes = progress_.bytes;
-  result.stopped_at_line = last_line;
-  result.stopped_at_block = last_block;
+  result.stopped_at_line = sent.last_line;
+  result.stopped_at_block = sent.last_block;
   result.xoff_events = progress_.xoff_events;
   result.max_queued_at_xoff = max_queued_at_xoff_;
   report(true);

@@ -212,29 +212,35 @@ std::string sequenceNumber(const std::string& line)
   return "";
 }
 
-void ModalTracker::apply(const std::string& line)
+// What one block says beyond the modal groups it sets at once: words that complete others (H for
+// G43, P for G54.1) and the tool change, settled once the whole block is read.
+struct ModalTracker::Block
 {
-  const auto words = splitWords(line);
   std::string h_word;
   std::string p_word;
+  std::string t_here;
   bool has_m6 = false;
   bool g54_1 = false;
   bool g43 = false;
-  std::string t_here;
+};
+
+void ModalTracker::apply(const std::string& line)
+{
+  const auto words = splitWords(line);
+  Block block;
   for (const auto& w : words)
   {
     if (w.letter == 'H')
     {
-      h_word = word('H', w.value);
+      block.h_word = word('H', w.value);
     }
     else if (w.letter == 'P')
     {
-      p_word = word('P', w.value);
+      block.p_word = word('P', w.value);
     }
   }
   for (const auto& w : words)
   {
-    const double v = w.number;
     switch (w.letter)
     {
       case 'N':
@@ -247,80 +253,95 @@ void ModalTracker::apply(const std::string& line)
         state_.spindle_speed = word('S', w.value);
         break;
       case 'T':
-        t_here = word('T', w.value);
-        last_t_ = t_here;
+        block.t_here = word('T', w.value);
+        last_t_ = block.t_here;
         break;
       case 'G':
-        if (is(v, 0) || is(v, 1) || is(v, 2) || is(v, 3))
-        {
-          state_.motion = "G" + std::to_string(static_cast<int>(v));
-        }
-        else if (is(v, 17) || is(v, 18) || is(v, 19))
-        {
-          state_.plane = "G" + std::to_string(static_cast<int>(v));
-        }
-        else if (is(v, 20) || is(v, 21))
-        {
-          state_.units = "G" + std::to_string(static_cast<int>(v));
-        }
-        else if (is(v, 90) || is(v, 91))
-        {
-          state_.distance = "G" + std::to_string(static_cast<int>(v));
-        }
-        else if (is(v, 54.1))
-        {
-          g54_1 = true;
-        }
-        else if ((v >= 54 && v <= 59 && is(v, std::round(v))) || (v >= 110 && v <= 129 && is(v, std::round(v))))
-        {
-          state_.work_offset = "G" + std::to_string(static_cast<int>(v));
-        }
-        else if (is(v, 43) || is(v, 44))
-        {
-          g43 = true;
-          state_.tool_length = "G" + std::to_string(static_cast<int>(v));
-        }
-        else if (is(v, 49))
-        {
-          state_.tool_length = "G49";
-        }
+        applyG(w.number, block);
         break;
       case 'M':
-        if (is(v, 3) || is(v, 4) || is(v, 5))
-        {
-          state_.spindle = "M" + std::to_string(static_cast<int>(v));
-        }
-        else if (is(v, 6))
-        {
-          has_m6 = true;
-        }
-        else if (is(v, 7) || is(v, 8) || is(v, 9))
-        {
-          state_.coolant = "M" + std::to_string(static_cast<int>(v));
-        }
+        applyM(w.number, block);
         break;
       default:
         break;
     }
   }
-  if (g54_1)
+  settle(block);
+}
+
+void ModalTracker::applyG(double v, Block& block)
+{
+  if (is(v, 0) || is(v, 1) || is(v, 2) || is(v, 3))
   {
-    state_.work_offset = p_word.empty() ? "G54.1" : "G54.1 " + p_word;
+    state_.motion = "G" + std::to_string(static_cast<int>(v));
   }
-  if (g43 && !h_word.empty())
+  else if (is(v, 17) || is(v, 18) || is(v, 19))
   {
-    state_.tool_length += " " + h_word;
+    state_.plane = "G" + std::to_string(static_cast<int>(v));
   }
-  if (has_m6)
+  else if (is(v, 20) || is(v, 21))
+  {
+    state_.units = "G" + std::to_string(static_cast<int>(v));
+  }
+  else if (is(v, 90) || is(v, 91))
+  {
+    state_.distance = "G" + std::to_string(static_cast<int>(v));
+  }
+  else if (is(v, 54.1))
+  {
+    block.g54_1 = true;
+  }
+  else if ((v >= 54 && v <= 59 && is(v, std::round(v))) || (v >= 110 && v <= 129 && is(v, std::round(v))))
+  {
+    state_.work_offset = "G" + std::to_string(static_cast<int>(v));
+  }
+  else if (is(v, 43) || is(v, 44))
+  {
+    block.g43 = true;
+    state_.tool_length = "G" + std::to_string(static_cast<int>(v));
+  }
+  else if (is(v, 49))
+  {
+    state_.tool_length = "G49";
+  }
+}
+
+void ModalTracker::applyM(double v, Block& block)
+{
+  if (is(v, 3) || is(v, 4) || is(v, 5))
+  {
+    state_.spindle = "M" + std::to_string(static_cast<int>(v));
+  }
+  else if (is(v, 6))
+  {
+    block.has_m6 = true;
+  }
+  else if (is(v, 7) || is(v, 8) || is(v, 9))
+  {
+    state_.coolant = "M" + std::to_string(static_cast<int>(v));
+  }
+}
+
+void ModalTracker::settle(const Block& block)
+{
+  if (block.g54_1)
+  {
+    state_.work_offset = block.p_word.empty() ? "G54.1" : "G54.1 " + block.p_word;
+  }
+  if (block.g43 && !block.h_word.empty())
+  {
+    state_.tool_length += " " + block.h_word;
+  }
+  if (block.has_m6)
   {
     // "T5 M6" and "M6 T5" change to T5; "M6" alone changes to the T selected earlier.
-    state_.tool = t_here.empty() ? last_t_ : t_here;
+    state_.tool = block.t_here.empty() ? last_t_ : block.t_here;
     pending_m6_ = true;
   }
-  else if (!pending_m6_ && !t_here.empty())
+  else if (!pending_m6_ && !block.t_here.empty())
   {
     // No M6 in the program so far: a lathe-style T0101 indexes the turret by itself.
-    state_.tool = t_here;
+    state_.tool = block.t_here;
   }
 }
 

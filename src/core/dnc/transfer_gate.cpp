@@ -5,11 +5,8 @@ namespace cnc_bridge::dnc
 bool TransferGate::tryReserve(const std::string& what)
 {
   std::lock_guard<std::mutex> lock(mutex_);
-  if (busy_)
+  if (!reserveLocked(what, nullptr))
     return false;
-  busy_ = true;
-  running_ = what;
-  cancel_ = false;
   listen_stop_ = listening_;  // the listener leaves the port (waitForListenerToLeave)
   return true;
 }
@@ -17,36 +14,13 @@ bool TransferGate::tryReserve(const std::string& what)
 bool TransferGate::tryReserveForPunch(const std::string& what, std::string& running)
 {
   std::lock_guard<std::mutex> lock(mutex_);
-  if (busy_)
-  {
-    running = running_;
-    return false;
-  }
-  busy_ = true;
-  running_ = what;
-  cancel_ = false;
-  return true;
-}
-
-void TransferGate::release()
-{
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    busy_ = false;
-  }
-  idle_.notify_all();
-}
-
-std::string TransferGate::running() const
-{
-  std::lock_guard<std::mutex> lock(mutex_);
-  return running_;
+  return reserveLocked(what, &running);
 }
 
 bool TransferGate::waitToListen()
 {
   std::unique_lock<std::mutex> lock(mutex_);
-  idle_.wait(lock, [this] { return stop_listener_ || !busy_; });
+  changed_.wait(lock, [this] { return stop_listener_ || !busy_; });
   if (stop_listener_)
     return false;
   listening_ = true;
@@ -60,14 +34,14 @@ void TransferGate::leftPort()
     std::lock_guard<std::mutex> lock(mutex_);
     listening_ = false;
   }
-  idle_.notify_all();
+  changed_.notify_all();
 }
 
 void TransferGate::waitForListenerToLeave()
 {
   std::unique_lock<std::mutex> lock(mutex_);
   listen_stop_ = listening_;
-  idle_.wait(lock, [this] { return !listening_; });
+  changed_.wait(lock, [this] { return !listening_; });
 }
 
 void TransferGate::stopListener()
@@ -77,12 +51,12 @@ void TransferGate::stopListener()
     stop_listener_ = true;
     listen_stop_ = true;
   }
-  idle_.notify_all();
+  changed_.notify_all();
 }
 
 void TransferGate::pauseListener(std::chrono::milliseconds pause)
 {
   std::unique_lock<std::mutex> lock(mutex_);
-  idle_.wait_for(lock, pause, [this] { return stop_listener_; });
+  changed_.wait_for(lock, pause, [this] { return stop_listener_; });
 }
 }  // namespace cnc_bridge::dnc

@@ -1,51 +1,11 @@
 #include "cnc_bridge/dnc/transfer_rules.h"
 
 #include <algorithm>
-#include <fstream>
-#include <iterator>
 
 #include "cnc_bridge/common/error.h"
 
 namespace cnc_bridge::dnc
 {
-JobCheck TransferFiles::check(const std::string& file, bool send) const
-{
-  JobCheck check;
-  try
-  {
-    const std::string path = send ? programs_.resolveExisting(file) : programs_.resolveForWrite(file);
-    if (send)
-      programs::checkProtectedFile(protected_, names_, path, file);
-    check.path = path;
-  }
-  catch (const ConfigError& e)
-  {
-    check.refusal = std::string("refused: ") + e.what();
-  }
-  catch (const Error& e)  // DisabledError ("refused: ..."), or the file cannot be read
-  {
-    check.refusal = e.what();
-    check.counted = true;
-  }
-  return check;
-}
-
-xmodem::ContentCheck TransferFiles::sendCheck(const std::string& file) const
-{
-  const std::string name = file.substr(file.find_last_of('/') + 1);
-  return [this, file, name](const std::string& contents)
-  { protected_.checkHeader(file, names_.number(name), programs::readHeader(contents)); };
-}
-
-std::string TransferFiles::archive(const std::string& path, const programs::VersionSource& source) const
-{
-  const std::string name = path.substr(path.find_last_of('/') + 1);
-  std::ifstream in(path, std::ios::binary);
-  const std::string content((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  const auto kept = archive_.add(name, content, source);
-  return kept ? "kept " + name + " as version " + std::to_string(kept->number) + " in " + archive_.root() : "";
-}
-
 std::string busyRefusal(const std::string& device, const std::string& running, const std::string& cancel_topic)
 {
   // One new-goal policy for everything that moves or cuts (docs/ROS_INTERFACE.md): name what
@@ -119,60 +79,4 @@ xmodem::FileResult transferByXmodem(Transport& link, const std::string& path, bo
   }
 }
 
-std::vector<std::pair<std::string, uint64_t>> TransferTotals::fields(bool with_requests) const
-{
-  std::vector<std::pair<std::string, uint64_t>> fields{
-      {"transfers", transfers}, {"completed", completed}, {"failed (aborts)", failed},
-      {"cancelled", cancelled}, {"refused", refused},     {"blocks", blocks},
-      {"retries", retries},     {"timeouts", timeouts},   {"bytes", bytes}};
-  if (with_requests)
-  {
-    fields.emplace_back("program requests", requests);
-    fields.emplace_back("program requests served", requests_served);
-  }
-  return fields;
-}
-
-void TransferCounters::refused()
-{
-  std::lock_guard<std::mutex> lock(mutex_);
-  ++totals_.refused;
-}
-
-void TransferCounters::started()
-{
-  std::lock_guard<std::mutex> lock(mutex_);
-  ++totals_.transfers;
-}
-
-void TransferCounters::finished(bool success, bool cancelled, uint64_t blocks, uint64_t retries, uint64_t bytes,
-                                const std::string& message)
-{
-  std::lock_guard<std::mutex> lock(mutex_);
-  (success ? totals_.completed : cancelled ? totals_.cancelled : totals_.failed)++;
-  totals_.blocks += blocks;
-  totals_.retries += retries;
-  totals_.bytes += bytes;
-  totals_.last_result = message;
-}
-
-void TransferCounters::xmodemStats(uint64_t timeouts, uint64_t failed_retries)
-{
-  std::lock_guard<std::mutex> lock(mutex_);
-  totals_.timeouts += timeouts;
-  totals_.retries += failed_retries;
-}
-
-void TransferCounters::request(bool served)
-{
-  std::lock_guard<std::mutex> lock(mutex_);
-  ++totals_.requests;
-  totals_.requests_served += served ? 1 : 0;
-}
-
-TransferTotals TransferCounters::totals() const
-{
-  std::lock_guard<std::mutex> lock(mutex_);
-  return totals_;
-}
 }  // namespace cnc_bridge::dnc

@@ -11,58 +11,37 @@ namespace cnc_bridge::programs
 ProgramTransfers::ProgramTransfers(ProgramStore& store, const ProgramDirectory& folder, ProtectedRange range,
                                    NamePattern pattern, ProgramArchive& archive, VersionSource source)
     : store_(store),
-      folder_(folder),
       range_(std::move(range)),
       pattern_(std::move(pattern)),
-      archive_(archive),
-      source_(std::move(source))
+      source_(std::move(source)),
+      files_(folder, range_, pattern_, archive)
 {
-}
-
-bool ProgramTransfers::busy() const
-{
-  std::lock_guard<std::mutex> lock(busy_mutex_);
-  return busy_;
 }
 
 TransferOutcome ProgramTransfers::run(Direction direction, const std::string& file, const StoreProgress& progress,
                                       const std::function<void()>& started)
 {
+  if (!slot_.tryReserve((direction == Direction::kSend ? "a send of " : "a receive of ") + file))
   {
-    std::lock_guard<std::mutex> lock(busy_mutex_);
-    if (busy_)
-    {
-      TransferOutcome refused;
-      refused.refused = true;
-      refused.message = "refused: another transfer is running on " + store_.describe() + " (one at a time)";
-      std::lock_guard<std::mutex> counts(counts_mutex_);
-      ++counts_.refused;
-      return refused;
-    }
-    busy_ = true;
-    cancel_ = false;
+    TransferOutcome refused;
+    refused.refused = true;
+    refused.message = "refused: another transfer is running on " + store_.describe() + " (one at a time)";
+    counters_.refused();
+    return refused;
   }
   // Free however the transfer ends: an unexpected error goes on to the node's request boundary.
   BOOST_SCOPE_EXIT_ALL(this)
   {
-    std::lock_guard<std::mutex> lock(busy_mutex_);
-    busy_ = false;
+    slot_.release();
   };
-  {
-    std::lock_guard<std::mutex> lock(counts_mutex_);
-    ++counts_.transfers;
-  }
+  counters_.started();
   if (started)
     started();
   TransferOutcome outcome = transfer(direction, file, progress);
-  {
-    std::lock_guard<std::mutex> lock(counts_mutex_);
-    (outcome.success ? counts_.completed : outcome.refused ? counts_.refused : counts_.failed)++;
-    counts_.bytes += outcome.bytes;
-    counts_.last_result = outcome.message;
-    if (!outcome.success && !outcome.refused)
-      counts_.last_error = outcome.message;
-  }
+  counters_.finished(outcome.success   ? TransferEnd::kCompleted
+                     : outcome.refused ? TransferEnd::kRefused
+                                       : TransferEnd::kFailed,
+                     0, 0, outcome.bytes, outcome.message);
   if (outcome.success)
     CNC_LOG_INFO(outcome.message);
   else
@@ -74,22 +53,23 @@ TransferOutcome ProgramTransfers::transfer(Direction direction, const std::strin
 {
   TransferOutcome outcome;
   const std::string name = file.substr(file.find_last_of('/') + 1);  // the name on the store
+  const bool send = direction == Direction::kSend;
   try
   {
-    if (direction == Direction::kSend)
+    const std::string path = files_.resolve(file, send);
+    if (send)
     {
-      const std::string path = folder_.resolveExisting(file);
-      outcome.bytes = putProgram(store_, path, name, range_, pattern_, progress, &cancel_);
+      // The protected range is checked on the bytes as they are read for the store.
+      outcome.bytes =
+          putProgram(store_, path, name, files_.protectedRange(), files_.names(), progress, &slot_.cancelFlag());
       outcome.message = "sent " + file + " to " + store_.describe() + "/" + name;
-      keep(name, path, "sent");
     }
     else
     {
-      const std::string path = folder_.resolveForWrite(file);
-      outcome.bytes = getProgram(store_, name, path, progress, &cancel_);
+      outcome.bytes = getProgram(store_, name, path, progress, &slot_.cancelFlag());
       outcome.message = "received " + store_.describe() + "/" + name + " as " + path;
-      keep(name, path, "received");
     }
+    keep(name, path, send ? "sent" : "received");
     outcome.success = true;
     outcome.message += " (" + std::to_string(outcome.bytes) + " bytes)";
   }
@@ -119,36 +99,16 @@ void ProgramTransfers::keep(const std::string& name, const std::string& path, co
 {
   try
   {
-    mode_t mode = 0;
-    const std::string content = readRegularFile(path, &mode);  // a link planted since is not followed
     VersionSource source = source_;
     source.direction = direction;
-    if (const auto kept = archive_.add(name, content, source, mode))
-      CNC_LOG_INFO("kept " << name << " as version " << kept->number << " in " << archive_.root());
+    const std::string kept = files_.archive(path, source);
+    if (!kept.empty())
+      CNC_LOG_INFO(kept);
   }
   catch (const Error& e)
   {
     // The transfer itself succeeded: a full archive disk is reported, not turned into a failure.
     CNC_LOG_ERROR(name << " was " << direction << " but not archived: " << e.what());
   }
-}
-
-bool ProgramTransfers::countCheck(double round_trip, const std::string& error)
-{
-  std::lock_guard<std::mutex> lock(counts_mutex_);
-  ++counts_.checks;
-  counts_.round_trip = round_trip;
-  if (error.empty())
-    return false;
-  ++counts_.check_failures;
-  const bool changed = error != counts_.last_error;
-  counts_.last_error = error;
-  return changed;
-}
-
-TransferCounts ProgramTransfers::counts() const
-{
-  std::lock_guard<std::mutex> lock(counts_mutex_);
-  return counts_;
 }
 }  // namespace cnc_bridge::programs

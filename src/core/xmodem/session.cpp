@@ -325,45 +325,8 @@ Stats Sender::send(const std::vector<uint8_t>& payload, const ProgressCallback& 
       const size_t n = std::min(left, block_size);
       std::vector<uint8_t> packet = encodePacket(block, payload.data() + offset, n, block_size, stats_.check);
       applyReading(packet, block_size);
-      unsigned errors = 0;
-      for (;;)
-      {
-        checkCancel();
-        link_.write(packet);
-        const Reply reply = waitForReply(block == 1, config_.ack_timeout);
-        if (reply == Reply::kAck)
-        {
-          stats_.block_time = std::chrono::duration_cast<std::chrono::microseconds>(Clock::now() - blocks_start);
-          // Nothing the receiver sends before the next block is an answer to it: a doubled ACK
-          // taken as the next block's would put the two sides a block apart. Once the line has
-          // shown damage, wait a little for such a double (it follows within a character time).
-          if (config_.ack_turnaround.count() > 0)
-            input_.purge(config_.ack_turnaround, config_.ack_turnaround * 4);
-          else if (stats_.retries > 0)
-            input_.purge(kDoubleReplyQuiet, kDoubleReplyQuiet * 4);
-          else
-            input_.discard();
-          break;
-        }
-        if (reply == Reply::kCancel)
-          abort("the receiver cancelled (CAN CAN) at block " + std::to_string(block) +
-                    (errors > 0 ? readingAdvice(packet, block_size) : ""),
-                false, false);
-        if (reply == Reply::kTimeout)
-          ++stats_.timeouts;
-        else
-          input_.purge(config_.turnaround, config_.turnaround * 10);
-        ++stats_.retries;
-        ++state.retries;
-        if (++errors > config_.max_retries)
-        {
-          abort("block " + std::to_string(block) + " not acknowledged after " + std::to_string(errors) + " tries" +
-                    (reply == Reply::kNak ? readingAdvice(packet, block_size) : ""),
-                true, reply == Reply::kTimeout);
-        }
-        CNC_LOG_DEBUG("xmodem: block " << block << (reply == Reply::kTimeout ? " not answered" : " NAKed")
-                                       << ", sending it again");
-      }
+      const auto acked = sendBlock(packet, block, block_size, state);
+      stats_.block_time = std::chrono::duration_cast<std::chrono::microseconds>(acked - blocks_start);
       stats_.used_1k = stats_.used_1k || block_size == kBlockSize1K;
       reading_.accept(packet.data() + 3, block_size);
       offset += n;
@@ -375,51 +338,7 @@ Stats Sender::send(const std::vector<uint8_t>& payload, const ProgressCallback& 
       if (progress)
         progress(state);
     }
-
-    bool eot_met_only_silence = true;
-    for (unsigned attempt = 1;; ++attempt)
-    {
-      checkCancel();
-      link_.writeByte(kEot);
-      const Reply reply = waitForReply(false, config_.eot_timeout, true);
-      if (reply == Reply::kAck)
-        break;
-      if (reply == Reply::kCancel)
-      {
-        // A Haas answers EOT with CAN CAN CAN; every block was ACKed, so the data is there. A
-        // receiver that aborts (cancelled, or out of step with us) sends more CANs, and its abort
-        // must not pass for success: count them.
-        const size_t cans = 2 + countCans();
-        if (config_.eot_can_completes && stats_.check == CheckType::kChecksum && cans <= kHaasEotCans)
-        {
-          stats_.eot_answered_with_can = true;
-          break;
-        }
-        abort("the receiver cancelled (" + std::to_string(cans) + " CANs) in answer to EOT after " +
-                  std::to_string(stats_.blocks) + " acknowledged blocks; it may not have stored the file" +
-                  (config_.eot_can_completes ? "" : " (CAN after EOT is not taken as complete)"),
-              false, false);
-      }
-      if (reply == Reply::kTimeout)
-        ++stats_.timeouts;
-      else
-        input_.purge(config_.turnaround, config_.turnaround * 10);
-      eot_met_only_silence = eot_met_only_silence && reply == Reply::kTimeout;
-      if (attempt >= config_.eot_retries)
-      {
-        // Every block was ACKed, so the receiver holds the whole payload; only the end went
-        // unconfirmed. Silence is what a receiver that has left leaves behind; anything else
-        // (NAKs, garbage) is a receiver that is still there and did not take the EOT.
-        if (config_.eot_silence_completes && eot_met_only_silence)
-        {
-          stats_.eot_unanswered = attempt;
-          CNC_LOG_WARN("xmodem: " << link_.describe() << ": every block was acknowledged, the end (EOT, sent "
-                                  << attempt << " times) was not: taken as complete");
-          break;
-        }
-        abort("every block was acknowledged but EOT was not (sent " + std::to_string(attempt) + " times)", false, true);
-      }
-    }
+    sendEot();
     return stats_;
   }
   catch (const CancelledError&)
@@ -427,6 +346,97 @@ Stats Sender::send(const std::vector<uint8_t>& payload, const ProgressCallback& 
     sendCancel(link_);
     throw CancelledError(link_.describe() + ": XModem send cancelled after " + std::to_string(stats_.blocks) +
                          " blocks (CAN sent)");
+  }
+}
+
+std::chrono::steady_clock::time_point Sender::sendBlock(const std::vector<uint8_t>& packet, uint32_t block,
+                                                        size_t block_size, Progress& state)
+{
+  for (unsigned errors = 0;;)
+  {
+    checkCancel();
+    link_.write(packet);
+    const Reply reply = waitForReply(block == 1, config_.ack_timeout);
+    if (reply == Reply::kAck)
+    {
+      const auto acked = Clock::now();
+      // Nothing the receiver sends before the next block is an answer to it: a doubled ACK
+      // taken as the next block's would put the two sides a block apart. Once the line has
+      // shown damage, wait a little for such a double (it follows within a character time).
+      if (config_.ack_turnaround.count() > 0)
+        input_.purge(config_.ack_turnaround, config_.ack_turnaround * 4);
+      else if (stats_.retries > 0)
+        input_.purge(kDoubleReplyQuiet, kDoubleReplyQuiet * 4);
+      else
+        input_.discard();
+      return acked;
+    }
+    if (reply == Reply::kCancel)
+      abort("the receiver cancelled (CAN CAN) at block " + std::to_string(block) +
+                (errors > 0 ? readingAdvice(packet, block_size) : ""),
+            false, false);
+    if (reply == Reply::kTimeout)
+      ++stats_.timeouts;
+    else
+      input_.purge(config_.turnaround, config_.turnaround * 10);
+    ++stats_.retries;
+    ++state.retries;
+    if (++errors > config_.max_retries)
+    {
+      abort("block " + std::to_string(block) + " not acknowledged after " + std::to_string(errors) + " tries" +
+                (reply == Reply::kNak ? readingAdvice(packet, block_size) : ""),
+            true, reply == Reply::kTimeout);
+    }
+    CNC_LOG_DEBUG("xmodem: block " << block << (reply == Reply::kTimeout ? " not answered" : " NAKed")
+                                   << ", sending it again");
+  }
+}
+
+void Sender::sendEot()
+{
+  bool eot_met_only_silence = true;
+  for (unsigned attempt = 1;; ++attempt)
+  {
+    checkCancel();
+    link_.writeByte(kEot);
+    const Reply reply = waitForReply(false, config_.eot_timeout, true);
+    if (reply == Reply::kAck)
+      return;
+    if (reply == Reply::kCancel)
+    {
+      // A Haas answers EOT with CAN CAN CAN; every block was ACKed, so the data is there. A
+      // receiver that aborts (cancelled, or out of step with us) sends more CANs, and its abort
+      // must not pass for success: count them.
+      const size_t cans = 2 + countCans();
+      if (config_.eot_can_completes && stats_.check == CheckType::kChecksum && cans <= kHaasEotCans)
+      {
+        stats_.eot_answered_with_can = true;
+        return;
+      }
+      abort("the receiver cancelled (" + std::to_string(cans) + " CANs) in answer to EOT after " +
+                std::to_string(stats_.blocks) + " acknowledged blocks; it may not have stored the file" +
+                (config_.eot_can_completes ? "" : " (CAN after EOT is not taken as complete)"),
+            false, false);
+    }
+    if (reply == Reply::kTimeout)
+      ++stats_.timeouts;
+    else
+      input_.purge(config_.turnaround, config_.turnaround * 10);
+    eot_met_only_silence = eot_met_only_silence && reply == Reply::kTimeout;
+    if (attempt >= config_.eot_retries)
+    {
+      // Every block was ACKed, so the receiver holds the whole payload; only the end went
+      // unconfirmed. Silence is what a receiver that has left leaves behind; anything else
+      // (NAKs, garbage) is a receiver that is still there and did not take the EOT.
+      if (config_.eot_silence_completes && eot_met_only_silence)
+      {
+        stats_.eot_unanswered = attempt;
+        CNC_LOG_WARN("xmodem: " << link_.describe() << ": every block was acknowledged, the end (EOT, sent " << attempt
+                                << " times) was not: taken as complete");
+        return;
+      }
+      abort("every block was acknowledged but EOT was not (sent " + std::to_string(attempt) + " times)", false, true);
+    }
   }
 }
 
@@ -484,221 +494,66 @@ void Receiver::nak(uint8_t request, Milliseconds purge_limit, Milliseconds alrea
   link_.writeByte(request);
 }
 
+// Where a receive is, between the steps of receive().
+struct Receiver::ReceiveState
+{
+  ReceiveState(const Config& config, Mode mode, const ProgressCallback& progress)
+      : crc(mode != Mode::kChecksum),
+        request(crc ? kCrcStart : kNak),
+        start_timeout(config.start_timeout.count() > 0 ? config.start_timeout
+                                                       : config.nak_interval * config.max_retries),
+        start_deadline(Clock::now() + start_timeout),
+        next_request(Clock::now() + config.nak_interval),
+        buffer(packetSize(kBlockSize1K, CheckType::kCrc16)),
+        progress(progress)
+  {
+  }
+
+  bool crc;         ///< CRC-16 packets (else the checksum)
+  uint8_t request;  ///< the start request: 'C' or NAK
+  const Milliseconds start_timeout;
+  const Clock::time_point start_deadline;
+  Clock::time_point next_request;  ///< when the start request is repeated
+  unsigned requests = 1;
+  bool started = false;  ///< a good packet arrived: the check type is settled
+  uint8_t expected = 1;
+  Progress state;
+  unsigned errors = 0;  ///< in a row
+  std::vector<uint8_t> buffer;
+  std::vector<uint8_t> data;
+  int pending = -1;  ///< a byte read ahead (after a lone CAN) that starts the next round
+  /// A whole packet after the last good block was NAKed (bad check, or followed by a doubled
+  /// byte): a sender must now send that block again. One that sends EOT instead took a stray byte
+  /// (a doubled or delayed ACK) for our ACK, and the block it believes delivered is missing.
+  bool block_to_resend = false;
+  Clock::time_point first_block_start;  ///< when the first byte of block 1 arrived
+  const ProgressCallback& progress;
+};
+
 std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
 {
   stats_ = Stats();
-  std::vector<uint8_t> data;
   try
   {
-    bool crc = mode_ != Mode::kChecksum;
-    uint8_t request = crc ? kCrcStart : kNak;
-    const Milliseconds start_timeout =
-        config_.start_timeout.count() > 0 ? config_.start_timeout : config_.nak_interval * config_.max_retries;
-    const auto start_deadline = Clock::now() + start_timeout;
-    unsigned requests = 1;
+    ReceiveState r(config_, mode_, progress);
     if (!config_.skip_initial_request)
-      link_.writeByte(request);
-    auto next_request = Clock::now() + config_.nak_interval;
-
-    bool started = false;  // a good packet arrived: the check type is settled
-    uint8_t expected = 1;
-    Progress state;
-    unsigned errors = 0;
-    std::vector<uint8_t> buffer(packetSize(kBlockSize1K, CheckType::kCrc16));
-    int pending = -1;  // a byte read ahead (after a lone CAN) that starts the next round
-    // A whole packet after the last good block was NAKed (bad check, or followed by a doubled
-    // byte): a sender must now send that block again. One that sends EOT instead took a stray byte
-    // (a doubled or delayed ACK) for our ACK, and the block it believes delivered is missing.
-    bool block_to_resend = false;
-    Clock::time_point first_block_start;  // when the first byte of block 1 arrived
-
-    auto error = [&](const std::string& what, Milliseconds already_quiet = Milliseconds(0))
-    {
-      ++stats_.retries;
-      ++state.retries;
-      if (++errors > config_.max_retries)
-      {
-        abort(
-            what + " (" + std::to_string(errors) + " errors in a row at block " + std::to_string(state.block + 1) + ")",
-            true, false);
-      }
-      CNC_LOG_DEBUG("xmodem: " << what << " at block " << state.block + 1 << ", NAK");
-      // Before the first packet the purge ends after one nak_interval at most: a control that is
-      // itself waiting to receive NAKs more often than purge_quiet, and would keep the line from
-      // ever going quiet (the rest of a block it sent before a cancel, then its NAKs).
-      nak(started ? kNak : request, started ? Milliseconds(10000) : config_.nak_interval, already_quiet);
-    };
-
+      link_.writeByte(r.request);
     for (;;)
     {
       checkCancel();
-      // Before the first packet the request is repeated on a fixed schedule: bytes that are not a
-      // packet (a control's own NAKs) must not postpone it.
-      const Milliseconds wait =
-          started ? config_.block_timeout : std::min(remainingUntil(next_request), remainingUntil(start_deadline));
-      int c = pending;
-      pending = -1;
+      const int c = nextByte(r);
       if (c < 0)
-        c = wait.count() > 0 ? input_.readByte(wait) : -1;
-      if (c < 0)
-      {
-        ++stats_.timeouts;
-        if (!started)
-        {
-          if (Clock::now() >= start_deadline)
-            abort("the sender did not start within " + seconds(start_timeout) + ": " + kNoAnswerHint, true, true);
-          if (crc && requests >= config_.crc_attempts)
-          {
-            crc = false;  // the sender does not know 'C': fall back to checksum mode
-            request = kNak;
-          }
-          if (Clock::now() < next_request)
-            continue;
-          ++requests;
-          link_.writeByte(request);
-          next_request = Clock::now() + config_.nak_interval;
-          continue;
-        }
-        ++stats_.retries;
-        ++state.retries;
-        if (++errors > config_.max_retries)
-          abort("nothing from the sender for " + seconds(config_.block_timeout) + ", " + std::to_string(errors) +
-                    " times in a row",
-                true, true);
-        link_.writeByte(kNak);
-        continue;
-      }
-
-      if (c == kSoh || c == kStx)
-      {
-        const auto packet_start = Clock::now();
-        const CheckType check = crc ? CheckType::kCrc16 : CheckType::kChecksum;
-        const size_t data_size = c == kSoh ? kBlockSize : kBlockSize1K;
-        const size_t need = packetSize(data_size, check);
-        buffer[0] = static_cast<uint8_t>(c);
-        const size_t got = input_.readExactly(buffer.data() + 1, need - 1, config_.char_timeout);
-        if (got < need - 1)
-        {
-          ++stats_.garbled;
-          ++stats_.timeouts;
-          error("short packet (" + std::to_string(got + 1) + " of " + std::to_string(need) + " bytes)",
-                config_.char_timeout);
-          continue;
-        }
-        const Packet packet = decodePacket(buffer.data(), need, check, crc ? nullptr : &reading_);
-        if (packet.status == PacketStatus::kBadCheck && !crc)
-          noteOtherReading(packet);
-        if (packet.status != PacketStatus::kOk)
-        {
-          ++stats_.garbled;
-          block_to_resend = started;
-          error(toString(packet.status));
-          continue;
-        }
-        // A byte doubled on the line shifts the packet by one: its check is then read from the
-        // data, which an 8-bit sum passes one time in 256, and the real check byte follows. Once
-        // the line has shown damage, a packet followed at once by more bytes is taken as garbled.
-        if (stats_.retries > 0 && input_.readByte(kDoubledByteQuiet) >= 0)
-        {
-          ++stats_.garbled;
-          block_to_resend = started;
-          error("packet followed by more bytes (a doubled byte on the line)");
-          continue;
-        }
-        block_to_resend = false;
-        if (packet.block == expected)
-        {
-          if (data.size() + packet.data_size > config_.max_bytes)
-          {
-            // XModem has no length field: only the cap stops a peer that keeps sending.
-            abort("the program is longer than " + config_.max_bytes_name + " (" + std::to_string(config_.max_bytes) +
-                      " bytes) allows; transfer cancelled, nothing stored (raise " + config_.max_bytes_name +
-                      " for a longer program)",
-                  true, false);
-          }
-          if (!started)
-            first_block_start = packet_start;
-          started = true;
-          stats_.check = check;
-          stats_.used_1k = stats_.used_1k || data_size == kBlockSize1K;
-          data.insert(data.end(), packet.data, packet.data + packet.data_size);
-          reading_.accept(packet.data, packet.data_size);
-          link_.writeByte(kAck);
-          stats_.block_time = std::chrono::duration_cast<std::chrono::microseconds>(Clock::now() - first_block_start);
-          errors = 0;
-          ++expected;
-          ++state.block;
-          state.bytes = data.size();
-          stats_.blocks = state.block;
-          stats_.bytes = data.size();
-          if (progress)
-            progress(state);
-          continue;
-        }
-        if (started && packet.block == static_cast<uint8_t>(expected - 1))
-        {
-          // The sender did not get our ACK and sent the block again: ACK it, keep the first copy.
-          ++stats_.duplicates;
-          link_.writeByte(kAck);
-          continue;
-        }
-        if (!started)
-        {
-          // No block taken yet, so no position to disagree on: this is the rest of an earlier
-          // transfer (a control that was still sending a block when that transfer was cancelled).
-          ++stats_.garbled;
-          error("block " + std::to_string(packet.block) + " before block 1 (left from an earlier transfer)");
-          continue;
-        }
-        abort("block " + std::to_string(packet.block) + " out of sequence (expected " + std::to_string(expected) +
-                  "): the two sides disagree on the position in the file",
-              true, false);
-      }
-      if (c == kEot)
-      {
-        // A real EOT is followed by silence; a garbled SOH is followed by the rest of its packet.
-        if (input_.readByte(config_.eot_quiet) >= 0)
-        {
-          ++stats_.garbled;
-          error("EOT followed by more data (line noise)");
-          continue;
-        }
-        if (block_to_resend)
-        {
-          abort("the sender ended the transfer instead of sending block " + std::to_string(expected) +
-                    " again after its NAK (it took a stray byte for an ACK): the end of the file is missing",
-                true, false);
-        }
-        if (config_.answer_eot_with_can)
-        {
-          const uint8_t cans[] = {kCan, kCan, kCan};
-          link_.write(cans, sizeof(cans));
-        }
-        else
-        {
-          link_.writeByte(kAck);
-        }
-        stats_.check = crc ? CheckType::kCrc16 : CheckType::kChecksum;
-        return data;
-      }
-      if (c == kCan)
-      {
-        const int next = input_.readByte(config_.char_timeout);
-        if (next == kCan)
-          abort("the sender cancelled (CAN CAN) after " + std::to_string(state.block) + " blocks", false, false);
-        pending = next;  // a lone CAN is line noise; what follows it is looked at as usual
-        continue;
-      }
-      if (!started && (c == kNak || c == kCrcStart || c == kAck))
-      {
-        // Before the first packet these are a peer's own start requests (a control that NAKs while
-        // it waits, a loopback): not a damaged packet, so nothing to purge.
-        continue;
-      }
-      // Noise between packets: drop the rest of the burst and ask again.
-      ++stats_.garbled;
-      static const char kHex[] = "0123456789abcdef";
-      error(std::string("unexpected byte 0x") + kHex[(c >> 4) & 0xF] + kHex[c & 0xF]);
+        onSilence(r);
+      else if (c == kSoh || c == kStx)
+        onPacket(r, static_cast<uint8_t>(c));
+      else if (c == kEot && onEot(r))
+        return std::move(r.data);
+      else if (c == kCan)
+        onCan(r);
+      else if (c != kEot && (r.started || (c != kNak && c != kCrcStart && c != kAck)))
+        onNoise(r, static_cast<uint8_t>(c));
+      // Before the first packet NAK, 'C' and ACK are a peer's own start requests (a control that
+      // NAKs while it waits, a loopback): not a damaged packet, so nothing to purge.
     }
   }
   catch (const CancelledError&)
@@ -707,6 +562,208 @@ std::vector<uint8_t> Receiver::receive(const ProgressCallback& progress)
     throw CancelledError(link_.describe() + ": XModem receive cancelled after " + std::to_string(stats_.blocks) +
                          " blocks (CAN sent)");
   }
+}
+
+int Receiver::nextByte(ReceiveState& r)
+{
+  if (r.pending >= 0)
+  {
+    const int c = r.pending;
+    r.pending = -1;
+    return c;
+  }
+  // Before the first packet the request is repeated on a fixed schedule: bytes that are not a
+  // packet (a control's own NAKs) must not postpone it.
+  const Milliseconds wait =
+      r.started ? config_.block_timeout : std::min(remainingUntil(r.next_request), remainingUntil(r.start_deadline));
+  return wait.count() > 0 ? input_.readByte(wait) : -1;
+}
+
+void Receiver::receiveError(ReceiveState& r, const std::string& what, Milliseconds already_quiet)
+{
+  ++stats_.retries;
+  ++r.state.retries;
+  if (++r.errors > config_.max_retries)
+  {
+    abort(
+        what + " (" + std::to_string(r.errors) + " errors in a row at block " + std::to_string(r.state.block + 1) + ")",
+        true, false);
+  }
+  CNC_LOG_DEBUG("xmodem: " << what << " at block " << r.state.block + 1 << ", NAK");
+  // Before the first packet the purge ends after one nak_interval at most: a control that is
+  // itself waiting to receive NAKs more often than purge_quiet, and would keep the line from
+  // ever going quiet (the rest of a block it sent before a cancel, then its NAKs).
+  nak(r.started ? kNak : r.request, r.started ? Milliseconds(10000) : config_.nak_interval, already_quiet);
+}
+
+void Receiver::onSilence(ReceiveState& r)
+{
+  ++stats_.timeouts;
+  if (!r.started)
+  {
+    if (Clock::now() >= r.start_deadline)
+      abort("the sender did not start within " + seconds(r.start_timeout) + ": " + kNoAnswerHint, true, true);
+    if (r.crc && r.requests >= config_.crc_attempts)
+    {
+      r.crc = false;  // the sender does not know 'C': fall back to checksum mode
+      r.request = kNak;
+    }
+    if (Clock::now() < r.next_request)
+      return;
+    ++r.requests;
+    link_.writeByte(r.request);
+    r.next_request = Clock::now() + config_.nak_interval;
+    return;
+  }
+  ++stats_.retries;
+  ++r.state.retries;
+  if (++r.errors > config_.max_retries)
+    abort("nothing from the sender for " + seconds(config_.block_timeout) + ", " + std::to_string(r.errors) +
+              " times in a row",
+          true, true);
+  link_.writeByte(kNak);
+}
+
+void Receiver::onPacket(ReceiveState& r, uint8_t first)
+{
+  const auto packet_start = Clock::now();
+  const CheckType check = r.crc ? CheckType::kCrc16 : CheckType::kChecksum;
+  const size_t data_size = first == kSoh ? kBlockSize : kBlockSize1K;
+  const size_t need = packetSize(data_size, check);
+  r.buffer[0] = first;
+  const size_t got = input_.readExactly(r.buffer.data() + 1, need - 1, config_.char_timeout);
+  if (got < need - 1)
+  {
+    ++stats_.garbled;
+    ++stats_.timeouts;
+    receiveError(r, "short packet (" + std::to_string(got + 1) + " of " + std::to_string(need) + " bytes)",
+                 config_.char_timeout);
+    return;
+  }
+  const Packet packet = decodePacket(r.buffer.data(), need, check, r.crc ? nullptr : &reading_);
+  if (packet.status == PacketStatus::kBadCheck && !r.crc)
+    noteOtherReading(packet);
+  if (packet.status != PacketStatus::kOk)
+  {
+    ++stats_.garbled;
+    r.block_to_resend = r.started;
+    receiveError(r, toString(packet.status));
+    return;
+  }
+  // A byte doubled on the line shifts the packet by one: its check is then read from the
+  // data, which an 8-bit sum passes one time in 256, and the real check byte follows. Once
+  // the line has shown damage, a packet followed at once by more bytes is taken as garbled.
+  if (stats_.retries > 0 && input_.readByte(kDoubledByteQuiet) >= 0)
+  {
+    ++stats_.garbled;
+    r.block_to_resend = r.started;
+    receiveError(r, "packet followed by more bytes (a doubled byte on the line)");
+    return;
+  }
+  r.block_to_resend = false;
+  onGoodPacket(r, packet, check, packet_start);
+}
+
+void Receiver::onGoodPacket(ReceiveState& r, const Packet& packet, CheckType check,
+                            std::chrono::steady_clock::time_point packet_start)
+{
+  if (packet.block == r.expected)
+  {
+    acceptBlock(r, packet, check, packet_start);
+    return;
+  }
+  if (r.started && packet.block == static_cast<uint8_t>(r.expected - 1))
+  {
+    // The sender did not get our ACK and sent the block again: ACK it, keep the first copy.
+    ++stats_.duplicates;
+    link_.writeByte(kAck);
+    return;
+  }
+  if (!r.started)
+  {
+    // No block taken yet, so no position to disagree on: this is the rest of an earlier
+    // transfer (a control that was still sending a block when that transfer was cancelled).
+    ++stats_.garbled;
+    receiveError(r, "block " + std::to_string(packet.block) + " before block 1 (left from an earlier transfer)");
+    return;
+  }
+  abort("block " + std::to_string(packet.block) + " out of sequence (expected " + std::to_string(r.expected) +
+            "): the two sides disagree on the position in the file",
+        true, false);
+}
+
+void Receiver::acceptBlock(ReceiveState& r, const Packet& packet, CheckType check,
+                           std::chrono::steady_clock::time_point packet_start)
+{
+  if (r.data.size() + packet.data_size > config_.max_bytes)
+  {
+    // XModem has no length field: only the cap stops a peer that keeps sending.
+    abort("the program is longer than " + config_.max_bytes_name + " (" + std::to_string(config_.max_bytes) +
+              " bytes) allows; transfer cancelled, nothing stored (raise " + config_.max_bytes_name +
+              " for a longer program)",
+          true, false);
+  }
+  if (!r.started)
+    r.first_block_start = packet_start;
+  r.started = true;
+  stats_.check = check;
+  stats_.used_1k = stats_.used_1k || packet.data_size == kBlockSize1K;
+  r.data.insert(r.data.end(), packet.data, packet.data + packet.data_size);
+  reading_.accept(packet.data, packet.data_size);
+  link_.writeByte(kAck);
+  stats_.block_time = std::chrono::duration_cast<std::chrono::microseconds>(Clock::now() - r.first_block_start);
+  r.errors = 0;
+  ++r.expected;
+  ++r.state.block;
+  r.state.bytes = r.data.size();
+  stats_.blocks = r.state.block;
+  stats_.bytes = r.data.size();
+  if (r.progress)
+    r.progress(r.state);
+}
+
+bool Receiver::onEot(ReceiveState& r)
+{
+  // A real EOT is followed by silence; a garbled SOH is followed by the rest of its packet.
+  if (input_.readByte(config_.eot_quiet) >= 0)
+  {
+    ++stats_.garbled;
+    receiveError(r, "EOT followed by more data (line noise)");
+    return false;
+  }
+  if (r.block_to_resend)
+  {
+    abort("the sender ended the transfer instead of sending block " + std::to_string(r.expected) +
+              " again after its NAK (it took a stray byte for an ACK): the end of the file is missing",
+          true, false);
+  }
+  if (config_.answer_eot_with_can)
+  {
+    const uint8_t cans[] = {kCan, kCan, kCan};
+    link_.write(cans, sizeof(cans));
+  }
+  else
+  {
+    link_.writeByte(kAck);
+  }
+  stats_.check = r.crc ? CheckType::kCrc16 : CheckType::kChecksum;
+  return true;
+}
+
+void Receiver::onCan(ReceiveState& r)
+{
+  const int next = input_.readByte(config_.char_timeout);
+  if (next == kCan)
+    abort("the sender cancelled (CAN CAN) after " + std::to_string(r.state.block) + " blocks", false, false);
+  r.pending = next;  // a lone CAN is line noise; what follows it is looked at as usual
+}
+
+void Receiver::onNoise(ReceiveState& r, uint8_t c)
+{
+  // Noise between packets: drop the rest of the burst and ask again.
+  ++stats_.garbled;
+  static const char kHex[] = "0123456789abcdef";
+  receiveError(r, std::string("unexpected byte 0x") + kHex[(c >> 4) & 0xF] + kHex[c & 0xF]);
 }
 }  // namespace xmodem
 }  // namespace cnc_bridge

@@ -7,7 +7,6 @@
 
 #include <memory>
 #include <mutex>
-#include <sstream>
 
 #include "cnc_bridge/DncLine.h"
 #include "cnc_bridge/PlanDrip.h"
@@ -339,11 +338,7 @@ class DripHandlers
       for (const auto& issue : scan.issues)
         response.character_issues.push_back(issue.describe());
       response.character_issue_count = scan.issue_count;
-      std::vector<dnc::CharacterIssue> preamble_issues;
-      std::istringstream preamble(response.preamble);
-      std::string line;
-      for (uint64_t n = 1; std::getline(preamble, line); ++n)
-        dnc::checkLine(line, n, drip_.rules, preamble_issues);
+      const auto preamble_issues = dnc::checkPreamble(response.preamble, drip_.rules);
       for (const auto& issue : preamble_issues)
         response.character_issues.push_back("restart preamble " + issue.describe());
       response.character_issue_count += preamble_issues.size();

@@ -8,11 +8,9 @@
 // (src/ros/nodes/dnc_requests.cpp) and leaves the port to any transfer asked for meanwhile.
 #pragma once
 
-#include <actionlib/server/action_server.h>
 #include <ros/ros.h>
 
 #include <atomic>
-#include <condition_variable>
 #include <functional>
 #include <map>
 #include <memory>
@@ -27,6 +25,7 @@
 #include "cnc_bridge/TransferAction.h"
 #include "cnc_bridge/common/port_lock.h"
 #include "cnc_bridge/common/program_dir.h"
+#include "cnc_bridge/dnc/dnc_settings.h"
 #include "cnc_bridge/dnc/program_requests.h"
 #include "cnc_bridge/dnc/transfer_gate.h"
 #include "cnc_bridge/dnc/transfer_rules.h"
@@ -35,6 +34,8 @@
 #include "cnc_bridge/programs/program_request.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/runtime_switch.h"
+#include "cnc_bridge/ros/single_goal_action_server.h"
+#include "cnc_bridge/transport/link_factory.h"
 #include "cnc_bridge/transport/serial_line.h"
 #include "cnc_bridge/xmodem/file_transfer.h"
 
@@ -58,10 +59,14 @@ using ProtocolHandler = std::function<TransferResult(Transport& link, const Tran
                                                      const std::atomic<bool>& cancel)>;
 
 /// \brief The dnc_node. Services and the action may be called from any spinner thread.
+/// \brief dnc_node's parameters as settings (dnc_params.cpp). \throws ConfigError naming a bad one.
+dnc::TransferSettings dncSettings(const ros::NodeHandle& pnh);
+
 class DncNode
 {
  public:
   DncNode(ros::NodeHandle nh, ros::NodeHandle pnh);
+  DncNode(ros::NodeHandle nh, ros::NodeHandle pnh, const dnc::TransferSettings& settings);
   ~DncNode();
 
   /// \brief Makes \p protocol available to ~transfer, ~send_program and ~receive_program.
@@ -77,6 +82,14 @@ class DncNode
   /// ~program_dir, holds the port lock, opens the link (if not open), updates state and
   /// diagnostics. \p cancelled is set when the transfer ended because it was cancelled.
   TransferResult runReserved(TransferGoal goal, const Feedback& feedback, bool& cancelled);
+  /// Checks \p job (protocol, direction, file, motion switch for a drip) and resolves its path.
+  /// \returns why it is refused, "" if it may run.
+  std::string checkJob(TransferJob& job);
+  /// Runs \p job by \p handler on the port (the listener gone, the port lock held, the link open).
+  TransferResult runOnPort(const ProtocolHandler& handler, const TransferJob& job, const std::string& transfer_message,
+                           const Feedback& feedback, bool& cancelled);
+  /// Counts the ended transfer, shows it in state, archives a completed one.
+  void endTransfer(const TransferJob& job, const TransferResult& result, bool cancelled);
   /// Takes the node for one transfer, \p what (named in the refusal of another); false (and
   /// counted as refused) if one is running.
   bool tryReserve(const std::string& what);
@@ -84,13 +97,10 @@ class DncNode
   /// Opens the serial port if it is not open (the only place the link is opened).
   Transport& openLink();
   void closeLink();
-  using GoalHandle = actionlib::ServerGoalHandle<TransferAction>;
-  void onGoal(GoalHandle goal);
-  void onCancel(GoalHandle goal);
-  /// Runs an accepted goal (the node reserved for it); an exception becomes the failed result.
-  TransferResult runGoal(GoalHandle& goal, bool& cancelled);
-  /// The thread that runs accepted ~transfer goals, one at a time.
-  void actionWorker();
+  /// Starts ~transfer: a goal is admitted once it has reserved the node (tryReserve()).
+  void startTransferAction();
+  /// Runs an admitted goal (the node reserved for it) and ends it.
+  void executeGoal(const TransferGoal& goal);
   void cancelRunning();
   bool onSend(SendProgram::Request& request, SendProgram::Response& response);
   bool onReceive(ReceiveProgram::Request& request, ReceiveProgram::Response& response);
@@ -137,26 +147,21 @@ class DncNode
 
   std::map<std::string, ProtocolHandler> protocols_;
   std::unique_ptr<MachineStatePublisher> state_;
+  LinkFactory open_link_;  ///< the only way the link is opened (openLink())
   PortLock port_lock_;
 
-  /// One transfer at a time (an accepted goal holds it while it waits for the worker), the
+  /// One transfer at a time (an admitted goal holds it until its result goes out), the
   /// request listener only while none runs; its cancel flag stops the running transfer.
   dnc::TransferGate gate_;
   std::mutex link_mutex_;  ///< guards link_ for cancelRunning()
-  std::unique_ptr<SerialLine> link_;
+  std::unique_ptr<Transport> link_;
   uint64_t link_generation_ = 0;  ///< counts the links opened (guarded by link_mutex_)
 
   dnc::TransferCounters counters_;
 
   ros::ServiceServer send_srv_;
   ros::ServiceServer receive_srv_;
-  std::unique_ptr<actionlib::ActionServer<TransferAction>> action_;
-  std::mutex goal_mutex_;
-  std::condition_variable goal_ready_;
-  std::unique_ptr<GoalHandle> pending_goal_;  ///< accepted, not yet picked up by the worker
-  std::unique_ptr<GoalHandle> current_goal_;  ///< the goal the worker runs
-  bool stopping_ = false;
-  std::thread worker_;
+  std::unique_ptr<SingleGoalActionServer<TransferAction>> action_;  ///< ~transfer
 
   // Program requests (the listener's turns on the port: gate_).
   bool requests_ = false;
