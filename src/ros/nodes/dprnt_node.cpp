@@ -33,11 +33,41 @@ namespace cnc_bridge
 {
 namespace
 {
+/// \brief DPRNT lines another node read: haas_mdc_node forwards the lines of a Classic control's
+/// one RS-232 port that are no MDC reply (its ~forward_dprnt), since only one reader may take the
+/// port's bytes. Lines arrive whole, in the order read, stamped when read.
+class TopicInput : public dprnt::DprntInput
+{
+ public:
+  using LineHandler = std::function<void(const DprntLine&)>;
+  TopicInput(ros::NodeHandle nh, std::string topic, LineHandler on_line)
+      : nh_(nh), topic_(nh.resolveName(topic)), on_line_(std::move(on_line))
+  {
+  }
+  void start(BytesHandler, StateHandler on_state, RestartHandler) override
+  {
+    // A deep queue: a program printing in a burst must not lose lines to a busy spinner.
+    sub_ = nh_.subscribe<DprntLine>(topic_, 10000, [this](const DprntLine::ConstPtr& line) { on_line_(*line); });
+    on_state(LinkState::kUp, "lines from " + topic_);
+  }
+  void stop() override { sub_.shutdown(); }
+  std::string describe() const override { return "topic " + topic_; }
+  unsigned reconnects() const override { return 0; }
+
+ private:
+  ros::NodeHandle nh_;
+  std::string topic_;
+  LineHandler on_line_;
+  ros::Subscriber sub_;
+};
+
 // Builds the input named by ~input, from the link parameters every node reads (docs/ROS_INTERFACE.md).
-std::unique_ptr<dprnt::DprntInput> makeInput(const ros::NodeHandle& pnh)
+std::unique_ptr<dprnt::DprntInput> makeInput(const ros::NodeHandle& nh, const ros::NodeHandle& pnh,
+                                             const TopicInput::LineHandler& on_line)
 {
   // ~input: where DPRNT output arrives: serial (Haas Classic, NGC with RS-232), tcp (NGC setting 261
-  // = TCP, the control listens on setting 263) or file (NGC setting 261 = file, path in 262).
+  // = TCP, the control listens on setting 263), file (NGC setting 261 = file, path in 262) or
+  // topic (the lines haas_mdc_node reads on a Classic's port it shares: its ~forward_dprnt).
   std::string input;
   pnh.param<std::string>("input", input, "serial");
   // ~reconnect_min, ~reconnect_max: s, backoff between attempts to (re)open the link.
@@ -70,7 +100,12 @@ std::unique_ptr<dprnt::DprntInput> makeInput(const ros::NodeHandle& pnh)
     // ~poll_period: s between looks at the file (inotify does not see writes over SMB).
     return std::make_unique<dprnt::FileInput>(file, from_start, params::seconds(pnh, "poll_period", 0.05), backoff);
   }
-  throw ConfigError("Parameter " + pnh.resolveName("input") + " is \"" + input + "\": use serial, tcp or file.");
+  if (input == "topic")
+  {
+    // ~input_topic: where haas_mdc_node publishes the port's DPRNT lines (relative: the machine's namespace).
+    return std::make_unique<TopicInput>(nh, pnh.param<std::string>("input_topic", "dprnt/port_lines"), on_line);
+  }
+  throw ConfigError("Parameter " + pnh.resolveName("input") + " is \"" + input + "\": use serial, tcp, file or topic.");
 }
 }  // namespace
 
@@ -91,11 +126,13 @@ class DprntNode
   };
 
   void onBytes(const uint8_t* data, size_t size);
+  void onForwardedLine(const DprntLine& line);
   void onLine(const dprnt::LineEvent& event, const ros::Time& stamp);
   void publishRule(const dprnt::RuleOutput& output, const std::string& line, const ros::Time& stamp);
   void onLinkState(LinkState state, const std::string& why);
   void onRestart(const std::string& why);
   void publishWorkOffset(const ros::NodeHandle& pnh);
+  void advertise(const ros::NodeHandle& pnh);
   bool clear(std_srvs::Trigger::Request& request, std_srvs::Trigger::Response& response);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
 
@@ -145,7 +182,7 @@ DprntNode::DprntNode(ros::NodeHandle nh, ros::NodeHandle pnh)
             return mask;
           }())
 {
-  input_ = makeInput(pnh);
+  input_ = makeInput(nh, pnh, [this](const DprntLine& line) { onForwardedLine(line); });
   // ~program_units: length unit of the macro programs (inch under G20, mm under G21); rules
   // without their own `units` convert point coordinates from it.
   std::string units;
@@ -165,6 +202,17 @@ DprntNode::DprntNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   state_->diagnostics().add("dprnt", this, &DprntNode::diagnose);
   publishWorkOffset(pnh);
 
+  advertise(pnh);
+  ROS_INFO("DPRNT from %s, %zu rules%s%s", input_->describe().c_str(), rules_.rules().size(),
+           rules_file_.empty() ? "" : " from ", rules_file_.c_str());
+  // Not under mutex_: an input may report its state from start() (the topic input does).
+  input_->start([this](const uint8_t* data, size_t size) { onBytes(data, size); },
+                [this](LinkState state, const std::string& why) { onLinkState(state, why); },
+                [this](const std::string& why) { onRestart(why); });
+}
+
+void DprntNode::advertise(const ros::NodeHandle& pnh)
+{
   // Publishers exist before the input thread can call into them.
   std::lock_guard<std::mutex> lock(mutex_);
   raw_pub_ = nh_.advertise<DprntLine>("dprnt/raw", 100);
@@ -191,11 +239,6 @@ DprntNode::DprntNode(ros::NodeHandle nh, ros::NodeHandle pnh)
     rule_pubs_.push_back(pubs);
   }
   clear_srv_ = advertiseGuardedService(pnh, "clear", &DprntNode::clear, this);
-  ROS_INFO("DPRNT from %s, %zu rules%s%s", input_->describe().c_str(), rules_.rules().size(),
-           rules_file_.empty() ? "" : " from ", rules_file_.c_str());
-  input_->start([this](const uint8_t* data, size_t size) { onBytes(data, size); },
-                [this](LinkState state, const std::string& why) { onLinkState(state, why); },
-                [this](const std::string& why) { onRestart(why); });
 }
 
 void DprntNode::publishWorkOffset(const ros::NodeHandle& pnh)
@@ -233,6 +276,16 @@ void DprntNode::onBytes(const uint8_t* data, size_t size)
   const ros::Time stamp = ros::Time::now();
   std::lock_guard<std::mutex> lock(mutex_);
   assembler_.feed(data, size, [&](const dprnt::LineEvent& event) { onLine(event, stamp); });
+}
+
+void DprntNode::onForwardedLine(const DprntLine& line)
+{
+  // The same path as bytes from a port (noise, parity and length checks, counters), stamped when
+  // the forwarding node read the line.
+  const std::string bytes = line.text + "\n";
+  std::lock_guard<std::mutex> lock(mutex_);
+  assembler_.feed(reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size(),
+                  [&](const dprnt::LineEvent& event) { onLine(event, line.header.stamp); });
 }
 
 void DprntNode::onLine(const dprnt::LineEvent& event, const ros::Time& stamp)

@@ -14,6 +14,7 @@
 #include <sstream>
 
 #include "cnc_bridge/CycleEvent.h"
+#include "cnc_bridge/DprntLine.h"
 #include "cnc_bridge/MacroVariables.h"
 #include "cnc_bridge/MdcQuery.h"
 #include "cnc_bridge/MdcReadVariable.h"
@@ -179,6 +180,20 @@ class HaasMdcNode
     }
     poller_->setListener([this](const mdc::MachineStatus& s, const std::vector<mdc::CycleEventData>& events)
                          { onStatus(s, events); });
+    // ~forward_dprnt: a Classic's one RS-232 port also carries the DPRNT output of its program:
+    // lines that are no (STX/ETB-framed) reply go out on `dprnt/port_lines`, where dprnt_node
+    // with input:=topic reads them (docs/dprnt_node.md). Serial only.
+    pnh.param("forward_dprnt", forward_dprnt_, false);
+    if (forward_dprnt_)
+    {
+      if (!serial_)
+        throw ConfigError(pnh.resolveName("forward_dprnt") +
+                          " needs ~port: only a Classic's serial port carries DPRNT "
+                          "between MDC replies (an NGC prints DPRNT to its own "
+                          "TCP port: dprnt_node input:=tcp)");
+      dprnt_pub_ = nh.advertise<DprntLine>("dprnt/port_lines", 1000);
+      poller_->setTextListener([this](const std::string& line) { forwardLine(line); });
+    }
     // ~enable_motion (start-up value) and ~set_motion_enabled (at run time): a macro variable write
     // changes what the machine does (offsets, the program's flow), so it is gated like motion on the
     // other nodes, on top of the ~writable_variables allow-list.
@@ -278,6 +293,17 @@ class HaasMdcNode
       events_pub_.publish(state_->cycleEvent(now, e.type, e.program, e.part_count, e.cycle_time, e.text));
       ROS_INFO_STREAM("haas_mdc_node: " << e.text << " (program " << e.program << ", parts " << e.part_count << ")");
     }
+  }
+
+  // Called by the poller for each line of the port that is no MDC reply, in the order read.
+  void forwardLine(const std::string& text)
+  {
+    DprntLine line;
+    line.header.stamp = ros::Time::now();
+    line.machine = state_->machineName();
+    line.line_number = ++forwarded_lines_;
+    line.text = text;
+    dprnt_pub_.publish(line);
   }
 
   // Publishes the watched variables' values, if VariableWatch says they are due.
@@ -389,6 +415,15 @@ class HaasMdcNode
     status.add("port regained after a DNC transfer", poller_->portRegained());
     status.add("reconnects", link_ ? link_->reconnects() : 0u);
     motion_->addTo(status);
+    if (forward_dprnt_)
+    {
+      status.add("DPRNT lines forwarded", stats.text_lines);
+      status.add("DPRNT readers", dprnt_pub_.getNumSubscribers());
+      if (dprnt_pub_.getNumSubscribers() == 0)
+        status.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN,
+                            "nobody reads dprnt/port_lines: DPRNT lines of this port are lost (start dprnt_node "
+                            "with input:=topic)");
+    }
     if (s.last_cycle_s)
       status.add("last cycle (s)", *s.last_cycle_s);
     if (s.m30_counter1)
@@ -418,6 +453,9 @@ class HaasMdcNode
   std::unique_ptr<MachineStatePublisher> state_;
   ros::Publisher events_pub_;
   ros::Publisher variables_pub_;
+  bool forward_dprnt_ = false;
+  ros::Publisher dprnt_pub_;      // dprnt/port_lines, with ~forward_dprnt
+  uint64_t forwarded_lines_ = 0;  // poller thread only
   ros::ServiceServer read_srv_, write_srv_, query_srv_;
   uint64_t last_unanswered_ = 0;
 
