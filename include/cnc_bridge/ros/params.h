@@ -10,6 +10,7 @@
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/common/soft_limits.h"
+#include "cnc_bridge/transport/link_factory.h"
 #include "cnc_bridge/transport/serial_port.h"
 
 namespace cnc_bridge
@@ -52,9 +53,34 @@ T required(const ros::NodeHandle& pnh, const std::string& name)
 /// \brief Reads a positive number; logs and falls back to \p fallback if the value is not positive.
 double positive(const ros::NodeHandle& pnh, const std::string& name, double fallback);
 
-/// \brief ~port (required), ~baud, ~data_bits, ~parity, ~stop_bits, ~flow_control.
-/// \throws ConfigError on a missing port or an invalid value.
+/// \brief ~port (required: a device path, tcp://host:port or rfc2217://host:port), ~baud,
+/// ~data_bits, ~parity, ~stop_bits, ~flow_control.
+/// \throws ConfigError naming the parameter on a missing port or an invalid value.
 SerialSettings serialSettings(const ros::NodeHandle& pnh, unsigned default_baud = 9600);
+
+/// \brief Defaults of a node's TCP link parameters (~host, ~tcp_port, ~connect_timeout).
+struct TcpLinkDefaults
+{
+  std::string host;                   ///< when ~host is not set or empty; empty: ~host is required
+  std::string host_alternative;       ///< what else would have given a host, for the missing-~host error
+  int tcp_port = 0;                   ///< when ~tcp_port is not set; 0: ~tcp_port is required
+  bool zero_port_is_default = false;  ///< ~tcp_port: 0 also means the default above
+  double connect_timeout = 3.0;       ///< s
+};
+
+/// \brief A serial link: serialSettings() (~port, ~baud, ~data_bits, ~parity, ~stop_bits,
+/// ~flow_control). The device server's connect timeout is openSerialLine()'s (5 s).
+/// \throws ConfigError naming the parameter.
+LinkSettings serialLink(const ros::NodeHandle& pnh, unsigned default_baud = 9600,
+                        InputOnOpen on_open = InputOnOpen::kDiscard);
+
+/// \brief A TCP link: ~host, ~tcp_port (1..65535), ~connect_timeout (s).
+/// \throws ConfigError (MissingParameter) naming the parameter.
+LinkSettings tcpLink(const ros::NodeHandle& pnh, const TcpLinkDefaults& defaults);
+
+/// \brief A serial link when ~port is given (serialLink()), else a TCP link (tcpLink()): a control
+/// reached either on its RS-232 port or over the network.
+LinkSettings link(const ros::NodeHandle& pnh, unsigned default_baud, const TcpLinkDefaults& tcp);
 
 /// What port 0 means for a TCP port parameter.
 enum class PortZero

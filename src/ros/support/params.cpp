@@ -85,37 +85,101 @@ SoftLimits softLimits(const ros::NodeHandle& pnh, const std::string& name)
   return limits;
 }
 
+namespace
+{
+/// \p read(), its ConfigError prefixed with the resolved name of the parameter it reads.
+template <class Read>
+auto naming(const ros::NodeHandle& pnh, const std::string& name, Read read) -> decltype(read())
+{
+  try
+  {
+    return read();
+  }
+  catch (const ConfigError& e)
+  {
+    throw ConfigError(pnh.resolveName(name) + ": " + e.what());
+  }
+}
+
+/// An integer parameter that must lie in \p low..\p high; \p fallback when not set.
+unsigned boundedInt(const ros::NodeHandle& pnh, const std::string& name, int fallback, int low, int high)
+{
+  int value = fallback;
+  pnh.param(name, value, fallback);
+  if (value < low || value > high)
+  {
+    throw ConfigError(pnh.resolveName(name) + " must be " + std::to_string(low) + ".." + std::to_string(high) +
+                      ", not " + std::to_string(value));
+  }
+  return static_cast<unsigned>(value);
+}
+}  // namespace
+
 SerialSettings serialSettings(const ros::NodeHandle& pnh, unsigned default_baud)
 {
   SerialSettings settings;
-  // ~port: serial device, e.g. /dev/ttyUSB0.
+  // ~port: serial device, e.g. /dev/ttyUSB0, or a device server's port: tcp://host:port (raw TCP),
+  // rfc2217://host:port (Telnet COM Port Control).
   settings.device = required<std::string>(pnh, "port");
-  int baud = static_cast<int>(default_baud), data_bits = 8, stop_bits = 1;
-  std::string parity = "none", flow = "none";
+  naming(pnh, "port", [&] { return parseSerialAddress(settings.device); });
+  int baud = static_cast<int>(default_baud);
   // ~baud: bits per second (Haas setting 11).
   pnh.param("baud", baud, baud);
-  // ~data_bits: 7 or 8 (Haas setting 37).
-  pnh.param("data_bits", data_bits, data_bits);
-  // ~parity: none, even or odd (Haas setting 12).
-  pnh.param("parity", parity, parity);
-  // ~stop_bits: 1 or 2 (Haas setting 13).
-  pnh.param("stop_bits", stop_bits, stop_bits);
-  // ~flow_control: none, xonxoff or rtscts.
-  pnh.param("flow_control", flow, flow);
-  if (baud <= 0 || data_bits <= 0 || stop_bits <= 0)
+  if (baud <= 0)
   {
-    throw ConfigError(pnh.resolveName("baud") + ", data_bits and stop_bits must be positive");
+    throw ConfigError(pnh.resolveName("baud") + " must be positive, not " + std::to_string(baud));
   }
   settings.baud = static_cast<unsigned>(baud);
-  settings.data_bits = static_cast<unsigned>(data_bits);
-  settings.stop_bits = static_cast<unsigned>(stop_bits);
-  settings.parity = parseParity(parity);
-  settings.flow_control = parseFlowControl(flow);
+  // ~data_bits: 7 or 8 (Haas setting 37).
+  settings.data_bits = boundedInt(pnh, "data_bits", 8, 5, 8);
+  // ~parity: none, even or odd (Haas setting 12).
+  settings.parity = naming(pnh, "parity", [&] { return parseParity(pnh.param<std::string>("parity", "none")); });
+  // ~stop_bits: 1 or 2 (Haas setting 13).
+  settings.stop_bits = boundedInt(pnh, "stop_bits", 1, 1, 2);
+  // ~flow_control: none, xonxoff or rtscts.
+  settings.flow_control =
+      naming(pnh, "flow_control", [&] { return parseFlowControl(pnh.param<std::string>("flow_control", "none")); });
   // ~wire_trace: a folder; when set, every byte of the line, both ways, goes to a trace file there
   // (one per opening of the line, at most 16 MiB each; `cnc_dnc replay` plays one back).
   pnh.param<std::string>("wire_trace", settings.wire_trace.dir, "");
   settings.validate();
   return settings;
+}
+
+LinkSettings serialLink(const ros::NodeHandle& pnh, unsigned default_baud, InputOnOpen on_open)
+{
+  return LinkSettings::serialLine(serialSettings(pnh, default_baud), on_open);
+}
+
+LinkSettings tcpLink(const ros::NodeHandle& pnh, const TcpLinkDefaults& defaults)
+{
+  // ~host: the control's (agent's, board's) name or address.
+  std::string host = pnh.param<std::string>("host", "");
+  if (host.empty())
+  {
+    host = defaults.host;
+  }
+  if (host.empty())
+  {
+    throw MissingParameter(pnh, "host", defaults.host_alternative);
+  }
+  // ~tcp_port: the control's TCP port.
+  const int fallback = defaults.tcp_port != 0 ? defaults.tcp_port : required<int>(pnh, "tcp_port");
+  uint16_t port =
+      tcpPort(pnh, "tcp_port", fallback, defaults.zero_port_is_default ? PortZero::kMeansAny : PortZero::kRefused);
+  if (port == 0)
+  {
+    port = static_cast<uint16_t>(defaults.tcp_port);
+  }
+  // ~connect_timeout: s allowed for a TCP connection.
+  LinkSettings link = LinkSettings::tcp(host, port, seconds(pnh, "connect_timeout", defaults.connect_timeout));
+  link.validate();
+  return link;
+}
+
+LinkSettings link(const ros::NodeHandle& pnh, unsigned default_baud, const TcpLinkDefaults& tcp)
+{
+  return pnh.hasParam("port") ? serialLink(pnh, default_baud) : tcpLink(pnh, tcp);
 }
 
 uint16_t tcpPort(const ros::NodeHandle& pnh, const std::string& name, int fallback, PortZero zero)
