@@ -24,10 +24,8 @@
 #include "cnc_bridge/dprnt/rules.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/node_main.h"
-#include "cnc_bridge/ros/params.h"
 #include "cnc_bridge/ros/request_boundary.h"
-#include "cnc_bridge/transport/serial_line.h"
-#include "cnc_bridge/transport/tcp.h"
+#include "dprnt_node.h"
 
 namespace cnc_bridge
 {
@@ -61,51 +59,15 @@ class TopicInput : public dprnt::DprntInput
   ros::Subscriber sub_;
 };
 
-// Builds the input named by ~input, from the link parameters every node reads (docs/ROS_INTERFACE.md).
-std::unique_ptr<dprnt::DprntInput> makeInput(const ros::NodeHandle& nh, const ros::NodeHandle& pnh,
+// The input the settings name; a topic input is this layer's.
+std::unique_ptr<dprnt::DprntInput> makeInput(const ros::NodeHandle& nh, const dprnt::InputSettings& settings,
                                              const TopicInput::LineHandler& on_line)
 {
-  // ~input: where DPRNT output arrives: serial (Haas Classic, NGC with RS-232), tcp (NGC setting 261
-  // = TCP, the control listens on setting 263), file (NGC setting 261 = file, path in 262) or
-  // topic (the lines haas_mdc_node reads on a Classic's port it shares: its ~forward_dprnt).
-  std::string input;
-  pnh.param<std::string>("input", input, "serial");
-  // ~reconnect_min, ~reconnect_max: s, backoff between attempts to (re)open the link.
-  const Backoff backoff(params::seconds(pnh, "reconnect_min", 0.25), params::seconds(pnh, "reconnect_max", 10.0));
-  if (input == "serial")
+  if (settings.kind == dprnt::InputSettings::Kind::kTopic)
   {
-    const SerialSettings settings = params::serialSettings(pnh, 9600);
-    return std::make_unique<dprnt::StreamInput>([settings] { return openSerialLine(settings); }, settings.describe(),
-                                                backoff);
+    return std::make_unique<TopicInput>(nh, settings.topic, on_line);
   }
-  if (input == "tcp")
-  {
-    // ~host: address or name of the control.
-    const std::string host = params::required<std::string>(pnh, "host");
-    // ~tcp_port: the control's DPRNT port (Haas NGC setting 263).
-    const uint16_t port = params::tcpPort(pnh, "tcp_port", params::required<int>(pnh, "tcp_port"));
-    // ~connect_timeout: s to wait for a TCP connection.
-    const Milliseconds timeout = params::seconds(pnh, "connect_timeout", 3.0);
-    return std::make_unique<dprnt::StreamInput>(
-        [host, port, timeout] { return TcpConnection::connect(host, static_cast<uint16_t>(port), timeout); },
-        host + ":" + std::to_string(port), backoff);
-  }
-  if (input == "file")
-  {
-    // ~file: the file the control appends DPRNT output to (Haas NGC setting 262), e.g. on a share.
-    const std::string file = params::required<std::string>(pnh, "file");
-    // ~from_start: publish what the file already holds when the node starts (else only new lines).
-    bool from_start = false;
-    pnh.param("from_start", from_start, false);
-    // ~poll_period: s between looks at the file (inotify does not see writes over SMB).
-    return std::make_unique<dprnt::FileInput>(file, from_start, params::seconds(pnh, "poll_period", 0.05), backoff);
-  }
-  if (input == "topic")
-  {
-    // ~input_topic: where haas_mdc_node publishes the port's DPRNT lines (relative: the machine's namespace).
-    return std::make_unique<TopicInput>(nh, pnh.param<std::string>("input_topic", "dprnt/port_lines"), on_line);
-  }
-  throw ConfigError("Parameter " + pnh.resolveName("input") + " is \"" + input + "\": use serial, tcp, file or topic.");
+  return dprnt::makeInput(settings);
 }
 }  // namespace
 
@@ -115,6 +77,7 @@ class DprntNode
 {
  public:
   DprntNode(ros::NodeHandle nh, ros::NodeHandle pnh);
+  DprntNode(ros::NodeHandle nh, ros::NodeHandle pnh, const dprnt::DprntSettings& settings);
   ~DprntNode();
 
  private:
@@ -131,7 +94,7 @@ class DprntNode
   void publishRule(const dprnt::RuleOutput& output, const std::string& line, const ros::Time& stamp);
   void onLinkState(LinkState state, const std::string& why);
   void onRestart(const std::string& why);
-  void publishWorkOffset(const ros::NodeHandle& pnh);
+  void publishWorkOffset(const std::vector<double>& offset);
   void advertise(const ros::NodeHandle& pnh);
   bool clear(std_srvs::Trigger::Request& request, std_srvs::Trigger::Response& response);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
@@ -159,48 +122,20 @@ class DprntNode
   std::unique_ptr<tf2_ros::StaticTransformBroadcaster> work_frame_;
 };
 
-DprntNode::DprntNode(ros::NodeHandle nh, ros::NodeHandle pnh)
-    : nh_(nh),
-      assembler_(
-          [&]
-          {
-            // ~max_line_length: characters; longer lines are reported (diagnostics) and skipped.
-            int length = 256;
-            pnh.param("max_line_length", length, length);
-            if (length < 8)
-            {
-              ROS_WARN("~max_line_length %d is too short: using 256", length);
-              length = 256;
-            }
-            return static_cast<size_t>(length);
-          }(),
-          [&]
-          {
-            // ~mask_parity: clear bit 7 of every byte (7-bit even/odd parity lines read as 8N1).
-            bool mask = true;
-            pnh.param("mask_parity", mask, true);
-            return mask;
-          }())
+DprntNode::DprntNode(ros::NodeHandle nh, ros::NodeHandle pnh) : DprntNode(nh, pnh, dprntSettings(pnh)) {}
+
+DprntNode::DprntNode(ros::NodeHandle nh, ros::NodeHandle pnh, const dprnt::DprntSettings& settings)
+    : nh_(nh), rules_file_(settings.rules_file), assembler_(settings.max_line_length, settings.mask_parity)
 {
-  input_ = makeInput(nh, pnh, [this](const DprntLine& line) { onForwardedLine(line); });
-  // ~program_units: length unit of the macro programs (inch under G20, mm under G21); rules
-  // without their own `units` convert point coordinates from it.
-  std::string units;
-  pnh.param<std::string>("program_units", units, "inch");
-  // ~rules: YAML file of rules (format in config/dprnt_rules.yaml); empty: raw and values only.
-  pnh.param<std::string>("rules", rules_file_, "");
+  input_ = makeInput(nh, settings.input, [this](const DprntLine& line) { onForwardedLine(line); });
   if (!rules_file_.empty())
   {
-    rules_ = dprnt::RuleSet::fromFile(rules_file_, units);
-  }
-  else
-  {
-    dprnt::RuleSet::unitScale(units);  // still validate the parameter
+    rules_ = dprnt::RuleSet::fromFile(rules_file_, settings.program_units);
   }
 
   state_ = std::make_unique<MachineStatePublisher>(nh, pnh, input_->describe());
   state_->diagnostics().add("dprnt", this, &DprntNode::diagnose);
-  publishWorkOffset(pnh);
+  publishWorkOffset(settings.work_offset);
 
   advertise(pnh);
   ROS_INFO("DPRNT from %s, %zu rules%s%s", input_->describe().c_str(), rules_.rules().size(),
@@ -241,17 +176,11 @@ void DprntNode::advertise(const ros::NodeHandle& pnh)
   clear_srv_ = advertiseGuardedService(pnh, "clear", &DprntNode::clear, this);
 }
 
-void DprntNode::publishWorkOffset(const ros::NodeHandle& pnh)
+void DprntNode::publishWorkOffset(const std::vector<double>& offset)
 {
-  // ~work_offset: [x, y, z] m, the work zero (G54) in <tf_prefix>machine, published as the static
-  // transform <tf_prefix>machine -> <tf_prefix>work so points of `frame: work` rules can be placed
-  // when nothing else publishes that frame. Empty (default): not published (haas_mdc_node
-  // publishes it from the control's work offset variables).
-  std::vector<double> offset;
-  if (!pnh.getParam("work_offset", offset) || offset.empty())
+  // ~work_offset (dprnt_params.cpp): the static transform <tf_prefix>machine -> <tf_prefix>work.
+  if (offset.empty())
     return;
-  if (offset.size() != 3)
-    throw ConfigError("Parameter " + pnh.resolveName("work_offset") + " needs [x, y, z] (m) or [].");
   geometry_msgs::TransformStamped t;
   t.header.stamp = ros::Time::now();
   t.header.frame_id = state_->frame("machine");
