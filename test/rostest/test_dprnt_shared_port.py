@@ -75,6 +75,7 @@ class TestDprntSharedPort(unittest.TestCase):
         send = rospy.ServiceProxy(self.ns + "/dnc_node/send_program", SendProgram)
         result = send(file="O05555.nc", protocol="xmodem")
         self.assertTrue(result.success, result.message)
+        open(rospy.get_param("~resume_file"), "w").close()  # CYCLE START again: the program goes on
 
         self.wait_for(lambda: len(self.lines) >= 60, 30, "the last 30 DPRNT lines")
         # Every line once, in order, whole: no line lost, none cut, none holding a reply.

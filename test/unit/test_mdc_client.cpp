@@ -969,3 +969,44 @@ TEST(MdcPoller, PassesTheProgramsLinesOnBetweenPolls)
   thread.join();
   EXPECT_EQ(lines, (std::vector<std::string>{"P1 X1.0", "P2 X2.0"}));
 }
+
+// On a line that also carries DPRNT, the program's lines printed as a transfer ends, before the
+// poller has the port again, are the program's output: passed on, not dropped with the transfer's
+// leftovers.
+TEST(MdcPoller, OnASharedPortTheLinesPrintedAfterATransferAreKept)
+{
+  const std::string device = "/tmp/cnc_bridge_test_mdc_shared_" + std::to_string(::getpid());
+  PortLock mine(device);
+  PortLock dnc(device);
+  FakeTransport fake;
+  fake.onWrite([](FakeTransport& f, const std::vector<uint8_t>&) { f.feed("\x02STATUS, BUSY\x17\r\n>"); });
+  PollPlan plan;
+  plan.status_period = 5ms;
+  plan.identity = false;
+  MdcPoller poller(plan, 500ms, &mine);
+  std::mutex m;
+  std::condition_variable cv;
+  std::vector<std::string> lines;
+  poller.setTextListener(
+      [&](const std::string& line)
+      {
+        std::lock_guard<std::mutex> lock(m);
+        lines.push_back(line);
+        cv.notify_all();
+      });
+  StopSignal stop;
+  std::thread thread([&] { poller.run(fake, stop); });
+  ASSERT_TRUE(fake.waitForWritten(1, 5s));
+  ASSERT_TRUE(dnc.lockForTransfer(2s));
+  // The control ACKs the transfer's EOT and its program prints on, all before the poller's turn.
+  fake.feed("\x06LINE 31\rLINE 32\r");
+  dnc.unlock();
+  {
+    std::unique_lock<std::mutex> lock(m);
+    EXPECT_TRUE(cv.wait_for(lock, 5s, [&] { return lines.size() >= 2; }));
+  }
+  stop.stop();
+  thread.join();
+  EXPECT_EQ(lines, (std::vector<std::string>{"LINE 31", "LINE 32"}));
+  EXPECT_EQ(poller.portRegained(), 1u);
+}

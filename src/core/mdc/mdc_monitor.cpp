@@ -563,7 +563,11 @@ bool MdcPoller::takePort(MdcClient& client)
     ++regained_;
     try
     {
-      client.discardInput();
+      // On a line that also carries DPRNT, what arrived meanwhile may be the program's lines,
+      // printed once the transfer ended: kept (the transfer's own leftovers, NAK ACK CAN, are
+      // control bytes the text demultiplexer drops).
+      if (!text_listener_)
+        client.discardInput();
       if (port_regained_)
       {
         port_regained_(client.transport());

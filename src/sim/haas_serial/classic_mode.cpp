@@ -8,7 +8,7 @@
 // DPRNT line leaves whole, never one inside the other, as from the control's one UART.
 //
 //   sim_haas_serial classic --program FILE --script FILE [--link PATH] [--recv-after N] [--dir DIR]
-//                           [--start-file PATH] [--rate N] [--nak-interval S]
+//                           [--start-file PATH] [--resume-file PATH] [--rate N] [--nak-interval S]
 #include <boost/program_options.hpp>
 
 #include <atomic>
@@ -40,7 +40,7 @@ constexpr uint8_t kSoh = 0x01, kEot = 0x04, kAck = 0x06, kNak = 0x15;
 
 struct ClassicOptions
 {
-  std::string link, program_file, script_file, dir, start_file;
+  std::string link, program_file, script_file, dir, start_file, resume_file;
   unsigned recv_after = 0;
   double rate = 0;
   double nak_interval = 1.0;
@@ -72,6 +72,13 @@ class ClassicPort
   PtyMaster pty_;
   std::mutex write_mutex_;
 };
+
+/// The operator's CYCLE START: a file appears (nothing to wait on but its presence).
+void waitForFile(const std::string& path, StopSignal& stop)
+{
+  while (!path.empty() && !std::filesystem::exists(path) && !stop.stopped())
+    stop.waitFor(Milliseconds(20));
+}
 
 /// \returns whether all \p size bytes came within \p timeout.
 bool readExact(Transport& link, uint8_t* out, size_t size, Milliseconds timeout)
@@ -195,6 +202,8 @@ class ClassicControl
     std::cerr << "sim_haas_serial classic: in RECV\n";
     while (receiving_ && !stop_.stopped())
       received_.wait_for(lock, std::chrono::milliseconds(100));  // wakes for stop_ too
+    lock.unlock();
+    waitForFile(options_.resume_file, stop_);
     return !stop_.stopped();
   }
 
@@ -234,6 +243,8 @@ bool parseOptions(const std::vector<std::string>& args, ClassicOptions& o)
           "dir", po::value(&o.dir)->default_value("."), "where received programs are stored")(
           "start-file", po::value(&o.start_file)->default_value(""),
           "start the program when this file exists (the operator's CYCLE START); empty: at once")(
+          "resume-file", po::value(&o.resume_file)->default_value(""),
+          "after the receive, go on when this file exists (CYCLE START again); empty: at once")(
           "rate", po::value(&o.rate)->default_value(0), "DPRNT lines per second (0: as fast as the port takes them)")(
           "nak-interval", po::value(&o.nak_interval)->default_value(1.0), "s between NAKs while in RECV");
   po::variables_map vm;
@@ -286,8 +297,7 @@ int runClassic(const std::vector<std::string>& args)
           {
           }
         });
-    while (!options.start_file.empty() && !std::filesystem::exists(options.start_file) && !stop.stopped())
-      stop.waitFor(Milliseconds(20));  // the operator's CYCLE START: a file, nothing to wait on but its presence
+    waitForFile(options.start_file, stop);
     MacroMachine machine;
     control.runProgram(program, machine);
     std::cerr << "sim_haas_serial classic: program ended\n";
