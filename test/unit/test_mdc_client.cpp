@@ -944,6 +944,7 @@ TEST(MdcPoller, PassesTheProgramsLinesOnBetweenPolls)
   plan.status_period = 10s;  // one poll, then nothing due for the rest of the test
   plan.identity = false;
   plan.counters_period = 10s;
+  plan.max_unanswered = 0;  // Q104 gets no answer from this control: no reason to reconnect
   // A Classic: every reply framed, then the prompt.
   fake.onWrite([](FakeTransport& f, const std::vector<uint8_t>&) { f.feed("\x02STATUS, BUSY\x17\r\n>"); });
   MdcPoller poller(plan, 500ms);
@@ -983,6 +984,7 @@ TEST(MdcPoller, OnASharedPortTheLinesPrintedAfterATransferAreKept)
   PollPlan plan;
   plan.status_period = 5ms;
   plan.identity = false;
+  plan.max_unanswered = 0;  // Q104 gets no answer from this control: no reason to reconnect
   MdcPoller poller(plan, 500ms, &mine);
   std::mutex m;
   std::condition_variable cv;
