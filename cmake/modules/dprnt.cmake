@@ -5,7 +5,8 @@ cnc_core_module(cnc_bridge_dprnt
   src/core/dprnt/format.cpp
   src/core/dprnt/parser.cpp
   src/core/dprnt/rules.cpp
-  src/core/dprnt/input.cpp)
+  src/core/dprnt/input.cpp
+  src/core/dprnt/settings.cpp)
 target_link_libraries(cnc_bridge_dprnt PUBLIC yaml-cpp)
 
 if(CATKIN_ENABLE_TESTING AND NOT CNC_BRIDGE_CORE_ONLY)
@@ -31,13 +32,14 @@ add_executable(bench_dprnt_parser bench/dprnt/bench_dprnt_parser.cpp)
 target_link_libraries(bench_dprnt_parser cnc_bridge_dprnt)
 
 if(NOT CNC_BRIDGE_CORE_ONLY)
-  cnc_node(dprnt_node src/ros/nodes/dprnt_node.cpp)
+  cnc_node(dprnt_node src/ros/nodes/dprnt_node.cpp src/ros/nodes/dprnt_params.cpp)
   target_link_libraries(dprnt_node cnc_bridge_dprnt)
   catkin_install_python(PROGRAMS scripts/surface_mapper DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
   if(CATKIN_ENABLE_TESTING)
     add_rostest(test/rostest/dprnt_pty.test DEPENDENCIES dprnt_node sim_haas_serial ${PROJECT_NAME}_generate_messages_cpp ${PROJECT_NAME}_generate_messages_py)
     add_rostest(test/rostest/dprnt_tcp.test DEPENDENCIES dprnt_node sim_haas_serial ${PROJECT_NAME}_generate_messages_cpp ${PROJECT_NAME}_generate_messages_py)
     add_rostest(test/rostest/dprnt_grid.test DEPENDENCIES dprnt_node sim_haas_serial ${PROJECT_NAME}_generate_messages_cpp ${PROJECT_NAME}_generate_messages_py)
+    add_rostest(test/rostest/dprnt_shared_port.test DEPENDENCIES dprnt_node haas_mdc_node dnc_node sim_haas_serial ${PROJECT_NAME}_generate_messages_cpp ${PROJECT_NAME}_generate_messages_py)
     add_rostest(test/rostest/dprnt_file.test DEPENDENCIES dprnt_node ${PROJECT_NAME}_generate_messages_cpp ${PROJECT_NAME}_generate_messages_py)
   endif()
 endif()

@@ -1,6 +1,6 @@
 # Haas Machine Data Collection (docs/protocols/haas_mdc.md): core library, haas_mdc_node, sim_haas_mdc, tests.
 cnc_core_module(cnc_bridge_mdc src/core/mdc/mdc_protocol.cpp src/core/mdc/mdc_client.cpp src/core/mdc/mdc_monitor.cpp
-                src/core/mdc/mdc_readings.cpp)
+                src/core/mdc/mdc_readings.cpp src/core/mdc/mdc_session.cpp)
 # The simulated machine (a peer model, not shipped in the protocol library): sim_haas_mdc and tests.
 cnc_sim_library(cnc_bridge_mdc_sim src/sim/mdc/sim_machine.cpp)
 target_link_libraries(cnc_bridge_mdc_sim PUBLIC cnc_bridge_mdc)
@@ -15,7 +15,7 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   target_compile_definitions(test_mdc PRIVATE MDC_TEST_DATA="${PROJECT_SOURCE_DIR}/test/data/mdc")
 endif()
 if(NOT CNC_BRIDGE_CORE_ONLY)
-  cnc_node(haas_mdc_node src/ros/nodes/haas_mdc_node.cpp)
+  cnc_node(haas_mdc_node src/ros/nodes/haas_mdc_node.cpp src/ros/nodes/haas_mdc_params.cpp)
   target_link_libraries(haas_mdc_node cnc_bridge_mdc)
   if(CATKIN_ENABLE_TESTING)
     find_package(rostest REQUIRED)

@@ -21,13 +21,14 @@ if(NOT CNC_BRIDGE_CORE_ONLY)
 endif()
 
 # sim_haas_serial: a Haas control's RS-232 port on a pty, one mode per use of the port (XModem,
-# drip, punch, DPRNT).
+# drip, punch, DPRNT, and all of a Classic's uses on one port).
 cnc_tool(sim_haas_serial
   src/sim/haas_serial/main.cpp
   src/sim/haas_serial/xmodem_mode.cpp
   src/sim/haas_serial/drip_mode.cpp
   src/sim/haas_serial/punch_mode.cpp
   src/sim/haas_serial/dprnt_mode.cpp
-  src/sim/haas_serial/dprnt_program.cpp)
+  src/sim/haas_serial/dprnt_program.cpp
+  src/sim/haas_serial/classic_mode.cpp)
 target_link_libraries(sim_haas_serial cnc_bridge_testing cnc_bridge_sim_support cnc_bridge_xmodem cnc_bridge_dnc_sim
-                      cnc_bridge_dprnt)
+                      cnc_bridge_dprnt cnc_bridge_mdc_sim)

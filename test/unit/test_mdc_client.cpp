@@ -900,3 +900,115 @@ TEST(MdcPoller, AVariableWithoutAValueIsReportedWithTheReason)
   EXPECT_EQ(errors_of_777[0], "no reply within 30 ms");
   EXPECT_EQ(s.variable_errors.count(500), 0u);
 }
+
+// A Classic control's one RS-232 port carries the program's DPRNT output between MDC replies:
+// framed lines are replies, bare lines are the program's, each to its own reader, none lost.
+TEST(MdcClient, OnASharedClassicPortBareLinesAreTextAndFramedOnesReplies)
+{
+  FakeTransport fake;
+  // A DPRNT line before the reply (after the previous reply's prompt), one whose first characters
+  // look like a reply, a NAK of a control waiting in RECV, the echo of the query, then the reply.
+  answerWith(fake, {">X1.0000 Y2.0000\r"
+                    "MODE, (MDI)\r"
+                    "\x15"
+                    "?Q104\r\n"
+                    "\x02MODE, (MEM)\x17\r\n>Z-0.5000\r"});
+  fake.setMaxReadChunk(5);
+  MdcClient client(fake);
+  std::vector<std::string> lines;
+  client.setTextListener([&](const std::string& line) { lines.push_back(line); });
+  const Reply reply = client.request(q(104), 1000ms);
+  EXPECT_EQ(valueOf(reply), "(MEM)");
+  client.drainForeign(50ms);
+  EXPECT_EQ(lines, (std::vector<std::string>{"X1.0000 Y2.0000", "MODE, (MDI)", "Z-0.5000"}));
+  EXPECT_EQ(client.stats().text_lines, 3u);
+  EXPECT_EQ(client.stats().foreign, 0u);
+}
+
+TEST(MdcClient, WithoutATextListenerEveryLineIsParsedAsAReply)
+{
+  FakeTransport fake;
+  answerWith(fake, {"MODE, (MDI)\r\n\x02MODE, (MEM)\x17\r\n"});
+  MdcClient client(fake);
+  const Reply reply = client.request(q(104), 1000ms);
+  EXPECT_EQ(valueOf(reply), "(MDI)");
+  EXPECT_EQ(client.stats().text_lines, 0u);
+}
+
+// Between polls the poller reads the line, so DPRNT lines come out as they are printed, not at the
+// next query, and in the order printed.
+TEST(MdcPoller, PassesTheProgramsLinesOnBetweenPolls)
+{
+  FakeTransport fake;
+  PollPlan plan;
+  plan.status_period = 10s;  // one poll, then nothing due for the rest of the test
+  plan.identity = false;
+  plan.counters_period = 10s;
+  plan.max_unanswered = 0;  // Q104 gets no answer from this control: no reason to reconnect
+  // A Classic: every reply framed, then the prompt.
+  fake.onWrite([](FakeTransport& f, const std::vector<uint8_t>&) { f.feed("\x02STATUS, BUSY\x17\r\n>"); });
+  MdcPoller poller(plan, 500ms);
+  std::mutex m;
+  std::condition_variable cv;
+  std::vector<std::string> lines;
+  poller.setTextListener(
+      [&](const std::string& line)
+      {
+        std::lock_guard<std::mutex> lock(m);
+        lines.push_back(line);
+        cv.notify_all();
+      });
+  StopSignal stop;
+  std::thread thread([&] { poller.run(fake, stop); });
+  ASSERT_TRUE(fake.waitForWritten(1, 5s));
+  fake.feed("P1 X1.0\rP2 X2.0\r");
+  {
+    std::unique_lock<std::mutex> lock(m);
+    EXPECT_TRUE(cv.wait_for(lock, 5s, [&] { return lines.size() >= 2; }));
+  }
+  stop.stop();
+  thread.join();
+  EXPECT_EQ(lines, (std::vector<std::string>{"P1 X1.0", "P2 X2.0"}));
+}
+
+// On a line that also carries DPRNT, the program's lines printed as a transfer ends, before the
+// poller has the port again, are the program's output: passed on, not dropped with the transfer's
+// leftovers.
+TEST(MdcPoller, OnASharedPortTheLinesPrintedAfterATransferAreKept)
+{
+  const std::string device = "/tmp/cnc_bridge_test_mdc_shared_" + std::to_string(::getpid());
+  PortLock mine(device);
+  PortLock dnc(device);
+  FakeTransport fake;
+  fake.onWrite([](FakeTransport& f, const std::vector<uint8_t>&) { f.feed("\x02STATUS, BUSY\x17\r\n>"); });
+  PollPlan plan;
+  plan.status_period = 5ms;
+  plan.identity = false;
+  plan.max_unanswered = 0;  // Q104 gets no answer from this control: no reason to reconnect
+  MdcPoller poller(plan, 500ms, &mine);
+  std::mutex m;
+  std::condition_variable cv;
+  std::vector<std::string> lines;
+  poller.setTextListener(
+      [&](const std::string& line)
+      {
+        std::lock_guard<std::mutex> lock(m);
+        lines.push_back(line);
+        cv.notify_all();
+      });
+  StopSignal stop;
+  std::thread thread([&] { poller.run(fake, stop); });
+  ASSERT_TRUE(fake.waitForWritten(1, 5s));
+  ASSERT_TRUE(dnc.lockForTransfer(2s));
+  // The control ACKs the transfer's EOT and its program prints on, all before the poller's turn.
+  fake.feed("\x06LINE 31\rLINE 32\r");
+  dnc.unlock();
+  {
+    std::unique_lock<std::mutex> lock(m);
+    EXPECT_TRUE(cv.wait_for(lock, 5s, [&] { return lines.size() >= 2; }));
+  }
+  stop.stop();
+  thread.join();
+  EXPECT_EQ(lines, (std::vector<std::string>{"LINE 31", "LINE 32"}));
+  EXPECT_EQ(poller.portRegained(), 1u);
+}

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <functional>
+#include <optional>
 #include <string>
 
 #include "cnc_bridge/mdc/mdc_protocol.h"
@@ -24,6 +25,7 @@ struct ClientStats
   uint64_t rejected = 0;       ///< queries the control answered with "?, ?Qnnn"
   uint64_t foreign = 0;        ///< replies that answered something else (another client, a late reply)
   uint64_t dropped_lines = 0;  ///< lines over kMaxLineLength, dropped
+  uint64_t text_lines = 0;     ///< unframed lines handed to the text listener (DPRNT on a shared port)
   double last_latency_ms = 0;  ///< query written to reply read, last answered query
   double max_latency_ms = 0;
   double total_latency_ms = 0;  ///< sum over answered queries (mean = total / answered)
@@ -43,6 +45,17 @@ class MdcClient
   explicit MdcClient(Transport& transport);
 
   void setForeignListener(ReplyListener listener) { foreign_listener_ = std::move(listener); }
+
+  /// \brief Told of every line of a shared port that is not an MDC reply.
+  using TextListener = std::function<void(const std::string& line)>;
+
+  /// \brief Demultiplexes a Classic control's one RS-232 port, which also carries the DPRNT output
+  /// of the running program: with a listener set, only lines holding the STX/ETB framing of a
+  /// Classic reply are taken as replies; every other line goes to \p listener, without the `>`
+  /// prompt and control bytes (NAKs of a control waiting in RECV, the line end). An echo of a
+  /// query (`?Q500`) is no output of the program and is dropped. Unset (the default), every line
+  /// is parsed as a reply.
+  void setTextListener(TextListener listener) { text_listener_ = std::move(listener); }
 
   /// \brief Sends \p query and waits for the reply that answers it.
   /// \returns the reply (kind kUnknownQuery if the control did not understand the query).
@@ -76,9 +89,12 @@ class MdcClient
  private:
   /// \returns the next complete line, or false when \p deadline passed first.
   bool readLine(std::string& line, std::chrono::steady_clock::time_point deadline);
+  /// \returns the reply \p line holds; nullopt for none, or a text line handed to the listener.
+  std::optional<Reply> replyIn(const std::string& line);
 
   Transport& transport_;
   ReplyListener foreign_listener_;
+  TextListener text_listener_;
   std::string partial_;
   bool overflow_ = false;
   ClientStats stats_;

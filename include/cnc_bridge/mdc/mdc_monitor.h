@@ -238,6 +238,12 @@ class MdcPoller
 
   void setListener(UpdateListener listener) { listener_ = std::move(listener); }
 
+  /// \brief Shares a Classic control's port with its DPRNT output (MdcClient::setTextListener()):
+  /// \p listener gets every line that is no reply, in the order read, in the poller's thread. The
+  /// poller then reads the line between polls too (the port lock held for each 50 ms look), so a
+  /// line is passed on as it comes, and a DNC transfer finds no DPRNT line waiting. Call before run().
+  void setTextListener(MdcClient::TextListener listener) { text_listener_ = std::move(listener); }
+
   /// \brief Polls over \p transport until \p stop is stopped (returns) or the link fails (throws
   /// LinkError / CancelledError). A query left unanswered is counted and the poll goes on, up to
   /// PollPlan::max_unanswered in a row (then LinkError).
@@ -265,12 +271,16 @@ class MdcPoller
   bool takePort(MdcClient& client);
   /// Asks for the control's cycle time for cycle ends held back by notify(), then delivers them.
   void deliverHeldEvents(MdcClient& client);
+  /// Waits \p wait for the next poll, reading the line meanwhile when it carries text. \returns
+  /// true when stopped.
+  bool waitForPoll(MdcClient& client, Milliseconds wait, StopSignal& stop);
 
   PollPlan plan_;
   Milliseconds reply_timeout_;
   PortLock* port_lock_;
   UpdateListener listener_;
   PortRegainedHook port_regained_;
+  MdcClient::TextListener text_listener_;
 
   mutable std::mutex mutex_;  // guards everything below, and all use of client_
   MdcClient* client_ = nullptr;

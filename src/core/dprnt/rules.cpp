@@ -132,6 +132,151 @@ double RuleSet::unitScale(const std::string& units)
   throw ConfigError("units \"" + units + "\" is not one of inch, mm, m, none");
 }
 
+namespace
+{
+// name, type, topic: what the rule is called and publishes. Appends the name to \p where.
+void parseIdentity(const YAML::Node& node, Rule& rule, std::string& where, std::set<std::string>& names)
+{
+  if (!node.IsMap())
+    throw ConfigError(where + ": expected a map");
+  rule.name = node["name"] ? node["name"].as<std::string>() : "";
+  if (!validName(rule.name))
+    throw ConfigError(where + ": \"name\" must be letters, digits and _ (it names a topic)");
+  where += " (" + rule.name + ")";
+  if (!names.insert(rule.name).second)
+    throw ConfigError(where + ": duplicate name");
+  const std::string type = node["type"] ? node["type"].as<std::string>() : "";
+  if (type == "point")
+    rule.type = OutputType::kPoint;
+  else if (type == "float64")
+    rule.type = OutputType::kFloat64;
+  else if (type == "cycle_event")
+    rule.type = OutputType::kCycleEvent;
+  else
+    throw ConfigError(where + ": \"type\" must be point, float64 or cycle_event");
+  rule.topic = node["topic"] ? node["topic"].as<std::string>() : "dprnt/" + rule.name;
+  if (rule.topic.empty() || rule.topic[0] == '/')
+    throw ConfigError(where + ": \"topic\" must be a relative name");
+}
+
+// regex, labels: which lines the rule matches.
+void parseMatch(const YAML::Node& node, Rule& rule, const std::string& where)
+{
+  if (node["regex"])
+  {
+    rule.regex_text = node["regex"].as<std::string>();
+    try
+    {
+      rule.regex = std::regex(rule.regex_text, std::regex::ECMAScript | std::regex::optimize);
+    }
+    catch (const std::regex_error& e)
+    {
+      throw ConfigError(where + ": bad regex \"" + rule.regex_text + "\": " + e.what());
+    }
+    rule.has_regex = true;
+  }
+  if (node["labels"])
+  {
+    for (const auto& label : node["labels"])
+      rule.labels.push_back(label.as<std::string>());
+  }
+  if (!rule.has_regex && rule.labels.empty())
+    throw ConfigError(where + R"(: give "regex", "labels" or both)");
+}
+
+// x, y, z, value, part_count, cycle_time, program: where the numbers come from.
+void parseSources(const YAML::Node& node, Rule& rule, const std::string& where)
+{
+  rule.x = parseSource(node["x"], where);
+  rule.y = parseSource(node["y"], where);
+  rule.z = parseSource(node["z"], where);
+  rule.value = parseSource(node["value"], where);
+  rule.part_count = parseSource(node["part_count"], where);
+  rule.cycle_time = parseSource(node["cycle_time"], where);
+  if (node["program"])
+  {
+    const ValueSource program = parseSource(node["program"], where);
+    if (program.group < 0)
+      throw ConfigError(where + R"(: "program" must be a capture group ("$1"))");
+    rule.program_group = program.group;
+  }
+}
+
+// units, frame, state, event: what each type of output needs.
+void parseOutput(const YAML::Node& node, Rule& rule, const std::string& where, const std::string& default_units)
+{
+  if (rule.type != OutputType::kPoint && node["state"])
+    throw ConfigError(where + ": \"state\" is for point rules (a position)");
+  switch (rule.type)
+  {
+    case OutputType::kPoint:
+      // A probe hit is a length in all three axes: the program's unit unless told otherwise.
+      rule.units = node["units"] ? node["units"].as<std::string>() : default_units;
+      if (rule.x.empty())
+        rule.x.label = "X";
+      if (rule.y.empty())
+        rule.y.label = "Y";
+      if (rule.z.empty())
+        rule.z.label = "Z";
+      rule.frame = node["frame"] ? node["frame"].as<std::string>() : "work";
+      if (rule.frame.empty())
+        throw ConfigError(where + ": \"frame\" is empty");
+      rule.state = parseStateField(node["state"], rule.frame, where);
+      break;
+    case OutputType::kFloat64:
+      // A plain number is not necessarily a length: scaled only when units are given.
+      rule.units = node["units"] ? node["units"].as<std::string>() : "none";
+      break;
+    case OutputType::kCycleEvent:
+      rule.units = "none";
+      rule.event = parseEvent(node["event"] ? node["event"].as<std::string>() : "", where);
+      break;
+  }
+  if (rule.units == "program")
+    rule.units = default_units;
+  rule.scale = RuleSet::unitScale(rule.units);
+}
+
+// Every capture group a source names exists in the regex.
+void checkGroups(const Rule& rule, const std::string& where)
+{
+  const auto check_group = [&](const ValueSource& source)
+  {
+    if (source.group > 0 && (!rule.has_regex || static_cast<size_t>(source.group) > rule.regex.mark_count()))
+      throw ConfigError(where + ": capture group " + source.describe() + " does not exist in the regex");
+  };
+  for (const ValueSource* source : {&rule.x, &rule.y, &rule.z, &rule.value, &rule.part_count, &rule.cycle_time})
+    check_group(*source);
+  if (rule.program_group > 0)
+    check_group(ValueSource{"", rule.program_group});
+}
+
+// One rule of the list; errors name it ("DPRNT rule #2 (probe): ...").
+Rule parseRule(const YAML::Node& node, size_t index, const std::string& default_units, std::set<std::string>& names)
+{
+  Rule rule;
+  std::string where = "DPRNT rule #" + std::to_string(index + 1);
+  try
+  {
+    parseIdentity(node, rule, where, names);
+    parseMatch(node, rule, where);
+    parseSources(node, rule, where);
+    parseOutput(node, rule, where, default_units);
+    checkGroups(rule, where);
+  }
+  catch (const YAML::Exception& e)
+  {
+    throw ConfigError(where + ": " + e.what());
+  }
+  catch (const ConfigError& e)
+  {
+    const std::string message = e.what();
+    throw ConfigError(message.rfind("DPRNT rule", 0) == 0 ? message : where + ": " + message);
+  }
+  return rule;
+}
+}  // namespace
+
 RuleSet RuleSet::fromYaml(const std::string& text, const std::string& default_units)
 {
   YAML::Node root;
@@ -157,114 +302,7 @@ RuleSet RuleSet::fromYaml(const std::string& text, const std::string& default_un
   std::set<std::string> names;
   for (size_t i = 0; i < list.size(); ++i)
   {
-    const YAML::Node node = list[i];
-    Rule rule;
-    std::string where = "DPRNT rule #" + std::to_string(i + 1);
-    try
-    {
-      if (!node.IsMap())
-        throw ConfigError(where + ": expected a map");
-      rule.name = node["name"] ? node["name"].as<std::string>() : "";
-      if (!validName(rule.name))
-        throw ConfigError(where + ": \"name\" must be letters, digits and _ (it names a topic)");
-      where += " (" + rule.name + ")";
-      if (!names.insert(rule.name).second)
-        throw ConfigError(where + ": duplicate name");
-      const std::string type = node["type"] ? node["type"].as<std::string>() : "";
-      if (type == "point")
-        rule.type = OutputType::kPoint;
-      else if (type == "float64")
-        rule.type = OutputType::kFloat64;
-      else if (type == "cycle_event")
-        rule.type = OutputType::kCycleEvent;
-      else
-        throw ConfigError(where + ": \"type\" must be point, float64 or cycle_event");
-      rule.topic = node["topic"] ? node["topic"].as<std::string>() : "dprnt/" + rule.name;
-      if (rule.topic.empty() || rule.topic[0] == '/')
-        throw ConfigError(where + ": \"topic\" must be a relative name");
-      if (node["regex"])
-      {
-        rule.regex_text = node["regex"].as<std::string>();
-        try
-        {
-          rule.regex = std::regex(rule.regex_text, std::regex::ECMAScript | std::regex::optimize);
-        }
-        catch (const std::regex_error& e)
-        {
-          throw ConfigError(where + ": bad regex \"" + rule.regex_text + "\": " + e.what());
-        }
-        rule.has_regex = true;
-      }
-      if (node["labels"])
-      {
-        for (const auto& label : node["labels"])
-          rule.labels.push_back(label.as<std::string>());
-      }
-      if (!rule.has_regex && rule.labels.empty())
-        throw ConfigError(where + R"(: give "regex", "labels" or both)");
-      rule.x = parseSource(node["x"], where);
-      rule.y = parseSource(node["y"], where);
-      rule.z = parseSource(node["z"], where);
-      rule.value = parseSource(node["value"], where);
-      rule.part_count = parseSource(node["part_count"], where);
-      rule.cycle_time = parseSource(node["cycle_time"], where);
-      if (node["program"])
-      {
-        const ValueSource program = parseSource(node["program"], where);
-        if (program.group < 0)
-          throw ConfigError(where + R"(: "program" must be a capture group ("$1"))");
-        rule.program_group = program.group;
-      }
-      if (rule.type != OutputType::kPoint && node["state"])
-        throw ConfigError(where + ": \"state\" is for point rules (a position)");
-      switch (rule.type)
-      {
-        case OutputType::kPoint:
-          // A probe hit is a length in all three axes: the program's unit unless told otherwise.
-          rule.units = node["units"] ? node["units"].as<std::string>() : default_units;
-          if (rule.x.empty())
-            rule.x.label = "X";
-          if (rule.y.empty())
-            rule.y.label = "Y";
-          if (rule.z.empty())
-            rule.z.label = "Z";
-          rule.frame = node["frame"] ? node["frame"].as<std::string>() : "work";
-          if (rule.frame.empty())
-            throw ConfigError(where + ": \"frame\" is empty");
-          rule.state = parseStateField(node["state"], rule.frame, where);
-          break;
-        case OutputType::kFloat64:
-          // A plain number is not necessarily a length: scaled only when units are given.
-          rule.units = node["units"] ? node["units"].as<std::string>() : "none";
-          break;
-        case OutputType::kCycleEvent:
-          rule.units = "none";
-          rule.event = parseEvent(node["event"] ? node["event"].as<std::string>() : "", where);
-          break;
-      }
-      if (rule.units == "program")
-        rule.units = default_units;
-      rule.scale = unitScale(rule.units);
-      const auto check_group = [&](const ValueSource& source)
-      {
-        if (source.group > 0 && (!rule.has_regex || static_cast<size_t>(source.group) > rule.regex.mark_count()))
-          throw ConfigError(where + ": capture group " + source.describe() + " does not exist in the regex");
-      };
-      for (const ValueSource* source : {&rule.x, &rule.y, &rule.z, &rule.value, &rule.part_count, &rule.cycle_time})
-        check_group(*source);
-      if (rule.program_group > 0)
-        check_group(ValueSource{"", rule.program_group});
-    }
-    catch (const YAML::Exception& e)
-    {
-      throw ConfigError(where + ": " + e.what());
-    }
-    catch (const ConfigError& e)
-    {
-      const std::string message = e.what();
-      throw ConfigError(message.rfind("DPRNT rule", 0) == 0 ? message : where + ": " + message);
-    }
-    set.rules_.push_back(std::move(rule));
+    set.rules_.push_back(parseRule(list[i], i, default_units, names));
   }
   return set;
 }

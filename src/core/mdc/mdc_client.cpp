@@ -63,6 +63,31 @@ bool MdcClient::readLine(std::string& line, Clock::time_point deadline)
   }
 }
 
+std::optional<Reply> MdcClient::replyIn(const std::string& line)
+{
+  // A Classic frames each reply in STX ... ETB; the program's DPRNT lines come bare.
+  if (!text_listener_ || line.find_first_of("\x02\x17") != std::string::npos)
+  {
+    return parseReply(line);
+  }
+  std::string text;
+  for (char c : line)
+  {
+    const auto byte = static_cast<unsigned char>(c);
+    if (byte >= 0x20 && byte != 0x7F)
+      text.push_back(c);
+  }
+  // The prompt the control writes after each reply starts the next line.
+  const size_t start = text.find_first_not_of('>');
+  if (start == std::string::npos || text[start] == '?')
+  {
+    return std::nullopt;  // a bare prompt, an empty line, or the echo of a query
+  }
+  ++stats_.text_lines;
+  text_listener_(text.substr(start));
+  return std::nullopt;
+}
+
 Reply MdcClient::request(const Query& query, Milliseconds timeout)
 {
   const auto started = Clock::now();
@@ -72,7 +97,7 @@ Reply MdcClient::request(const Query& query, Milliseconds timeout)
   std::string line;
   while (readLine(line, deadline))
   {
-    auto reply = parseReply(line);
+    auto reply = replyIn(line);
     if (!reply)
     {
       continue;
@@ -129,7 +154,7 @@ void MdcClient::drainForeign(Milliseconds timeout)
   std::string line;
   while (readLine(line, deadline))
   {
-    if (auto reply = parseReply(line))
+    if (auto reply = replyIn(line))
     {
       ++stats_.foreign;
       if (foreign_listener_)

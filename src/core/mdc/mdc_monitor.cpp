@@ -26,6 +26,7 @@ ClientStats sum(const ClientStats& a, const ClientStats& b)
   s.rejected = a.rejected + b.rejected;
   s.foreign = a.foreign + b.foreign;
   s.dropped_lines = a.dropped_lines + b.dropped_lines;
+  s.text_lines = a.text_lines + b.text_lines;
   s.last_latency_ms = b.answered ? b.last_latency_ms : a.last_latency_ms;
   s.max_latency_ms = std::max(a.max_latency_ms, b.max_latency_ms);
   s.total_latency_ms = a.total_latency_ms + b.total_latency_ms;
@@ -562,7 +563,11 @@ bool MdcPoller::takePort(MdcClient& client)
     ++regained_;
     try
     {
-      client.discardInput();
+      // On a line that also carries DPRNT, what arrived meanwhile may be the program's lines,
+      // printed once the transfer ended: kept (the transfer's own leftovers, NAK ACK CAN, are
+      // control bytes the text demultiplexer drops).
+      if (!text_listener_)
+        client.discardInput();
       if (port_regained_)
       {
         port_regained_(client.transport());
@@ -581,6 +586,10 @@ void MdcPoller::run(Transport& transport, StopSignal& stop)
 {
   MdcClient client(transport);
   client.setForeignListener([this](const Reply& reply) { notify(reply); });
+  if (text_listener_)
+  {
+    client.setTextListener(text_listener_);
+  }
   QueryScheduler scheduler = plan_.scheduler();
   const bool ask_cycle_time = plan_.cycle_time_from_control;
   {
@@ -622,7 +631,7 @@ void MdcPoller::run(Transport& transport, StopSignal& stop)
       return;
     }
     const auto wait = std::chrono::duration_cast<Milliseconds>(next->second - Clock::now());
-    if (wait.count() > 0 && stop.waitFor(wait))
+    if (wait.count() > 0 && waitForPoll(client, wait, stop))
     {
       return;
     }
@@ -675,6 +684,41 @@ void MdcPoller::run(Transport& transport, StopSignal& stop)
     }
     stats_ = sum(base_stats_, client.stats());
   }
+}
+
+bool MdcPoller::waitForPoll(MdcClient& client, Milliseconds wait, StopSignal& stop)
+{
+  if (!text_listener_)
+  {
+    return stop.waitFor(wait);
+  }
+  // The line carries DPRNT output too: read it while waiting, in slices with the port held, so
+  // that each line is passed on as it comes and none is left in the buffer for a DNC transfer
+  // (which would take it for noise) when the port changes hands.
+  constexpr Milliseconds kSlice{50};
+  const auto until = Clock::now() + wait;
+  while (!stop.stopped())
+  {
+    const auto left = std::chrono::ceil<Milliseconds>(until - Clock::now());
+    if (left.count() <= 0)
+    {
+      return false;
+    }
+    std::unique_lock<std::mutex> lock(mutex_);
+    if (!takePort(client))
+    {
+      lock.unlock();
+      if (stop.waitFor(std::min(left, kSlice)))
+      {
+        return true;
+      }
+      continue;
+    }
+    PortUse port(port_lock_);
+    client.drainForeign(std::min(left, kSlice));
+    stats_ = sum(base_stats_, client.stats());
+  }
+  return true;
 }
 
 bool MdcPoller::noteVariableFailure(const Query& query, const std::string& why)

@@ -24,53 +24,50 @@
 #include "cnc_bridge/dprnt/rules.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/node_main.h"
-#include "cnc_bridge/ros/params.h"
 #include "cnc_bridge/ros/request_boundary.h"
-#include "cnc_bridge/transport/serial_line.h"
-#include "cnc_bridge/transport/tcp.h"
+#include "dprnt_node.h"
 
 namespace cnc_bridge
 {
 namespace
 {
-// Builds the input named by ~input, from the link parameters every node reads (docs/ROS_INTERFACE.md).
-std::unique_ptr<dprnt::DprntInput> makeInput(const ros::NodeHandle& pnh)
+/// \brief DPRNT lines another node read: haas_mdc_node forwards the lines of a Classic control's
+/// one RS-232 port that are no MDC reply (its ~forward_dprnt), since only one reader may take the
+/// port's bytes. Lines arrive whole, in the order read, stamped when read.
+class TopicInput : public dprnt::DprntInput
 {
-  // ~input: where DPRNT output arrives: serial (Haas Classic, NGC with RS-232), tcp (NGC setting 261
-  // = TCP, the control listens on setting 263) or file (NGC setting 261 = file, path in 262).
-  std::string input;
-  pnh.param<std::string>("input", input, "serial");
-  // ~reconnect_min, ~reconnect_max: s, backoff between attempts to (re)open the link.
-  const Backoff backoff(params::seconds(pnh, "reconnect_min", 0.25), params::seconds(pnh, "reconnect_max", 10.0));
-  if (input == "serial")
+ public:
+  using LineHandler = std::function<void(const DprntLine&)>;
+  TopicInput(ros::NodeHandle nh, std::string topic, LineHandler on_line)
+      : nh_(nh), topic_(nh.resolveName(topic)), on_line_(std::move(on_line))
   {
-    const SerialSettings settings = params::serialSettings(pnh, 9600);
-    return std::make_unique<dprnt::StreamInput>([settings] { return openSerialLine(settings); }, settings.describe(),
-                                                backoff);
   }
-  if (input == "tcp")
+  void start(BytesHandler, StateHandler on_state, RestartHandler) override
   {
-    // ~host: address or name of the control.
-    const std::string host = params::required<std::string>(pnh, "host");
-    // ~tcp_port: the control's DPRNT port (Haas NGC setting 263).
-    const uint16_t port = params::tcpPort(pnh, "tcp_port", params::required<int>(pnh, "tcp_port"));
-    // ~connect_timeout: s to wait for a TCP connection.
-    const Milliseconds timeout = params::seconds(pnh, "connect_timeout", 3.0);
-    return std::make_unique<dprnt::StreamInput>(
-        [host, port, timeout] { return TcpConnection::connect(host, static_cast<uint16_t>(port), timeout); },
-        host + ":" + std::to_string(port), backoff);
+    // A deep queue: a program printing in a burst must not lose lines to a busy spinner.
+    sub_ = nh_.subscribe<DprntLine>(topic_, 10000, [this](const DprntLine::ConstPtr& line) { on_line_(*line); });
+    on_state(LinkState::kUp, "lines from " + topic_);
   }
-  if (input == "file")
+  void stop() override { sub_.shutdown(); }
+  std::string describe() const override { return "topic " + topic_; }
+  unsigned reconnects() const override { return 0; }
+
+ private:
+  ros::NodeHandle nh_;
+  std::string topic_;
+  LineHandler on_line_;
+  ros::Subscriber sub_;
+};
+
+// The input the settings name; a topic input is this layer's.
+std::unique_ptr<dprnt::DprntInput> makeInput(const ros::NodeHandle& nh, const dprnt::InputSettings& settings,
+                                             const TopicInput::LineHandler& on_line)
+{
+  if (settings.kind == dprnt::InputSettings::Kind::kTopic)
   {
-    // ~file: the file the control appends DPRNT output to (Haas NGC setting 262), e.g. on a share.
-    const std::string file = params::required<std::string>(pnh, "file");
-    // ~from_start: publish what the file already holds when the node starts (else only new lines).
-    bool from_start = false;
-    pnh.param("from_start", from_start, false);
-    // ~poll_period: s between looks at the file (inotify does not see writes over SMB).
-    return std::make_unique<dprnt::FileInput>(file, from_start, params::seconds(pnh, "poll_period", 0.05), backoff);
+    return std::make_unique<TopicInput>(nh, settings.topic, on_line);
   }
-  throw ConfigError("Parameter " + pnh.resolveName("input") + " is \"" + input + "\": use serial, tcp or file.");
+  return dprnt::makeInput(settings);
 }
 }  // namespace
 
@@ -80,6 +77,7 @@ class DprntNode
 {
  public:
   DprntNode(ros::NodeHandle nh, ros::NodeHandle pnh);
+  DprntNode(ros::NodeHandle nh, ros::NodeHandle pnh, const dprnt::DprntSettings& settings);
   ~DprntNode();
 
  private:
@@ -91,11 +89,13 @@ class DprntNode
   };
 
   void onBytes(const uint8_t* data, size_t size);
+  void onForwardedLine(const DprntLine& line);
   void onLine(const dprnt::LineEvent& event, const ros::Time& stamp);
   void publishRule(const dprnt::RuleOutput& output, const std::string& line, const ros::Time& stamp);
   void onLinkState(LinkState state, const std::string& why);
   void onRestart(const std::string& why);
-  void publishWorkOffset(const ros::NodeHandle& pnh);
+  void publishWorkOffset(const std::vector<double>& offset);
+  void advertise(const ros::NodeHandle& pnh);
   bool clear(std_srvs::Trigger::Request& request, std_srvs::Trigger::Response& response);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
 
@@ -122,49 +122,32 @@ class DprntNode
   std::unique_ptr<tf2_ros::StaticTransformBroadcaster> work_frame_;
 };
 
-DprntNode::DprntNode(ros::NodeHandle nh, ros::NodeHandle pnh)
-    : nh_(nh),
-      assembler_(
-          [&]
-          {
-            // ~max_line_length: characters; longer lines are reported (diagnostics) and skipped.
-            int length = 256;
-            pnh.param("max_line_length", length, length);
-            if (length < 8)
-            {
-              ROS_WARN("~max_line_length %d is too short: using 256", length);
-              length = 256;
-            }
-            return static_cast<size_t>(length);
-          }(),
-          [&]
-          {
-            // ~mask_parity: clear bit 7 of every byte (7-bit even/odd parity lines read as 8N1).
-            bool mask = true;
-            pnh.param("mask_parity", mask, true);
-            return mask;
-          }())
+DprntNode::DprntNode(ros::NodeHandle nh, ros::NodeHandle pnh) : DprntNode(nh, pnh, dprntSettings(pnh)) {}
+
+DprntNode::DprntNode(ros::NodeHandle nh, ros::NodeHandle pnh, const dprnt::DprntSettings& settings)
+    : nh_(nh), rules_file_(settings.rules_file), assembler_(settings.max_line_length, settings.mask_parity)
 {
-  input_ = makeInput(pnh);
-  // ~program_units: length unit of the macro programs (inch under G20, mm under G21); rules
-  // without their own `units` convert point coordinates from it.
-  std::string units;
-  pnh.param<std::string>("program_units", units, "inch");
-  // ~rules: YAML file of rules (format in config/dprnt_rules.yaml); empty: raw and values only.
-  pnh.param<std::string>("rules", rules_file_, "");
+  input_ = makeInput(nh, settings.input, [this](const DprntLine& line) { onForwardedLine(line); });
   if (!rules_file_.empty())
   {
-    rules_ = dprnt::RuleSet::fromFile(rules_file_, units);
-  }
-  else
-  {
-    dprnt::RuleSet::unitScale(units);  // still validate the parameter
+    rules_ = dprnt::RuleSet::fromFile(rules_file_, settings.program_units);
   }
 
   state_ = std::make_unique<MachineStatePublisher>(nh, pnh, input_->describe());
   state_->diagnostics().add("dprnt", this, &DprntNode::diagnose);
-  publishWorkOffset(pnh);
+  publishWorkOffset(settings.work_offset);
 
+  advertise(pnh);
+  ROS_INFO("DPRNT from %s, %zu rules%s%s", input_->describe().c_str(), rules_.rules().size(),
+           rules_file_.empty() ? "" : " from ", rules_file_.c_str());
+  // Not under mutex_: an input may report its state from start() (the topic input does).
+  input_->start([this](const uint8_t* data, size_t size) { onBytes(data, size); },
+                [this](LinkState state, const std::string& why) { onLinkState(state, why); },
+                [this](const std::string& why) { onRestart(why); });
+}
+
+void DprntNode::advertise(const ros::NodeHandle& pnh)
+{
   // Publishers exist before the input thread can call into them.
   std::lock_guard<std::mutex> lock(mutex_);
   raw_pub_ = nh_.advertise<DprntLine>("dprnt/raw", 100);
@@ -191,24 +174,13 @@ DprntNode::DprntNode(ros::NodeHandle nh, ros::NodeHandle pnh)
     rule_pubs_.push_back(pubs);
   }
   clear_srv_ = advertiseGuardedService(pnh, "clear", &DprntNode::clear, this);
-  ROS_INFO("DPRNT from %s, %zu rules%s%s", input_->describe().c_str(), rules_.rules().size(),
-           rules_file_.empty() ? "" : " from ", rules_file_.c_str());
-  input_->start([this](const uint8_t* data, size_t size) { onBytes(data, size); },
-                [this](LinkState state, const std::string& why) { onLinkState(state, why); },
-                [this](const std::string& why) { onRestart(why); });
 }
 
-void DprntNode::publishWorkOffset(const ros::NodeHandle& pnh)
+void DprntNode::publishWorkOffset(const std::vector<double>& offset)
 {
-  // ~work_offset: [x, y, z] m, the work zero (G54) in <tf_prefix>machine, published as the static
-  // transform <tf_prefix>machine -> <tf_prefix>work so points of `frame: work` rules can be placed
-  // when nothing else publishes that frame. Empty (default): not published (haas_mdc_node
-  // publishes it from the control's work offset variables).
-  std::vector<double> offset;
-  if (!pnh.getParam("work_offset", offset) || offset.empty())
+  // ~work_offset (dprnt_params.cpp): the static transform <tf_prefix>machine -> <tf_prefix>work.
+  if (offset.empty())
     return;
-  if (offset.size() != 3)
-    throw ConfigError("Parameter " + pnh.resolveName("work_offset") + " needs [x, y, z] (m) or [].");
   geometry_msgs::TransformStamped t;
   t.header.stamp = ros::Time::now();
   t.header.frame_id = state_->frame("machine");
@@ -233,6 +205,16 @@ void DprntNode::onBytes(const uint8_t* data, size_t size)
   const ros::Time stamp = ros::Time::now();
   std::lock_guard<std::mutex> lock(mutex_);
   assembler_.feed(data, size, [&](const dprnt::LineEvent& event) { onLine(event, stamp); });
+}
+
+void DprntNode::onForwardedLine(const DprntLine& line)
+{
+  // The same path as bytes from a port (noise, parity and length checks, counters), stamped when
+  // the forwarding node read the line.
+  const std::string bytes = line.text + "\n";
+  std::lock_guard<std::mutex> lock(mutex_);
+  assembler_.feed(reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size(),
+                  [&](const dprnt::LineEvent& event) { onLine(event, line.header.stamp); });
 }
 
 void DprntNode::onLine(const dprnt::LineEvent& event, const ros::Time& stamp)

@@ -14,69 +14,24 @@
 #include <sstream>
 
 #include "cnc_bridge/CycleEvent.h"
+#include "cnc_bridge/DprntLine.h"
 #include "cnc_bridge/MacroVariables.h"
 #include "cnc_bridge/MdcQuery.h"
 #include "cnc_bridge/MdcReadVariable.h"
 #include "cnc_bridge/MdcWriteVariable.h"
 #include "cnc_bridge/common/error.h"
-#include "cnc_bridge/common/port_lock.h"
 #include "cnc_bridge/mdc/mdc_monitor.h"
 #include "cnc_bridge/mdc/mdc_readings.h"
 #include "cnc_bridge/ros/machine_state_publisher.h"
 #include "cnc_bridge/ros/node_main.h"
-#include "cnc_bridge/ros/params.h"
 #include "cnc_bridge/ros/request_boundary.h"
 #include "cnc_bridge/ros/runtime_switch.h"
-#include "cnc_bridge/transport/backoff.h"
-#include "cnc_bridge/transport/reconnecting_link.h"
-#include "cnc_bridge/transport/serial_line.h"
-#include "cnc_bridge/transport/tcp.h"
+#include "haas_mdc_node.h"
 
 namespace cnc_bridge
 {
 namespace
 {
-std::vector<int> intList(const ros::NodeHandle& pnh, const std::string& name, const std::vector<int>& fallback)
-{
-  std::vector<int> values = fallback;
-  pnh.param(name, values, fallback);
-  for (int v : values)
-  {
-    if (v < 0)
-    {
-      throw ConfigError(pnh.resolveName(name) + ": variable numbers must not be negative, not " + std::to_string(v));
-    }
-  }
-  return values;
-}
-// A poll period: at least 1 ms, so a node never polls a real control back to back.
-Milliseconds period(const ros::NodeHandle& pnh, const std::string& name, double fallback_seconds)
-{
-  return std::max(params::seconds(pnh, name, fallback_seconds), Milliseconds(1));
-}
-
-// ~query_periods: {"Q500": 0.25, "Q600 5021": 0.1, "Q303": 0} -> per-query periods (0: not polled).
-std::vector<std::pair<mdc::Query, Milliseconds>> queryPeriods(const ros::NodeHandle& pnh)
-{
-  std::vector<std::pair<mdc::Query, Milliseconds>> periods;
-  XmlRpc::XmlRpcValue table;
-  if (!pnh.getParam("query_periods", table))
-    return periods;
-  const std::string name = pnh.resolveName("query_periods");
-  if (table.getType() != XmlRpc::XmlRpcValue::TypeStruct)
-    throw ConfigError(name + " must be a dictionary of query: seconds, e.g. {Q500: 0.25, \"Q600 5021\": 0.1}");
-  for (auto& [key, value] : table)
-  {
-    if (value.getType() == XmlRpc::XmlRpcValue::TypeDouble)
-      periods.push_back(mdc::queryPeriod(name, key, static_cast<double>(value)));
-    else if (value.getType() == XmlRpc::XmlRpcValue::TypeInt)
-      periods.push_back(mdc::queryPeriod(name, key, static_cast<int>(value)));
-    else
-      throw ConfigError(name + "/" + key + " must be a number of seconds");
-  }
-  return periods;
-}
-
 uint8_t estopState(mdc::Estop estop)
 {
   switch (estop)
@@ -94,83 +49,27 @@ uint8_t estopState(mdc::Estop estop)
 class HaasMdcNode
 {
  public:
-  HaasMdcNode(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh), pnh_(pnh)
+  HaasMdcNode(ros::NodeHandle nh, ros::NodeHandle pnh)
+      : nh_(nh), pnh_(pnh), settings_(haasMdcSettings(pnh)), session_(settings_), poller_(&session_.poller())
   {
-    // ~port: serial device of a Classic control's RS-232 port; when set, the node uses serial
-    // (with ~baud, ~data_bits, ~parity, ~stop_bits, ~flow_control) instead of TCP.
-    if (pnh.hasParam("port"))
-    {
-      serial_ = params::serialSettings(pnh, 9600);
-      hardware_id_ = serial_->describe();
-      // ~lock_dir: where the serial-port lock shared with dnc_node lives.
-      std::string lock_dir;
-      pnh.param<std::string>("lock_dir", lock_dir, kDefaultLockDir);
-      port_lock_ = std::make_unique<PortLock>(serial_->device, lock_dir);
-    }
-    else
-    {
-      // ~host: address of an NGC control (or sim_haas_mdc).
-      host_ = pnh.param<std::string>("host", "");
-      if (host_.empty())
-      {
-        throw params::MissingParameter(pnh, "host", "nor ~port, the serial device of a Classic control");
-      }
-      // ~tcp_port: the control's MDC port, Haas setting 143.
-      tcp_port_ = params::tcpPort(pnh, "tcp_port", 5051);
-      hardware_id_ = host_ + ":" + std::to_string(tcp_port_);
-    }
-    // ~connect_timeout: s allowed for a TCP connection.
-    connect_timeout_ = params::seconds(pnh, "connect_timeout", 3.0);
-    // ~reply_timeout: s to wait for the reply to one query before counting it unanswered.
-    reply_timeout_ = params::seconds(pnh, "reply_timeout", 1.0);
-
-    mdc::PollPlan plan;
-    // ~status_period: s between Q500 (program, status, parts) polls, and Q104 (mode).
-    plan.status_period = period(pnh, "status_period", 0.25);
-    // ~variables_period: s between polls of each position variable and ~variables entry.
-    plan.variables_period = period(pnh, "variables_period", 0.25);
-    // ~counters_period: s between polls of tool in use, cycle times, M30 counters and #4006.
-    plan.counters_period = period(pnh, "counters_period", 2.0);
-    // ~max_unanswered: queries unanswered in a row before the link is reopened (0: never).
-    int max_unanswered = 5;
-    pnh.param("max_unanswered", max_unanswered, max_unanswered);
-    plan.max_unanswered = static_cast<unsigned>(std::max(0, max_unanswered));
-    // ~position_variables: machine position X Y Z (Haas #5021-#5023); [] to not poll positions.
-    vars_.position = intList(pnh, "position_variables", {5021, 5022, 5023});
-    // ~work_position_variables: work position X Y Z (#5041-#5043) giving the work offset; [] for none.
-    vars_.work = intList(pnh, "work_position_variables", {5041, 5042, 5043});
-    // ~spindle_variable: spindle speed in rpm (#3027); 0 to not poll it.
-    pnh.param("spindle_variable", vars_.spindle, 3027);
-    // ~variables: more macro variables polled via Q600 and shown in diagnostics (#100s, counters).
-    vars_.extra = intList(pnh, "variables", {});
-    // ~watch_variables: macro variables polled like those and published on `variables` when one
-    // changes (a robot's orchestration waits on them: the program sets #500 = 1, the part is ready).
-    vars_.watched = intList(pnh, "watch_variables", {});
+    vars_ = settings_.vars;
+    reply_timeout_ = settings_.reply_timeout;
     watch_ = std::make_unique<mdc::VariableWatch>(vars_.watched);
-    // ~units: linear unit of positions: auto (from G20/G21, #4006), inch or mm.
-    vars_.units = mdc::parseUnitSetting(pnh.param<std::string>("units", "auto"), pnh.resolveName("units"));
-    // ~writable_variables: macro variables ~write_variable may set with the E command; empty
-    // (the default) disables writes.
-    policy_ = std::make_unique<mdc::WritePolicy>(intList(pnh, "writable_variables", {}),
-                                                 pnh.resolveName("writable_variables"));
-    vars_.check(pnh.resolveName("position_variables"));
-    vars_.addTo(plan);
-    // ~query_periods: per-query periods in s overriding the three above, keyed by the query
-    // ("Q500", "Q600 5021"); a query not otherwise polled is added, 0 stops polling one.
-    plan.query_periods = queryPeriods(pnh);
-    poller_ = std::make_unique<mdc::MdcPoller>(plan, reply_timeout_, port_lock_.get());
-    // A DNC transfer on the same serial line may have set the device up its own way (the line
-    // settings belong to the device, not to our open port): ours again before the next query.
-    poller_->setPortRegainedHook(
-        [](Transport& link)
-        {
-          if (auto* serial = dynamic_cast<SerialLine*>(&link))
-            serial->applySettings();
-        });
-    if (const auto axes = vars_.workOffsetAxes(); !axes.empty())
-      poller_->setWorkOffsetAxes(axes);
+    policy_ = std::make_unique<mdc::WritePolicy>(settings_.writable_variables, pnh.resolveName("writable_variables"));
+    advertise(nh, pnh);
+    session_.start([this](LinkState link, const std::string& why) { onLinkState(link, why); });
+    ROS_INFO_STREAM("haas_mdc_node polling " << session_.hardwareId() << " (Q500 every "
+                                             << settings_.plan.status_period.count() << " ms; writes "
+                                             << (policy_->allowed().empty() ? "disabled" : "allow-listed") << ")");
+  }
 
-    state_ = std::make_unique<MachineStatePublisher>(nh, pnh, hardware_id_);
+  ~HaasMdcNode() { session_.stop(); }
+
+ private:
+  // Publishers, services and the poller's listeners: all there before the session starts.
+  void advertise(ros::NodeHandle& nh, ros::NodeHandle& pnh)
+  {
+    state_ = std::make_unique<MachineStatePublisher>(nh, pnh, session_.hardwareId());
     state_->diagnostics().add("mdc", this, &HaasMdcNode::diagnose);
     events_pub_ = nh.advertise<CycleEvent>("events", 20);
     if (!watch_->numbers().empty())
@@ -179,6 +78,11 @@ class HaasMdcNode
     }
     poller_->setListener([this](const mdc::MachineStatus& s, const std::vector<mdc::CycleEventData>& events)
                          { onStatus(s, events); });
+    if (settings_.forward_dprnt)
+    {
+      dprnt_pub_ = nh.advertise<DprntLine>("dprnt/port_lines", 1000);
+      poller_->setTextListener([this](const std::string& line) { forwardLine(line); });
+    }
     // ~enable_motion (start-up value) and ~set_motion_enabled (at run time): a macro variable write
     // changes what the machine does (offsets, the program's flow), so it is gated like motion on the
     // other nodes, on top of the ~writable_variables allow-list.
@@ -186,46 +90,25 @@ class HaasMdcNode
     read_srv_ = advertiseGuardedService(pnh, "read_variable", &HaasMdcNode::readVariable, this);
     write_srv_ = advertiseGuardedService(pnh, "write_variable", &HaasMdcNode::writeVariable, this);
     query_srv_ = advertiseGuardedService(pnh, "query", &HaasMdcNode::query, this);
-
-    link_ = std::make_unique<ReconnectingLink>("haas_mdc " + hardware_id_, [this] { return open(); });
-    auto on_state = [this](LinkState link, const std::string& why)
-    {
-      if (link != LinkState::kUp)
-      {
-        std::lock_guard<std::mutex> lock(watch_mutex_);
-        publishVariables(watch_->linkLost(), ros::Time::now());
-        state_->update(
-            [](MachineState& m)
-            {
-              // Nothing is known about a machine we cannot reach (MTConnect: UNAVAILABLE).
-              m.mode = MachineState::MODE_UNKNOWN;
-              m.execution = MachineState::EXECUTION_UNKNOWN;
-              m.position_valid = false;
-              m.estop = MachineState::ESTOP_UNKNOWN;
-            });
-      }
-      state_->setLink(link, why);
-    };
-    link_->start([this](Transport& link) { poller_->run(link, stop_); }, on_state);
-    ROS_INFO_STREAM("haas_mdc_node polling " << hardware_id_ << " (Q500 every " << plan.status_period.count()
-                                             << " ms; writes "
-                                             << (policy_->allowed().empty() ? "disabled" : "allow-listed") << ")");
   }
 
-  ~HaasMdcNode()
+  void onLinkState(LinkState link, const std::string& why)
   {
-    stop_.stop();
-    link_->stop();
-  }
-
- private:
-  std::unique_ptr<Transport> open() const
-  {
-    if (serial_)
+    if (link != LinkState::kUp)
     {
-      return openSerialLine(*serial_);
+      std::lock_guard<std::mutex> lock(watch_mutex_);
+      publishVariables(watch_->linkLost(), ros::Time::now());
+      state_->update(
+          [](MachineState& m)
+          {
+            // Nothing is known about a machine we cannot reach (MTConnect: UNAVAILABLE).
+            m.mode = MachineState::MODE_UNKNOWN;
+            m.execution = MachineState::EXECUTION_UNKNOWN;
+            m.position_valid = false;
+            m.estop = MachineState::ESTOP_UNKNOWN;
+          });
     }
-    return TcpConnection::connect(host_, tcp_port_, connect_timeout_);
+    state_->setLink(link, why);
   }
 
   // Called by the poller after each reply, under its lock.
@@ -278,6 +161,17 @@ class HaasMdcNode
       events_pub_.publish(state_->cycleEvent(now, e.type, e.program, e.part_count, e.cycle_time, e.text));
       ROS_INFO_STREAM("haas_mdc_node: " << e.text << " (program " << e.program << ", parts " << e.part_count << ")");
     }
+  }
+
+  // Called by the poller for each line of the port that is no MDC reply, in the order read.
+  void forwardLine(const std::string& text)
+  {
+    DprntLine line;
+    line.header.stamp = ros::Time::now();
+    line.machine = state_->machineName();
+    line.line_number = ++forwarded_lines_;
+    line.text = text;
+    dprnt_pub_.publish(line);
   }
 
   // Publishes the watched variables' values, if VariableWatch says they are due.
@@ -387,8 +281,17 @@ class HaasMdcNode
     status.add("latency max (ms)", stats.max_latency_ms);
     status.add("polls skipped for a DNC transfer", poller_->skippedForPortLock());
     status.add("port regained after a DNC transfer", poller_->portRegained());
-    status.add("reconnects", link_ ? link_->reconnects() : 0u);
+    status.add("reconnects", session_.reconnects());
     motion_->addTo(status);
+    if (settings_.forward_dprnt)
+    {
+      status.add("DPRNT lines forwarded", stats.text_lines);
+      status.add("DPRNT readers", dprnt_pub_.getNumSubscribers());
+      if (dprnt_pub_.getNumSubscribers() == 0)
+        status.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN,
+                            "nobody reads dprnt/port_lines: DPRNT lines of this port are lost (start dprnt_node "
+                            "with input:=topic)");
+    }
     if (s.last_cycle_s)
       status.add("last cycle (s)", *s.last_cycle_s);
     if (s.m30_counter1)
@@ -402,27 +305,23 @@ class HaasMdcNode
   }
 
   ros::NodeHandle nh_, pnh_;
-  std::optional<SerialSettings> serial_;
-  std::string host_;
-  uint16_t tcp_port_ = 0;
-  std::string hardware_id_;
-  Milliseconds connect_timeout_{3000}, reply_timeout_{1000};
+  mdc::MdcSettings settings_;
+  mdc::MdcSession session_;
+  mdc::MdcPoller* poller_;  // session_'s
+  Milliseconds reply_timeout_{1000};
   mdc::PollVariables vars_;
   std::atomic<mdc::Units> units_{mdc::Units::kUnknown};  ///< the control's G20/G21 as last polled (#4006)
   std::unique_ptr<mdc::WritePolicy> policy_;
   std::unique_ptr<RuntimeSwitch> motion_;      // gates ~write_variable
   std::unique_ptr<mdc::VariableWatch> watch_;  // update() and linkLost() under watch_mutex_
   std::mutex watch_mutex_;
-  std::unique_ptr<PortLock> port_lock_;
-  std::unique_ptr<mdc::MdcPoller> poller_;
   std::unique_ptr<MachineStatePublisher> state_;
   ros::Publisher events_pub_;
   ros::Publisher variables_pub_;
+  ros::Publisher dprnt_pub_;      // dprnt/port_lines, with ~forward_dprnt
+  uint64_t forwarded_lines_ = 0;  // poller thread only
   ros::ServiceServer read_srv_, write_srv_, query_srv_;
   uint64_t last_unanswered_ = 0;
-
-  StopSignal stop_;
-  std::unique_ptr<ReconnectingLink> link_;
 };
 }  // namespace cnc_bridge
 

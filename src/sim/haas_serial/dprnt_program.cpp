@@ -270,176 +270,213 @@ MacroProgram MacroProgram::parse(const std::string& text)
   return program;
 }
 
-void MacroProgram::run(MacroMachine& m, const std::function<bool(const std::string&)>& print) const
+namespace
 {
-  const auto error = [](const Block& b, const std::string& what)
-  { return ConfigError("line " + std::to_string(b.line) + " (" + b.text + "): " + what); };
+ConfigError blockError(int line, const std::string& text, const std::string& what)
+{
+  return ConfigError("line " + std::to_string(line) + " (" + text + "): " + what);
+}
+
+// Address words: G, M, P, X, Y, Z ... each followed by a number, #var or [expr].
+struct AddressWords
+{
+  bool probe = false, has_p = false, end = false;
+  double p = 0;
+  double target[3] = {0, 0, 0};
+  bool has_axis[3] = {false, false, false};
+};
+
+AddressWords readAddressWords(const std::string& t, int line, MacroMachine& m)
+{
+  AddressWords w;
+  size_t i = 0;
+  while (i < t.size())
+  {
+    const char address = t[i];
+    if (!std::isalpha(static_cast<unsigned char>(address)))
+      throw blockError(line, t, std::string("unexpected '") + address + "'");
+    Expression value(t, i + 1, m);
+    const double v = value.parse();
+    i = value.pos();
+    switch (address)
+    {
+      case 'G':
+        if (v == 90)
+          m.incremental = false;
+        else if (v == 91)
+          m.incremental = true;
+        else if (v == 65)
+          w.probe = true;
+        break;
+      case 'M':
+        w.end = w.end || v == 30 || v == 2 || v == 99;
+        break;
+      case 'P':
+        w.has_p = true;
+        w.p = v;
+        break;
+      case 'X':
+      case 'Y':
+      case 'Z':
+        w.has_axis[address - 'X'] = true;
+        w.target[address - 'X'] = v;
+        break;
+      default:
+        break;  // feed, spindle, probe arguments (W, A, H ...): no effect here
+    }
+  }
+  return w;
+}
+
+// A block of address words: a move, a probe cycle, the end. \returns false at M30/M02/M99.
+bool runAddressBlock(const std::string& t, int line, MacroMachine& m)
+{
+  const AddressWords w = readAddressWords(t, line, m);
+  if (!w.probe)
+  {
+    for (int axis = 0; axis < 3; ++axis)
+    {
+      if (w.has_axis[axis])
+        m.position[axis] = m.incremental ? m.position[axis] + w.target[axis] : w.target[axis];
+    }
+  }
+  if (w.probe && w.has_p && std::lround(w.p) == 9995)
+  {
+    // Single-surface Z probe (WIPS): the probe comes down at the current X Y and stops on the
+    // surface; the G54 Z offset (#5223) becomes the surface height, as in OpenDNC's grid cycle.
+    const double z = m.surface(m.position[0], m.position[1]);
+    m.variables[5223] = z;
+    m.variables[5061] = m.position[0];
+    m.variables[5062] = m.position[1];
+    m.variables[5063] = z;
+  }
+  // Work position (#5041-#5043) and machine position (#5021-#5023): work plus the G54
+  // offset (#5221-#5223; the probe cycle above sets the Z offset, as in OpenDNC's).
+  for (int axis = 0; axis < 3; ++axis)
+  {
+    m.variables[5041 + axis] = m.position[axis];
+    const auto offset = m.variables.find(5221 + axis);
+    m.variables[5021 + axis] = m.position[axis] + (offset == m.variables.end() ? 0.0 : offset->second);
+  }
+  return !w.end;
+}
+}  // namespace
+
+bool MacroProgram::printBlock(const std::string& t, MacroMachine& m, const PrintFn& print)
+{
+  if (m.before_print)
+    m.before_print(m);
+  const std::string body = t.substr(6, t.size() - 7);
+  const std::string line = dprnt::formatStatement(body,
+                                                  [&](int n)
+                                                  {
+                                                    const auto found = m.variables.find(n);
+                                                    return found == m.variables.end() ? 0.0 : found->second;
+                                                  });
+  return print(line);
+}
+
+size_t MacroProgram::whileBlock(size_t pc, MacroMachine& m) const
+{
+  const Block& b = blocks_[pc];
+  const std::string& t = b.text;
+  Expression cond(t, 5, m);
+  const double v = cond.parse();
+  if (t.compare(cond.pos(), 2, "DO") != 0)
+    throw blockError(b.line, t, "WHILE without DOn");
+  const int label = loopLabel(t, cond.pos() + 2);
+  if (v != 0)
+    return pc + 1;
+  const std::string end = "END" + std::to_string(label);
+  size_t j = pc + 1;
+  while (j < blocks_.size() && blocks_[j].text != end)
+    ++j;
+  if (j == blocks_.size())
+    throw blockError(b.line, t, "no " + end);
+  return j + 1;
+}
+
+size_t MacroProgram::endBlock(size_t pc) const
+{
+  const Block& b = blocks_[pc];
+  const std::string label = "DO" + b.text.substr(3);
+  size_t j = pc;
+  while (j > 0 && !(blocks_[j - 1].text.rfind("WHILE", 0) == 0 && blocks_[j - 1].text.size() >= label.size() &&
+                    blocks_[j - 1].text.compare(blocks_[j - 1].text.size() - label.size(), label.size(), label) == 0))
+    --j;
+  if (j == 0)
+    throw blockError(b.line, b.text, "END without its WHILE");
+  return j - 1;
+}
+
+size_t MacroProgram::ifBlock(size_t pc, MacroMachine& m) const
+{
+  const Block& b = blocks_[pc];
+  const std::string& t = b.text;
+  Expression cond(t, 2, m);
+  const double v = cond.parse();
+  if (t.compare(cond.pos(), 4, "GOTO") != 0)
+    throw blockError(b.line, t, "only IF [...] GOTOn is supported");
+  if (v == 0)
+    return pc + 1;
+  const int target = loopLabel(t, cond.pos() + 4);
+  size_t j = 0;
+  while (j < blocks_.size() && blocks_[j].n != target)
+    ++j;
+  if (j == blocks_.size())
+    throw blockError(b.line, t, "no block N" + std::to_string(target));
+  return j;
+}
+
+size_t MacroProgram::step(size_t pc, MacroMachine& m, const PrintFn& print) const
+{
+  const Block& b = blocks_[pc];
+  const std::string& t = b.text;
+  if (t.rfind("DPRNT[", 0) == 0)
+    return printBlock(t, m, print) ? pc + 1 : kStop;
+  if (t[0] == '#')
+  {
+    Expression lhs(t, 0, m);
+    const int n = lhs.variableNumber();
+    if (lhs.pos() >= t.size() || t[lhs.pos()] != '=')
+      throw blockError(b.line, t, "expected '=' after the variable");
+    Expression rhs(t, lhs.pos() + 1, m);
+    m.variables[n] = rhs.parse();
+    return pc + 1;
+  }
+  if (t.rfind("WHILE", 0) == 0)
+    return whileBlock(pc, m);
+  if (t.rfind("END", 0) == 0)
+    return endBlock(pc);
+  if (t.rfind("IF", 0) == 0)
+    return ifBlock(pc, m);
+  return runAddressBlock(t, b.line, m) ? pc + 1 : kStop;
+}
+
+void MacroProgram::run(MacroMachine& m, const PrintFn& print) const
+{
   size_t pc = 0;
   uint64_t steps = 0;
   while (pc < blocks_.size())
   {
     const Block& b = blocks_[pc];
-    const std::string& t = b.text;
     if (m.max_blocks > 0 && ++steps > m.max_blocks)
-      throw error(b, "more than " + std::to_string(m.max_blocks) + " blocks: endless loop?");
-    size_t next = pc + 1;
+      throw blockError(b.line, b.text, "more than " + std::to_string(m.max_blocks) + " blocks: endless loop?");
     try
     {
-      if (t.rfind("DPRNT[", 0) == 0)
-      {
-        if (m.before_print)
-          m.before_print(m);
-        const std::string body = t.substr(6, t.size() - 7);
-        const std::string line = dprnt::formatStatement(body,
-                                                        [&](int n)
-                                                        {
-                                                          const auto found = m.variables.find(n);
-                                                          return found == m.variables.end() ? 0.0 : found->second;
-                                                        });
-        if (!print(line))
-          return;
-      }
-      else if (t[0] == '#')
-      {
-        Expression lhs(t, 0, m);
-        const int n = lhs.variableNumber();
-        if (lhs.pos() >= t.size() || t[lhs.pos()] != '=')
-          throw error(b, "expected '=' after the variable");
-        Expression rhs(t, lhs.pos() + 1, m);
-        m.variables[n] = rhs.parse();
-      }
-      else if (t.rfind("WHILE", 0) == 0)
-      {
-        Expression cond(t, 5, m);
-        const double v = cond.parse();
-        if (t.compare(cond.pos(), 2, "DO") != 0)
-          throw error(b, "WHILE without DOn");
-        const int label = loopLabel(t, cond.pos() + 2);
-        if (v == 0)
-        {
-          const std::string end = "END" + std::to_string(label);
-          size_t j = pc + 1;
-          while (j < blocks_.size() && blocks_[j].text != end)
-            ++j;
-          if (j == blocks_.size())
-            throw error(b, "no " + end);
-          next = j + 1;
-        }
-      }
-      else if (t.rfind("END", 0) == 0)
-      {
-        const std::string label = "DO" + t.substr(3);
-        size_t j = pc;
-        while (j > 0 &&
-               !(blocks_[j - 1].text.rfind("WHILE", 0) == 0 && blocks_[j - 1].text.size() >= label.size() &&
-                 blocks_[j - 1].text.compare(blocks_[j - 1].text.size() - label.size(), label.size(), label) == 0))
-          --j;
-        if (j == 0)
-          throw error(b, "END without its WHILE");
-        next = j - 1;
-      }
-      else if (t.rfind("IF", 0) == 0)
-      {
-        Expression cond(t, 2, m);
-        const double v = cond.parse();
-        if (t.compare(cond.pos(), 4, "GOTO") != 0)
-          throw error(b, "only IF [...] GOTOn is supported");
-        if (v != 0)
-        {
-          const int target = loopLabel(t, cond.pos() + 4);
-          size_t j = 0;
-          while (j < blocks_.size() && blocks_[j].n != target)
-            ++j;
-          if (j == blocks_.size())
-            throw error(b, "no block N" + std::to_string(target));
-          next = j;
-        }
-      }
-      else
-      {
-        // Address words: G, M, P, X, Y, Z ... each followed by a number, #var or [expr].
-        bool probe = false, has_p = false, end = false;
-        double p = 0;
-        double target[3];
-        bool has_axis[3] = {false, false, false};
-        size_t i = 0;
-        while (i < t.size())
-        {
-          const char address = t[i];
-          if (!std::isalpha(static_cast<unsigned char>(address)))
-            throw error(b, std::string("unexpected '") + address + "'");
-          Expression value(t, i + 1, m);
-          const double v = value.parse();
-          i = value.pos();
-          switch (address)
-          {
-            case 'G':
-              if (v == 90)
-                m.incremental = false;
-              else if (v == 91)
-                m.incremental = true;
-              else if (v == 65)
-                probe = true;
-              break;
-            case 'M':
-              end = end || v == 30 || v == 2 || v == 99;
-              break;
-            case 'P':
-              has_p = true;
-              p = v;
-              break;
-            case 'X':
-            case 'Y':
-            case 'Z':
-              has_axis[address - 'X'] = true;
-              target[address - 'X'] = v;
-              break;
-            default:
-              break;  // feed, spindle, probe arguments (W, A, H ...): no effect here
-          }
-        }
-        if (!probe)
-        {
-          for (int axis = 0; axis < 3; ++axis)
-          {
-            if (has_axis[axis])
-              m.position[axis] = m.incremental ? m.position[axis] + target[axis] : target[axis];
-          }
-        }
-        if (probe && has_p && std::lround(p) == 9995)
-        {
-          // Single-surface Z probe (WIPS): the probe comes down at the current X Y and stops on the
-          // surface; the G54 Z offset (#5223) becomes the surface height, as in OpenDNC's grid cycle.
-          const double z = m.surface(m.position[0], m.position[1]);
-          m.variables[5223] = z;
-          m.variables[5061] = m.position[0];
-          m.variables[5062] = m.position[1];
-          m.variables[5063] = z;
-        }
-        // Work position (#5041-#5043) and machine position (#5021-#5023): work plus the G54
-        // offset (#5221-#5223; the probe cycle above sets the Z offset, as in OpenDNC's).
-        for (int axis = 0; axis < 3; ++axis)
-        {
-          m.variables[5041 + axis] = m.position[axis];
-          const auto offset = m.variables.find(5221 + axis);
-          m.variables[5021 + axis] = m.position[axis] + (offset == m.variables.end() ? 0.0 : offset->second);
-        }
-        if (end)
-          return;
-      }
+      pc = step(pc, m, print);
     }
     catch (const ConfigError& e)
     {
       const std::string what = e.what();
       if (what.rfind("line ", 0) == 0)
         throw;
-      throw error(b, what);
+      throw blockError(b.line, b.text, what);
     }
     catch (const ProtocolError& e)  // a malformed DPRNT statement
     {
-      throw error(b, e.what());
+      throw blockError(b.line, b.text, e.what());
     }
-    pc = next;
   }
 }
 }  // namespace sim

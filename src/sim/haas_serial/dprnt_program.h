@@ -45,10 +45,13 @@ class MacroProgram
   /// \brief Runs the program once; \p print gets every DPRNT line (without its line end) and
   /// returns false to stop early.
   /// \throws ConfigError on a run-time error (a loop without its END, a bad expression).
-  void run(MacroMachine& machine, const std::function<bool(const std::string&)>& print) const;
+  using PrintFn = std::function<bool(const std::string&)>;
+  void run(MacroMachine& machine, const PrintFn& print) const;
   size_t blocks() const { return blocks_.size(); }
 
  private:
+  /// What step() returns when the program ends (M30, M02, M99) or print() asked it to stop.
+  static constexpr size_t kStop = static_cast<size_t>(-1);
   struct Block
   {
     std::string text;  // upper case, spaces removed except inside DPRNT[...]
@@ -56,6 +59,14 @@ class MacroProgram
     int n = -1;  // N number, for GOTO
   };
   std::vector<Block> blocks_;
+
+  /// Runs block \p pc. \returns the next block's index, or kStop.
+  size_t step(size_t pc, MacroMachine& m, const PrintFn& print) const;
+  /// DPRNT[...]: \returns what print() returned.
+  static bool printBlock(const std::string& text, MacroMachine& m, const PrintFn& print);
+  size_t whileBlock(size_t pc, MacroMachine& m) const;
+  size_t endBlock(size_t pc) const;
+  size_t ifBlock(size_t pc, MacroMachine& m) const;
 };
 }  // namespace sim
 }  // namespace cnc_bridge
