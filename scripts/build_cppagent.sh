@@ -31,11 +31,14 @@ while [[ $# -gt 0 ]]; do
 done
 
 installed() {
-  # The agent prints its version on any unknown argument.
+  # The agent prints its version first, whatever its argument (here taken as a missing file).
   # (Its output read whole first: grep -q leaving early would fail the pipe under pipefail.)
   [[ -x "$prefix/agent" ]] || return 1
   local said
-  said=$("$prefix/agent" version 2>&1 || true)
+  local scratch
+  scratch=$(mktemp -d)  # the agent starts a log in the folder it runs in
+  said=$(cd "$scratch" && "$prefix/agent" version 2>&1 || true)
+  rm -rf "$scratch"
   [[ $said == *"Version $version"* ]]
 }
 if installed; then

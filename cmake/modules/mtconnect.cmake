@@ -24,9 +24,15 @@ endif()
 if(NOT CNC_BRIDGE_CORE_ONLY)
   cnc_node(mtconnect_node src/ros/nodes/mtconnect_node.cpp src/ros/nodes/mtconnect_params.cpp)
   target_link_libraries(mtconnect_node cnc_bridge_mtconnect)
+  # MTConnect out: the cell's machines (their MachineState) served as an SHDR adapter to an agent.
+  cnc_node(mtconnect_adapter_node src/ros/nodes/mtconnect_adapter_node.cpp src/ros/nodes/mtconnect_adapter_params.cpp)
+  target_link_libraries(mtconnect_adapter_node cnc_bridge_mtconnect)
   if(CATKIN_ENABLE_TESTING)
     find_package(rostest REQUIRED)
     # The node against the reference agent's recorded answers, replayed byte for byte.
     add_rostest(test/rostest/mtconnect_node.test DEPENDENCIES mtconnect_node ${PROJECT_NAME}_generate_messages_py)
+    # Out and back in: mtconnect_adapter_node -> the reference agent -> mtconnect_node, two machines.
+    add_rostest(test/rostest/mtconnect_round_trip.test DEPENDENCIES mtconnect_adapter_node mtconnect_node
+                ${PROJECT_NAME}_generate_messages_py)
   endif()
 endif()
