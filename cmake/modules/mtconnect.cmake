@@ -21,6 +21,8 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   target_link_libraries(test_mtconnect_agent cnc_bridge_mtconnect)
   target_compile_definitions(test_mtconnect_agent PRIVATE CNC_MTCONNECT_AGENT_DEFAULT="${CNC_MTCONNECT_AGENT}")
 endif()
+# The client's HTTP framing and documents, and the adapter's encoding of texts, on arbitrary bytes.
+cnc_fuzz_target(fuzz_mtconnect test/fuzz/fuzz_mtconnect.cpp)
 if(NOT CNC_BRIDGE_CORE_ONLY)
   cnc_node(mtconnect_node src/ros/nodes/mtconnect_node.cpp src/ros/nodes/mtconnect_params.cpp)
   target_link_libraries(mtconnect_node cnc_bridge_mtconnect)
