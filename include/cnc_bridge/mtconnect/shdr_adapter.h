@@ -40,7 +40,7 @@ class ShdrAdapter
  public:
   /// \brief Listens on settings.address:port (\throws LinkError if it cannot be bound) for agents
   /// that read \p devices.
-  ShdrAdapter(AdapterSettings settings, std::vector<std::string> devices);
+  ShdrAdapter(AdapterSettings settings, const std::vector<std::string>& devices);
   ~ShdrAdapter();
   ShdrAdapter(const ShdrAdapter&) = delete;
   ShdrAdapter& operator=(const ShdrAdapter&) = delete;

@@ -4,6 +4,7 @@
 #include <tinyxml2.h>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <ctime>
@@ -111,12 +112,9 @@ bool isXmlName(const std::string& name)
 {
   if (name.empty() || !(std::isalpha(static_cast<unsigned char>(name[0])) || name[0] == '_'))
     return false;
-  for (const char c : name)
-  {
-    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.'))
-      return false;
-  }
-  return true;
+  return std::all_of(name.begin(), name.end(),
+                     [](char c)
+                     { return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.'; });
 }
 
 void addItems(tinyxml2::XMLElement* parent, const std::string& device, const ItemSpec* begin, const ItemSpec* end)
@@ -301,15 +299,16 @@ std::string devicesXml(const std::vector<DeviceSpec>& devices)
   for (const auto& d : devices)
   {
     if (!isXmlName(d.name))
-      throw ConfigError("device name '" + d.name +
-                        "' cannot name an MTConnect device: use letters, digits, '_', '-', starting with a letter");
+      throw ConfigError(
+          "device name '" + d.name +
+          "' cannot name an MTConnect device: use letters, digits, '_', '-', '.', starting with a letter or '_'");
     if (!seen.insert(d.name).second)
       throw ConfigError("device '" + d.name + "' is named twice");
   }
   if (devices.empty())
     throw ConfigError("no device to describe: give the adapter at least one machine");
   tinyxml2::XMLDocument doc;
-  doc.InsertEndChild(doc.NewDeclaration("xml version=\"1.0\" encoding=\"UTF-8\""));
+  doc.InsertEndChild(doc.NewDeclaration(R"(xml version="1.0" encoding="UTF-8")"));
   auto* root = doc.NewElement("MTConnectDevices");
   doc.InsertEndChild(root);
   root->SetAttribute("xmlns", "urn:mtconnect.org:MTConnectDevices:1.7");

@@ -297,7 +297,7 @@ void ShdrAdapter::Impl::stop()
     thread_.join();
 }
 
-ShdrAdapter::ShdrAdapter(AdapterSettings settings, std::vector<std::string> devices)
+ShdrAdapter::ShdrAdapter(AdapterSettings settings, const std::vector<std::string>& devices)
     : impl_(std::make_unique<Impl>(std::move(settings), devices))
 {
   impl_->start();
