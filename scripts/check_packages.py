@@ -148,7 +148,9 @@ ROSDEP_EXCEPTIONS = {
 }
 
 # Installed for building and running the scripts and benchmarks, not a dependency of the package.
-TOOLS = {"build-essential", "cmake", "ccache", "bc", "nodejs", "npm", "time", "clang-tidy", "universal-ctags"}
+TOOLS = {"build-essential", "cmake", "ccache", "bc", "nodejs", "npm", "time", "clang-tidy", "universal-ctags",
+         # scripts/build_cppagent.sh: the reference MTConnect agent, a test peer built from its tag
+         "git", "libdlib-dev", "libhowardhinnant-date-dev", "nlohmann-json3-dev", "libxml2-dev"}
 
 # Python module (top-level name) -> the Debian 12 package that provides it.
 PYTHON_MODULE_PACKAGE = {
@@ -207,6 +209,7 @@ PROGRAM_PACKAGES = {
     "/usr/bin/time": ["time"],  # bench/gcode: CPU time of rs274 and of the parser
     "node": ["nodejs"], "npm": ["npm"],  # bench/gcode's peer, npm gcode-parser
     "rs274": ["linuxcnc-uspace"],  # test_gcode_rs274's reference interpreter
+    "git": ["git"],  # scripts/build_cppagent.sh clones the reference MTConnect agent's tag
 }
 
 SCANNED_FOLDERS = ("scripts", "test", "bench")

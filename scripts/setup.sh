@@ -7,6 +7,8 @@
 #   scripts/setup.sh --runtime         only what a machine computer needs to run an installed
 #                                      package (scripts/debian-runtime-packages.txt)
 #   scripts/setup.sh [--runtime] --check   only list what is missing; exit status 1 if anything is
+# Without --runtime it also builds the reference MTConnect agent the round-trip test runs
+# (scripts/build_cppagent.sh: cppagent v1.8.0.3 from its tag, installed outside the repository).
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 check_only=0
@@ -27,12 +29,23 @@ missing=()
 for pkg in "${wanted[@]}"; do
   grep -qxF "$pkg" <<<"$present" || missing+=("$pkg")
 done
+# The reference MTConnect agent (not a Debian package), for building and testing only.
+agent_step() {
+  [[ $list == debian-packages.txt ]] || return 0
+  if [[ $check_only -eq 1 ]]; then
+    "$here/build_cppagent.sh" --check
+  else
+    "$here/build_cppagent.sh"
+  fi
+}
 if [[ ${#missing[@]} -eq 0 ]]; then
   echo "setup: all ${#wanted[@]} Debian packages present"
+  agent_step
   exit 0
 fi
 if [[ $check_only -eq 1 ]]; then
   echo "setup: ${#missing[@]} Debian packages missing: ${missing[*]}"
+  agent_step || true
   exit 1
 fi
 sudo=""
@@ -43,3 +56,4 @@ fi
 echo "setup: installing ${#missing[@]} Debian packages: ${missing[*]}"
 $sudo apt-get update -qq
 DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}"
+agent_step

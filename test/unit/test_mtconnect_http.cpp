@@ -160,3 +160,22 @@ TEST(MtconnectHttp, StreamCutByTheAgentStoppingEndsInALinkError)
   EXPECT_FALSE(parser.done());
   EXPECT_THROW(parser.feedEnd(), LinkError);
 }
+
+TEST(MtconnectHttp, ConnectionClosedBeforeAnyByteIsALinkError)
+{
+  // An agent that accepts and closes without a byte (found by fuzz_mtconnect: Beast's parser may
+  // not be told the end of a stream it never saw a byte of; without NDEBUG it aborts).
+  ResponseParser parser([](std::string_view) {});
+  try
+  {
+    parser.feedEnd();
+    FAIL() << "an answer of no bytes was taken as complete";
+  }
+  catch (const LinkError& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("before answering"), std::string::npos) << e.what();
+  }
+  ResponseParser fed_nothing([](std::string_view) {});
+  fed_nothing.feed("");
+  EXPECT_THROW(fed_nothing.feedEnd(), LinkError);
+}

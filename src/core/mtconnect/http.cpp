@@ -158,6 +158,10 @@ void ResponseParser::feedEnd()
 {
   if (impl_->parser.is_done())
     return;
+  // Not a byte seen: Beast's parser must not be told the end (it would take the empty answer as
+  // complete, or abort on its assertion).
+  if (!impl_->parser.got_some())
+    throw LinkError("the agent closed the connection before answering");
   boost::beast::error_code ec;
   impl_->parser.put_eof(ec);
   if (ec || !impl_->parser.is_done())
