@@ -84,21 +84,21 @@ TEST(CellRulesTable, ReasonNamesTheField)
 {
   MachineRules rules;
   rules.reports_door = true;
-  auto reasonWith = [&](auto change)
+  auto reason_with = [&](auto change)
   {
     MachineReport report = safeReport();
     change(report);
     return judgeReport(report, 0.0, rules).reason;
   };
-  EXPECT_EQ(reasonWith([](MachineReport& r) { r.link = Link::Down; }), "link down");
-  EXPECT_EQ(reasonWith([](MachineReport& r) { r.estop = Estop::Unknown; }), "emergency stop unknown");
-  EXPECT_EQ(reasonWith([](MachineReport& r) { r.estop = Estop::On; }), "emergency stop on");
-  EXPECT_EQ(reasonWith([](MachineReport& r) { r.execution = Execution::Paused; }), "execution PAUSED (in a cycle)");
-  EXPECT_EQ(reasonWith([](MachineReport& r) { r.execution = Execution::Alarm; }), "execution ALARM");
-  EXPECT_EQ(reasonWith([](MachineReport& r) { r.spindle_rpm = kNaN; }), "spindle speed unknown");
-  EXPECT_EQ(reasonWith([](MachineReport& r) { r.spindle_rpm = 800; }), "spindle turning");
-  EXPECT_EQ(reasonWith([](MachineReport& r) { r.door = Door::Unknown; }), "door unknown");
-  EXPECT_EQ(reasonWith([](MachineReport& r) { r.door = Door::Closed; }), "door closed");
+  EXPECT_EQ(reason_with([](MachineReport& r) { r.link = Link::Down; }), "link down");
+  EXPECT_EQ(reason_with([](MachineReport& r) { r.estop = Estop::Unknown; }), "emergency stop unknown");
+  EXPECT_EQ(reason_with([](MachineReport& r) { r.estop = Estop::On; }), "emergency stop on");
+  EXPECT_EQ(reason_with([](MachineReport& r) { r.execution = Execution::Paused; }), "execution PAUSED (in a cycle)");
+  EXPECT_EQ(reason_with([](MachineReport& r) { r.execution = Execution::Alarm; }), "execution ALARM");
+  EXPECT_EQ(reason_with([](MachineReport& r) { r.spindle_rpm = kNaN; }), "spindle speed unknown");
+  EXPECT_EQ(reason_with([](MachineReport& r) { r.spindle_rpm = 800; }), "spindle turning");
+  EXPECT_EQ(reason_with([](MachineReport& r) { r.door = Door::Unknown; }), "door unknown");
+  EXPECT_EQ(reason_with([](MachineReport& r) { r.door = Door::Closed; }), "door closed");
   EXPECT_NE(judgeReport(safeReport(), 10.0, rules).reason.find("stale"), std::string::npos);
   EXPECT_NE(judgeReport(safeReport(), -1.0, rules).reason.find("clock"), std::string::npos);
 }
@@ -272,9 +272,9 @@ TEST_P(CellRulesProperty, NeverGrantsAnUnsafeEntryNorKeepsABrokenLease)
   for (std::size_t i = 0; i < names.size(); ++i)
   {
     MachineRules rules;
-    rules.state_period_s = 0.2 + 0.3 * i;
-    rules.stale_factor = 2.0 + i;
-    rules.settle_s = 0.5 * i;
+    rules.state_period_s = 0.2 + 0.3 * static_cast<double>(i);
+    rules.stale_factor = 2.0 + static_cast<double>(i);
+    rules.settle_s = 0.5 * static_cast<double>(i);
     rules.reports_door = i != 1;
     cell.addMachine(names[i], rules);
     oracle[names[i]].rules = rules;

@@ -201,7 +201,7 @@ Verdict CellRules::verdict(const std::string& name, double now)
   noteTime(now);
   if (!target.last)
     return no("no state received");
-  const Verdict judged = judgeReport(*target.last, now - target.received_at, target.rules);
+  Verdict judged = judgeReport(*target.last, now - target.received_at, target.rules);
   if (!judged.safe)
   {
     target.safe_since.reset();

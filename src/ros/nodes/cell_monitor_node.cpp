@@ -107,8 +107,8 @@ class CellMonitorNode
     diagnostics_pub_ = nh.advertise<diagnostic_msgs::DiagnosticArray>("/diagnostics", 10);
     request_srv_ = pnh.advertiseService("request_entry", &CellMonitorNode::onRequest, this);
     release_srv_ = pnh.advertiseService("release_entry", &CellMonitorNode::onRelease, this);
-    server_.registerGoalCallback([this](Server::GoalHandle goal) { onHoldGoal(goal); });
-    server_.registerCancelCallback([this](Server::GoalHandle goal) { onHoldCancel(goal); });
+    server_.registerGoalCallback([this](const Server::GoalHandle& goal) { onHoldGoal(goal); });
+    server_.registerCancelCallback([this](const Server::GoalHandle& goal) { onHoldCancel(goal); });
     server_.start();
     // ~check_rate: Hz at which staleness is judged without a state (leases, held goals, cell_state).
     timer_ = nh.createTimer(ros::Duration(1.0 / params::positive(pnh, "check_rate", 10.0)),
@@ -173,7 +173,7 @@ class CellMonitorNode
     if (!rules_.has(machine))
       return cell::Verdict{false, "no machine '" + machine + "' in the cell"};
     const bool held = rules_.leaseHolder(machine).value_or("") == robot;
-    const cell::Verdict answer = rules_.requestEntry(machine, robot, steadyNow());
+    cell::Verdict answer = rules_.requestEntry(machine, robot, steadyNow());
     if (answer.safe && !held)
       publishEvent(machine, robot, CellEntryEvent::GRANTED, "");
     return answer;
