@@ -8,6 +8,8 @@ Waits for every machine of the cell description, then, for each node a machine r
   at_controller    follows a G-code path with 1 ms setpoints (~follow_path action)
   slave_bus_node   steps the bus: axes move, the tool toggles
   haas_mdc_node    reports the cycle events it saw (a robot waits for CYCLE_END to unload)
+Before each of these steps the cell's robot (a stand-in) asks cell_monitor whether it may enter the
+machine and prints the answer with its reason,
 and prints a readable line for everything that happens, with numbers. Exit status 0 only if
 every step succeeded. Then, unless --once, keeps printing the cell's state until Ctrl-C.
 
@@ -27,10 +29,10 @@ import rospy
 import yaml
 from sensor_msgs.msg import PointCloud2
 
-from cnc_bridge.msg import (AtFollowPathAction, AtFollowPathGoal, CycleEvent, MachineState,
+from cnc_bridge.msg import (AtFollowPathAction, AtFollowPathGoal, CellState, CycleEvent, MachineState,
                             RunJobAction, RunJobGoal, SlaveCommand, SlaveResponse, TransferAction,
                             TransferGoal)
-from cnc_bridge.srv import DprntSaveSurface
+from cnc_bridge.srv import DprntSaveSurface, RequestEntry
 
 MODES = {v: k[5:] for k, v in vars(MachineState).items() if k.startswith("MODE_")}
 EXECUTION = {v: k[10:] for k, v in vars(MachineState).items() if k.startswith("EXECUTION_")}
@@ -38,8 +40,12 @@ LINK = {v: k[5:] for k, v in vars(MachineState).items() if k.startswith("LINK_")
 EVENTS = {v: k for k, v in vars(CycleEvent).items() if k.isupper() and isinstance(v, int)}
 
 
+SAY_LOCK = threading.Lock()  # the steps run side by side: one whole line at a time
+
+
 def say(text):
-    print("[%7.2f s] %s" % (time.time() - START, text), flush=True)
+    with SAY_LOCK:
+        print("[%7.2f s] %s" % (time.time() - START, text), flush=True)
 
 
 def describe(state):
@@ -256,6 +262,26 @@ def step_bus(machine, args):
         machine.name, len(responses)))
 
 
+# The demo's robot is a stand-in: before each of its steps at a machine it asks cell_monitor
+# (docs/cell_monitor.md) whether it may enter, prints the answer with its reason, and gives a
+# granted entry back at once (it does not reach in).
+ROBOT = "demo_robot"
+CELL_MONITOR = "/cell_monitor"
+
+
+def ask_cell_monitor(machine, node):
+    step = node.replace("_node", "")
+    try:
+        answer = rospy.ServiceProxy(CELL_MONITOR + "/request_entry", RequestEntry)(machine.name, ROBOT)
+    except rospy.ServiceException as error:
+        raise RuntimeError("cell_monitor did not answer before %s: %s" % (step, error))
+    if answer.granted:
+        say("%s: cell_monitor before %s: entry granted" % (machine.name, step))
+        rospy.ServiceProxy(CELL_MONITOR + "/release_entry", RequestEntry)(machine.name, ROBOT)
+    else:
+        say("%s: cell_monitor before %s: refused: %s" % (machine.name, step, answer.reason))
+
+
 STEPS = [("dnc_node", send_program), ("dprnt_node", probe_surface), ("ethernut_node", run_job),
          ("at_controller_node", follow_path), ("slave_bus_node", step_bus)]
 
@@ -291,6 +317,22 @@ def main():
         for node, state in sorted(machine.states.items()):
             say("%s/%s: %s" % (machine.name, node, describe(state)))
 
+    monitored = "cell_monitor" in description
+    if monitored:
+        try:
+            rospy.wait_for_service(CELL_MONITOR + "/request_entry", 30)
+        except rospy.ROSException:
+            say("cell_monitor: no %s/request_entry after 30 s" % CELL_MONITOR)
+            return 1
+        # Its first answers are "no state received" until it has heard every machine's state.
+        heard = threading.Event()
+        sub = rospy.Subscriber("/cell_state", CellState,
+                               lambda view: all(m.state_known for m in view.machines) and heard.set())
+        if not heard.wait(30):
+            say("cell_monitor: has not heard every machine's state after 30 s")
+            return 1
+        sub.unregister()
+
     failures = []
     threads = []
     for machine in machines:
@@ -298,6 +340,8 @@ def main():
             if node in machine.nodes:
                 def run(machine=machine, step=step, node=node):
                     try:
+                        if monitored:
+                            ask_cell_monitor(machine, node)
                         step(machine, args)
                     except Exception as error:  # report every failure, keep the others running
                         failures.append("%s/%s: %s" % (machine.name, node, error))

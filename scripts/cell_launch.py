@@ -97,6 +97,16 @@ def package_path(path):
     return absolute
 
 
+def cell_monitor_include(settings, source):
+    """cell_monitor (docs/cell_monitor.md) over the machines of this cell file, with its settings."""
+    lines = ['  <include file="$(find cnc_bridge)/launch/cell_monitor.launch">',
+             f'    <arg name="cell_file" value={attr(package_path(source))}/>']
+    for key, value in settings.items():
+        lines.append(f"    <arg name={attr(key)} value={attr(value)}/>")
+    lines.append("  </include>")
+    return lines
+
+
 def generate(description, source, rviz_path):
     cell = description.get("cell", "cell")
     root_frame = description.get("root_frame", "world")
@@ -106,6 +116,8 @@ def generate(description, source, rviz_path):
                f'args={attr("0 0 0 0 0 0 %s %s" % (root_frame, cell))}/>')
     for machine in description.get("machines", []):
         out.extend(machine_group(cell, machine, simulate))
+    if "cell_monitor" in description:
+        out.extend(cell_monitor_include(description["cell_monitor"] or {}, source))
     out.append('  <include if="$(arg gui)" file="$(find cnc_bridge)/launch/view.launch">')
     out.append(f'    <arg name="config" value={attr(rviz_path)}/>')
     out.append("  </include>")

@@ -105,6 +105,16 @@ class Demo(unittest.TestCase):
             match = re.search(pattern, run.stdout)
             self.assertIsNotNone(match, "no summary line for %s (/%s/) in:\n%s" % (step, pattern, run.stdout))
             numbers[step] = [float(g) for g in match.groups()]
+        # Before each step the demo's stand-in robot asked cell_monitor, and printed the answer
+        # with its reason when refused: one line per step, each machine and step once.
+        asked = re.findall(r"^\[[ \d.]+ s\] (\w+): cell_monitor before (\w+): (entry granted|refused: (.*))$",
+                           run.stdout, re.M)
+        self.assertEqual(len(asked), numbers["done"][0], "one cell_monitor answer per step in:\n" + run.stdout)
+        self.assertEqual(len({(machine, step) for machine, step, _, _ in asked}), len(asked))
+        for machine, step, answer, reason in asked:
+            self.assertIn(machine, MACHINES)
+            if answer != "entry granted":
+                self.assertTrue(reason.strip(), "%s before %s: refused without a reason" % (machine, step))
         self.assertGreater(numbers["xmodem"][0], 0)
         self.assertGreater(numbers["xmodem"][1], 0)
         self.assertEqual(numbers["surface"][0], 100)
