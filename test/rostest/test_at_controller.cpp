@@ -25,6 +25,10 @@ namespace
 std::string node, ns, prefix, pid_file, command_log, profile = "trapezoid";
 double jog_timeout = 0.5;  // the node's ~jog_timeout
 
+/// The node's ~end_tolerance (5 um, whole pulses, inclusive): a report 5 pulses off ends a goal, and
+/// its position in metres is 5e-6 give or take the last bit of a double.
+constexpr double kEndTolerance = 5e-6 + 1e-12;
+
 bool near(const geometry_msgs::Point& p, double x, double y, double z, double tolerance)
 {
   return std::fabs(p.x - x) <= tolerance && std::fabs(p.y - y) <= tolerance && std::fabs(p.z - z) <= tolerance;
@@ -169,7 +173,7 @@ TEST_F(AtController, FollowsAGcodeProgramToItsEndPoint)
   EXPECT_TRUE(result->success);
   // The goal ended on the controller's report of the program's end point X5 Y5 Z-1 (mm), within
   // ~end_tolerance (5 um), not when the last setpoint left: final_position is that report.
-  EXPECT_TRUE(near(result->final_position, 0.005, 0.005, -0.001, 5e-6)) << result->final_position;
+  EXPECT_TRUE(near(result->final_position, 0.005, 0.005, -0.001, kEndTolerance)) << result->final_position;
   EXPECT_NE(result->message.find("the controller reported the end point X5 Y5 Z-1 mm ("), std::string::npos)
       << result->message;
   EXPECT_GT(result->setpoints, 3000u);  // some 110 mm at 20 mm/s: several seconds of 1 ms steps
@@ -496,7 +500,7 @@ TEST_F(AtController, ProgramStopsHoldTheGoalUntilResumeAndM30EndsIt)
                                               0),
             0u)
       << client.getResult()->message;
-  EXPECT_TRUE(near(client.getResult()->final_position, 0.025, 0.005, 0.002, 5e-6))
+  EXPECT_TRUE(near(client.getResult()->final_position, 0.025, 0.005, 0.002, kEndTolerance))
       << client.getResult()->final_position;
   EXPECT_TRUE(state.waitFor([](const auto& s) { return near(s.position, 0.025, 0.005, 0.002, 1.5e-6); }))
       << state.last().position;

@@ -3,12 +3,15 @@
 // with a timeout; nothing sleeps.
 #include <gtest/gtest.h>
 
+#include <filesystem>
+#include <fstream>
 #include <memory>
 #include <string>
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/transport/link_factory.h"
 #include "cnc_bridge/transport/tcp.h"
+#include "temp_dir.h"
 #include "testing/pty.h"
 
 using namespace cnc_bridge;
@@ -135,4 +138,34 @@ TEST(LinkFactory, AnUnreachableLinkFailsWithALinkError)
   EXPECT_THROW(open(), LinkError);
   const LinkFactory missing = linkFactory(LinkSettings::serialLine(lineOn("/dev/cnc_bridge_no_such_port")));
   EXPECT_THROW(missing(), LinkError);
+}
+
+TEST(LinkFactory, ATcpLinkWithAWireTraceRecordsBothDirections)
+{
+  test::TempDir dir("test_link_factory");
+  TcpServer control(0, "127.0.0.1");
+  LinkSettings link = LinkSettings::tcp("127.0.0.1", control.port(), 2000ms);
+  link.wire_trace.dir = dir.path;
+  {
+    auto connection = linkFactory(link)();
+    auto peer = control.accept(2000ms);
+    ASSERT_NE(peer, nullptr);
+    expectCarries(*connection, *peer, "?Q100\r\n");
+    expectCarries(*peer, *connection, ">SERIAL NUMBER, 1234567\r\n");
+  }
+  std::vector<std::string> files;
+  for (const auto& entry : std::filesystem::directory_iterator(dir.path))
+  {
+    files.push_back(entry.path().string());
+  }
+  ASSERT_EQ(files.size(), 1u);
+  EXPECT_NE(files[0].find("127.0.0.1_" + std::to_string(control.port())), std::string::npos) << files[0];
+  std::ifstream in(files[0]);
+  std::string written, read;
+  for (const auto& entry : parseWireTrace(in, files[0]))
+  {
+    (entry.direction == TraceDirection::kWritten ? written : read).append(entry.bytes.begin(), entry.bytes.end());
+  }
+  EXPECT_EQ(written, "?Q100\r\n");
+  EXPECT_EQ(read, ">SERIAL NUMBER, 1234567\r\n");
 }

@@ -32,6 +32,10 @@ struct LinkSettings
   std::string host;       ///< kTcp: name or address
   uint16_t tcp_port = 0;  ///< kTcp: 1..65535
 
+  /// kTcp: where the connection's bytes are traced (off unless set; a serial line's own trace is
+  /// serial.wire_trace).
+  WireTraceSettings wire_trace;
+
   /// The TCP connect of a kTcp link, and of a serial line at a device server (with, for RFC 2217,
   /// the server's answers to the line settings). 5 s: openSerialLine()'s own default.
   Milliseconds connect_timeout{5000};

@@ -69,7 +69,8 @@ std::unique_ptr<Transport> openLink(const LinkSettings& settings)
     return openSerialLine(settings.serial, settings.input_on_open, settings.connect_timeout);
   }
   settings.validate();
-  return TcpConnection::connect(settings.host, settings.tcp_port, settings.connect_timeout);
+  return traced<Transport>(TcpConnection::connect(settings.host, settings.tcp_port, settings.connect_timeout),
+                           settings.wire_trace, settings.hardwareId());
 }
 
 LinkFactory linkFactory(LinkSettings settings)

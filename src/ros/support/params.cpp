@@ -159,6 +159,9 @@ LinkSettings tcpLink(const ros::NodeHandle& pnh, const TcpLinkDefaults& defaults
   }
   // ~connect_timeout: s allowed for a TCP connection.
   LinkSettings link = LinkSettings::tcp(host, port, seconds(pnh, "connect_timeout", defaults.connect_timeout));
+  // ~wire_trace: a folder; when set, every byte of the connection, both ways, goes to a trace file
+  // there (one per connection, at most 16 MiB each).
+  pnh.param<std::string>("wire_trace", link.wire_trace.dir, "");
   link.validate();
   return link;
 }
