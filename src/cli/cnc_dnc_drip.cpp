@@ -172,6 +172,22 @@ class PauseSignals
 };
 }  // namespace
 
+namespace
+{
+/// --preamble-file's blocks, or "" (the restart's own preamble) without it.
+std::string preambleFrom(const po::variables_map& vm)
+{
+  if (vm.count("preamble-file") == 0)
+    return "";
+  std::ifstream in(vm["preamble-file"].as<std::string>());
+  if (!in)
+    throw ConfigError("cannot read " + vm["preamble-file"].as<std::string>());
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+}  // namespace
+
 int runDrip(const std::vector<std::string>& args)
 {
   po::options_description options = dripSerialOptions();
@@ -228,17 +244,7 @@ int runDrip(const std::vector<std::string>& args)
   dnc::RestartPoint restart;
   restart.line = vm["start-line"].as<uint64_t>();
   restart.block = vm["start-block"].as<std::string>();
-  std::string preamble;
-  if (vm.count("preamble-file"))
-  {
-    std::ifstream in(vm["preamble-file"].as<std::string>());
-    if (!in)
-      throw ConfigError("cannot read " + vm["preamble-file"].as<std::string>());
-    std::ostringstream text;
-    text << in.rdbuf();
-    preamble = text.str();
-  }
-  const dnc::DripPlan plan = dnc::planDrip(file, drip, restart, preamble);
+  const dnc::DripPlan plan = dnc::planDrip(file, drip, restart, preambleFrom(vm));
   for (const auto& warning : plan.scan.warnings)
     std::cerr << "cnc_dnc drip: warning: " << warning << "\n";
   if (vm["show-preamble"].as<bool>())

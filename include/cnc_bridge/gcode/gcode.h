@@ -386,6 +386,8 @@ class Parser
   double dwellSeconds(const Scan& scan, int word) const;
   // Cutter compensation (gcode_comp.cpp).
   void compensatedStraight(Step& step, const Move& move);
+  /// G40 with a straight move: the exit from the offset path to the programmed point.
+  void compensationExit(Step& step, const Move& move);
   void compensatedArc(Step& step, const Move& move, const Arc& arc);
   static void compensationOn(Step& step);
   void compensationOff(Step& step, bool program_end);

@@ -271,6 +271,8 @@ class MdcPoller
   bool takePort(MdcClient& client);
   /// Asks for the control's cycle time for cycle ends held back by notify(), then delivers them.
   void deliverHeldEvents(MdcClient& client);
+  /// A new connection's client: stale values forgotten, cycle ends held for their measured time.
+  void attach(MdcClient& client);
   /// Waits \p wait for the next poll, reading the line meanwhile when it carries text. \returns
   /// true when stopped.
   bool waitForPoll(MdcClient& client, Milliseconds wait, StopSignal& stop);

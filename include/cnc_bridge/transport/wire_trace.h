@@ -182,7 +182,7 @@ class TraceReplay
   ReplayResult run(Transport& link, const Progress& progress = nullptr);
 
  private:
-  bool expect(Transport& link, const std::vector<uint8_t>& wanted, Milliseconds limit, ReplayResult& result);
+  static bool expect(Transport& link, const std::vector<uint8_t>& wanted, Milliseconds limit, ReplayResult& result);
   std::vector<TraceEntry> entries_;
   Options options_;
 };

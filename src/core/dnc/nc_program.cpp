@@ -421,6 +421,19 @@ bool percentLine(const std::string& line)
 }
 }  // namespace
 
+namespace
+{
+/// Counts \p issue; the first 100 are kept with their line and column.
+void addIssue(ProgramScan& scan, CharacterIssue issue)
+{
+  ++scan.issue_count;
+  if (scan.issues.size() < 100)
+  {
+    scan.issues.push_back(std::move(issue));
+  }
+}
+}  // namespace
+
 ProgramScan scanProgram(const std::string& path, const CharacterRules& rules, const RestartPoint& restart,
                         size_t eob_size, size_t max_line_length)
 {
@@ -441,11 +454,7 @@ ProgramScan scanProgram(const std::string& path, const CharacterRules& rules, co
     checkLine(line, n, rules, line_issues);
     for (auto& issue : line_issues)
     {
-      ++scan.issue_count;
-      if (scan.issues.size() < 100)
-      {
-        scan.issues.push_back(std::move(issue));
-      }
+      addIssue(scan, std::move(issue));
     }
     const bool text = !blank(line);
     if (text)
@@ -459,12 +468,8 @@ ProgramScan scanProgram(const std::string& path, const CharacterRules& rules, co
       {
         if (percent_pending != 0 && rules.reject_inner_percent)
         {
-          ++scan.issue_count;
-          if (scan.issues.size() < 100)
-          {
-            scan.issues.push_back(
-                CharacterIssue{percent_pending, 1, '%', "ends the program at the control, but more program follows"});
-          }
+          addIssue(scan, CharacterIssue{percent_pending, 1, '%',
+                                        "ends the program at the control, but more program follows"});
         }
         percent_pending = 0;
         if (percentLine(line))
@@ -473,11 +478,7 @@ ProgramScan scanProgram(const std::string& path, const CharacterRules& rules, co
         }
         else if (rules.reject_inner_percent && line.find('%') != std::string::npos)
         {
-          ++scan.issue_count;
-          if (scan.issues.size() < 100)
-          {
-            scan.issues.push_back(CharacterIssue{n, line.find('%') + 1, '%', "inside a block ends the program"});
-          }
+          addIssue(scan, CharacterIssue{n, line.find('%') + 1, '%', "inside a block ends the program"});
         }
       }
       scan.last_text_line = n;

@@ -315,6 +315,26 @@ void Parser::joinHeld(Step& st, Comp& comp, bool next_arc, double ncu, double nc
   (void)ncw;
 }
 
+void Parser::compensationExit(Step& st, const Move& move)
+{
+  // G40: the exit move, straight from the offset path to the programmed point.
+  Comp& comp = st.comp;
+  Vec3 from = st.position;
+  if (comp.on && comp.has_held)
+  {
+    emitHeld(st, comp);
+    from = comp.end;
+  }
+  comp = Comp();
+  Move m = move;
+  m.start = from;
+  if (m.start.x != m.end.x || m.start.y != m.end.y || m.start.z != m.end.z)
+  {
+    st.block.moves.push_back(m);
+  }
+  st.position = move.end;
+}
+
 void Parser::compensatedStraight(Step& st, const Move& move)
 {
   Comp& comp = st.comp;
@@ -322,21 +342,7 @@ void Parser::compensatedStraight(Step& st, const Move& move)
   const bool xy_moves = target.x != st.position.x || target.y != st.position.y;
   if (st.next.cutter_comp == CutterComp::kOff)
   {
-    // G40: the exit move, straight from the offset path to the programmed point.
-    Vec3 from = st.position;
-    if (comp.on && comp.has_held)
-    {
-      emitHeld(st, comp);
-      from = comp.end;
-    }
-    comp = Comp();
-    Move m = move;
-    m.start = from;
-    if (m.start.x != m.end.x || m.start.y != m.end.y || m.start.z != m.end.z)
-    {
-      st.block.moves.push_back(m);
-    }
-    st.position = target;
+    compensationExit(st, move);
     return;
   }
   if (!comp.on)

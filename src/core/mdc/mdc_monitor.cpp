@@ -591,15 +591,7 @@ void MdcPoller::run(Transport& transport, StopSignal& stop)
     client.setTextListener(text_listener_);
   }
   QueryScheduler scheduler = plan_.scheduler();
-  const bool ask_cycle_time = plan_.cycle_time_from_control;
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    client_ = &client;
-    monitor_.forgetVariables();  // values of an earlier connection may be stale
-    port_generation_.reset();    // a freshly opened port has our settings
-    hold_cycle_ends_ = ask_cycle_time;
-    held_events_.clear();
-  }
+  attach(client);
   struct Detach
   {
     MdcPoller& self;
@@ -684,6 +676,16 @@ void MdcPoller::run(Transport& transport, StopSignal& stop)
     }
     stats_ = sum(base_stats_, client.stats());
   }
+}
+
+void MdcPoller::attach(MdcClient& client)
+{
+  std::lock_guard<std::mutex> lock(mutex_);
+  client_ = &client;
+  monitor_.forgetVariables();  // values of an earlier connection may be stale
+  port_generation_.reset();    // a freshly opened port has our settings
+  hold_cycle_ends_ = plan_.cycle_time_from_control;
+  held_events_.clear();
 }
 
 bool MdcPoller::waitForPoll(MdcClient& client, Milliseconds wait, StopSignal& stop)

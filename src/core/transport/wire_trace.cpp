@@ -67,27 +67,29 @@ void writeRows(std::ostream& out, const uint8_t* data, size_t size)
 /// the epoch, UTC. \returns false for anything else.
 bool parseStamp(const std::string& text, double& seconds)
 {
-  std::tm tm{};
-  double fraction = 0.0;
-  int consumed = 0;
-  if (std::sscanf(text.c_str(), "%4d-%2d-%2d %2d:%2d:%2d%n", &tm.tm_year, &tm.tm_mon, &tm.tm_mday, &tm.tm_hour,
-                  &tm.tm_min, &tm.tm_sec, &consumed) == 6)
+  for (const char* format : {"%Y-%m-%d %H:%M:%S", "%d/%m/%Y %H:%M:%S"})
   {
-    const std::string rest = text.substr(static_cast<size_t>(consumed));
-    if (!rest.empty() && std::sscanf(rest.c_str(), "%lf", &fraction) != 1)
+    std::tm tm{};
+    std::istringstream in(text);
+    in >> std::get_time(&tm, format);
+    if (in.fail())
+    {
+      continue;
+    }
+    double fraction = 0.0;  // ".123456" after the seconds, in this writer's own form
+    if (in.peek() == '.' && !(in >> fraction))
     {
       return false;
     }
+    in >> std::ws;
+    if (!in.eof())
+    {
+      return false;
+    }
+    seconds = static_cast<double>(timegm(&tm)) + fraction;
+    return true;
   }
-  else if (std::sscanf(text.c_str(), "%2d/%2d/%4d %2d:%2d:%2d", &tm.tm_mday, &tm.tm_mon, &tm.tm_year, &tm.tm_hour,
-                       &tm.tm_min, &tm.tm_sec) != 6)
-  {
-    return false;
-  }
-  tm.tm_year -= 1900;
-  tm.tm_mon -= 1;
-  seconds = static_cast<double>(timegm(&tm)) + fraction;
-  return true;
+  return false;
 }
 
 bool parseHexPair(const std::string& token, uint8_t& byte)
@@ -240,7 +242,7 @@ std::vector<TraceEntry> parseWireTrace(std::istream& in, const std::string& sour
       }
       else
       {
-        fail("neither \"Written data\" nor \"Read data\"");
+        fail(R"(neither "Written data" nor "Read data")");
       }
       entries.push_back(entry);
       continue;
