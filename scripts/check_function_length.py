@@ -48,7 +48,7 @@ def functions(paths):
 
 
 def problems(paths=None):
-    """[(where, problem)] for every function over LIMIT lines; \\returns also how many were checked."""
+    """[(where, problem)] for every function over LIMIT lines, and how many functions were checked."""
     paths = paths or repo_files(ROOT, *SOURCES)
     found = functions(paths)
     long = [(f"{path}:{first}", f"{name} is {last - first + 1} lines long (at most {LIMIT}): split it by what "

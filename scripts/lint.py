@@ -3,7 +3,8 @@
 launch file with a doc on each <arg>, no citation of a document a reader of the repository cannot
 open, the module table of docs/DEVELOPING.md matching the tree
 (scripts/check_module_table.py), no sleep standing in for synchronisation in test/
-(scripts/check_test_sleeps.py), clang-tidy clean on the core (scripts/check_clang_tidy.py, with the
+(scripts/check_test_sleeps.py), no function in src/ over 100 lines (scripts/check_function_length.py),
+clang-tidy clean on the core (scripts/check_clang_tidy.py, with the
 compile commands of the build given by --build). (The core's freedom from ROS: scripts/check_ros_free.py.)
 
 The files come from git, or from a walk of the tree outside a git checkout (scripts/repo_files.py);
@@ -18,6 +19,7 @@ import xml.etree.ElementTree as ET
 
 import check_clang_tidy
 import check_module_table
+import check_function_length
 import check_test_sleeps
 from repo_files import git_files, repo_files, walked_files
 from tool_cases import ToolCases
@@ -138,6 +140,8 @@ def main():
     tools.add("module table", [(check_module_table.GUIDE, problem) for problem in table], checked=1)
     sleeps, sleep_files = check_test_sleeps.problems()
     tools.add("no sleep as synchronisation", sleeps, checked=sleep_files)
+    long_functions, functions = check_function_length.problems()
+    tools.add("functions at most 100 lines", long_functions, checked=functions)
     tidy, tidied = check_clang_tidy.findings(os.path.abspath(args.build))
     tools.add("clang-tidy", tidy, checked=tidied)
     if os.path.exists(os.path.join(ROOT, "config/cell.yaml")):

@@ -8,6 +8,8 @@
 // run is not a pass.
 #pragma once
 
+#include "loopback_port.h"
+
 #include <netinet/in.h>
 #include <signal.h>
 #include <sys/prctl.h>
@@ -49,7 +51,7 @@ class ReferenceAgent
       : dir_(dir)
   {
     const std::string agent = binary();
-    http_port = freePort();
+    http_port = freeLoopbackPort();
     std::ofstream(dir_ + "/Devices.xml") << devices_xml;
     const std::string config = config_for(http_port) +
                                "ServerIp = 127.0.0.1\nMonitorConfigFiles = false\n"
@@ -74,7 +76,7 @@ class ReferenceAgent
     }
     ::setpgid(pid_, pid_);
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
-    while (!accepts(http_port))
+    while (!listensOnLoopback(http_port))
     {
       int status = 0;
       if (::waitpid(pid_, &status, WNOHANG) == pid_)
@@ -118,38 +120,7 @@ class ReferenceAgent
 
   unsigned http_port = 0;
 
-  static unsigned freePort()
-  {
-    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-    sockaddr_in address{};
-    address.sin_family = AF_INET;
-    address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    socklen_t size = sizeof address;
-    ::bind(fd, reinterpret_cast<sockaddr*>(&address), sizeof address);
-    ::getsockname(fd, reinterpret_cast<sockaddr*>(&address), &size);
-    ::close(fd);
-    return ntohs(address.sin_port);
-  }
-
  private:
-  static bool accepts(unsigned port)
-  {
-    std::ifstream table("/proc/net/tcp");
-    std::string line;
-    std::getline(table, line);  // the header
-    char wanted[32];
-    std::snprintf(wanted, sizeof wanted, "0100007F:%04X", port);
-    while (std::getline(table, line))
-    {
-      std::istringstream fields(line);
-      std::string slot, local, remote, state;
-      fields >> slot >> local >> remote >> state;
-      if (local == wanted && state == "0A")  // TCP_LISTEN
-        return true;
-    }
-    return false;
-  }
-
   std::string dir_;
   pid_t pid_ = -1;
 };

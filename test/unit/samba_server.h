@@ -5,6 +5,8 @@
 // in the private password database. smbd must be started as root (it becomes the user it serves).
 #pragma once
 
+#include "loopback_port.h"
+
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <pwd.h>
@@ -48,7 +50,7 @@ class SambaServer
     user = me ? me->pw_name : "root";
     for (const char* sub : {"private", "lock", "state", "cache", "pid", "ncalrpc", "guest", "secure"})
       std::filesystem::create_directories(dir_ + "/" + sub);
-    port = freePort();
+    port = freeLoopbackPort();
     std::ofstream conf(config());
     conf << "[global]\n"
          << "  server role = standalone server\n"
@@ -140,19 +142,6 @@ class SambaServer
   unsigned port = 0;
 
  private:
-  static unsigned freePort()
-  {
-    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-    sockaddr_in address{};
-    address.sin_family = AF_INET;
-    address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    ::bind(fd, reinterpret_cast<sockaddr*>(&address), sizeof(address));
-    socklen_t length = sizeof(address);
-    ::getsockname(fd, reinterpret_cast<sockaddr*>(&address), &length);
-    ::close(fd);
-    return ntohs(address.sin_port);
-  }
-
   bool answers() const
   {
     const int fd = ::socket(AF_INET, SOCK_STREAM, 0);

@@ -4,6 +4,8 @@
 // folder; it runs in the foreground in a process group of its own and dies with the test.
 #pragma once
 
+#include "loopback_port.h"
+
 #include <netinet/in.h>
 #include <signal.h>
 #include <sys/prctl.h>
@@ -29,8 +31,8 @@ class Ser2netServer
   Ser2netServer(const std::string& dir, const std::string& device, const std::string& line = "9600n81")
       : dir_(dir), device_(device), line_(line)
   {
-    raw_port = freePort();
-    rfc2217_port = freePort();
+    raw_port = freeLoopbackPort();
+    rfc2217_port = freeLoopbackPort();
     start();
   }
   ~Ser2netServer() { stop(SIGKILL); }
@@ -57,7 +59,7 @@ class Ser2netServer
     }
     ::setpgid(pid_, pid_);
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
-    while (!accepts(raw_port) || !accepts(rfc2217_port))
+    while (!listensOnLoopback(raw_port) || !listensOnLoopback(rfc2217_port))
     {
       int status = 0;
       if (::waitpid(pid_, &status, WNOHANG) == pid_)
@@ -111,40 +113,6 @@ class Ser2netServer
         << "connection: &rfc2217\n"
         << "  accepter: telnet(rfc2217),tcp,127.0.0.1," << rfc2217_port << "\n"
         << "  connector: serialdev," << device_ << "," << line_ << ",local\n";
-  }
-
-  /// Whether something listens on 127.0.0.1:\p port, read from /proc/net/tcp rather than by
-  /// connecting: a connection would make ser2net open the device, and a client connecting while it
-  /// still closes that one is turned away as a second client.
-  static bool accepts(unsigned port)
-  {
-    std::ifstream table("/proc/net/tcp");
-    std::string line;
-    std::getline(table, line);  // the header
-    char wanted[32];
-    std::snprintf(wanted, sizeof wanted, "0100007F:%04X", port);
-    while (std::getline(table, line))
-    {
-      std::istringstream fields(line);
-      std::string slot, local, remote, state;
-      fields >> slot >> local >> remote >> state;
-      if (local == wanted && state == "0A")  // TCP_LISTEN
-        return true;
-    }
-    return false;
-  }
-
-  static unsigned freePort()
-  {
-    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-    sockaddr_in address{};
-    address.sin_family = AF_INET;
-    address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    socklen_t size = sizeof address;
-    ::bind(fd, reinterpret_cast<sockaddr*>(&address), sizeof address);
-    ::getsockname(fd, reinterpret_cast<sockaddr*>(&address), &size);
-    ::close(fd);
-    return ntohs(address.sin_port);
   }
 
   std::string dir_;
