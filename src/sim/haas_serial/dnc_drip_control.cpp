@@ -98,181 +98,216 @@ class Execution
   std::string last_;   // the block executed last
   bool waiting_ = false;
 };
+
+/// One drip-feed session of the control: the buffer accounting between reads, the XOFF/XON
+/// events and their statistics, and the end of the program.
+class DripSession
+{
+ public:
+  DripSession(Transport& link, const DripControlOptions& options,
+              const std::function<void(const uint8_t*, size_t)>& sink, UartModel& uart, const DripControlHooks& hooks)
+      : link_(link), options_(options), sink_(sink), uart_(uart), hooks_(hooks), execution_(hooks)
+  {
+    masked_.reserve(sizeof(buffer_));
+  }
+
+  DripControlStats run(StopSignal& stop)
+  {
+    while (!stop.stopped())
+    {
+      if (hooks_.reset && hooks_.reset())
+      {
+        stats_.reset = true;
+        break;
+      }
+      const size_t wanted = uart_.allowed(sizeof(buffer_));
+      const size_t n = link_.read(buffer_, wanted, uart_.timeout());
+      uart_.took(n, wanted);
+      const auto now = Clock::now();
+      executeDue(now);
+      take(buffer_, n);
+      execution_.checkStarved();
+      if (xoff_ && buffered_ <= options_.low_mark)
+      {
+        closeXoffEvent();
+        link_.writeByte(code(dnc::kDc1));
+      }
+      if (programEnded(now))
+      {
+        break;
+      }
+    }
+    if (xoff_)
+    {
+      closeXoffEvent();
+    }
+    if (stats_.program_complete)
+    {
+      execution_.executeAll();
+    }
+    return stats_;
+  }
+
+ private:
+  uint8_t code(uint8_t c) const { return options_.seven_e1 ? dnc::withEvenParity(c) : c; }
+
+  /// Executes what the control could have executed since the last read, at its execution rate.
+  void executeDue(Clock::time_point now)
+  {
+    if (options_.execution_cps <= 0)
+    {
+      execution_.executeAll();
+      buffered_ = 0;
+    }
+    else
+    {
+      credit_ += std::chrono::duration<double>(now - last_).count() * options_.execution_cps;
+      const auto executed = static_cast<size_t>(std::min<double>(static_cast<double>(buffered_), std::floor(credit_)));
+      buffered_ -= executed;
+      execution_.execute(executed);
+      credit_ -= static_cast<double>(executed);
+      if (buffered_ == 0)
+      {
+        credit_ = std::min(credit_, 1.0);  // an idle control does not save up execution time
+      }
+    }
+    last_ = now;
+  }
+
+  // Takes what one read returned into the buffer. Every character counts against the host if
+  // the XOFF went out before the read; the XOFF is written after the batch that crossed the mark
+  // (its characters were on the line before it).
+  void take(const uint8_t* data, size_t n)
+  {
+    masked_.clear();
+    bool crossed = false;
+    for (size_t i = 0; i < n; ++i)
+    {
+      uint8_t c = data[i];
+      if (options_.seven_e1)
+      {
+        if ((c & 0x80) != 0 && dnc::withEvenParity(c) != c)
+        {
+          ++stats_.parity_errors;
+        }
+        c = dnc::maskParity(c);
+      }
+      ++stats_.received;
+      masked_.push_back(c);
+      if (xoff_)
+      {
+        ++after_;
+      }
+      else if (crossed)
+      {
+        ++event_late_;  // a control reacting at the character that crossed would have sent DC3 already
+      }
+      if (buffered_ >= options_.buffer_size)
+      {
+        ++stats_.overflow;
+        if (xoff_ || crossed)
+        {
+          ++event_overflow_;
+        }
+        else
+        {
+          ++stats_.overflow_beyond_late;  // a buffer smaller than its high mark
+        }
+      }
+      else
+      {
+        ++buffered_;
+        execution_.buffered(c);
+      }
+      if (c == '%' && ++percents_ == 2)
+      {
+        stats_.program_complete = true;
+        completed_at_ = Clock::now();
+      }
+      last_char_ = c;
+      if (!xoff_ && !crossed && buffered_ >= options_.high_mark)
+      {
+        crossed = true;
+        event_late_ = 0;
+        event_overflow_ = 0;
+      }
+    }
+    if (crossed)
+    {
+      link_.writeByte(code(dnc::kDc3));
+      xoff_ = true;
+      after_ = 0;
+      ++stats_.xoff_events;
+    }
+    if (!masked_.empty() && sink_)
+    {
+      sink_(masked_.data(), masked_.size());
+    }
+  }
+
+  void closeXoffEvent()
+  {
+    stats_.max_after_xoff = std::max(stats_.max_after_xoff, after_);
+    if (after_ > options_.allowance)
+    {
+      stats_.overruns += after_ - options_.allowance;
+      ++stats_.xoff_over_allowance;
+    }
+    stats_.late += event_late_;
+    stats_.overflow_beyond_late += event_overflow_ - std::min(event_overflow_, event_late_);
+    xoff_ = false;
+  }
+
+  // The program ends with the end of block after its closing '%' (LF, or CR alone: then the
+  // line falls quiet): take that too, so the next program starts clean. An XOFF still standing
+  // is answered first, once the buffer has drained to the low mark: a host that kept the DC3 as
+  // the last word from the control would start its next program held, waiting for a DC1 that
+  // a control with an empty buffer never has reason to send.
+  bool programEnded(Clock::time_point now) const
+  {
+    return stats_.program_complete && options_.stop_at_end && !xoff_ &&
+           (last_char_ == '\n' || now - completed_at_ > std::chrono::milliseconds(50));
+  }
+
+  Transport& link_;
+  const DripControlOptions& options_;
+  const std::function<void(const uint8_t*, size_t)>& sink_;
+  UartModel& uart_;
+  const DripControlHooks& hooks_;
+  Execution execution_;
+  DripControlStats stats_;
+  size_t buffered_ = 0;
+  double credit_ = 0;  // characters the control could have executed but has not yet
+  bool xoff_ = false;
+  uint64_t after_ = 0;
+  uint64_t event_late_ = 0;      // this XOFF event: characters taken past the mark before the XOFF
+  uint64_t event_overflow_ = 0;  // this XOFF event: characters lost to a full buffer
+  unsigned percents_ = 0;
+  uint8_t last_char_ = 0;
+  Clock::time_point completed_at_;
+  Clock::time_point last_ = Clock::now();
+  uint8_t buffer_[256];
+  std::vector<uint8_t> masked_;
+};
 }  // namespace
 
 DripControlStats runDripControl(Transport& link, const DripControlOptions& options, StopSignal& stop,
                                 const std::function<void(const uint8_t*, size_t)>& sink, UartModel* line,
                                 const DripControlHooks& hooks)
 {
-  DripControlStats stats;
   if (options.realtime)
   {
     sched_param param{};
     param.sched_priority = 10;
     pthread_setschedparam(pthread_self(), SCHED_FIFO, &param);  // best effort: EPERM keeps the default
   }
-  const auto code = [&](uint8_t c) { return options.seven_e1 ? dnc::withEvenParity(c) : c; };
   if (options.send_dc1_at_start)
   {
-    link.writeByte(code(dnc::kDc1));
+    link.writeByte(options.seven_e1 ? dnc::withEvenParity(dnc::kDc1) : dnc::kDc1);
   }
   UartModel own_uart(options.line_cps);
-  UartModel& uart = line != nullptr ? *line : own_uart;
-  Execution execution(hooks);
-  size_t buffered = 0;
-  double credit = 0;  // characters the control could have executed but has not yet
-  bool xoff = false;
-  uint64_t after = 0;
-  uint64_t event_late = 0;      // this XOFF event: characters taken past the mark before the XOFF
-  uint64_t event_overflow = 0;  // this XOFF event: characters lost to a full buffer
-  unsigned percents = 0;
-  uint8_t last_char = 0;
-  Clock::time_point completed_at;
-  auto last = Clock::now();
-  uint8_t buffer[256];
-  std::vector<uint8_t> masked;
-  masked.reserve(sizeof(buffer));
-
-  const auto closeXoffEvent = [&]
-  {
-    stats.max_after_xoff = std::max(stats.max_after_xoff, after);
-    if (after > options.allowance)
-    {
-      stats.overruns += after - options.allowance;
-      ++stats.xoff_over_allowance;
-    }
-    stats.late += event_late;
-    stats.overflow_beyond_late += event_overflow - std::min(event_overflow, event_late);
-    xoff = false;
-  };
-
-  // Takes what one read returned into the buffer. Every character counts against the host if
-  // the XOFF went out before the read; the XOFF is written after the batch that crossed the mark
-  // (its characters were on the line before it).
-  const auto take = [&](const uint8_t* data, size_t n)
-  {
-    masked.clear();
-    bool crossed = false;
-    for (size_t i = 0; i < n; ++i)
-    {
-      uint8_t c = data[i];
-      if (options.seven_e1)
-      {
-        if ((c & 0x80) != 0 && dnc::withEvenParity(c) != c)
-        {
-          ++stats.parity_errors;
-        }
-        c = dnc::maskParity(c);
-      }
-      ++stats.received;
-      masked.push_back(c);
-      if (xoff)
-      {
-        ++after;
-      }
-      else if (crossed)
-      {
-        ++event_late;  // a control reacting at the character that crossed would have sent DC3 already
-      }
-      if (buffered >= options.buffer_size)
-      {
-        ++stats.overflow;
-        if (xoff || crossed)
-        {
-          ++event_overflow;
-        }
-        else
-        {
-          ++stats.overflow_beyond_late;  // a buffer smaller than its high mark
-        }
-      }
-      else
-      {
-        ++buffered;
-        execution.buffered(c);
-      }
-      if (c == '%' && ++percents == 2)
-      {
-        stats.program_complete = true;
-        completed_at = Clock::now();
-      }
-      last_char = c;
-      if (!xoff && !crossed && buffered >= options.high_mark)
-      {
-        crossed = true;
-        event_late = 0;
-        event_overflow = 0;
-      }
-    }
-    if (crossed)
-    {
-      link.writeByte(code(dnc::kDc3));
-      xoff = true;
-      after = 0;
-      ++stats.xoff_events;
-    }
-    if (!masked.empty() && sink)
-    {
-      sink(masked.data(), masked.size());
-    }
-  };
-
-  while (!stop.stopped())
-  {
-    if (hooks.reset && hooks.reset())
-    {
-      stats.reset = true;
-      break;
-    }
-    const size_t wanted = uart.allowed(sizeof(buffer));
-    const size_t n = link.read(buffer, wanted, uart.timeout());
-    uart.took(n, wanted);
-    const auto now = Clock::now();
-    if (options.execution_cps <= 0)
-    {
-      execution.executeAll();
-      buffered = 0;
-    }
-    else
-    {
-      credit += std::chrono::duration<double>(now - last).count() * options.execution_cps;
-      const auto executed = static_cast<size_t>(std::min<double>(static_cast<double>(buffered), std::floor(credit)));
-      buffered -= executed;
-      execution.execute(executed);
-      credit -= static_cast<double>(executed);
-      if (buffered == 0)
-      {
-        credit = std::min(credit, 1.0);  // an idle control does not save up execution time
-      }
-    }
-    last = now;
-    take(buffer, n);
-    execution.checkStarved();
-    if (xoff && buffered <= options.low_mark)
-    {
-      closeXoffEvent();
-      link.writeByte(code(dnc::kDc1));
-    }
-    // The program ends with the end of block after its closing '%' (LF, or CR alone: then the
-    // line falls quiet): take that too, so the next program starts clean. An XOFF still standing
-    // is answered first, once the buffer has drained to the low mark: a host that kept the DC3 as
-    // the last word from the control would start its next program held, waiting for a DC1 that
-    // a control with an empty buffer never has reason to send.
-    if (stats.program_complete && options.stop_at_end && !xoff &&
-        (last_char == '\n' || now - completed_at > std::chrono::milliseconds(50)))
-    {
-      break;
-    }
-  }
-  if (xoff)
-  {
-    closeXoffEvent();
-  }
-  if (stats.program_complete)
-  {
-    execution.executeAll();
-  }
-  return stats;
+  DripSession session(link, options, sink, line != nullptr ? *line : own_uart, hooks);
+  return session.run(stop);
 }
 }  // namespace sim
 }  // namespace cnc_bridge
