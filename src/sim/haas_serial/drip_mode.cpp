@@ -133,6 +133,32 @@ void listenForReset(const std::string& path)
   sigaction(SIGHUP, &action, nullptr);
 }
 
+/// Takes one program as the control would, its characters to \p output, its report printed and to
+/// \p stats_path. \returns true when the host overran the control's buffer.
+bool takeProgram(Transport& link, const DripControlOptions& control, StopSignal& stop, std::ofstream& output,
+                 UartModel& uart, const DripControlHooks& hooks, const std::string& stats_path)
+{
+  const auto stats = runDripControl(
+      link, control, stop,
+      [&](const uint8_t* data, size_t size)
+      {
+        if (output.is_open())
+        {
+          output.write(reinterpret_cast<const char*>(data), size);
+          output.flush();  // read while a feed runs, and after one that broke off
+        }
+      },
+      &uart, hooks);
+  std::cout << "sim_haas_serial drip: " << stats.summary() << std::endl;
+  if (!stats_path.empty())
+  {
+    AtomicFileWriter file(stats_path);
+    file.write(stats.summary() + "\n");
+    file.commit();
+  }
+  return stats.overruns > 0 || stats.overflow_beyond_late > 0;  // its own lateness is not the host's
+}
+
 int runDripMode(const std::vector<std::string>& args)
 {
   DripControlOptions control;
@@ -214,25 +240,7 @@ int runDripMode(const std::vector<std::string>& args)
     UartModel uart(control.line_cps);  // one line across programs: writing the report takes time
     do
     {
-      const auto stats = runDripControl(
-          link, control, stop,
-          [&](const uint8_t* data, size_t size)
-          {
-            if (output.is_open())
-            {
-              output.write(reinterpret_cast<const char*>(data), size);
-              output.flush();  // read while a feed runs, and after one that broke off
-            }
-          },
-          &uart, hooks);
-      std::cout << "sim_haas_serial drip: " << stats.summary() << std::endl;
-      bad = bad || stats.overruns > 0 || stats.overflow_beyond_late > 0;  // its own lateness is not the host's
-      if (!stats_path.empty())
-      {
-        AtomicFileWriter file(stats_path);
-        file.write(stats.summary() + "\n");
-        file.commit();
-      }
+      bad = takeProgram(link, control, stop, output, uart, hooks, stats_path) || bad;
     } while (repeat && !stop.stopped());
     return bad ? 3 : 0;
   }

@@ -20,6 +20,7 @@
 #include <filesystem>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <regex>
 #include <thread>
 
@@ -106,7 +107,9 @@ bool waitForHostNak(PushbackTransport& line, Milliseconds wait)
   }
 }
 
-int runXmodem(const std::vector<std::string>& all_args)
+/// The command line, roslaunch's __name:=/__log:= dropped. \returns an exit code if the run ends
+/// here (--help, a bad option), else nothing and \p vm filled.
+std::optional<int> parseXmodemArgs(const std::vector<std::string>& all_args, po::variables_map& vm)
 {
   // roslaunch appends __name:= and __log:= when a test launches the simulator as a node.
   std::vector<std::string> args;
@@ -129,7 +132,6 @@ int runXmodem(const std::vector<std::string>& all_args)
       "how the control sums ends of block: wire (the bytes sent) or lf (each end of block as LF)")(
       "timeout-scale", po::value<double>()->default_value(1.0),
       "multiply the protocol timeouts (tests use 0.1 for fast recovery)");
-  po::variables_map vm;
   try
   {
     po::store(po::command_line_parser(args).options(options).run(), vm);
@@ -145,14 +147,121 @@ int runXmodem(const std::vector<std::string>& all_args)
     std::cout << options;
     return 0;
   }
-
   const std::string send_on = vm["send-on"].as<std::string>();
   if (send_on != "request" && send_on != "signal")
   {
     std::cerr << "sim_haas_serial xmodem: --send-on is request or signal, not '" << send_on << "'\n";
     return 2;
   }
-  const bool send_on_signal = send_on == "signal";
+  return std::nullopt;
+}
+
+/// What the serving loop needs: the protocol settings, scaled by --timeout-scale, and the options.
+struct XmodemSession
+{
+  explicit XmodemSession(const po::variables_map& vm) : scale(vm["timeout-scale"].as<double>())
+  {
+    config.char_timeout = scaled(1000);
+    config.purge_quiet = scaled(1000);
+    config.block_timeout = scaled(10000);
+    config.ack_timeout = scaled(10000);
+    config.stale_nak_settle = scaled(1000);
+    config.eot_quiet = scaled(250);
+    config.start_wait = scaled(1000);
+    config.skip_initial_request = true;
+    config.answer_eot_with_can = true;
+    text.control_eob = xmodem::parseEob(vm["eob"].as<std::string>());
+    text.eob_checksum = xmodem::parseEobChecksum(vm["eob-checksum"].as<std::string>());
+    dir = vm["dir"].as<std::string>();
+    std::error_code ignored;
+    std::filesystem::create_directories(dir, ignored);  // a failure shows when a program is stored
+    program = vm["program"].as<std::string>();
+    nak_interval = Milliseconds(static_cast<int64_t>(vm["nak-interval"].as<double>() * 1000));
+    send_wait = scaled(60000);  // how long a pressed SEND waits for the host
+    send_on_signal = vm["send-on"].as<std::string>() == "signal";
+  }
+
+  Milliseconds scaled(int ms) const { return Milliseconds(std::max<int64_t>(1, static_cast<int64_t>(ms * scale))); }
+
+  double scale;
+  xmodem::Config config;
+  xmodem::TextOptions text;
+  std::string dir;
+  std::string program;
+  Milliseconds nak_interval{0};
+  Milliseconds send_wait{0};
+  bool send_on_signal = false;
+  unsigned received = 0;
+};
+
+/// SEND pressed: the control waits for the host's NAK and sends the program.
+void sendOnPressedSend(PushbackTransport& line, const XmodemSession& session)
+{
+  if (session.program.empty())
+    std::cerr << "sim_haas_serial: SEND pressed but --program is not set" << std::endl;
+  else if (!waitForHostNak(line, session.send_wait))
+    std::cerr << "sim_haas_serial: SEND pressed but the host did not ask (no NAK within "
+              << session.send_wait.count() / 1000.0 << " s)" << std::endl;
+  else
+    std::cerr << "sim_haas_serial: "
+              << xmodem::sendFile(line, session.program, xmodem::Mode::kChecksum, session.config, session.text).message
+              << std::endl;
+}
+
+/// The host started sending (its first block header is put back): receive and store the program.
+void receiveProgram(PushbackTransport& line, XmodemSession& session)
+{
+  xmodem::Receiver receiver(line, xmodem::Mode::kChecksum, xmodem::withEobReading(session.config, session.text));
+  const std::string contents = xmodem::fromWire(receiver.receive(), session.text);
+  const std::string path = session.dir + "/" + programName(contents, ++session.received);
+  AtomicFileWriter writer(path);
+  writer.write(contents);
+  writer.commit();
+  std::cerr << "sim_haas_serial: received " << path << " (" << contents.size() << " bytes, " << receiver.stats().retries
+            << " retries)" << std::endl;
+}
+
+/// One turn of the control's loop: a pressed SEND, else a NAK and whatever the host answers.
+void serveOneTransfer(PushbackTransport& line, XmodemSession& session, std::atomic<bool>& send_pressed)
+{
+  if (send_pressed.exchange(false))
+  {
+    sendOnPressedSend(line, session);
+    return;
+  }
+  // Waiting in "receive" as the control does: a NAK now and then until something happens.
+  line.writeByte(xmodem::kNak);
+  const int c = line.readByte(session.nak_interval);
+  if (c == xmodem::kSoh || c == xmodem::kStx)
+  {
+    line.unread(static_cast<uint8_t>(c));
+    receiveProgram(line, session);
+  }
+  else if (c == xmodem::kNak && !session.send_on_signal)
+  {
+    // The host wants a program (it is a receiver asking in checksum mode).
+    if (session.program.empty())
+    {
+      std::cerr << "sim_haas_serial: host asked for a program but --program is not set" << std::endl;
+      xmodem::sendCancel(line);
+      line.purge(session.scaled(1000));
+      return;
+    }
+    line.unread(xmodem::kNak);
+    const xmodem::FileResult result =
+        xmodem::sendFile(line, session.program, xmodem::Mode::kChecksum, session.config, session.text);
+    std::cerr << "sim_haas_serial: " << result.message << std::endl;
+  }
+  // Anything else ('C' from a host that wants CRC, noise, a NAK nobody pressed SEND for): a
+  // checksum-only control ignores it.
+}
+
+int runXmodem(const std::vector<std::string>& all_args)
+{
+  po::variables_map vm;
+  if (const std::optional<int> exit_code = parseXmodemArgs(all_args, vm))
+    return *exit_code;
+
   blockSendSignal();  // before the stop handler's thread starts
   StopSignal& stop = installStopHandler();
   std::atomic<bool>& send_pressed = sendPressedOnSignal();
@@ -177,78 +286,14 @@ int runXmodem(const std::vector<std::string>& all_args)
     }
     PushbackTransport line(*link);
 
-    const double scale = vm["timeout-scale"].as<double>();
-    auto scaled = [scale](int ms) { return Milliseconds(std::max<int64_t>(1, static_cast<int64_t>(ms * scale))); };
-    xmodem::Config config;
-    config.char_timeout = scaled(1000);
-    config.purge_quiet = scaled(1000);
-    config.block_timeout = scaled(10000);
-    config.ack_timeout = scaled(10000);
-    config.stale_nak_settle = scaled(1000);
-    config.eot_quiet = scaled(250);
-    config.start_wait = scaled(1000);
-    config.skip_initial_request = true;
-    config.answer_eot_with_can = true;
-    xmodem::TextOptions text;
-    text.control_eob = xmodem::parseEob(vm["eob"].as<std::string>());
-    text.eob_checksum = xmodem::parseEobChecksum(vm["eob-checksum"].as<std::string>());
-    const std::string dir = vm["dir"].as<std::string>();
-    std::error_code ignored;
-    std::filesystem::create_directories(dir, ignored);  // a failure shows when a program is stored
-    const std::string program = vm["program"].as<std::string>();
-    const Milliseconds nak_interval(static_cast<int64_t>(vm["nak-interval"].as<double>() * 1000));
-    const Milliseconds send_wait = scaled(60000);  // how long a pressed SEND waits for the host
+    XmodemSession session(vm);
 
     announce("sim_haas_serial", "pty " + pty.slavePath());
-    unsigned received = 0;
     while (!stop.stopped())
     {
       try
       {
-        if (send_pressed.exchange(false))
-        {
-          // SEND pressed: the control waits for the host's NAK and sends the program.
-          if (program.empty())
-            std::cerr << "sim_haas_serial: SEND pressed but --program is not set" << std::endl;
-          else if (!waitForHostNak(line, send_wait))
-            std::cerr << "sim_haas_serial: SEND pressed but the host did not ask (no NAK within "
-                      << send_wait.count() / 1000.0 << " s)" << std::endl;
-          else
-            std::cerr << "sim_haas_serial: "
-                      << xmodem::sendFile(line, program, xmodem::Mode::kChecksum, config, text).message << std::endl;
-          continue;
-        }
-        // Waiting in "receive" as the control does: a NAK now and then until something happens.
-        line.writeByte(xmodem::kNak);
-        const int c = line.readByte(nak_interval);
-        if (c == xmodem::kSoh || c == xmodem::kStx)
-        {
-          line.unread(static_cast<uint8_t>(c));
-          xmodem::Receiver receiver(line, xmodem::Mode::kChecksum, xmodem::withEobReading(config, text));
-          const std::string contents = xmodem::fromWire(receiver.receive(), text);
-          const std::string path = dir + "/" + programName(contents, ++received);
-          AtomicFileWriter writer(path);
-          writer.write(contents);
-          writer.commit();
-          std::cerr << "sim_haas_serial: received " << path << " (" << contents.size() << " bytes, "
-                    << receiver.stats().retries << " retries)" << std::endl;
-        }
-        else if (c == xmodem::kNak && !send_on_signal)
-        {
-          // The host wants a program (it is a receiver asking in checksum mode).
-          if (program.empty())
-          {
-            std::cerr << "sim_haas_serial: host asked for a program but --program is not set" << std::endl;
-            xmodem::sendCancel(line);
-            line.purge(scaled(1000));
-            continue;
-          }
-          line.unread(xmodem::kNak);
-          const xmodem::FileResult result = xmodem::sendFile(line, program, xmodem::Mode::kChecksum, config, text);
-          std::cerr << "sim_haas_serial: " << result.message << std::endl;
-        }
-        // Anything else ('C' from a host that wants CRC, noise, a NAK nobody pressed SEND for): a
-        // checksum-only control ignores it.
+        serveOneTransfer(line, session, send_pressed);
       }
       catch (const CancelledError&)
       {
@@ -259,7 +304,7 @@ int runXmodem(const std::vector<std::string>& all_args)
         std::cerr << "sim_haas_serial: transfer failed: " << e.what() << std::endl;
         try
         {
-          line.purge(scaled(1000));
+          line.purge(session.scaled(1000));
         }
         catch (const CancelledError&)
         {
