@@ -10,8 +10,10 @@
 // when everything matched, 1 at the first difference (printed: which entry, which byte), 2 for a
 // bad command line or an unreadable trace.
 #include <boost/program_options.hpp>
+#include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -40,12 +42,23 @@ po::options_description replayOptions()
 
 std::vector<TraceEntry> readTrace(const std::string& path)
 {
+  std::error_code error;
+  if (!std::filesystem::is_regular_file(path, error))
+  {
+    throw ConfigError("the trace " + path +
+                      " is not a file: name a trace file (a node's ~wire_trace folder holds them)");
+  }
   std::ifstream in(path);
   if (!in)
   {
-    throw ConfigError("cannot read the trace " + path + ": check the path");
+    throw ConfigError("cannot read the trace " + path + ": check its permissions");
   }
-  return parseWireTrace(in, path);
+  auto entries = parseWireTrace(in, path);
+  if (entries.empty())
+  {
+    throw ConfigError("the trace " + path + " has no entries: nothing to replay");
+  }
+  return entries;
 }
 }  // namespace
 
@@ -72,11 +85,10 @@ int runReplay(const std::vector<std::string>& args)
     std::cerr << "cnc_dnc replay: " << e.what() << "\nusage: cnc_dnc replay [options] TRACE\n" << options;
     return 2;
   }
-  std::vector<TraceEntry> entries;
+  std::unique_ptr<TraceReplay> player;
   TraceReplay::Options replay;
   try
   {
-    entries = readTrace(vm["trace"].as<std::string>());
     replay.speed = vm["speed"].as<double>();
     const double slack = vm["slack"].as<double>();
     if (!(slack >= 0.0) || slack > 3600.0)
@@ -84,15 +96,16 @@ int runReplay(const std::vector<std::string>& args)
       throw ConfigError("--slack must be from 0 to 3600 s");
     }
     replay.host_slack = Milliseconds(static_cast<long>(slack * 1000.0));
+    // Everything checked before the port is opened: the program under test receives nothing.
+    player = std::make_unique<TraceReplay>(readTrace(vm["trace"].as<std::string>()), replay);
   }
   catch (const ConfigError& e)
   {
     std::cerr << "cnc_dnc replay: " << e.what() << "\n";
     return 2;
   }
-  TraceReplay player(std::move(entries), replay);
   const auto line = openSerialLine(serialSettingsFrom(vm), InputOnOpen::kKeep);
-  const ReplayResult result = player.run(*line, [](const std::string& step) { std::cerr << step << "\n"; });
+  const ReplayResult result = player->run(*line, [](const std::string& step) { std::cerr << step << "\n"; });
   std::cout << (result.matched ? "" : "cnc_dnc replay: ") << result.message << std::endl;
   return result.matched ? 0 : 1;
 }

@@ -848,3 +848,28 @@ TEST(CncDncReplay, ASendRecordedAgainstTheSimulatedHaasReplaysToTheSameSendAndCa
   EXPECT_EQ(caught.status, 1) << caught.out << caught.err;
   EXPECT_NE(caught.out.find("where the trace has"), std::string::npos) << caught.out;
 }
+
+TEST(CncDncReplay, WhatIsNoTraceIsABadCommandLineAndThePortReceivesNothing)
+{
+  TempDir dir("test_xmodem_cli");
+  PtyMaster control;
+  writeFile(dir.path + "/empty.trace", "# a trace with no entries\n");
+  writeFile(dir.path + "/garbage.trace", std::string("\x01\xff not a trace\n"));
+  const std::vector<std::pair<std::vector<std::string>, std::string>> bad = {
+      {{dir.path}, "is not a file"},
+      {{dir.path + "/empty.trace"}, "has no entries"},
+      {{dir.path + "/garbage.trace"}, "line 1: bytes outside an entry"},
+      {{"--speed", "nan", XMODEM_TEST_DATA "/haas_capture_cnc_to_pc.trace"}, "speed must be above 0"},
+      {{"--slack", "-1", XMODEM_TEST_DATA "/haas_capture_cnc_to_pc.trace"}, "--slack must be from 0"},
+  };
+  for (const auto& [args, reason] : bad)
+  {
+    std::vector<std::string> command = {"replay", "--port", control.slavePath()};
+    command.insert(command.end(), args.begin(), args.end());
+    const ToolRun run = cncDnc(command, dir.path);
+    EXPECT_EQ(run.status, 2) << args.back() << ": " << run.err;
+    EXPECT_NE(run.err.find(reason), std::string::npos) << run.err;
+  }
+  uint8_t byte = 0;
+  EXPECT_EQ(control.read(&byte, 1, Milliseconds(100)), 0u) << "the port received a byte";
+}
