@@ -118,8 +118,8 @@ PROFILE_NODES = {
 
 def node_sources(node):
     """The C++ sources of a node and of the ROS helpers every node uses."""
-    return glob.glob(os.path.join(ROOT, "src", "nodes", node.replace("_node", "") + "*.cpp")) + \
-        glob.glob(os.path.join(ROOT, "src", "ros", "*.cpp"))
+    return glob.glob(os.path.join(ROOT, "src", "ros", "nodes", node.replace("_node", "") + "*.cpp")) + \
+        glob.glob(os.path.join(ROOT, "src", "ros", "support", "*.cpp"))
 
 
 class ControlProfiles(unittest.TestCase):
