@@ -45,12 +45,15 @@ EXPECTED = {
     "haas_send": ["sent "],
     "haas_dnc_node": ["success: True"],
     "haas_classic_shared": ['machine: "haas_classic"', 'program: "O01000"', "link: 2"],
+    # One port for all three: the transfer through dnc_node, then MDC's state (only the state has
+    # a `program:` field) and a DPRNT line through haas_mdc_node to dprnt_node.
+    "haas_classic_dprnt": ["success: True", 'program: "O01000"', "link: 2", DPRNT_LINE],
     "haas_dprnt": [DPRNT_LINE],
     "ngc_status": ["link: 2", 'machine: "haas_vf2"'],
     "ngc_dprnt": [DPRNT_LINE],
 }
 BLOCKS = ["setup", "programs", "rehearsal", "check_port", "listen", "haas_send", "haas_dnc_node",
-          "haas_classic_shared", "haas_dprnt", "ngc_status", "ngc_dprnt", "fanuc_backup", "ethernut_status",
+          "haas_classic_shared", "haas_classic_dprnt", "haas_dprnt", "ngc_status", "ngc_dprnt", "fanuc_backup", "ethernut_status",
           "at_status", "board_status"]
 
 
@@ -220,6 +223,12 @@ class Commissioning(unittest.TestCase):
             with open(stored) as a, open(sample) as b:
                 self.assertEqual(a.read(), b.read())
             os.remove(stored)  # the next block must store it again
+        if name == "haas_classic_dprnt":
+            # sim_haas_serial classic numbers what it receives.
+            stored = os.path.join(self.rehearsal, "haas_memory", "received_1.nc")
+            self.assertTrue(os.path.exists(stored), "block %s stored nothing at %s" % (name, stored))
+            with open(stored) as a, open(sample) as b:
+                self.assertEqual(a.read(), b.read())
         if name == "fanuc_backup":
             with open(os.path.join(programs, "punched.nc")) as punched:
                 self.assertIn("O05555", punched.read())

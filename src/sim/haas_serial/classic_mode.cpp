@@ -5,10 +5,12 @@
 // (the operator pressing RECV): after --recv-after DPRNT lines the program waits while the control
 // NAKs every --nak-interval, takes one program and stores it in --dir, then the program goes on.
 // While in RECV the control answers no query and ignores what is not a packet. Each reply and each
-// DPRNT line leaves whole, never one inside the other, as from the control's one UART.
+// DPRNT line leaves whole, never one inside the other, as from the control's one UART. --repeat
+// runs the program again after its end (0: until stopped; the RECV comes once, counted over all runs).
 //
 //   sim_haas_serial classic --program FILE --script FILE [--link PATH] [--recv-after N] [--dir DIR]
 //                           [--start-file PATH] [--resume-file PATH] [--rate N] [--nak-interval S]
+//                           [--repeat N]
 #include <boost/program_options.hpp>
 
 #include <atomic>
@@ -19,6 +21,7 @@
 #include <mutex>
 #include <sstream>
 #include <thread>
+#include <utility>
 
 #include "cnc_bridge/common/atomic_file.h"
 #include "cnc_bridge/common/error.h"
@@ -42,6 +45,7 @@ struct ClassicOptions
 {
   std::string link, program_file, script_file, dir, start_file, resume_file;
   unsigned recv_after = 0;
+  unsigned repeat = 1;
   double rate = 0;
   double nak_interval = 1.0;
 };
@@ -92,7 +96,8 @@ bool readExact(Transport& link, uint8_t* out, size_t size, Milliseconds timeout)
 
 /// The control in RECV (checksum XModem): NAKs until the first packet, ignores what is not a
 /// packet (the queries of an MDC poller that does not know the port is taken), ACKs each good
-/// packet, NAKs a bad one, ACKs the EOT. \returns the data, SUB padding removed.
+/// packet, NAKs a bad one. \returns the data, SUB padding removed, at the EOT, which the caller
+/// ACKs once the program is stored (so that a sender told "done" finds it stored).
 std::string receiveProgram(ClassicPort& port, StopSignal& stop, Milliseconds nak_interval)
 {
   std::string data;
@@ -110,10 +115,7 @@ std::string receiveProgram(ClassicPort& port, StopSignal& stop, Milliseconds nak
     if (port.pty().read(&byte, 1, Milliseconds(50)) == 0)
       continue;
     if (byte == kEot && started)
-    {
-      port.write(std::string(1, static_cast<char>(kAck)));
       return data.substr(0, data.find_last_not_of('\x1a') + 1);
-    }
     if (byte != kSoh)
       continue;
     uint8_t packet[131];  // block, its complement, 128 data bytes, checksum
@@ -174,24 +176,43 @@ class ClassicControl
     }
   }
 
-  /// The program in MEM: every DPRNT line to the port, a RECV after options.recv_after lines.
+  /// The program in MEM, options.repeat times (0: until stopped): every DPRNT line to the port, a
+  /// RECV after options.recv_after lines of all runs.
   void runProgram(const MacroProgram& program, MacroMachine& machine)
   {
     const auto period =
         options_.rate > 0 ? std::chrono::duration<double>(1.0 / options_.rate) : std::chrono::duration<double>(0);
     uint64_t lines = 0;
-    program.run(machine,
-                [&](const std::string& text)
-                {
-                  if (stop_.stopped())
-                    return false;
-                  if (period.count() > 0)
-                    stop_.waitFor(std::chrono::duration_cast<Milliseconds>(period));
-                  port_.write(text + "\r");
-                  if (++lines == options_.recv_after)
-                    return waitForReceive();
-                  return true;
-                });
+    bool go_on = true;
+    bool unread = false;
+    const auto print = [&](const std::string& text)
+    {
+      if (stop_.stopped())
+        return go_on = false;
+      if (period.count() > 0)
+        stop_.waitFor(std::chrono::duration_cast<Milliseconds>(period));
+      try
+      {
+        port_.write(text + "\r");
+      }
+      catch (const TimeoutError&)
+      {
+        // Nobody reads the port (no node on it, the pty full): the line goes nowhere, as from a
+        // control whose cable nobody listens to, and the program runs on.
+        if (!std::exchange(unread, true))
+          std::cerr << "sim_haas_serial classic: nobody reads the port; DPRNT lines are lost until a reader comes\n";
+      }
+      if (++lines == options_.recv_after)
+        return go_on = waitForReceive();
+      return true;
+    };
+    for (unsigned run = 0; go_on && (options_.repeat == 0 || run < options_.repeat) && !stop_.stopped(); ++run)
+    {
+      // Variables persist from run to run as on the control (#3901 counts parts); the axes start at 0.
+      machine.position[0] = machine.position[1] = machine.position[2] = 0;
+      machine.incremental = false;
+      program.run(machine, print);
+    }
   }
 
  private:
@@ -215,6 +236,7 @@ class ClassicControl
     AtomicFileWriter file(path);
     file.write(program);
     file.commit();
+    port_.write(std::string(1, static_cast<char>(kAck)));  // the EOT's
     std::cerr << "sim_haas_serial classic: received " << program.size() << " bytes into " << path << "\n";
     std::lock_guard<std::mutex> lock(mutex_);
     receiving_ = false;
@@ -246,6 +268,7 @@ bool parseOptions(const std::vector<std::string>& args, ClassicOptions& o)
           "resume-file", po::value(&o.resume_file)->default_value(""),
           "after the receive, go on when this file exists (CYCLE START again); empty: at once")(
           "rate", po::value(&o.rate)->default_value(0), "DPRNT lines per second (0: as fast as the port takes them)")(
+          "repeat", po::value(&o.repeat)->default_value(1), "run the program this many times (0: until stopped)")(
           "nak-interval", po::value(&o.nak_interval)->default_value(1.0), "s between NAKs while in RECV");
   po::variables_map vm;
   po::store(po::command_line_parser(args).options(options).run(), vm);
@@ -297,13 +320,22 @@ int runClassic(const std::vector<std::string>& args)
           {
           }
         });
-    waitForFile(options.start_file, stop);
-    MacroMachine machine;
-    control.runProgram(program, machine);
-    std::cerr << "sim_haas_serial classic: program ended\n";
-    // The port stays up after the program (MDC is still answered); stop with a signal.
-    while (!stop.stopped())
-      stop.waitFor(Milliseconds(1000));
+    try
+    {
+      waitForFile(options.start_file, stop);
+      MacroMachine machine;
+      control.runProgram(program, machine);
+      std::cerr << "sim_haas_serial classic: program ended\n";
+      // The port stays up after the program (MDC is still answered); stop with a signal.
+      while (!stop.stopped())
+        stop.waitFor(Milliseconds(1000));
+    }
+    catch (...)
+    {
+      stop.stop();  // the reader too, before its thread is left
+      reader.join();
+      throw;
+    }
     reader.join();
   }
   catch (const CancelledError&)
