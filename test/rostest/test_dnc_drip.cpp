@@ -37,7 +37,8 @@ using line_log::waitUntil;
 // The simulator renames its stats file into place when a program is complete.
 bool waitForContent(const std::string& path, const std::function<bool(const std::string&)>& ready, double seconds)
 {
-  return waitUntil([&] { return ready(readFile(path)); }, seconds);
+  return line_log::waitForFile(
+      path, [&] { return ready(readFile(path)); }, seconds);
 }
 
 struct Watch : topic_watch::Record
@@ -68,8 +69,7 @@ TEST(DncDrip, FeedThroughTheActionWithFeedbackLinesAndState)
   Client client(ns + "/dnc_node/transfer", true);
   ASSERT_TRUE(client.waitForServer(ros::Duration(20)));
   // The simulator makes its pty link when it starts; the node opens it per transfer.
-  struct stat info;
-  ASSERT_TRUE(waitUntil([&] { return ::stat(pty.c_str(), &info) == 0; }, 20));  // never read it: a pty
+  ASSERT_TRUE(line_log::waitUntilExists(pty, 20));  // never read it: a pty
   ASSERT_TRUE(waitUntil([&] { return line_sub.getNumPublishers() > 0; }, 20));
 
   cnc_bridge::TransferGoal goal;
@@ -448,8 +448,7 @@ TEST(DncBackup, TheActionStoresWhatTheControlPunches)
 {
   Client client(backup_ns + "/dnc_node/transfer", true);
   ASSERT_TRUE(client.waitForServer(ros::Duration(20)));
-  struct stat info;
-  ASSERT_TRUE(waitUntil([&] { return ::stat(punch_pty.c_str(), &info) == 0; }, 20));
+  ASSERT_TRUE(line_log::waitUntilExists(punch_pty, 20));
   topic_watch::Messages<cnc_bridge::TransferFeedback> received;
   cnc_bridge::TransferGoal goal;
   goal.direction = goal.DIRECTION_RECEIVE;

@@ -75,6 +75,11 @@ struct Control
   }
   std::string received() const { return readFile(received_path); }
   Lines log() const { return line_log::LineLog(log_path).lines(); }
+  /// Waits until \p ready holds, looking again at each change of the execution log.
+  bool waitForLog(const std::function<bool()>& ready, double seconds) const
+  {
+    return line_log::waitForFile(log_path, ready, seconds);
+  }
   bool logEndsWith(const std::string& entry) const
   {
     const Lines entries = log();
@@ -84,7 +89,7 @@ struct Control
   bool reset() const
   {
     const pid_t pid = process_kill::pidFromFile(pid_file);
-    return pid > 0 && ::kill(pid, SIGHUP) == 0 && waitUntil([&] { return logEndsWith("reset"); }, 10);
+    return pid > 0 && ::kill(pid, SIGHUP) == 0 && waitForLog([&] { return logEndsWith("reset"); }, 10);
   }
 };
 
@@ -118,9 +123,8 @@ class Machine
   /// The action server is up, the control's pty exists and dnc/current_line is connected.
   bool ready(Client& client, const Control& control)
   {
-    struct stat info;
     return client.waitForServer(ros::Duration(20)) &&
-           waitUntil([&] { return ::stat(control.pty.c_str(), &info) == 0; }, 20) &&  // never read it: a pty
+           line_log::waitUntilExists(control.pty, 20) &&  // never read it: a pty
            waitUntil([&] { return lines_sub_.getNumPublishers() > 0; }, 20);
   }
   /// The line the node reported sent last, once it is at least \p line; 0 if it did not get there.
@@ -218,7 +222,7 @@ void expectARestartAfterTheLastExecutedBlockRunsToTheEnd(Machine& machine, const
       << client.getResult()->message;
   const std::string sent = client.getResult()->message;
   const size_t blocks = wholeLines(expected).size();
-  EXPECT_TRUE(waitUntil([&] { return blocksOf(mark.log(control)).size() >= blocks; }, 20)) << sent;
+  EXPECT_TRUE(control.waitForLog([&] { return blocksOf(mark.log(control)).size() >= blocks; }, 20)) << sent;
   EXPECT_EQ(expected, mark.received(control));
   EXPECT_EQ(wholeLines(expected), blocksOf(mark.log(control))) << sent;
   if (feed)
@@ -258,7 +262,7 @@ TEST_F(DncDripLink, LinkLossFailsTheGoalNamingThePortLeavesTheControlWaitingAndT
   EXPECT_NE(result->message.find(control.pty), std::string::npos) << result->message;
 
   // The link is gone: nothing more can arrive; the control executes its buffer and starves.
-  ASSERT_TRUE(waitUntil([&] { return control.logEndsWith(kWaiting); }, 10));
+  ASSERT_TRUE(control.waitForLog([&] { return control.logEndsWith(kWaiting); }, 10));
   const std::string received = mark->received(control);
   EXPECT_EQ(1200u, received.size());
   expectAPrefixRunToItsLastWholeBlockThenWaiting(received, mark->log(control));
@@ -287,7 +291,7 @@ TEST_F(DncDripLink, NodeDeathLeavesTheControlWaitingAfterTheBlocksItReceivedAndT
   // and reports that it waits. That nothing more arrives after it is checked when the restart's
   // characters arrive on the same line: they follow what is received now, with nothing between.
   ros::WallDuration(0.5).sleep();  // window: what was on its way arrives
-  ASSERT_TRUE(waitUntil([&] { return control.logEndsWith(kWaiting); }, 10));
+  ASSERT_TRUE(control.waitForLog([&] { return control.logEndsWith(kWaiting); }, 10));
   const std::string received = mark->received(control);
   const Lines log = mark->log(control);
 

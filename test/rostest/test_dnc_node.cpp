@@ -1,14 +1,12 @@
 // dnc_node against sim_haas_serial xmodem (test/rostest/dnc_node.test): programs sent and received
 // by service and by the ~transfer action, feedback, cancel, the one-transfer-at-a-time refusal,
 // path escapes refused, and the state topic. Every wait is on a message, a service reply or an
-// inotify event with a deadline; nothing sleeps.
+// inotify event with a deadline (line_log.h); nothing sleeps.
 #include <actionlib/client/simple_action_client.h>
 #include <dirent.h>
 #include <gtest/gtest.h>
 
-#include <poll.h>
 #include <ros/ros.h>
-#include <sys/inotify.h>
 #include <sys/stat.h>
 #include <unistd.h>
 #include <filesystem>
@@ -36,33 +34,12 @@ std::string param(const std::string& name)
 }
 
 using line_log::readFile;
+using line_log::waitUntilExists;
 
 bool exists(const std::string& path)
 {
   struct stat st;
   return ::stat(path.c_str(), &st) == 0;
-}
-
-/// Waits until \p path exists (created, or renamed into place), by inotify on its directory.
-bool waitForFile(const std::string& path, double seconds)
-{
-  const std::string dir = path.substr(0, path.rfind('/'));
-  const int fd = ::inotify_init1(IN_NONBLOCK);
-  ::inotify_add_watch(fd, dir.c_str(), IN_CREATE | IN_MOVED_TO | IN_CLOSE_WRITE);
-  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(seconds);
-  bool found = exists(path);
-  while (!found && ros::WallTime::now() < deadline)
-  {
-    pollfd p{fd, POLLIN, 0};
-    ::poll(&p, 1, static_cast<int>((deadline - ros::WallTime::now()).toSec() * 1000) + 1);
-    char buffer[4096];
-    while (::read(fd, buffer, sizeof(buffer)) > 0)
-    {
-    }
-    found = exists(path);
-  }
-  ::close(fd);
-  return found;
 }
 
 /// A text program of about \p size bytes with LF line ends.
@@ -87,7 +64,7 @@ class DncNodeTest : public ::testing::Test
     receive_ = nh_.serviceClient<cnc_bridge::ReceiveProgram>("dnc_node/receive_program");
     ASSERT_TRUE(send_.waitForExistence(ros::Duration(30)));
     ASSERT_TRUE(receive_.waitForExistence(ros::Duration(30)));
-    ASSERT_TRUE(waitForFile(param("link"), 30)) << "the simulator's pty link never appeared";
+    ASSERT_TRUE(waitUntilExists(param("link"), 30)) << "the simulator's pty link never appeared";
     states_ = std::make_unique<topic_watch::TopicWatch<MachineState>>("state", 50, nh_);
   }
 
@@ -117,7 +94,7 @@ TEST_F(DncNodeTest, SendsAProgramByServiceAndTheControlStoresIt)
   EXPECT_EQ(srv.response.blocks, 8u);
   // The simulated Haas answers EOT with CAN CAN CAN, which the result reports as complete.
   EXPECT_NE(srv.response.message.find("CAN"), std::string::npos) << srv.response.message;
-  ASSERT_TRUE(waitForFile(control_dir_ + "/O05555.nc", 10));
+  ASSERT_TRUE(waitUntilExists(control_dir_ + "/O05555.nc", 10));
   EXPECT_EQ(readFile(control_dir_ + "/O05555.nc"), contents);
   // Kept in the archive beside ~program_dir, with where it went.
   EXPECT_EQ(readFile(program_dir_ + ".archive/O05555.nc/v0001.nc"), contents);
@@ -159,7 +136,7 @@ TEST_F(DncNodeTest, TransferActionGivesFeedbackAndAResult)
   EXPECT_EQ(feedback.back().bytes, feedback.back().total);
   EXPECT_FLOAT_EQ(feedback.back().percent, 100.0f);
   EXPECT_GT(feedback.back().block, 100u);
-  ASSERT_TRUE(waitForFile(control_dir_ + "/O01234.nc", 10));
+  ASSERT_TRUE(waitUntilExists(control_dir_ + "/O01234.nc", 10));
   EXPECT_EQ(readFile(control_dir_ + "/O01234.nc"), contents);
 }
 
@@ -383,7 +360,7 @@ TEST_F(DncNodeTest, ADripFeedIsRefusedWhileMotionIsDisabledAndTheControlReceives
   xmodem.request.file = "O05556.nc";
   ASSERT_TRUE(send_.call(xmodem));
   EXPECT_TRUE(xmodem.response.success) << xmodem.response.message;
-  ASSERT_TRUE(waitForFile(control_dir_ + "/O05556.nc", 10));
+  ASSERT_TRUE(waitUntilExists(control_dir_ + "/O05556.nc", 10));
   EXPECT_EQ(readFile(control_dir_ + "/O05556.nc"), contents);
 }
 

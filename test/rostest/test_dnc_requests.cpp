@@ -7,7 +7,6 @@
 #include <gtest/gtest.h>
 #include <poll.h>
 #include <ros/ros.h>
-#include <sys/inotify.h>
 #include <sys/stat.h>
 #include <termios.h>
 #include <unistd.h>
@@ -24,6 +23,7 @@
 #include "cnc_bridge/ProgramRequestEvent.h"
 #include "cnc_bridge/ReceiveProgram.h"
 #include "cnc_bridge/programs/archive.h"
+#include "line_log.h"
 #include "topic_watch.h"
 
 using cnc_bridge::ProgramRequestEvent;
@@ -55,7 +55,7 @@ class PtyPair
   PtyPair(const std::string& node_link, const std::string& control_link)
       : socat_({"/usr/bin/socat", "pty,rawer,link=" + node_link, "pty,rawer,link=" + control_link}, "/tmp", "")
   {
-    waitForLinks({node_link, control_link}, 5.0);
+    line_log::waitUntilAllExist({node_link, control_link}, 5.0);  // socat makes them
     fd_ = ::open(control_link.c_str(), O_RDWR | O_NOCTTY);
   }
   ~PtyPair()
@@ -93,40 +93,6 @@ class PtyPair
   }
 
  private:
-  static bool exists(const std::string& path)
-  {
-    struct stat st;
-    return ::stat(path.c_str(), &st) == 0;
-  }
-  /// Waits until socat has made every link in \p links, or \p seconds passed: inotify watches
-  /// their folders for the links' creation (set before the first look, so none is missed).
-  static void waitForLinks(const std::vector<std::string>& links, double seconds)
-  {
-    const int watch = ::inotify_init1(IN_CLOEXEC | IN_NONBLOCK);
-    if (watch < 0)
-      return;  // the open below then fails and ok() says so
-    for (const std::string& link : links)
-    {
-      const auto slash = link.find_last_of('/');
-      ::inotify_add_watch(watch, slash == std::string::npos ? "." : link.substr(0, slash).c_str(),
-                          IN_CREATE | IN_MOVED_TO);
-    }
-    const auto all_there = [&links]
-    { return std::all_of(links.begin(), links.end(), [](const std::string& link) { return exists(link); }); };
-    const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(seconds);
-    while (!all_there() && ros::WallTime::now() < deadline)
-    {
-      pollfd p{watch, POLLIN, 0};
-      if (::poll(&p, 1, static_cast<int>((deadline - ros::WallTime::now()).toSec() * 1000) + 1) > 0)
-      {
-        alignas(inotify_event) char events[4096];
-        while (::read(watch, events, sizeof(events)) > 0)
-        {
-        }
-      }
-    }
-    ::close(watch);
-  }
   Peer socat_;
   int fd_ = -1;
 };

@@ -31,6 +31,7 @@
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/transport/backoff.h"
 #include "cnc_bridge/transport/tcp.h"
+#include "line_log.h"
 #include "topic_watch.h"
 
 using cnc_bridge::CycleEvent;
@@ -56,16 +57,16 @@ std::vector<std::string> queriesReceived(const std::string& log)
 // Waits until the control has received \p query after its first \p from queries.
 bool waitForQuery(const std::string& log, const std::string& query, size_t from, double seconds = 10.0)
 {
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
-  do
-  {
-    const auto lines = queriesReceived(log);
-    if (std::find(lines.begin() + static_cast<long>(std::min(from, lines.size())), lines.end(), query) != lines.end())
-      return true;
-    // The simulator writes the log from another process: the file is all there is to wait on.
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));  // poll
-  } while (std::chrono::steady_clock::now() < deadline);
-  return false;
+  // The simulator writes the log from another process: the file is all there is to wait on.
+  return line_log::waitForFile(
+      log,
+      [&]
+      {
+        const auto lines = queriesReceived(log);
+        return std::find(lines.begin() + static_cast<long>(std::min(from, lines.size())), lines.end(), query) !=
+               lines.end();
+      },
+      seconds);
 }
 
 // The writes (?E...) a control received after its first \p from queries, once a status poll
