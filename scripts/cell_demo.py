@@ -8,6 +8,10 @@ Waits for every machine of the cell description, then, for each node a machine r
   at_controller    follows a G-code path with 1 ms setpoints (~follow_path action)
   slave_bus_node   steps the bus: axes move, the tool toggles
   haas_mdc_node    reports the cycle events it saw (a robot waits for CYCLE_END to unload)
+  mtconnect_node   a machine reached only through its MTConnect agent: waits for a whole cycle
+                   read from the agent's stream, and reports its cycle events
+Once the machines are up, it reads what mtconnect_adapter_node (the cell's machines out to the
+shop's MTConnect agent) serves, as an agent connecting to it does, and prints every machine's line.
 Before each of these steps the cell's robot (a stand-in) asks cell_monitor whether it may enter the
 machine and prints the answer with its reason,
 and prints a readable line for everything that happens, with numbers. Exit status 0 only if
@@ -17,9 +21,11 @@ every step succeeded. Then, unless --once, keeps printing the cell's state until
 """
 import argparse
 import logging
+import math
 import os
 import re
 import shutil
+import socket
 import sys
 import threading
 import time
@@ -74,6 +80,7 @@ class Machine:
         self.nodes = {node["launch"]: node for node in entry.get("nodes", [])}
         self.states = {}
         self.events = []
+        self.cycle_ended = threading.Event()  # a whole cycle (start and end) was seen
         self.lock = threading.Lock()
         self.subscribers = []
         for node in entry.get("nodes", []):
@@ -82,7 +89,7 @@ class Machine:
                 continue
             self.subscribers.append(rospy.Subscriber(self.ns + "/" + topic, MachineState, self._on_state,
                                                      callback_args=node["launch"]))
-        if "haas_mdc_node" in self.nodes:
+        if "haas_mdc_node" in self.nodes or "mtconnect_node" in self.nodes:
             self.subscribers.append(rospy.Subscriber(self.ns + "/events", CycleEvent, self._on_event))
 
     def _on_state(self, state, node):
@@ -92,6 +99,8 @@ class Machine:
     def _on_event(self, event):
         with self.lock:
             self.events.append(event)
+        if event.event == CycleEvent.CYCLE_END and math.isfinite(event.cycle_time):
+            self.cycle_ended.set()
         say("%s: %s %s%s" % (self.name, EVENTS.get(event.event, "?"), event.program,
                              (", parts %d" % event.part_count) if event.part_count >= 0 else ""))
 
@@ -262,6 +271,73 @@ def step_bus(machine, args):
         machine.name, len(responses)))
 
 
+def follow_mtconnect(machine, args):
+    """A machine reached only through its MTConnect agent: a whole cycle, its start and its end, as
+    mtconnect_node reads them from the agent's stream (Execution ACTIVE, then READY)."""
+    node = machine.nodes["mtconnect_node"].get("args", {})
+    agent = "http://%s:%s" % (node.get("host", "127.0.0.1"), node.get("tcp_port", 5000))
+    say("%s: waiting for a whole cycle read through its MTConnect agent %s" % (machine.name, agent))
+    if not machine.cycle_ended.wait(args.timeout):
+        raise RuntimeError("no whole cycle read through MTConnect within %.0f s" % args.timeout)
+    with machine.lock:
+        end = [e for e in machine.events if e.event == CycleEvent.CYCLE_END and math.isfinite(e.cycle_time)][0]
+        state = machine.states.get("mtconnect_node")
+    say("%s: through MTConnect: cycle of %s ended after %.1f s, parts %d; now %s" % (
+        machine.name, end.program, end.cycle_time, end.part_count, describe(state)))
+
+
+def shdr_values(line, items):
+    """{(machine, item): value} of an SHDR line's `<machine>:<item>|value` pairs for these items."""
+    tokens = line.split("|")
+    found = {}
+    for key, value in zip(tokens, tokens[1:]):
+        machine, _, item = key.partition(":")
+        if item in items:
+            found[(machine, item)] = value
+    return found
+
+
+def report_mtconnect_out(cell, timeout=10.0):
+    """Connects to the cell's SHDR adapter (mtconnect_adapter_node) as the shop's agent does and reads
+    the full state it sends a new agent first, then the changes, until every machine it serves is
+    AVAILABLE (a machine whose state the node has not received yet is UNAVAILABLE): every machine's
+    availability and execution."""
+    node = "/%s/mtconnect_adapter_node" % cell
+    machines = rospy.get_param(node + "/machines")
+    address, port = rospy.get_param(node + "/address", "127.0.0.1"), rospy.get_param(node + "/port")
+    host = "127.0.0.1" if address == "0.0.0.0" else address
+    deadline = time.time() + timeout
+    while True:
+        try:
+            link = socket.create_connection((host, port), timeout=timeout)
+            break
+        except ConnectionRefusedError:
+            if time.time() > deadline:
+                raise RuntimeError("no SHDR adapter at %s:%d (mtconnect_adapter_node)" % (host, port))
+            time.sleep(0.2)  # the node is still starting: try again
+    seen, data = {}, b""
+
+    def served():
+        return ", ".join("%s %s %s" % (m, seen.get((m, "avail"), "?"), seen.get((m, "exec"), "?")) for m in machines)
+
+    until = time.time() + timeout
+    with link:
+        while not all(seen.get((m, "avail")) == "AVAILABLE" and (m, "exec") in seen for m in machines):
+            try:
+                link.settimeout(max(0.01, until - time.time()))
+                chunk = link.recv(4096)
+            except socket.timeout:
+                raise RuntimeError("not every machine AVAILABLE at the SHDR adapter %s:%d after %.0f s: %s" % (
+                    host, port, timeout, served()))
+            if not chunk:
+                raise RuntimeError("the SHDR adapter at %s:%d closed the connection" % (host, port))
+            *lines, data = (data + chunk).split(b"\n")
+            for line in lines:
+                seen.update(shdr_values(line.decode("utf-8", "replace"), ("avail", "exec")))
+    say("mtconnect out: the cell's SHDR adapter at %s:%d serves %d machines to the shop's agent: %s" % (
+        host, port, len(machines), served()))
+
+
 # The demo's robot is a stand-in: before each of its steps at a machine it asks cell_monitor
 # (docs/cell_monitor.md) whether it may enter, prints the answer with its reason, and gives a
 # granted entry back at once (it does not reach in).
@@ -283,7 +359,7 @@ def ask_cell_monitor(machine, node):
 
 
 STEPS = [("dnc_node", send_program), ("dprnt_node", probe_surface), ("ethernut_node", run_job),
-         ("at_controller_node", follow_path), ("slave_bus_node", step_bus)]
+         ("at_controller_node", follow_path), ("slave_bus_node", step_bus), ("mtconnect_node", follow_mtconnect)]
 
 
 def main():
@@ -334,6 +410,12 @@ def main():
         sub.unregister()
 
     failures = []
+    if "mtconnect_adapter" in description:
+        try:
+            report_mtconnect_out(cell)
+        except (OSError, RuntimeError, KeyError) as error:
+            failures.append("mtconnect out: %s" % error)
+            say("mtconnect out FAILED: %s" % error)
     threads = []
     for machine in machines:
         for node, step in STEPS:
@@ -353,10 +435,11 @@ def main():
         thread.join()
 
     for machine in machines:
-        if "haas_mdc_node" in machine.nodes:
+        if "haas_mdc_node" in machine.nodes or "mtconnect_node" in machine.nodes:
             ends = [e for e in machine.events if e.event == CycleEvent.CYCLE_END]
-            say("%s: %d cycle events seen, %d cycle ends (a robot unloads on each)" % (
-                machine.name, len(machine.events), len(ends)))
+            via = " through MTConnect" if "mtconnect_node" in machine.nodes else ""
+            say("%s: %d cycle events seen%s, %d cycle ends (a robot unloads on each)" % (
+                machine.name, len(machine.events), via, len(ends)))
     say("scenario %s: %d steps, %d failed" % ("done" if not failures else "FAILED", len(threads), len(failures)))
     for failure in failures:
         say("  " + failure)

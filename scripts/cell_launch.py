@@ -6,8 +6,8 @@ roslaunch cannot loop over a list, so the cell's launch file is generated: one g
 under /<cell>/<machine>, with the machine's simulators (when `simulate` is true), its nodes (each
 the production launch file launch/<node>.launch with the args given in the YAML, and the machine's
 control profile as params_file), its model (launch/machine_model.launch) placed in the cell frame,
-the cell frame placed in the root frame (`root_frame`, default `world`), and rviz and rosbag when
-asked. The rviz configuration shows the cell's own machines: each model with its name above it
+the cell frame placed in the root frame (`root_frame`, default `world`), cell_monitor and
+mtconnect_adapter_node when the YAML has their sections, and rviz and rosbag when asked. The rviz configuration shows the cell's own machines: each model with its name above it
 (the label marker of launch/machine_model.launch), tool trail, job path, planned path and probe
 cloud its nodes publish, with line widths and point sizes for the size of the cell, and opens with
 the Displays panel.
@@ -107,6 +107,23 @@ def cell_monitor_include(settings, source):
     return lines
 
 
+def mtconnect_adapter_include(cell, settings, machines):
+    """mtconnect_adapter_node (docs/mtconnect_adapter_node.md) in the cell's namespace with its
+    settings: the cell's machines out to the shop's MTConnect agent. Unless `machines` names them,
+    it serves the machines without an agent of their own (those no mtconnect_node reads)."""
+    settings = dict(settings)
+    if "machines" not in settings:
+        settings["machines"] = [m["name"] for m in machines
+                                if not any(node["launch"] == "mtconnect_node" for node in m.get("nodes", []))]
+    if isinstance(settings["machines"], list):
+        settings["machines"] = "[%s]" % ", ".join(str(name) for name in settings["machines"])
+    lines = [f"  <group ns={attr(cell)}>", '    <include file="$(find cnc_bridge)/launch/mtconnect_adapter_node.launch">']
+    for key, value in settings.items():
+        lines.append(f"      <arg name={attr(key)} value={attr(value)}/>")
+    lines += ["    </include>", "  </group>"]
+    return lines
+
+
 def generate(description, source, rviz_path):
     cell = description.get("cell", "cell")
     root_frame = description.get("root_frame", "world")
@@ -118,6 +135,9 @@ def generate(description, source, rviz_path):
         out.extend(machine_group(cell, machine, simulate))
     if "cell_monitor" in description:
         out.extend(cell_monitor_include(description["cell_monitor"] or {}, source))
+    if "mtconnect_adapter" in description:
+        out.extend(mtconnect_adapter_include(cell, description["mtconnect_adapter"] or {},
+                                             description.get("machines", [])))
     out.append('  <include if="$(arg gui)" file="$(find cnc_bridge)/launch/view.launch">')
     out.append(f'    <arg name="config" value={attr(rviz_path)}/>')
     out.append("  </include>")

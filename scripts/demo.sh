@@ -9,6 +9,13 @@ set -eo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 source "$root/scripts/env.sh"
 source "$root/.build/devel/setup.bash"
+# The cell's mtconnect_mill is served by the reference MTConnect agent, which scripts/setup.sh builds.
+agent=${CNC_MTCONNECT_AGENT:-/usr/local/lib/cnc_bridge/cppagent-1.8.0.3/agent}
+if [[ ! -x "$agent" ]]; then
+  echo "demo: the MTConnect agent (cppagent 1.8.0.3) is not at $agent, and the cell's mtconnect_mill needs it:" \
+    "run scripts/setup.sh (it builds the agent with scripts/build_cppagent.sh) or set CNC_MTCONNECT_AGENT" >&2
+  exit 1
+fi
 gui=false
 [[ "${GUI:-0}" == "1" ]] && gui=true
 out=${DEMO_OUTPUT:-$root/output/demo-$(date +%Y%m%d-%H%M%S)}

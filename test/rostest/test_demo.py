@@ -3,7 +3,10 @@
 this test's master): it must exit 0, print a summary of every step with its numbers, leave the
 surface-map PNG, and leave a rosbag that holds what launch/record.launch promises (state, DPRNT
 lines, the probe cloud, the actions' results, the '@' controller's planned path, the slave
-commands) and a wire trace of the VF-2's RS-232 line that replays to the same transfer. While it runs, every machine's tool_path trail and the '@' controller's job/path are
+commands, the MTConnect machine's state, events and conditions) and a wire trace of the VF-2's
+RS-232 line that replays to the same transfer. The MTConnect machine (mtconnect_mill) is reached
+only through its agent (the reference agent, fed by the simulated machine's SHDR adapter): a whole
+cycle must be read through it; and the cell's SHDR adapter must serve the other four machines. While it runs, every machine's tool_path trail and the '@' controller's job/path are
 watched: each must arrive, in its machine's frame, with the tool's motion in it.
 """
 import glob
@@ -23,7 +26,9 @@ from nav_msgs.msg import Path
 
 from cnc_bridge.msg import MachineState
 
-MACHINES = ["haas_vf2", "ethernut_mill", "at_router", "laser"]
+MACHINES = ["haas_vf2", "ethernut_mill", "at_router", "laser", "mtconnect_mill"]
+# The machines without an agent of their own, which mtconnect_adapter_node serves out.
+SERVED_OUT = ["haas_vf2", "ethernut_mill", "at_router", "laser"]
 
 # One pattern per step of the scenario: what the summary must say, with numbers that must be sane.
 SUMMARY = {
@@ -34,6 +39,12 @@ SUMMARY = {
             r"ends at \((-?[\d.]+), (-?[\d.]+), (-?[\d.]+)\) mm as the controller reported it",
     "bus": r"laser: bus stepped x, y, z and the laser around a 150 mm square; (\d+) answers",
     "cycles": r"haas_vf2: (\d+) cycle events seen",
+    # config/demo/mtconnect_mill.mdcsim: O02002, a 7 s cycle (a feed hold inside it), from 17 parts.
+    "mtconnect": r"mtconnect_mill: through MTConnect: cycle of O02002 ended after ([\d.]+) s, parts (\d+); "
+                 r"now link UP",
+    "mtconnect_cycles": r"mtconnect_mill: (\d+) cycle events seen through MTConnect, (\d+) cycle ends",
+    "mtconnect_out": r"mtconnect out: the cell's SHDR adapter at 127\.0\.0\.1:25071 serves (\d+) machines "
+                     r"to the shop's agent",
     "done": r"scenario done: (\d+) steps, 0 failed",
 }
 
@@ -46,6 +57,8 @@ BAG_TOPICS = [
     "/cell/at_router/at_controller_node/follow_path/feedback", "/cell/at_router/at_controller_node/follow_path/result",
     "/cell/ethernut_mill/job/path", "/cell/at_router/job/path", "/cell/laser/slaves/x/command",
     "/cell/laser/slaves/x/response", "/cell/haas_vf2/variables", "/tf", "/tf_static",
+    "/cell/mtconnect_mill/state", "/cell/mtconnect_mill/joint_states", "/cell/mtconnect_mill/events",
+    "/cell/mtconnect_mill/conditions",
 ]
 
 
@@ -131,7 +144,8 @@ class Demo(unittest.TestCase):
             self.assertAlmostEqual(got, end, delta=printed_tolerance,
                                    msg="the path ends at %s mm" % numbers["path"][1:])
         self.assertGreater(numbers["bus"][0], 0)
-        self.assertEqual(numbers["done"][0], 5)
+        self.assertEqual(numbers["done"][0], 6)
+        self.check_the_mtconnect_machine(numbers, run.stdout)
 
         pngs = glob.glob(os.path.join(out, "haas_vf2_surface*.png"))
         self.assertTrue(pngs, "no surface map PNG in %s: %s" % (out, os.listdir(out)))
@@ -180,6 +194,21 @@ class Demo(unittest.TestCase):
                              "MDC counts %d parts, DPRNT %d" % (mdc.part_count, dprnt.part_count))
         self.check_the_traced_transfer_replays(out)
         shutil.rmtree(out, ignore_errors=True)  # kept for a look when something failed
+
+    def check_the_mtconnect_machine(self, numbers, stdout):
+        """mtconnect_mill, read only through its agent: a whole cycle of its script (7 s from the
+        agent's timestamps, the part counted after it), and its cycle events; the cell's other
+        machines served out by mtconnect_adapter_node, each available with its execution."""
+        cycle_time, parts = numbers["mtconnect"]
+        self.assertAlmostEqual(cycle_time, 7.0, delta=0.5, msg="the cycle of config/demo/mtconnect_mill.mdcsim")
+        self.assertGreaterEqual(parts, 18, "the first cycle ends with the 18th part")
+        events, ends = numbers["mtconnect_cycles"]
+        self.assertGreaterEqual(ends, 1)
+        self.assertGreater(events, ends, "the whole cycle's start was read too")
+        self.assertEqual(numbers["mtconnect_out"][0], len(SERVED_OUT))
+        served = re.search(r"^.*mtconnect out: .* to the shop's agent: (.*)$", stdout, re.M).group(1)
+        self.assertEqual(re.findall(r"(\w+) AVAILABLE [A-Z_]+", served), SERVED_OUT,
+                         "every machine without an agent of its own, available: " + served)
 
     def check_the_traced_transfer_replays(self, out):
         """dnc_node traced the VF-2's RS-232 line (its ~wire_trace): played back by `cnc_dnc replay`

@@ -201,6 +201,28 @@ class CellLaunch(unittest.TestCase):
         self.assertEqual(frame.args.split()[-2:], ["world", "shop"])
         self.assertEqual(rviz["Visualization Manager"]["Global Options"]["Fixed Frame"], "world")
 
+    def test_mtconnect_adapter_serves_the_machines_without_an_agent_of_their_own(self):
+        description = dict(self.CELL)
+        description["machines"] = self.CELL["machines"] + [
+            {"name": "mazak", "position": [6.0, 0.0, 0.0],
+             "nodes": [{"launch": "mtconnect_node", "args": {"host": "10.0.0.9", "tcp_port": 5000}}]}]
+        description["mtconnect_adapter"] = {"port": 7979, "agent_port": 5001}
+        params, nodes, _, _ = self.generate(description)
+        adapter = [node for node in nodes if node.type == "mtconnect_adapter_node"]
+        self.assertEqual([node.namespace for node in adapter], ["/shop/"])
+        # mazak is read through its own agent: served out again, the shop's agent would have it twice.
+        self.assertEqual(params["/shop/mtconnect_adapter_node/machines"], ["lathe", "router"])
+        self.assertEqual(params["/shop/mtconnect_adapter_node/port"], 7979)
+        self.assertEqual(params["/shop/mtconnect_adapter_node/agent_port"], 5001)
+        self.assertEqual(params["/shop/mazak/mtconnect_node/host"], "10.0.0.9")
+        # Named in the YAML, the machines are those.
+        description["mtconnect_adapter"] = {"machines": ["router"]}
+        params, _, _, _ = self.generate(description)
+        self.assertEqual(params["/shop/mtconnect_adapter_node/machines"], ["router"])
+        # Without the section, no adapter.
+        _, nodes, _, _ = self.generate(self.CELL)
+        self.assertFalse([node for node in nodes if node.type == "mtconnect_adapter_node"])
+
 
 if __name__ == "__main__":
     unittest.main()

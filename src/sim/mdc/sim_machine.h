@@ -82,6 +82,8 @@ class SimMachine
   State stateAt(Clock::time_point now) const;
 
   double timelineSeconds() const;
+  /// \returns true when the script's positions are inches (`units inch`), false for millimetres.
+  bool inch() const { return inch_; }
 
   /// \brief Lengths in s of the last and the one before last cycle (a run of BUSY / FEED_HOLD
   /// phases) that ended by \p now: Q303 LAST CYCLE and Q304 PREV CYCLE. 0 when none yet.
