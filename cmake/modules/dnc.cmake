@@ -5,8 +5,9 @@ cnc_core_module(cnc_bridge_drip
   src/core/dnc/dnc_codes.cpp
   src/core/dnc/nc_program.cpp
   src/core/dnc/drip_feed.cpp
-  src/core/dnc/backup.cpp)
-target_link_libraries(cnc_bridge_drip PUBLIC cnc_bridge_gcode)  # the block lexer of nc_program.cpp
+  src/core/dnc/backup.cpp
+  src/core/dnc/commanded_position.cpp)
+target_link_libraries(cnc_bridge_drip PUBLIC cnc_bridge_gcode)  # the block lexer of nc_program.cpp, the parser of commanded_position.cpp
 target_link_libraries(cnc_bridge_drip PUBLIC cnc_bridge_programs)  # the program header the feed checks
 
 # The simulated control, shared by sim_haas_serial and the unit tests that run it in-process.
@@ -23,6 +24,8 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   target_link_libraries(test_drip_feed cnc_bridge_dnc_sim)
   cnc_core_gtest(test_backup test/unit/test_backup.cpp)
   target_link_libraries(test_backup cnc_bridge_dnc_sim)
+  cnc_core_gtest(test_commanded_position test/unit/test_commanded_position.cpp)
+  target_link_libraries(test_commanded_position cnc_bridge_drip)
 endif()
 
 cnc_fuzz_target(fuzz_dnc_backup test/fuzz/fuzz_dnc_backup.cpp)
@@ -39,6 +42,7 @@ if(NOT CNC_BRIDGE_CORE_ONLY)
     src/ros/nodes/dnc_params.cpp
     src/ros/nodes/dnc_transfer_action.cpp
     src/ros/nodes/dnc_drip_handlers.cpp
+    src/ros/nodes/dnc_commanded_position.cpp
     src/ros/nodes/dnc_requests.cpp)
   target_link_libraries(dnc_node cnc_bridge_xmodem cnc_bridge_programs cnc_bridge_drip cnc_bridge_requests)
 endif()

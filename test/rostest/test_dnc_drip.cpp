@@ -1,5 +1,6 @@
 // dnc_node drip-feed through the ~transfer action against sim_haas_serial drip: feedback (line,
-// N number, bytes, percent, held), dnc/current_line, state.block, the control receiving every byte
+// N number, bytes, percent, held), dnc/current_line, state.block, the commanded position
+// (dnc/commanded_position and tf, none during a backup), the control receiving every byte
 // in order without overrun, a restart from an N number, ~plan_drip, a second goal rejected while
 // a feed runs, ~pause/~resume, cancel, refusals; and a backup through the action of a second node
 // against sim_haas_serial punch. The simulated control's buffer (256 characters, DC3 at 192, DC1
@@ -10,14 +11,18 @@
 #include <ros/ros.h>
 #include <sys/stat.h>
 
+#include <cmath>
 #include <fstream>
 #include <functional>
 #include <iostream>
 #include <mutex>
+#include <optional>
 #include <sstream>
 
 #include <diagnostic_msgs/DiagnosticArray.h>
+#include <geometry_msgs/PointStamped.h>
 #include <std_srvs/Trigger.h>
+#include <tf2_msgs/TFMessage.h>
 
 #include "cnc_bridge/DncLine.h"
 #include "cnc_bridge/MachineState.h"
@@ -444,6 +449,137 @@ TEST(DncDrip, CancelReportsWhereItStoppedAndTheLinkCarriesTheNextFeed)
   EXPECT_EQ(103u, client.getResult()->stopped_at_line);
 }
 
+// The block ends of drip_rostest.nc worked out from its text (not with the parser the node uses):
+// metres, program coordinates, from the first block that names X, Y and Z on.
+std::vector<geometry_msgs::Point> blockEnds(const std::string& program)
+{
+  std::vector<geometry_msgs::Point> ends;
+  std::istringstream lines(program);
+  std::optional<double> axis[3];
+  for (std::string line; std::getline(lines, line);)
+  {
+    bool moved = false;
+    for (int a = 0; a < 3; ++a)
+    {
+      const size_t at = line.find(static_cast<char>('X' + a));
+      if (at != std::string::npos)
+      {
+        axis[a] = std::stod(line.substr(at + 1)) / 1000.0;
+        moved = true;
+      }
+    }
+    if (moved && axis[0] && axis[1] && axis[2])
+    {
+      geometry_msgs::Point p;
+      p.x = *axis[0];
+      p.y = *axis[1];
+      p.z = *axis[2];
+      ends.push_back(p);
+    }
+  }
+  return ends;
+}
+
+// The first of \p ends at or after \p from that is \p p, or ends.size().
+size_t findEnd(const std::vector<geometry_msgs::Point>& ends, size_t from, double x, double y, double z)
+{
+  for (size_t k = from; k < ends.size(); ++k)
+  {
+    if (std::fabs(ends[k].x - x) < 1e-9 && std::fabs(ends[k].y - y) < 1e-9 && std::fabs(ends[k].z - z) < 1e-9)
+      return k;
+  }
+  return ends.size();
+}
+
+// During a feed the node publishes the end of the last motion block it fed (ahead of the tool:
+// the control buffers), in the program's frame, on dnc/commanded_position and as tf
+// fanuc/program -> fanuc/commanded_tool: block ends of the program in the order they were fed (at
+// most ~state_rate a second, so not every one), none before the first motion block (N5, line 6).
+TEST(DncDrip, CommandedPositionIsTheLastBlockEndFedInTheProgramFrame)
+{
+  ros::NodeHandle nh;
+  struct Seen : topic_watch::Record
+  {
+    std::vector<geometry_msgs::PointStamped> points;
+    std::vector<geometry_msgs::TransformStamped> frames;
+    std::vector<cnc_bridge::DncLine> lines;
+  } seen;
+  auto point_sub =
+      nh.subscribe<geometry_msgs::PointStamped>(ns + "/dnc/commanded_position", 1000, seen.appendTo(seen.points));
+  auto line_sub = nh.subscribe<cnc_bridge::DncLine>(ns + "/dnc/current_line", 1000, seen.appendTo(seen.lines));
+  auto tf_sub = nh.subscribe<tf2_msgs::TFMessage>("/tf", 1000,
+                                                  [&](const tf2_msgs::TFMessage::ConstPtr& msg)
+                                                  {
+                                                    seen.update(
+                                                        [&]
+                                                        {
+                                                          for (const auto& t : msg->transforms)
+                                                          {
+                                                            if (t.child_frame_id == "fanuc/commanded_tool")
+                                                              seen.frames.push_back(t);
+                                                          }
+                                                        });
+                                                  });
+  Client client(ns + "/dnc_node/transfer", true);
+  ASSERT_TRUE(client.waitForServer(ros::Duration(20)));
+  struct stat info;
+  ASSERT_TRUE(waitUntil([&] { return ::stat(pty.c_str(), &info) == 0; }, 20));  // never read it: a pty
+  ASSERT_TRUE(waitUntil(
+      [&]
+      { return line_sub.getNumPublishers() > 0 && point_sub.getNumPublishers() > 0 && tf_sub.getNumPublishers() > 0; },
+      20));
+  {
+    std::lock_guard<std::mutex> lock(seen.mutex);
+    EXPECT_TRUE(seen.points.empty());  // nothing before a feed (nor after the tests before this one)
+  }
+
+  cnc_bridge::TransferGoal goal;
+  goal.direction = goal.DIRECTION_SEND;
+  goal.protocol = "drip";
+  goal.file = "drip_rostest.nc";
+  ASSERT_EQ(actionlib::SimpleClientGoalState::SUCCEEDED, client.sendGoalAndWait(goal, ros::Duration(60)).state_)
+      << client.getResult()->message;
+  const ros::Time done = ros::Time::now();
+  // Every line published reaches us; a point published with a line comes before it.
+  ASSERT_TRUE(seen.waitFor([&] { return seen.lines.size() >= 103; }, 20));
+
+  const std::vector<geometry_msgs::Point> ends = blockEnds(readFile(program_path));
+  ASSERT_EQ(95u, ends.size());  // N5 .. N99
+  std::lock_guard<std::mutex> lock(seen.mutex);
+  // The simulated control takes ~3 s for the program (1000 characters/s): ~30 at 10 Hz.
+  ASSERT_GE(seen.points.size(), 5u);
+  ros::Time line5_sent;
+  for (const auto& line : seen.lines)
+  {
+    if (line.line == 5)
+      line5_sent = line.header.stamp;
+  }
+  ASSERT_FALSE(line5_sent.isZero());
+  size_t next = 0;
+  for (const auto& p : seen.points)
+  {
+    EXPECT_EQ("fanuc/program", p.header.frame_id);
+    EXPECT_GE(p.header.stamp, line5_sent);  // none before the first motion block
+    EXPECT_LE(p.header.stamp, done);        // none after the feed
+    const size_t k = findEnd(ends, next, p.point.x, p.point.y, p.point.z);
+    ASSERT_LT(k, ends.size()) << "(" << p.point.x << ", " << p.point.y << ", " << p.point.z
+                              << ") is no block end of the program after block end " << next;
+    next = k + 1;  // consecutive block ends differ: each point is a later block than the one before
+  }
+  // tf: the same positions, in order (an unchanged one is sent again while the control holds us).
+  ASSERT_FALSE(seen.frames.empty());
+  next = 0;
+  for (const auto& t : seen.frames)
+  {
+    EXPECT_EQ("fanuc/program", t.header.frame_id);
+    EXPECT_LE(t.header.stamp, done);
+    const auto& v = t.transform.translation;
+    const size_t k = findEnd(ends, next, v.x, v.y, v.z);
+    ASSERT_LT(k, ends.size()) << "(" << v.x << ", " << v.y << ", " << v.z << ") is no block end";
+    next = k;
+  }
+}
+
 TEST(DncBackup, TheActionStoresWhatTheControlPunches)
 {
   Client client(backup_ns + "/dnc_node/transfer", true);
@@ -454,9 +590,13 @@ TEST(DncBackup, TheActionStoresWhatTheControlPunches)
   goal.direction = goal.DIRECTION_RECEIVE;
   goal.protocol = "backup";
   goal.file = "backup.nc";
+  // A backup stores a program: it commands no position (published only during a drip-feed).
+  topic_watch::TopicWatch<geometry_msgs::PointStamped> commanded(backup_ns + "/dnc/commanded_position");
+  ASSERT_TRUE(waitUntil([&] { return commanded.publishers() > 0; }, 20));
   client.sendGoal(goal, Client::SimpleDoneCallback(), Client::SimpleActiveCallback(),
                   [&](const cnc_bridge::TransferFeedbackConstPtr& f) { received.add(*f); });
   ASSERT_TRUE(client.waitForResult(ros::Duration(60)));
+  EXPECT_EQ(0u, commanded.size());
   ASSERT_EQ(actionlib::SimpleClientGoalState::SUCCEEDED, client.getState().state_) << client.getResult()->message;
   const std::string program = readFile(program_path);
   EXPECT_EQ(program, readFile(backup_dir + "/backup.nc"));

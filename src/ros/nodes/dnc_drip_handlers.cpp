@@ -3,6 +3,8 @@
 // serialises them), so the handlers hold no lock of their own.
 #include "dnc_drip_handlers.h"
 
+#include "dnc_commanded_position.h"
+
 #include <std_srvs/Trigger.h>
 
 #include <memory>
@@ -76,7 +78,7 @@ class DripHandlers
  public:
   DripHandlers(ros::NodeHandle nh, ros::NodeHandle pnh, const SerialSettings& serial, MachineStatePublisher& state,
                ros::Duration feedback_period)
-      : state_(state)
+      : state_(state), commanded_(nh, pnh, state)
   {
     // ~drip_eob (string, default "lf"): end of block sent after each line: lf (ISO, Fanuc), cr
     // (EIA), crlf (Haas), lfcr, lfcrcr.
@@ -174,6 +176,7 @@ class DripHandlers
     FlowControlGuard guard(link, options.flow);
     dnc::DripSender sender(link, options);
     ActiveSender active(*this, sender);
+    CommandedPositionScope commanded(commanded_, plan.preamble);  // dnc/commanded_position and tf
     bool was_held = false;
     bool was_paused = false;
     const auto progress = [&](const dnc::DripProgress& p)
@@ -188,6 +191,7 @@ class DripHandlers
       f.paused = p.paused;
       if (feedback)
         feedback(f);
+      commanded_.refresh();
       state_.update(
           [&](MachineState& s)
           {
@@ -206,6 +210,7 @@ class DripHandlers
     };
     const auto line_sent = [&](uint64_t line, const std::string& text)
     {
+      commanded_.lineSent(text);
       if (line_pub_.getNumSubscribers() == 0)
         return;
       DncLine msg;
@@ -373,6 +378,7 @@ class DripHandlers
   }
 
   MachineStatePublisher& state_;
+  CommandedPositionPublisher commanded_;
   const ProgramDirectory* programs_ = nullptr;
   std::mutex sender_mutex_;
   dnc::DripSender* sender_ = nullptr;  ///< the feed running, for ~pause / ~resume
