@@ -15,7 +15,7 @@ import rospy
 import rostest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 
-from cnc_bridge.msg import CellEntryEvent, CellState, HoldEntryAction, HoldEntryGoal, MachineState
+from cnc_bridge.msg import CellEntryEvent, CellState, CycleCountdown, HoldEntryAction, HoldEntryGoal, MachineState
 from cnc_bridge.srv import RequestEntry
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
@@ -35,6 +35,7 @@ class CellMonitorTest(unittest.TestCase):
         cls.views = Collector("/cell_state", CellState)
         cls.events = Collector("/entry_events", CellEntryEvent)
         cls.diagnostics = Collector("/diagnostics", DiagnosticArray)
+        cls.countdowns = Collector("/cycle_countdown", CycleCountdown)
         rospy.wait_for_service("/cell_monitor/request_entry", 30)
         cls.request = rospy.ServiceProxy("/cell_monitor/request_entry", RequestEntry)
         cls.release = rospy.ServiceProxy("/cell_monitor/release_entry", RequestEntry)
@@ -116,6 +117,32 @@ class CellMonitorTest(unittest.TestCase):
             self.assertTrue(math.isfinite(m.state.spindle_speed) and abs(m.state.spindle_speed) < 0.5)
             self.assertFalse(machine(view, "ghost").safe_to_enter)
         self.assertGreater(seen_safe, 0)
+
+    def test_e_time_to_cycle_end(self):
+        # haas_ngc runs O00110 (test/data/cell/programs: a 1 s tool change and a 2 s dwell under its
+        # cycle_time profile): the machine's 3 s of BUSY, with a feed hold between.
+        def haas(c):
+            return c.machine == "haas_ngc"
+        known = self.countdowns.wait(lambda c: haas(c) and math.isfinite(c.time_to_cycle_end), 30)
+        self.assertIsNotNone(known, "no time to cycle end for haas_ngc in a cycle")
+        self.assertEqual(known.program, "O00110")
+        self.assertAlmostEqual(known.planned_cycle_time, 3.0, places=9)
+        # Its first value comes with the cycle's start (at most one state poll and one tick late).
+        self.assertLessEqual(known.time_to_cycle_end, 3.0)
+        self.assertGreater(known.time_to_cycle_end, 1.0)
+        first = self.countdowns.messages.index(known)
+        end = self.countdowns.wait(lambda c: haas(c) and math.isnan(c.time_to_cycle_end), 30, first)
+        self.assertIsNotNone(end, "the countdown never ended")
+        self.assertEqual(end.reason, "no cycle running")
+        cycle = [c.time_to_cycle_end for c in self.countdowns.messages[first:self.countdowns.messages.index(end)]
+                 if haas(c)]
+        self.assertTrue(all(math.isfinite(t) and 0.0 <= t <= 3.0 for t in cycle), cycle)
+        self.assertEqual(cycle, sorted(cycle, reverse=True), "the countdown went back up")
+        # The machine without a node: never a number, and why.
+        ghost = self.countdowns.wait(lambda c: c.machine == "ghost", 10)
+        self.assertIsNotNone(ghost)
+        self.assertTrue(math.isnan(ghost.time_to_cycle_end))
+        self.assertEqual(ghost.reason, "no state received")
 
 
 if __name__ == "__main__":

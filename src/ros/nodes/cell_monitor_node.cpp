@@ -2,7 +2,9 @@
 // ~cell_file (config/cell.yaml), follows each machine's `state` (/<cell>/<machine>/state), judges
 // it with the ROS-free rules (cnc_bridge/cell/cell_rules.h) and publishes `cell_state` (latched),
 // `entry_events` and, when an entry is withdrawn, an ERROR on /diagnostics. Serves ~request_entry,
-// ~release_entry and the ~hold_entry action. Advisory only: not a safety PLC.
+// ~release_entry and the ~hold_entry action. Advisory only: not a safety PLC. For each machine with
+// a `cycle_time` profile in the cell file, publishes the predicted time to its cycle end on
+// `cycle_countdown` (cnc_bridge/cell/cycle_time.h: its program from ~program_dir, planned).
 #include <actionlib/server/action_server.h>
 #include <diagnostic_msgs/DiagnosticArray.h>
 #include <ros/ros.h>
@@ -14,10 +16,12 @@
 
 #include "cnc_bridge/CellEntryEvent.h"
 #include "cnc_bridge/CellState.h"
+#include "cnc_bridge/CycleCountdown.h"
 #include "cnc_bridge/HoldEntryAction.h"
 #include "cnc_bridge/MachineState.h"
 #include "cnc_bridge/RequestEntry.h"
 #include "cnc_bridge/cell/cell_rules.h"
+#include "cnc_bridge/cell/cycle_time.h"
 #include "cnc_bridge/ros/node_main.h"
 
 namespace cnc_bridge
@@ -42,12 +46,52 @@ cell::MachineReport toReport(const MachineState& state)
   return report;
 }
 
-// The machines of the cell file, in its order, and the namespace of the cell (`cell:`).
+// The machines of the cell file, in its order, the namespace of the cell (`cell:`) and the cycle
+// profiles of the machines that have one.
 struct CellFile
 {
   std::string cell;
   std::vector<std::string> machines;
+  std::map<std::string, cell::CycleProfile> cycle_profiles;
 };
+
+// A machine's `cycle_time:` entry: metres, seconds, as every parameter of the suite.
+cell::CycleProfile readCycleProfile(const YAML::Node& node, const std::string& where)
+{
+  const auto number = [&](const char* key, bool required) -> double
+  {
+    if (!node[key])
+    {
+      if (required)
+        throw std::runtime_error(where + ": cycle_time needs " + key);
+      return 0.0;
+    }
+    try
+    {
+      return node[key].as<double>();
+    }
+    catch (const YAML::Exception&)
+    {
+      throw std::runtime_error(where + ": cycle_time " + key + " must be a number");
+    }
+  };
+  cell::CycleProfile profile;
+  profile.max_feed = number("max_feed", true) * 1000.0;  // m/s to mm/s
+  profile.rapid_rate = number("rapid_rate", true) * 1000.0;
+  profile.acceleration = number("acceleration", true) * 1000.0;
+  profile.tool_change_time = number("tool_change_time", false);
+  if (node["dialect"])
+    profile.dialect = gcode::parseDialect(node["dialect"].as<std::string>());
+  try
+  {
+    profile.validate();
+  }
+  catch (const ConfigError& e)
+  {
+    throw std::runtime_error(where + ": " + e.what());
+  }
+  return profile;
+}
 
 CellFile readCellFile(const std::string& path)
 {
@@ -69,6 +113,9 @@ CellFile readCellFile(const std::string& path)
     if (!machine["name"])
       throw std::runtime_error("~cell_file " + path + ": a machine has no name");
     file.machines.push_back(machine["name"].as<std::string>());
+    if (machine["cycle_time"])
+      file.cycle_profiles[file.machines.back()] =
+          readCycleProfile(machine["cycle_time"], "~cell_file " + path + ", machine " + file.machines.back());
   }
   return file;
 }
@@ -92,6 +139,14 @@ class CellMonitorNode
     // ~door_machines: machines that report a door; theirs must be known and open.
     std::vector<std::string> door_machines;
     pnh.param("door_machines", door_machines, {});
+    // ~program_dir: the folder of the programs the machines run (for those with a cycle_time profile).
+    const std::string program_dir = pnh.param<std::string>("program_dir", "");
+    for (const auto& [name, profile] : file.cycle_profiles)
+    {
+      if (program_dir.empty())
+        throw std::runtime_error("~program_dir is needed: machine " + name + " has a cycle_time profile");
+      watches_.emplace(name, cell::CycleWatch(profile, program_dir));
+    }
     for (const std::string& name : file.machines)
     {
       cell::MachineRules machine_rules = rules;
@@ -104,6 +159,7 @@ class CellMonitorNode
     }
     state_pub_ = nh.advertise<CellState>("cell_state", 1, true);
     event_pub_ = nh.advertise<CellEntryEvent>("entry_events", 20);
+    countdown_pub_ = nh.advertise<CycleCountdown>("cycle_countdown", 20);
     diagnostics_pub_ = nh.advertise<diagnostic_msgs::DiagnosticArray>("/diagnostics", 10);
     request_srv_ = pnh.advertiseService("request_entry", &CellMonitorNode::onRequest, this);
     release_srv_ = pnh.advertiseService("release_entry", &CellMonitorNode::onRelease, this);
@@ -112,7 +168,11 @@ class CellMonitorNode
     server_.start();
     // ~check_rate: Hz at which staleness is judged without a state (leases, held goals, cell_state).
     timer_ = nh.createTimer(ros::Duration(1.0 / params::positive(pnh, "check_rate", 10.0)),
-                            [this](const ros::TimerEvent&) { update(); });
+                            [this](const ros::TimerEvent&)
+                            {
+                              update();
+                              publishCountdowns();
+                            });
     publishState();
   }
 
@@ -128,7 +188,43 @@ class CellMonitorNode
   {
     states_[name] = state;
     rules_.report(name, toReport(state), steadyNow());
+    const auto watch = watches_.find(name);
+    if (watch != watches_.end())
+      watch->second.observe(toObservation(state), steadyNow());
     update();
+  }
+
+  static cell::CycleObservation toObservation(const MachineState& state)
+  {
+    const cell::MachineReport report = toReport(state);
+    cell::CycleObservation observation;
+    observation.link = report.link;
+    observation.execution = report.execution;
+    observation.program = state.program;
+    observation.block = state.block;
+    return observation;
+  }
+
+  // Every machine with a cycle profile, at ~check_rate: the time to its cycle end or NaN and why.
+  void publishCountdowns()
+  {
+    const double now = steadyNow();
+    for (const std::string& name : order_)
+    {
+      const auto watch = watches_.find(name);
+      if (watch == watches_.end())
+        continue;
+      const cell::CyclePrediction prediction = watch->second.predict(now);
+      CycleCountdown countdown;
+      countdown.header.stamp = ros::Time::now();
+      countdown.machine = name;
+      countdown.program = prediction.program;
+      countdown.planned_cycle_time = prediction.planned;
+      countdown.time_to_cycle_end = prediction.remaining;
+      countdown.block = prediction.block;
+      countdown.reason = states_.count(name) ? prediction.reason : "no state received";
+      countdown_pub_.publish(countdown);
+    }
   }
 
   // Withdraws broken leases, serves held goals, publishes the view when it changed.
@@ -315,7 +411,8 @@ class CellMonitorNode
   std::vector<std::string> order_;
   std::map<std::string, MachineState> states_;
   std::vector<ros::Subscriber> subscribers_;
-  ros::Publisher state_pub_, event_pub_, diagnostics_pub_;
+  ros::Publisher state_pub_, event_pub_, diagnostics_pub_, countdown_pub_;
+  std::map<std::string, cell::CycleWatch> watches_;  // machines with a cycle profile
   ros::ServiceServer request_srv_, release_srv_;
   Server server_;
   std::list<HeldGoal> held_;
