@@ -150,12 +150,13 @@ def generate(description, source, rviz_path):
 
 
 # rviz displays of what a node publishes besides the machine's model and tool trail:
-# (kind, topic relative to the machine's namespace, display name suffix, colour).
+# (kind, topic relative to the machine's namespace, display name suffix, colour); for "axes" a
+# frame relative to the machine's tf prefix.
 NODE_DISPLAYS = {
     "ethernut_node": [("path", "job/path", "job path", "25; 255; 0"),
                       ("markers", "job/markers", "job (rapids, feeds)", None)],
     "at_controller_node": [("path", "job/path", "planned path", "255; 170; 0")],
-    "surface_mapper": [("cloud", "surface/cloud", "probe surface", None)],
+    "surface_mapper": [("cloud", "surface/cloud", "probe surface", None), ("axes", "part", "part frame", None)],
 }
 
 
@@ -174,6 +175,10 @@ def rviz_display(kind, name, topic, color=None, width=0.02):
     if kind == "markers":
         return ["    - Class: rviz/MarkerArray", f"      Name: {name}", "      Enabled: true",
                 f"      Marker Topic: {topic}", "      Value: true"]
+    if kind == "axes":
+        return ["    - Class: rviz/Axes", f"      Name: {name}", "      Enabled: true", f"      Reference Frame: {topic}",
+                # Long enough to be seen beside the probe cloud at the cell's scale.
+                "      Length: 0.2", f"      Radius: {round(width / 3, 4)}", "      Value: true"]
     if kind == "cloud":
         return ["    - Class: rviz/PointCloud2", f"      Name: {name}", "      Enabled: true", f"      Topic: {topic}",
                 "      Style: Boxes", f"      Size (m): {width}", "      Color Transformer: AxisColor", "      Axis: Z",
@@ -204,7 +209,8 @@ def generate_rviz(description):
             for kind, topic, label, color in NODE_DISPLAYS.get(node["launch"], []):
                 # A probe grid is a few centimetres wide: its points drawn large enough to be seen.
                 size = width
-                display = rviz_display(kind, f"{name} {label}", f"{space}/{topic}", color, size)
+                where = machine.get("tf_prefix", name + "/") + topic if kind == "axes" else f"{space}/{topic}"
+                display = rviz_display(kind, f"{name} {label}", where, color, size)
                 (clouds if kind == "cloud" else extras).extend(display)
     lines = ["Panels:", "  - Class: rviz/Displays", "    Name: Displays", "    Property Tree Widget:",
              "      Expanded: ~", "    Splitter Ratio: 0.6", "    Tree Height: 700",

@@ -99,7 +99,7 @@ RUNTIME_DEBIAN_OF_KEY = {
     "actionlib": ["libactionlib1d"],
     "actionlib_msgs": ["python3-actionlib-msgs"],
     "tf2": ["libtf2-2d"],
-    "tf2_ros": ["libtf2-ros1d"],
+    "tf2_ros": ["libtf2-ros1d", "python3-tf2-ros"],  # python: surface_mapper's part frame
     "tf2_geometry_msgs": [],
     "diagnostic_updater": [],
     "diagnostic_msgs": ["python3-diagnostic-msgs"],

@@ -35,11 +35,16 @@ if(NOT CNC_BRIDGE_CORE_ONLY)
   cnc_node(dprnt_node src/ros/nodes/dprnt_node.cpp src/ros/nodes/dprnt_params.cpp)
   target_link_libraries(dprnt_node cnc_bridge_dprnt)
   catkin_install_python(PROGRAMS scripts/surface_mapper DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
+  # The part frame's fit, imported by surface_mapper from beside itself.
+  install(FILES scripts/part_fit.py DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
   if(CATKIN_ENABLE_TESTING)
     add_rostest(test/rostest/dprnt_pty.test DEPENDENCIES dprnt_node sim_haas_serial ${PROJECT_NAME}_generate_messages_cpp ${PROJECT_NAME}_generate_messages_py)
     add_rostest(test/rostest/dprnt_tcp.test DEPENDENCIES dprnt_node sim_haas_serial ${PROJECT_NAME}_generate_messages_cpp ${PROJECT_NAME}_generate_messages_py)
     add_rostest(test/rostest/dprnt_grid.test DEPENDENCIES dprnt_node sim_haas_serial ${PROJECT_NAME}_generate_messages_cpp ${PROJECT_NAME}_generate_messages_py)
     add_rostest(test/rostest/dprnt_shared_port.test DEPENDENCIES dprnt_node haas_mdc_node dnc_node sim_haas_serial ${PROJECT_NAME}_generate_messages_cpp ${PROJECT_NAME}_generate_messages_py)
     add_rostest(test/rostest/dprnt_file.test DEPENDENCIES dprnt_node ${PROJECT_NAME}_generate_messages_cpp ${PROJECT_NAME}_generate_messages_py)
+    # The part frame from the probe points of a known plate, and the G54 write only where enabled.
+    add_rostest(test/rostest/part_frame.test DEPENDENCIES dprnt_node haas_mdc_node sim_haas_serial sim_haas_mdc
+      ${PROJECT_NAME}_generate_messages_py)
   endif()
 endif()

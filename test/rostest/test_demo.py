@@ -172,6 +172,21 @@ class Demo(unittest.TestCase):
             self.assertTrue(any(all(abs(a - b) < 1e-6 for a, b in zip(c, corner)) for c in corners),
                             "corner %s not in the planned path %s" % (corner, corners))
 
+        # The part frame surface_mapper fitted to the VF-2's probe points, on /tf_static as rviz
+        # gets it: the demo's plate (config/cell.yaml: z = -0.01 + 0.002 x + 0.001 y in, with a
+        # waviness that averages out on the probed grid) gives a frame 0.254 mm below the work
+        # zero, its z axis along the plate's normal (-0.002, -0.001, 1).
+        with rosbag.Bag(bag_path) as bag:
+            parts = [t for _, m, _ in bag.read_messages(topics=["/tf_static"]) for t in m.transforms
+                     if t.child_frame_id == "haas_vf2/part"]
+        self.assertTrue(parts, "no haas_vf2/part frame on /tf_static")
+        self.assertEqual(parts[-1].header.frame_id, "haas_vf2/work")
+        self.assertAlmostEqual(parts[-1].transform.translation.z, -0.000254, delta=3e-6)
+        q = parts[-1].transform.rotation
+        normal = (2 * (q.x * q.z + q.y * q.w), 2 * (q.y * q.z - q.x * q.w), 1 - 2 * (q.x * q.x + q.y * q.y))
+        self.assertAlmostEqual(normal[0], -0.002, delta=2e-5)
+        self.assertAlmostEqual(normal[1], -0.001, delta=2e-5)
+
         # Every machine left a trail of its tool in its own frame, with the motion of the scenario.
         with watch.lock:
             last = dict(watch.last)

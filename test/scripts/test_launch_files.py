@@ -193,6 +193,19 @@ class CellLaunch(unittest.TestCase):
         viewer = [node for node in nodes if node.package == "rviz"][0]
         self.assertIn(rviz_path, viewer.args)
 
+    def test_the_part_frame_of_a_surface_mapper_in_rviz(self):
+        description = dict(self.CELL)
+        description["machines"] = self.CELL["machines"] + [
+            {"name": "mill", "position": [6.0, 0.0, 0.0], "tf_prefix": "vf2/",
+             "nodes": [{"launch": "surface_mapper", "no_machine_args": True, "args": {"tf_prefix": "vf2/"}}]}]
+        params, _, rviz, _ = self.generate(description)
+        self.assertEqual(params["/shop/mill/surface_mapper/tf_prefix"], "vf2/")
+        displays = {d["Name"]: d for d in rviz["Visualization Manager"]["Displays"]}
+        self.assertEqual(displays["mill part frame"]["Class"], "rviz/Axes")
+        self.assertEqual(displays["mill part frame"]["Reference Frame"], "vf2/part")
+        self.assertEqual(displays["mill probe surface"]["Topic"], "/shop/mill/surface/cloud")
+        self.assertNotIn("lathe part frame", displays)
+
     def test_root_frame_defaults_to_world(self):
         description = dict(self.CELL)
         del description["root_frame"]

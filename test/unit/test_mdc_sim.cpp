@@ -98,6 +98,24 @@ TEST(MdcSim, WritesOnlyToUserVariables)
   EXPECT_EQ(m.answer("?E100", t0), "?, ?E100");
 }
 
+// The G54 work offset (#5221-#5223) is the script's `work`: read with Q600, written with ?E, and
+// the work position (#5041-#5043) follows the written offset.
+TEST(MdcSim, TheWorkOffsetReadsAndWritesAsTheG54Variables)
+{
+  SimMachine m = cell();  // work 5 4 -2
+  const SimMachine::Clock::time_point t0{};
+  m.start(t0);
+  EXPECT_EQ(m.answer("?Q600 5221", t0), "MACRO, 5.000000");
+  EXPECT_EQ(m.answer("?Q600 5223", t0), "MACRO, -2.000000");
+  EXPECT_EQ(m.answer("?E5223 -1.5", t0), "!");
+  EXPECT_EQ(m.answer("?Q600 5223", t0), "MACRO, -1.500000");
+  EXPECT_EQ(m.answer("?Q600 5221", t0), "MACRO, 5.000000");
+  const double z = macroOf(*parseReply(m.answer("?Q600 5023", t0 + 2500ms))).value;
+  EXPECT_NEAR(macroOf(*parseReply(m.answer("?Q600 5043", t0 + 2500ms))).value, z + 1.5, 1e-6);
+  EXPECT_EQ(m.answer("?E5224 1", t0), "?, ?E5224 1");  // G54 A: not in this machine
+  EXPECT_EQ(m.answer("?E5220 1", t0), "?, ?E5220 1");
+}
+
 TEST(MdcSim, DropFiresOncePerDropPhase)
 {
   SimMachine m = cell();

@@ -394,7 +394,14 @@ std::string SimMachine::answerWrite(const std::string& command, Clock::time_poin
     try
     {
       const double n = parseNumber(var), v = parseNumber(value);
-      // System variables (#1000 and up here) are read-only on the control.
+      // The G54 work offset (#5221-#5223) is the `work` of the script: writing it moves the work
+      // zero, as probing software does on a control.
+      if (n == std::floor(n) && n >= 5221 && n <= 5223)
+      {
+        work_[static_cast<int>(n) - 5221] = v;
+        return "!";
+      }
+      // Other system variables (#1000 and up here) are read-only on the control.
       if (n == std::floor(n) && n >= 1 && n < 1000)
       {
         variables_[static_cast<int>(n)] = v;
@@ -421,6 +428,8 @@ std::string SimMachine::answerMacro(const std::optional<double>& argument, const
     value = n == 5021 ? s.x : n == 5022 ? s.y : s.z;
   else if (n >= 5041 && n <= 5043)
     value = work[n - 5041];
+  else if (n >= 5221 && n <= 5223)
+    value = work_[n - 5221];
   else if (n == 4006)
     value = inch_ ? 20 : 21;
   else if (n == 3027)

@@ -24,7 +24,8 @@ namespace mdc
 /// software 100.20.000.1200     ?Q101
 /// model VF2D                   ?Q102
 /// units inch|mm                #4006 = 20|21; positions below are in these units
-/// work X Y Z                   machine coordinates of the active work zero (#5041.. = #5021.. - work)
+/// work X Y Z                   machine coordinates of the active work zero (#5041.. = #5021.. - work):
+///                              the G54 offset #5221-#5223, which ?E writes
 /// var N VALUE                  initial value of macro variable #N (writable with ?E)
 /// phase SECONDS key=value ...  one step of the timeline; the timeline repeats
 /// ```

@@ -1,0 +1,135 @@
+#!/usr/bin/env python3
+"""The part's frame from the probe points of a plate placed with a known tilt and height, and the
+G54 work offset written from it only where enabled and under the residual limit
+(part_frame.test).
+
+The plate: z = 0.5 + 0.002 x - 0.001 y + 0.0004 sin(pi x) sin(pi y) inches, probed by
+config/dprnt/grid_probe.nc on 10 x 10 points 0.5 in apart from the work origin, printed to 4
+decimals. Stated tolerances: the frame's origin within 3 um of (0, 0, 0.5 in), its z axis within
+20 urad of the plate's normal (-0.002, 0.001, 1) (the waviness and the printed digits move the fit
+by 0.05 um and 0.7 urad), the residual as the waviness makes it (rms 5.1 um, max 10.3 um). Expected
+numbers come from the formula, not from the fit's code. Every wait is on a message or, for the
+simulators' query logs (files another process writes), a poll with a deadline.
+"""
+import math
+import os
+import re
+import sys
+import time
+import unittest
+
+import rospy
+import rostest
+import tf2_ros
+
+from cnc_bridge.msg import PartFrame
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from topic_collector import Collector  # noqa: E402
+
+INCH = 0.0254
+HEIGHT = 0.5 * INCH
+NORMAL = (-0.002, 0.001, 1.0)
+HEIGHT_TOLERANCE = 3e-6  # m
+TILT_TOLERANCE = 20e-6  # rad
+G54_Z_BEFORE = -2.0  # in, test/data/mdc/plate.mdcsim
+
+
+def z_axis(q):
+    """The third column of the rotation of quaternion q (geometry_msgs/Quaternion)."""
+    return (2 * (q.x * q.z + q.y * q.w), 2 * (q.y * q.z - q.x * q.w), 1 - 2 * (q.x * q.x + q.y * q.y))
+
+
+def angle(u, v):
+    dot = sum(a * b for a, b in zip(u, v))
+    norm = math.sqrt(sum(a * a for a in u) * sum(b * b for b in v))
+    return math.acos(max(-1.0, min(1.0, dot / norm)))
+
+
+def queries(path):
+    """The queries a simulated control received so far (its --query-log)."""
+    if not os.path.exists(path):
+        return []
+    with open(path) as f:
+        return [line.strip() for line in f if line.strip()]
+
+
+def wait_for_query(path, query, after, timeout=20.0):
+    """True once the control received `query` after its first `after` queries."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if query in queries(path)[after:]:
+            return True
+        time.sleep(0.05)  # poll: the log is a file the simulator writes, no event to wait on
+    return False
+
+
+class TestPartFrame(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        rospy.init_node("test_part_frame")
+        cls.ns = rospy.get_param("~namespace")
+        cls.written_log = rospy.get_param("~written_queries")
+        cls.refused_log = rospy.get_param("~refused_queries")
+        cls.frames = Collector(cls.ns + "/part_frame", PartFrame)
+        cls.off = Collector(cls.ns + "/off/part_frame", PartFrame)
+        cls.strict = Collector(cls.ns + "/strict/part_frame", PartFrame)
+        cls.tf_buffer = tf2_ros.Buffer()
+        cls.tf_listener = tf2_ros.TransformListener(cls.tf_buffer)
+
+    def complete_frame(self, collector):
+        msg = collector.wait(lambda m: m.valid and m.points == 100, timeout=60.0)
+        self.assertIsNotNone(msg, "no part frame of the 100 probe points")
+        return msg
+
+    def test_frame_of_the_plate_within_tolerance(self):
+        msg = self.complete_frame(self.frames)
+        self.assertEqual(msg.header.frame_id, "plate/work")
+        self.assertEqual(msg.child_frame_id, "plate/part")
+        p = msg.pose.position
+        self.assertLess(math.hypot(p.x, p.y), 1e-9)  # above the work origin: no edge probes
+        self.assertAlmostEqual(p.z, HEIGHT, delta=HEIGHT_TOLERANCE)
+        self.assertLess(angle(z_axis(msg.pose.orientation), NORMAL), TILT_TOLERANCE)
+        self.assertAlmostEqual(msg.pitch, -math.atan(0.002), delta=TILT_TOLERANCE)
+        self.assertAlmostEqual(msg.roll, math.atan(-0.001), delta=TILT_TOLERANCE)
+        self.assertEqual(msg.yaw, 0.0)
+        self.assertAlmostEqual(msg.residual_rms, 5.1e-6, delta=0.5e-6)
+        self.assertAlmostEqual(msg.residual_max, 10.3e-6, delta=0.5e-6)
+
+    def test_frame_on_tf(self):
+        self.complete_frame(self.frames)
+        transform = self.tf_buffer.lookup_transform("plate/work", "plate/part", rospy.Time(0),
+                                                    rospy.Duration(30.0)).transform
+        self.assertAlmostEqual(transform.translation.z, HEIGHT, delta=HEIGHT_TOLERANCE)
+        self.assertLess(angle(z_axis(transform.rotation), NORMAL), TILT_TOLERANCE)
+
+    def test_work_offset_written_when_enabled(self):
+        msg = self.frames.wait(lambda m: m.work_offset.startswith("written"), timeout=60.0)
+        self.assertIsNotNone(msg, "no write: %s" % [m.work_offset for m in self.frames.messages if m.work_offset])
+        self.assertIn("#5223", msg.work_offset)
+        writes = [q for q in queries(self.written_log) if q.startswith("?E")]
+        self.assertTrue(writes, "the control received no write")
+        match = re.match(r"^\?E5223 (-?[0-9.]+)$", writes[0])
+        self.assertTrue(match, writes)
+        # The G54 Z moves up by the plate's height: work Z0 on the top face.
+        self.assertAlmostEqual(float(match.group(1)), G54_Z_BEFORE + 0.5, delta=0.0001)
+        # Z only: the X/Y origin is not measured without edge probes.
+        self.assertEqual([q for q in writes if not q.startswith("?E5223 ")], [])
+
+    def test_nothing_written_when_off_or_above_the_limit(self):
+        off = self.off.wait(lambda m: m.work_offset != "", timeout=60.0)
+        self.assertIsNotNone(off, "no cycle end reached the mapper with the write off")
+        self.assertEqual(off.work_offset, "not written: ~write_work_offset is false")
+        strict = self.strict.wait(lambda m: m.work_offset.startswith("refused"), timeout=60.0)
+        self.assertIsNotNone(strict, "no refusal: %s" % [m.work_offset for m in self.strict.messages if m.work_offset])
+        self.assertIn("~max_residual (5.0 um)", strict.work_offset)
+        self.assertTrue(strict.valid)  # the frame is still published; only the write is refused
+        # The control behind both received no write: a status poll after the refusals (one query
+        # at a time) shows that nothing sent before it is still on its way.
+        mark = len(queries(self.refused_log))
+        self.assertTrue(wait_for_query(self.refused_log, "?Q500", mark), "haas_mdc_node does not poll its control")
+        self.assertEqual([q for q in queries(self.refused_log) if q.startswith("?E")], [])
+
+
+if __name__ == "__main__":
+    rostest.rosrun("cnc_bridge", "test_part_frame", TestPartFrame)
