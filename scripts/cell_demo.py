@@ -2,7 +2,9 @@
 """The scripted scenario of the simulated cell: what a robot cell's orchestration code would do.
 
 Waits for every machine of the cell description, then, for each node a machine runs:
-  dnc_node         sends a program to the control by XModem (~transfer action)
+  dnc_node         sends a program to the control by XModem (~transfer action); where the node
+                   may move the machine (enable_motion: a Fanuc in DNC mode), drip-feeds one and
+                   reports the commanded positions it published during the feed
   dprnt_node       waits for the probe grid the macro program prints; surface_mapper saves the map
   ethernut_node    streams a G-code job to the board (~run_job action)
   at_controller    follows a G-code path with 1 ms setpoints (~follow_path action)
@@ -32,7 +34,9 @@ import time
 
 import actionlib
 import rospy
+import rosgraph
 import yaml
+from geometry_msgs.msg import PointStamped
 from sensor_msgs.msg import PointCloud2
 
 from cnc_bridge.msg import (AtFollowPathAction, AtFollowPathGoal, CellState, CycleEvent, MachineState,
@@ -168,6 +172,8 @@ class Progress:
 
 
 def send_program(machine, args):
+    if machine.nodes["dnc_node"].get("args", {}).get("enable_motion"):
+        return drip_feed(machine, args)  # the control runs the program as it is fed (DNC)
     program = args.program
     shutil.copy(program, os.path.join(args.programs, os.path.basename(program)))
     goal = TransferGoal(direction="send", protocol="xmodem", file=os.path.basename(program))
@@ -179,6 +185,53 @@ def send_program(machine, args):
         raise RuntimeError(result.message)
     say("%s: sent %s by XModem: %d bytes, %d blocks, %d retries in %.1f s (%s)" % (
         machine.name, goal.file, result.bytes, result.blocks, result.retries, elapsed, result.message))
+
+
+def wait_topic_subscribers(subscriber, count, timeout=10.0):
+    """Until this subscriber is connected to the topic's publisher and the master lists `count`
+    subscribers of it (this one and the rosbag recorder's, which finds topics when it polls)."""
+    master = rosgraph.Master(rospy.get_name())
+    deadline = time.time() + timeout
+    while True:
+        listed = dict(master.getSystemState()[1]).get(subscriber.resolved_name, [])
+        if subscriber.get_num_connections() >= 1 and len(listed) >= count:
+            return
+        if time.time() > deadline:
+            raise RuntimeError("%s: %d connections, %d of %d subscribers within %.0f s" % (
+                subscriber.resolved_name, subscriber.get_num_connections(), len(listed), count, timeout))
+        time.sleep(0.05)
+
+
+def drip_feed(machine, args):
+    """Drip-feeds --drip-program through dnc_node's ~transfer action (protocol drip) and reports the
+    commanded positions the node published on dnc/commanded_position during the feed (the end of
+    the last motion block fed, in the program's coordinates: ahead of the tool, which the control's
+    buffer keeps behind)."""
+    if not args.drip_program:
+        raise RuntimeError("no --drip-program for the drip-feed")
+    file = os.path.basename(args.drip_program)
+    shutil.copy(args.drip_program, os.path.join(args.programs, file))
+    seen = []
+    sub = rospy.Subscriber(machine.ns + "/dnc/commanded_position", PointStamped, seen.append)
+    try:
+        wait_topic_subscribers(sub, 1 + RECORDERS)
+        goal = TransferGoal(direction="send", protocol="drip", file=file)
+        started = time.time()
+        result = action(machine.ns + "/dnc_node", "transfer", TransferAction, goal, 120,
+                        Progress("%s: drip-feed" % machine.name, lambda f: f.percent))
+        elapsed = time.time() - started
+    finally:
+        sub.unregister()
+    if not result.success:
+        raise RuntimeError(result.message)
+    if not seen:
+        raise RuntimeError("no commanded position on %s during the feed" % sub.resolved_name)
+    distinct = len({(p.point.x, p.point.y, p.point.z) for p in seen})
+    last = seen[-1]
+    say("%s: drip-fed %s: %d bytes in %.1f s, to line %d; %d commanded positions (%d distinct), "
+        "the last (%.3f, %.3f, %.3f) mm in %s" % (
+            machine.name, file, result.bytes, elapsed, result.stopped_at_line, len(seen), distinct,
+            last.point.x * 1e3, last.point.y * 1e3, last.point.z * 1e3, last.header.frame_id))
 
 
 def probe_surface(machine, args):
@@ -368,6 +421,7 @@ def main():
     parser.add_argument("--output", required=True, help="folder for the surface map and the summary")
     parser.add_argument("--programs", required=True, help="the nodes' ~program_dir")
     parser.add_argument("--program", required=True, help="NC program sent by XModem")
+    parser.add_argument("--drip-program", help="NC program drip-fed where dnc_node has enable_motion")
     parser.add_argument("--job", required=True, help="G-code job streamed to the ethernut")
     parser.add_argument("--path-program", required=True, help="G-code path for the '@' controller")
     parser.add_argument("--grid-points", type=int, default=100)

@@ -41,7 +41,8 @@ set +e
 # a trap only once the foreground command has ended, but it interrupts a `wait`.
 python3 "$root/scripts/cell_demo.py" --cell "$root/config/cell.yaml" --output "$out" --programs "$out/programs" \
   --program "$root/config/demo/O05555.nc" --job "$root/config/demo/ethernut_job.nc" \
-  --path-program "$root/config/demo/at_path.nc" --recorded "${once[@]}" &
+  --path-program "$root/config/demo/at_path.nc" \
+  --drip-program "$root/test/data/gcode/cam/autodesk_fanuc_post_o0123.nc" --recorded "${once[@]}" &
 scenario_pid=$!
 stop_scenario() {
   kill -TERM "$scenario_pid" 2>/dev/null  # rospy shuts the scenario down on SIGTERM

@@ -7,7 +7,9 @@ commands, the MTConnect machine's state, events and conditions) and a wire trace
 RS-232 line that replays to the same transfer. The MTConnect machine (mtconnect_mill) is reached
 only through its agent (the reference agent, fed by the simulated machine's SHDR adapter): a whole
 cycle must be read through it; and the cell's SHDR adapter must serve the other four machines. While it runs, every machine's tool_path trail and the '@' controller's job/path are
-watched: each must arrive, in its machine's frame, with the tool's motion in it.
+watched: each must arrive, in its machine's frame, with the tool's motion in it. The Fanuc mill
+(fanuc_mill) is drip-fed a program by dnc_node: the bag must hold the commanded positions the node
+published during the feed, in the program's frame, more than one of them.
 """
 import glob
 import math
@@ -26,9 +28,12 @@ from nav_msgs.msg import Path
 
 from cnc_bridge.msg import MachineState
 
-MACHINES = ["haas_vf2", "ethernut_mill", "at_router", "laser", "mtconnect_mill"]
+MACHINES = ["haas_vf2", "ethernut_mill", "at_router", "laser", "mtconnect_mill", "fanuc_mill"]
 # The machines without an agent of their own, which mtconnect_adapter_node serves out.
-SERVED_OUT = ["haas_vf2", "ethernut_mill", "at_router", "laser"]
+SERVED_OUT = ["haas_vf2", "ethernut_mill", "at_router", "laser", "fanuc_mill"]
+# The machines whose state carries the tool's position, which tool_trail follows (dnc_node knows
+# only the commanded position of a drip-feed, in the program's frame, not the tool's).
+TRAILED = ["haas_vf2", "ethernut_mill", "at_router", "laser", "mtconnect_mill"]
 
 # One pattern per step of the scenario: what the summary must say, with numbers that must be sane.
 SUMMARY = {
@@ -45,6 +50,10 @@ SUMMARY = {
     "mtconnect_cycles": r"mtconnect_mill: (\d+) cycle events seen through MTConnect, (\d+) cycle ends",
     "mtconnect_out": r"mtconnect out: the cell's SHDR adapter at 127\.0\.0\.1:25071 serves (\d+) machines "
                      r"to the shop's agent",
+    # test/data/gcode/cam/autodesk_fanuc_post_o0123.nc (2268 bytes) drip-fed to the Fanuc mill.
+    "drip": r"fanuc_mill: drip-fed autodesk_fanuc_post_o0123\.nc: (\d+) bytes in [\d.]+ s, to line (\d+); "
+            r"(\d+) commanded positions \((\d+) distinct\), the last \((-?[\d.]+), (-?[\d.]+), (-?[\d.]+)\) mm "
+            r"in fanuc_mill/program",
     "done": r"scenario done: (\d+) steps, 0 failed",
 }
 
@@ -58,7 +67,8 @@ BAG_TOPICS = [
     "/cell/ethernut_mill/job/path", "/cell/at_router/job/path", "/cell/laser/slaves/x/command",
     "/cell/laser/slaves/x/response", "/cell/haas_vf2/variables", "/tf", "/tf_static",
     "/cell/mtconnect_mill/state", "/cell/mtconnect_mill/joint_states", "/cell/mtconnect_mill/events",
-    "/cell/mtconnect_mill/conditions",
+    "/cell/mtconnect_mill/conditions", "/cell/fanuc_mill/state", "/cell/fanuc_mill/dnc_node/transfer/result",
+    "/cell/fanuc_mill/dnc/commanded_position",
 ]
 
 
@@ -144,8 +154,9 @@ class Demo(unittest.TestCase):
             self.assertAlmostEqual(got, end, delta=printed_tolerance,
                                    msg="the path ends at %s mm" % numbers["path"][1:])
         self.assertGreater(numbers["bus"][0], 0)
-        self.assertEqual(numbers["done"][0], 6)
+        self.assertEqual(numbers["done"][0], 7)
         self.check_the_mtconnect_machine(numbers, run.stdout)
+        self.check_the_drip_feed_line(numbers)
 
         pngs = glob.glob(os.path.join(out, "haas_vf2_surface*.png"))
         self.assertTrue(pngs, "no surface map PNG in %s: %s" % (out, os.listdir(out)))
@@ -190,7 +201,7 @@ class Demo(unittest.TestCase):
         # Every machine left a trail of its tool in its own frame, with the motion of the scenario.
         with watch.lock:
             last = dict(watch.last)
-        for machine in MACHINES:
+        for machine in TRAILED:
             trail = last.get("/cell/%s/tool_path" % machine)
             self.assertIsNotNone(trail, "no tool_path from %s" % machine)
             self.assertEqual(trail.header.frame_id, machine + "/machine")
@@ -208,6 +219,7 @@ class Demo(unittest.TestCase):
         self.assertLessEqual(abs(mdc.part_count - dprnt.part_count), 1,
                              "MDC counts %d parts, DPRNT %d" % (mdc.part_count, dprnt.part_count))
         self.check_the_traced_transfer_replays(out)
+        self.check_the_recorded_commanded_positions(bag_path, numbers)
         shutil.rmtree(out, ignore_errors=True)  # kept for a look when something failed
 
     def check_the_mtconnect_machine(self, numbers, stdout):
@@ -224,6 +236,33 @@ class Demo(unittest.TestCase):
         served = re.search(r"^.*mtconnect out: .* to the shop's agent: (.*)$", stdout, re.M).group(1)
         self.assertEqual(re.findall(r"(\w+) AVAILABLE [A-Z_]+", served), SERVED_OUT,
                          "every machine without an agent of its own, available: " + served)
+
+    def check_the_drip_feed_line(self, numbers):
+        """The whole program went to the Fanuc (its 2268 bytes, as LF is its EOB, through its last
+        line), and the scenario saw the node's commanded position move during the feed."""
+        fed, last_line, positions, distinct = numbers["drip"][:4]
+        self.assertEqual(fed, 2268)
+        self.assertEqual(last_line, 129, "the feed ends at the program's closing %")
+        self.assertGreaterEqual(positions, distinct)
+        self.assertGreater(distinct, 1, "the commanded position did not move during the feed")
+
+    def check_the_recorded_commanded_positions(self, bag_path, numbers):
+        """The bag holds dnc_node's commanded positions of the drip-feed, in the program's frame
+        (fanuc_mill/program), several distinct ones, all inside the program's travel (mm: X -80..80,
+        Y -40..40, Z -10..16, see autodesk_fanuc_post_o0123.nc), the last the scenario saw among them."""
+        with rosbag.Bag(bag_path) as bag:
+            points = [m for _, m, _ in bag.read_messages(topics=["/cell/fanuc_mill/dnc/commanded_position"])]
+        self.assertTrue(points, "no commanded position in the bag")
+        self.assertEqual({p.header.frame_id for p in points}, {"fanuc_mill/program"})
+        distinct = {(p.point.x, p.point.y, p.point.z) for p in points}
+        self.assertGreater(len(distinct), 1, "one commanded position only: %s" % distinct)
+        for x, y, z in distinct:
+            self.assertTrue(-0.0805 <= x <= 0.0805 and -0.0405 <= y <= 0.0405 and -0.0105 <= z <= 0.0165,
+                            "commanded position (%f, %f, %f) m outside the program's travel" % (x, y, z))
+        # The scenario's subscriber may miss the last message (still in flight when the result came).
+        printed = numbers["drip"][4:]
+        self.assertTrue(any(all(abs(got * 1e3 - mm) <= 0.0005 + 1e-6 for got, mm in zip(p, printed)) for p in distinct),
+                        "the printed last position %s mm is not in the bag" % printed)
 
     def check_the_traced_transfer_replays(self, out):
         """dnc_node traced the VF-2's RS-232 line (its ~wire_trace): played back by `cnc_dnc replay`
