@@ -334,9 +334,20 @@ def follow_mtconnect(machine, args):
         raise RuntimeError("no whole cycle read through MTConnect within %.0f s" % args.timeout)
     with machine.lock:
         end = [e for e in machine.events if e.event == CycleEvent.CYCLE_END and math.isfinite(e.cycle_time)][0]
-        state = machine.states.get("mtconnect_node")
+        starts = [e for e in machine.events if e.event == CycleEvent.CYCLE_START and e.header.stamp < end.header.stamp]
+    # The agent reports the execution and the part counter as separate observations: the step of
+    # the counter can come in the next chunk of the stream, after the cycle end.
+    counted = (starts[-1].part_count + 1) if starts and starts[-1].part_count >= 0 else end.part_count
+    deadline = time.time() + 3.0
+    while True:
+        with machine.lock:
+            state = machine.states.get("mtconnect_node")
+        if (state and state.part_count >= counted) or time.time() > deadline:
+            break
+        time.sleep(0.05)  # poll: the next state message
+    parts = max(end.part_count, state.part_count if state else -1)
     say("%s: through MTConnect: cycle of %s ended after %.1f s, parts %d; now %s" % (
-        machine.name, end.program, end.cycle_time, end.part_count, describe(state)))
+        machine.name, end.program, end.cycle_time, parts, describe(state)))
 
 
 def shdr_values(line, items):

@@ -84,6 +84,8 @@ def machine_group(cell, machine, simulate_all):
         lines.append(f"      <arg name=\"y\" value={attr(place[1])}/>")
         lines.append(f"      <arg name=\"yaw\" value={attr(place[2] if len(place) > 2 else 0.0)}/>")
         lines.append(f"      <arg name=\"label\" value={attr(name)}/>")
+        if not machine.get("axes", True):
+            lines.append('      <arg name="axes" value="false"/>')
         lines.append("    </include>")
     lines.append("  </group>")
     return lines

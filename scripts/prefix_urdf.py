@@ -3,6 +3,9 @@
 
 robot_state_publisher no longer applies a tf_prefix, so each machine's robot_description is made
 with its prefix baked in: `prefix_urdf.py urdf/mill_3axis.urdf haas_vf2/`.
+
+`--body-only` leaves out every moving joint and what it carries: the model of a machine whose nodes
+report no position (a drip-fed control) shows its body, not axes placed where nothing says they are.
 """
 import sys
 import xml.etree.ElementTree as ET
@@ -20,13 +23,40 @@ def prefixed(urdf_text, prefix):
     return ET.tostring(root, encoding="unicode")
 
 
+def body_only(urdf_text):
+    """The URDF without its moving joints and every link and joint downstream of them."""
+    root = ET.fromstring(urdf_text)
+    joints = [j for j in root.findall("joint")]
+    dropped_links = set()
+    changed = True
+    while changed:
+        changed = False
+        for joint in joints:
+            child = joint.find("child").get("link")
+            moving = joint.get("type") != "fixed"
+            if child not in dropped_links and (moving or joint.find("parent").get("link") in dropped_links):
+                dropped_links.add(child)
+                changed = True
+    for joint in joints:
+        if joint.find("child").get("link") in dropped_links:
+            root.remove(joint)
+    for link in root.findall("link"):
+        if link.get("name") in dropped_links:
+            root.remove(link)
+    return ET.tostring(root, encoding="unicode")
+
+
 def main(argv):
-    if len(argv) < 2:
-        sys.stderr.write("usage: prefix_urdf.py URDF [PREFIX]\n")
+    flags = [a for a in argv[1:] if a.startswith("--")]
+    args = [a for a in argv[1:] if not a.startswith("--")]
+    if not args or any(flag != "--body-only" for flag in flags):
+        sys.stderr.write("usage: prefix_urdf.py URDF [PREFIX] [--body-only]\n")
         return 2
-    with open(argv[1]) as f:
+    with open(args[0]) as f:
         text = f.read()
-    sys.stdout.write(prefixed(text, argv[2] if len(argv) > 2 else ""))
+    if flags:
+        text = body_only(text)
+    sys.stdout.write(prefixed(text, args[1] if len(args) > 1 else ""))
     return 0
 
 
