@@ -10,7 +10,7 @@ cnc_core_module(cnc_bridge_ethernut
   src/core/ethernut/debug_channel.cpp)
 target_link_libraries(cnc_bridge_ethernut PUBLIC cnc_bridge_gcode)  # a job's G-code program
 # The simulated board (a peer model, not shipped in the protocol library): sim_ethernut and tests.
-cnc_sim_library(cnc_bridge_ethernut_sim src/sim/ethernut/board.cpp)
+cnc_sim_library(cnc_bridge_ethernut_sim src/sim/ethernut/board.cpp src/sim/ethernut/debug_port.cpp)
 target_link_libraries(cnc_bridge_ethernut_sim PUBLIC cnc_bridge_ethernut)
 cnc_tool(sim_ethernut src/sim/sim_ethernut.cpp)
 target_link_libraries(sim_ethernut cnc_bridge_ethernut_sim cnc_bridge_testing)

@@ -155,7 +155,11 @@ void DebugChannel::start(LineHandler on_line, StateHandler on_state)
                  {
                    std::lock_guard<std::mutex> lock(mutex_);
                    status_.link = state;
-                   status_.why = state == LinkState::kUp ? "" : why;
+                   // The last failure stays shown while reconnecting; cleared once up.
+                   if (state == LinkState::kUp || !why.empty())
+                   {
+                     status_.why = state == LinkState::kUp ? "" : why;
+                   }
                  }
                  if (on_state_)
                  {
