@@ -2,7 +2,8 @@
 // (docs/ethernut_node.md). It keeps the link up (init, mode, keepalive, reconnect), streams jobs
 // from G-code files or point lists through the ~run_job action, carries pause/resume/reset/kill/mode
 // requests, publishes the machine's reported and commanded position as state (the reported one as
-// joint_states/tf), and a preview of each job for rviz before it runs. The protocol and the jobs
+// joint_states/tf), a preview of each job for rviz before it runs, and the lines the board prints
+// on its serial debug port (~debug_port: the core ethernut::DebugChannel) on `debug`. The protocol and the jobs
 // (coordinates, segments, preview, streaming: ethernut::JobStreamer, whose program steps and
 // holds are the common JobRunner's) live in the ROS-free cnc_bridge_ethernut library.
 // The connection (link, reconnection, the protocol loop) is the core ethernut::BoardSession.
