@@ -6,10 +6,11 @@ cnc_core_module(cnc_bridge_ethernut
   src/core/ethernut/settings.cpp
   src/core/ethernut/job.cpp
   src/core/ethernut/job_streamer.cpp
-  src/core/ethernut/board_session.cpp)
+  src/core/ethernut/board_session.cpp
+  src/core/ethernut/debug_channel.cpp)
 target_link_libraries(cnc_bridge_ethernut PUBLIC cnc_bridge_gcode)  # a job's G-code program
 # The simulated board (a peer model, not shipped in the protocol library): sim_ethernut and tests.
-cnc_sim_library(cnc_bridge_ethernut_sim src/sim/ethernut/board.cpp)
+cnc_sim_library(cnc_bridge_ethernut_sim src/sim/ethernut/board.cpp src/sim/ethernut/debug_port.cpp)
 target_link_libraries(cnc_bridge_ethernut_sim PUBLIC cnc_bridge_ethernut)
 cnc_tool(sim_ethernut src/sim/sim_ethernut.cpp)
 target_link_libraries(sim_ethernut cnc_bridge_ethernut_sim cnc_bridge_testing)
@@ -18,7 +19,7 @@ target_link_libraries(bench_ethernut cnc_bridge_ethernut)
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   cnc_core_gtest(test_ethernut test/unit/test_ethernut_codec.cpp test/unit/test_ethernut_client.cpp
                  test/unit/test_ethernut_job.cpp test/unit/test_ethernut_streamer.cpp
-                 test/unit/test_ethernut_session.cpp)
+                 test/unit/test_ethernut_session.cpp test/unit/test_ethernut_debug.cpp)
   target_link_libraries(test_ethernut cnc_bridge_ethernut_sim)
   target_compile_definitions(test_ethernut PRIVATE CNC_BRIDGE_FIXTURE_DIR="${PROJECT_SOURCE_DIR}/test/data/gcode")
 endif()

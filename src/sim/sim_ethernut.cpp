@@ -3,11 +3,14 @@
 // task) and keeps the tool position across connections. Behaviour is in ethernut/board.h.
 #include <boost/program_options.hpp>
 #include <iostream>
+#include <memory>
 
 #include "cnc_bridge/common/log.h"
 #include "cnc_bridge/transport/tcp.h"
 #include "sim/ethernut/board.h"
+#include "sim/ethernut/debug_port.h"
 #include "sim/sim_support.h"
+#include "testing/pty.h"
 
 namespace po = boost::program_options;
 using namespace cnc_bridge;
@@ -19,6 +22,7 @@ int main(int argc, char** argv)
   std::string address;
   int port = 0;
   long report_ms = 100;
+  std::string debug_link;
   po::options_description desc("sim_ethernut: simulated ethernut board (qCNC opcode protocol) on TCP");
   desc.add_options()("help,h", "this help")                                                                           //
       ("address", po::value(&address)->default_value("127.0.0.1"), "address to listen on")                            //
@@ -36,7 +40,11 @@ int main(int argc, char** argv)
       ("mute-keepalive-after", po::value(&options.mute_keepalive_after)->default_value(0),
        "stop answering alive requests (only those) once N coordinates were accepted (0: never)")         //
       ("log", po::value(&options.log_path), "append every accepted coordinate to this file as 'x y z'")  //
-      ("message-log", po::value(&options.message_log_path), "append the name of every message received to this file");
+      ("message-log", po::value(&options.message_log_path),
+       "append the name of every message received to this file")  //
+      ("debug-link", po::value(&debug_link),
+       "print the board's debug messages (connections, commands, job events) on a pty, with a symbolic link to it "
+       "made here, as the board does on its RS-232 port");
   po::variables_map vm;
   try
   {
@@ -61,6 +69,16 @@ int main(int argc, char** argv)
   options.report_period = Milliseconds(report_ms);
   try
   {
+    // The debug port first, so that the board's first words (boot) are on it.
+    std::unique_ptr<PtyMaster> debug_pty;
+    std::unique_ptr<ethernut::DebugPort> debug_port;
+    if (!debug_link.empty())
+    {
+      debug_pty = std::make_unique<PtyMaster>(debug_link);
+      debug_port = std::make_unique<ethernut::DebugPort>(*debug_pty);
+      options.debug = [&debug_port](const ethernut::DebugMessage& message) { debug_port->print(message); };
+      debug_port->print(ethernut::DebugMessage{0, "ucos", "DEBUG", "boot", 0});
+    }
     ethernut::Board board(options);
     TcpServer server(static_cast<uint16_t>(port), address);
     sim::onStop([&] { server.interrupt(); });

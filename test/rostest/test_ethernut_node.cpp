@@ -2,13 +2,14 @@
 // simulator's log of accepted coordinates and against our own parse of the program), G53 moves
 // skipped or refused, the preview published before the job runs, pause/resume, cancel, a second goal
 // rejected while a job runs, the kill gate, diagnostics, link loss (silence and a dropped
-// connection), and the node's death in the middle of a job.
+// connection), the board's debug lines, and the node's death in the middle of a job.
 #include <actionlib/client/simple_action_client.h>
 #include <diagnostic_msgs/DiagnosticArray.h>
 #include <gtest/gtest.h>
 #include <nav_msgs/Path.h>
 #include <ros/ros.h>
 #include <signal.h>
+#include <std_msgs/String.h>
 #include <std_srvs/SetBool.h>
 #include <std_srvs/Trigger.h>
 #include <visualization_msgs/MarkerArray.h>
@@ -58,6 +59,8 @@ struct Watch : topic_watch::Record
   uint64_t first_feedback_seq = 0;
   ros::WallTime last_feedback_time;
   std::map<std::string, std::string> protocol;  // the last "ethernut protocol" diagnostics, key -> value
+  std::vector<std::string> debug_lines;         // every line on debug, in arrival order
+  std::map<std::string, std::string> debug;     // the last "ethernut debug channel" diagnostics
 
   template <typename F>
   bool waitFor(F condition, double seconds = 20.0)
@@ -120,20 +123,28 @@ void onDiagnostics(const diagnostic_msgs::DiagnosticArray::ConstPtr& m)
 {
   for (const auto& status : m->status)
   {
-    if (status.name.find("ethernut protocol") == std::string::npos || status.values.empty())
+    const bool protocol = status.name.find("ethernut protocol") != std::string::npos;
+    const bool debug = status.name.find("ethernut debug channel") != std::string::npos;
+    if ((!protocol && !debug) || status.values.empty())
     {
       continue;
     }
     watch->update(
         [&]
         {
-          watch->protocol.clear();
+          auto& values = protocol ? watch->protocol : watch->debug;
+          values.clear();
           for (const auto& kv : status.values)
           {
-            watch->protocol[kv.key] = kv.value;
+            values[kv.key] = kv.value;
           }
         });
   }
+}
+
+void onDebug(const std_msgs::String::ConstPtr& m)
+{
+  watch->update([&] { watch->debug_lines.push_back(m->data); });
 }
 
 // A number from the last protocol diagnostics (caller holds watch->mutex); NaN if absent.
@@ -1176,6 +1187,84 @@ TEST(EthernutLink, SyncOledReachesTheBoardAndBoardCommandWaitsForTheMotionSwitch
   ASSERT_TRUE(setMotion(false, motion));
 }
 
+// The number at the end of a debug line ("1 TCP GUI close 7" -> 7) if it starts with \p start; -1 if not.
+long debugValue(const std::string& line, const std::string& start)
+{
+  if (line.rfind(start, 0) != 0 || line.size() == start.size())
+  {
+    return -1;
+  }
+  const std::string digits = line.substr(start.size());
+  return digits.find_first_not_of("0123456789") == std::string::npos ? std::stol(digits) : -1;
+}
+
+// The board prints on its debug port (the simulator's pty, read as ~debug_port): what it says for
+// a clear, a reset (the node closes the connection, which the board sees closed and accepted again,
+// then the handshake) and a two-set job arrives on `debug` in order, each line whole (no cut, no
+// escape); diagnostics show the channel up, the lines counted and the last one.
+TEST(EthernutLink, TheBoardsDebugLinesArePublishedInOrderAndWhole)
+{
+  ASSERT_TRUE(boardReady());
+  ASSERT_TRUE(watch->waitFor([] { return watch->debug["link"] == "up"; }, 20.0)) << "the debug channel is not up";
+  size_t from;
+  {
+    std::lock_guard<std::mutex> lock(watch->mutex);
+    from = watch->debug_lines.size();
+  }
+  std_srvs::SetBool::Response motion;
+  ASSERT_TRUE(setMotion(true, motion));
+  std_srvs::Trigger::Response clear, reset;
+  ASSERT_TRUE(call("clear", clear));
+  ASSERT_TRUE(clear.success) << clear.message;
+  const size_t before_reset = simMessages().size();
+  ASSERT_TRUE(call("reset", reset));
+  ASSERT_TRUE(reset.success) << reset.message;
+  ASSERT_TRUE(waitForSimMessage("init-request", before_reset));
+  ASSERT_TRUE(boardReady(20.0));
+  auto client = actionClient();
+  client->sendGoal(pointsGoal({{0.001, 0.002, 0.003}, {0.004, 0.005, 0.006}}));
+  ASSERT_TRUE(client->waitForResult(ros::Duration(20.0)));
+  ASSERT_EQ(client->getState(), actionlib::SimpleClientGoalState::SUCCEEDED) << client->getState().getText();
+  ASSERT_TRUE(setMotion(false, motion));
+
+  // Lines of the tests before may still be on their way: ours start at the clear's reset.
+  const std::vector<std::string> fixed = {"2 GUI TCP reset 0",     "2 GUI TCP reset 0",  "", "", "2 GUI TCP init 78",
+                                          "2 GUI TCP filemode 15", "2 GUI TCP ready 50", "", ""};
+  std::vector<std::string> ours;
+  ASSERT_TRUE(watch->waitFor(
+      [&]
+      {
+        const auto first =
+            std::find(watch->debug_lines.begin() + static_cast<long>(from), watch->debug_lines.end(), fixed[0]);
+        ours.assign(first, watch->debug_lines.end());
+        return ours.size() >= fixed.size();
+      },
+      10.0))
+      << "debug lines received: " << ours.size();
+  ASSERT_EQ(ours.size(), fixed.size()) << "more debug lines than the board printed";
+  for (size_t i = 0; i < fixed.size(); ++i)
+  {
+    if (!fixed[i].empty())
+    {
+      EXPECT_EQ(ours[i], fixed[i]) << "line " << i;
+    }
+  }
+  // The connection the reset closed, the next one accepted; the job's two sets, one after the other.
+  const long closed = debugValue(ours[2], "1 TCP GUI close ");
+  EXPECT_GT(closed, 0) << ours[2];
+  EXPECT_EQ(debugValue(ours[3], "1 TCP GUI accept "), closed + 1) << ours[3];
+  const long first_set = debugValue(ours[7], "3 GUI MCP coord ");
+  EXPECT_GT(first_set, 0) << ours[7];
+  EXPECT_EQ(debugValue(ours[8], "3 GUI MCP coord "), first_set + 1) << ours[8];
+
+  ASSERT_TRUE(watch->waitFor([&] { return watch->debug["last line"] == ours.back(); }, 10.0));
+  std::lock_guard<std::mutex> lock(watch->mutex);
+  EXPECT_EQ(watch->debug["link"], "up");
+  EXPECT_GE(std::stol(watch->debug["lines received"]), static_cast<long>(from + fixed.size()));
+  EXPECT_EQ(watch->debug["cut lines"], "0");
+  EXPECT_EQ(watch->debug["escaped bytes"], "0");
+}
+
 // The state the test last received (a copy, taken under the lock).
 MachineState lastState()
 {
@@ -1247,6 +1336,7 @@ int main(int argc, char** argv)
   auto path_sub = nh.subscribe(ns + "/job/path", 10, &onPath);
   auto markers_sub = nh.subscribe(ns + "/job/markers", 10, &onMarkers);
   auto diagnostics_sub = nh.subscribe("/diagnostics", 10, &onDiagnostics);
+  auto debug_sub = nh.subscribe(ns + "/debug", 100, &onDebug);
   ros::AsyncSpinner spinner(2);
   spinner.start();
   const int result = RUN_ALL_TESTS();

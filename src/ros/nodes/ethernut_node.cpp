@@ -4,6 +4,7 @@
 #include "ethernut_node.h"
 
 #include <nav_msgs/Path.h>
+#include <std_msgs/String.h>
 #include <visualization_msgs/MarkerArray.h>
 
 #include <cmath>
@@ -134,10 +135,15 @@ EthernutNode::EthernutNode(ros::NodeHandle nh, ros::NodeHandle pnh)
   mode_srv_ = advertiseGuardedService(pnh_, "set_mode", &EthernutNode::onSetMode, this);
   action_.start();
   board_->start(state_->linkStateHandler());
+  startDebugChannel();
 }
 
 EthernutNode::~EthernutNode()
 {
+  if (debug_)
+  {
+    debug_->stop();
+  }
   board_->stop();
   action_.shutdown();
 }
@@ -186,6 +192,57 @@ void EthernutNode::protocolDiagnostics(diagnostic_updater::DiagnosticStatusWrapp
   status.add("reconnects", board_->reconnects());
   kill_->addTo(status);
   motion_->addTo(status);
+}
+
+// ------------------------------------------------------------------------------ the debug channel
+// ~debug_port: every line the board prints on its debug port, on `debug`, and in diagnostics.
+void EthernutNode::startDebugChannel()
+{
+  if (!settings_.debug)
+  {
+    return;
+  }
+  debug_pub_ = nh_.advertise<std_msgs::String>("debug", 100);
+  debug_ = std::make_unique<ethernut::DebugChannel>(*settings_.debug);
+  state_->diagnostics().add("ethernut debug channel", this, &EthernutNode::debugDiagnostics);
+  debug_->start(
+      [this](const ethernut::DebugLine& line)
+      {
+        std_msgs::String message;
+        message.data = line.display();
+        debug_pub_.publish(message);
+      });
+}
+
+void EthernutNode::debugDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& status)
+{
+  const ethernut::DebugChannelStatus st = debug_->status();
+  if (st.link == LinkState::kUp)
+  {
+    status.summary(diagnostic_msgs::DiagnosticStatus::OK, "reading " + st.device);
+  }
+  else
+  {
+    status.summary(diagnostic_msgs::DiagnosticStatus::WARN,
+                   std::string("debug port ") + toString(st.link) + (st.why.empty() ? "" : ": " + st.why));
+  }
+  // Mostly escaped bytes: the line settings do not match the board's (a 7-bit or slower line).
+  if (st.counts.bytes >= 32 && st.counts.escaped_bytes * 2 > st.counts.bytes)
+  {
+    status.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN,
+                        "most bytes are not text: check " + pnh_.resolveName("debug_baud") + " and the line settings");
+  }
+  status.add("device", st.device);
+  status.add("link", toString(st.link));
+  status.add("last failure", st.why);
+  status.add("lines received", st.counts.lines);
+  status.add("last line", st.last_line);
+  status.add("cut lines", st.counts.cut_lines);
+  status.add("bytes dropped from cut lines", st.counts.dropped_bytes);
+  status.add("escaped bytes", st.counts.escaped_bytes);
+  status.add("unterminated lines", st.counts.unterminated);
+  status.add("bytes received", st.counts.bytes);
+  status.add("reconnects", st.reconnects);
 }
 }  // namespace cnc_bridge
 

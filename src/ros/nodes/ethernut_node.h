@@ -2,7 +2,8 @@
 // (docs/ethernut_node.md). It keeps the link up (init, mode, keepalive, reconnect), streams jobs
 // from G-code files or point lists through the ~run_job action, carries pause/resume/reset/kill/mode
 // requests, publishes the machine's reported and commanded position as state (the reported one as
-// joint_states/tf), and a preview of each job for rviz before it runs. The protocol and the jobs
+// joint_states/tf), a preview of each job for rviz before it runs, and the lines the board prints
+// on its serial debug port (~debug_port: the core ethernut::DebugChannel) on `debug`. The protocol and the jobs
 // (coordinates, segments, preview, streaming: ethernut::JobStreamer, whose program steps and
 // holds are the common JobRunner's) live in the ROS-free cnc_bridge_ethernut library.
 // The connection (link, reconnection, the protocol loop) is the core ethernut::BoardSession.
@@ -28,6 +29,7 @@
 #include "cnc_bridge/common/program_dir.h"
 #include "cnc_bridge/ethernut/board_session.h"
 #include "cnc_bridge/ethernut/client.h"
+#include "cnc_bridge/ethernut/debug_channel.h"
 #include "cnc_bridge/ethernut/job.h"
 #include "cnc_bridge/ethernut/job_streamer.h"
 #include "cnc_bridge/ethernut/settings.h"
@@ -48,6 +50,8 @@ struct Settings
   ethernut::JobSettings jobs;         ///< ~program_dir, the G-code options, ~g53_moves, ~soft_limits, ...
   double transform_timeout = 0.5;     ///< s, ~transform_timeout
   std::string kill_enabled_by;        ///< "PROG_CNCkill|1 in <file>" when the settings file enables ~kill
+  /// ~debug_port and its line settings: the board's serial debug channel; none when ~debug_port is empty.
+  std::optional<ethernut::DebugChannelSettings> debug;
 };
 
 /// \brief Reads them. \throws ConfigError naming the parameter (or the settings file's line).
@@ -73,6 +77,8 @@ class EthernutNode : public ethernut::ClientListener
   std::shared_ptr<ethernut::Client> client(std::string& why) { return board_->client(why); }
   void publishPreview(const ethernut::Preview& preview);
   void protocolDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& status);
+  void startDebugChannel();
+  void debugDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& status);
 
   // ethernut_services.cpp: the client's events (its run() thread) and the services.
   void onState(ethernut::SessionState st, ethernut::SessionState previous) override;
@@ -122,5 +128,7 @@ class EthernutNode : public ethernut::ClientListener
   SingleGoalActionServer<RunJobAction> action_;
   std::unique_ptr<ethernut::JobStreamer> jobs_;    // the running job: its segments, steps and holds
   std::unique_ptr<ethernut::BoardSession> board_;  // the connection; last: its events use the rest
+  ros::Publisher debug_pub_;
+  std::unique_ptr<ethernut::DebugChannel> debug_;  // ~debug_port: the board's debug lines; none when off
 };
 }  // namespace cnc_bridge

@@ -1,6 +1,7 @@
 // ethernut_node's parameters, every one read here (ethernut_node.h; docs/ethernut_node.md,
 // parameters) into the core's settings: the board's link and the client's options
-// (ethernut::SessionSettings), how jobs are loaded (ethernut::JobSettings).
+// (ethernut::SessionSettings), how jobs are loaded (ethernut::JobSettings), the board's serial debug
+// channel (ethernut::DebugChannelSettings).
 #include "ethernut_node.h"
 
 #include <algorithm>
@@ -67,6 +68,46 @@ ethernut::ClientOptions clientOptions(const ros::NodeHandle& pnh, const ethernut
   return options;
 }
 
+int intIn(const ros::NodeHandle& pnh, const std::string& name, int fallback, int low, int high)
+{
+  const int value = pnh.param(name, fallback);
+  if (value < low || value > high)
+  {
+    throw ConfigError(pnh.resolveName(name) + " must be from " + std::to_string(low) + " to " + std::to_string(high) +
+                      ", not " + std::to_string(value));
+  }
+  return value;
+}
+
+/// The board's serial debug channel (qCNC's SERIAL_DEV): none when ~debug_port is empty. qCNC's
+/// documentation names only the device; the line settings default to 9600 8N1, set them to the board's.
+std::optional<ethernut::DebugChannelSettings> debugChannel(const ros::NodeHandle& pnh)
+{
+  // ~debug_port (string, ""): the port the board prints its debug messages on: a device path,
+  // tcp://host:port or rfc2217://host:port (a device server); empty: no debug channel.
+  SerialSettings serial;
+  serial.device = pnh.param<std::string>("debug_port", "");
+  if (serial.device.empty())
+  {
+    return std::nullopt;
+  }
+  params::naming(pnh, "debug_port", [&] { return parseSerialAddress(serial.device); });
+  // ~debug_baud (int, 9600), ~debug_data_bits (int, 8), ~debug_parity (none|even|odd),
+  // ~debug_stop_bits (int, 1): the debug port's line settings.
+  serial.baud = static_cast<unsigned>(intIn(pnh, "debug_baud", 9600, 1, 4000000));
+  serial.data_bits = static_cast<unsigned>(intIn(pnh, "debug_data_bits", 8, 5, 8));
+  serial.parity =
+      params::naming(pnh, "debug_parity", [&] { return parseParity(pnh.param<std::string>("debug_parity", "none")); });
+  serial.stop_bits = static_cast<unsigned>(intIn(pnh, "debug_stop_bits", 1, 1, 2));
+  params::naming(pnh, "debug_port", [&] { serial.validate(); });
+  ethernut::DebugChannelSettings debug;
+  // Input held before the port was opened is what the board said meanwhile: kept.
+  debug.link = LinkSettings::serialLine(serial, InputOnOpen::kKeep);
+  // ~debug_max_line (int, 256): longest debug line published, in characters; a longer one is cut.
+  debug.max_line = static_cast<size_t>(intIn(pnh, "debug_max_line", 256, 8, 65536));
+  return debug;
+}
+
 ethernut::JobSettings jobSettings(const ros::NodeHandle& pnh)
 {
   ethernut::JobSettings jobs;
@@ -115,6 +156,7 @@ Settings read(const ros::NodeHandle& pnh)
   // ~transform_timeout (s, 0.5): how long a points goal in another frame waits for its transform
   // into the machine frame.
   settings.transform_timeout = params::positive(pnh, "transform_timeout", 0.5);
+  settings.debug = debugChannel(pnh);
   return settings;
 }
 }  // namespace ethernut_params

@@ -32,6 +32,51 @@ Board::Board(const BoardOptions& options) : options_(options), rng_(options.seed
   }
 }
 
+std::string debugLine(const DebugMessage& message)
+{
+  return std::to_string(message.type) + ' ' + message.sender + ' ' + message.destination + ' ' + message.opcode + ' ' +
+         std::to_string(message.opcodev);
+}
+
+void Board::say(int type, const char* sender, const char* destination, const char* opcode, int value)
+{
+  if (options_.debug)
+  {
+    options_.debug(DebugMessage{type, sender, destination, opcode, value});
+  }
+}
+
+// What the board prints on its debug port for a command it received (Table 1's x as the value);
+// alive requests and acknowledgements are not worth a line.
+void Board::sayReceived(Opcode opcode)
+{
+  switch (opcode)
+  {
+    case Opcode::kInitRequest:
+      return say(2, "GUI", "TCP", "init", 78);
+    case Opcode::kFileMode:
+      return say(2, "GUI", "TCP", "filemode", 15);
+    case Opcode::kGuiControlMode:
+      return say(2, "GUI", "TCP", "guimode", 6);
+    case Opcode::kStandaloneMode:
+      return say(2, "GUI", "TCP", "alone", 9);
+    case Opcode::kReset:
+      return say(2, "GUI", "TCP", "reset", 0);
+    case Opcode::kKill:
+      return say(2, "GUI", "TCP", "kill", 99);
+    case Opcode::kPauseRequest:
+      return say(2, "GUI", "TCP", "pause", 199);
+    case Opcode::kReadyToSend:
+      return say(2, "GUI", "TCP", "ready", 50);
+    case Opcode::kSyncOled:
+      return say(2, "GUI", "oLED", "sync", 2);
+    case Opcode::kCommand:
+      return say(2, "GUI", "DEBUG", "command", 3);
+    default:
+      return;
+  }
+}
+
 void Board::log(float x, float y, float z)
 {
   if (log_.is_open())
@@ -82,6 +127,8 @@ struct Board::Connection
 void Board::serve(Transport& link, StopSignal& stop)
 {
   Connection c(link);
+  const int number = ++connections_;
+  say(1, "TCP", "GUI", "accept", number);
   uint8_t buffer[512];
   try
   {
@@ -98,6 +145,7 @@ void Board::serve(Transport& link, StopSignal& stop)
   {
     CNC_LOG_INFO("sim_ethernut: connection ended: " << e.what());
   }
+  say(1, "TCP", "GUI", "close", number);
 }
 
 // Motion: advances towards the target by speed * elapsed time (NEXT on arrival), and reports the
@@ -181,6 +229,7 @@ void Board::receive(Connection& c, const uint8_t* data, size_t n)
 bool Board::answer(Connection& c, const Message& m)
 {
   logMessage(classify(m));
+  sayReceived(classify(m));
   switch (classify(m))
   {
     case Opcode::kInitRequest:
@@ -238,12 +287,14 @@ bool Board::takeCoordinates(Connection& c, const Message& m)
   {
     CNC_LOG_WARN("sim_ethernut: coordinates while the previous set is still moving");
     ++resends_;
+    say(3, "TCP", "GUI", "resend", 60);
     c.reply(Opcode::kResend);
     return true;
   }
   if (resendOnFirstReceipt(c))
   {
     ++resends_;
+    say(3, "TCP", "GUI", "resend", 60);
     c.reply(Opcode::kResend);
     return true;
   }
@@ -252,6 +303,7 @@ bool Board::takeCoordinates(Connection& c, const Message& m)
   c.target[2] = m.z;
   c.moving = true;
   const uint64_t taken = accepted_ + 1;
+  say(3, "GUI", "MCP", "coord", static_cast<int>(taken));
   if (options_.drop_after > 0 && !dropped_ && taken >= options_.drop_after)
   {
     dropped_ = true;

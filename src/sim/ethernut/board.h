@@ -7,6 +7,7 @@
 #include <atomic>
 #include <cstdint>
 #include <fstream>
+#include <functional>
 #include <mutex>
 #include <random>
 #include <string>
@@ -19,6 +20,21 @@ namespace cnc_bridge
 {
 namespace ethernut
 {
+/// \brief One message of the board's serial debug port, shaped as qCNC's Interfaces.h declares it
+/// (struct Suart_debug: int type; char sender[10], destination[10], opcode[10]; int opcodev). The
+/// document gives the struct, not its text; the simulated board prints it as debugLine() does.
+struct DebugMessage
+{
+  int type = 0;             ///< 0 the board itself, 1 a connection, 2 a command received, 3 the job
+  std::string sender;       ///< Table 1's origins and destinations: GUI, TCP, MCP, oLED, DEBUG
+  std::string destination;  ///< (at most 9 characters each, as the struct's char[10] holds)
+  std::string opcode;       ///< what happened: accept, close, init, reset, ready, coord, ...
+  int opcodev = 0;          ///< its value: Table 1's x of the opcode, or a count
+};
+
+/// \brief "type sender destination opcode opcodev", e.g. "2 GUI TCP reset 0" (no line end).
+std::string debugLine(const DebugMessage& message);
+
 struct BoardOptions
 {
   double speed_mm_per_s = 500.0;    ///< tool speed; 0 moves instantly
@@ -34,6 +50,9 @@ struct BoardOptions
   /// Append the name of every message received (toString of its opcode), one per line, so a test
   /// can check what the board was sent (e.g. that a refused kill never reached it).
   std::string message_log_path;
+  /// Told every debug message the board prints on its serial port (connections, commands, job
+  /// events); empty: none. Called on the serving thread: it must not block.
+  std::function<void(const DebugMessage&)> debug;
 };
 
 /// \brief Simulated ethernut board. serve() runs one connection on the calling thread; the
@@ -60,6 +79,8 @@ class Board
   bool resendOnFirstReceipt(Connection& c);
   void log(float x, float y, float z);
   void logMessage(Opcode opcode);
+  void say(int type, const char* sender, const char* destination, const char* opcode, int value);
+  void sayReceived(Opcode opcode);
 
   BoardOptions options_;
   std::mt19937 rng_;
@@ -68,6 +89,7 @@ class Board
   std::atomic<uint64_t> accepted_{0};
   std::atomic<uint64_t> received_{0};
   std::atomic<uint64_t> resends_{0};
+  int connections_ = 0;
   bool dropped_ = false;
   bool silenced_ = false;
   // Board memory survives reconnections (the machine does not move back when the PC goes away).
