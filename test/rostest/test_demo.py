@@ -7,7 +7,8 @@ commands, the MTConnect machine's state, events and conditions) and a wire trace
 RS-232 line that replays to the same transfer. The MTConnect machine (mtconnect_mill) is reached
 only through its agent (the reference agent, fed by the simulated machine's SHDR adapter): a whole
 cycle must be read through it; and the cell's SHDR adapter must serve the other four machines. While it runs, every machine's tool_path trail and the '@' controller's job/path are
-watched: each must arrive, in its machine's frame, with the tool's motion in it.
+watched: each must arrive, in its machine's frame, with the tool's motion in it. cell_monitor's
+countdown to the '@' router's cycle end must fall to the end, its plan near the actual cycle.
 """
 import glob
 import math
@@ -59,7 +60,15 @@ BAG_TOPICS = [
     "/cell/laser/slaves/x/response", "/cell/haas_vf2/variables", "/tf", "/tf_static",
     "/cell/mtconnect_mill/state", "/cell/mtconnect_mill/joint_states", "/cell/mtconnect_mill/events",
     "/cell/mtconnect_mill/conditions",
+    "/cycle_countdown",
 ]
+
+# cell_monitor's countdown to the '@' router's cycle end, as the scenario prints it.
+COUNTDOWN_LINE = r"at_router: cycle of at_path\.nc: ([\d.]+) s planned, ([\d.]+) s to go"
+COUNTDOWN_END = r"at_router: cycle of at_path\.nc ended: predicted ([\d.]+) s, actual ([\d.]+) s"
+# The predicted cycle against the actual one: the planner's limits in config/cell.yaml are the node's
+# (X and Y; Z is slower), the actual is measured from states 0.1 s apart.
+CYCLE_TOLERANCE = 0.25
 
 
 class PathWatch:
@@ -146,6 +155,7 @@ class Demo(unittest.TestCase):
         self.assertGreater(numbers["bus"][0], 0)
         self.assertEqual(numbers["done"][0], 6)
         self.check_the_mtconnect_machine(numbers, run.stdout)
+        self.check_the_countdowns(run.stdout)
 
         pngs = glob.glob(os.path.join(out, "haas_vf2_surface*.png"))
         self.assertTrue(pngs, "no surface map PNG in %s: %s" % (out, os.listdir(out)))
@@ -209,6 +219,29 @@ class Demo(unittest.TestCase):
         served = re.search(r"^.*mtconnect out: .* to the shop's agent: (.*)$", stdout, re.M).group(1)
         self.assertEqual(re.findall(r"(\w+) AVAILABLE [A-Z_]+", served), SERVED_OUT,
                          "every machine without an agent of its own, available: " + served)
+
+    def check_the_countdowns(self, stdout):
+        """cell_monitor's countdown to the '@' router's cycle end: the whole cycle planned, the time
+        left falling from the start through halfway to the end, the predicted cycle within
+        CYCLE_TOLERANCE of the actual; the VF-2's macro program has no countdown, and says why."""
+        lines = [(float(planned), float(left)) for planned, left in re.findall(COUNTDOWN_LINE, stdout)]
+        self.assertGreaterEqual(len(lines), 3, "start, halfway and end of the countdown in:\n" + stdout)
+        planned = lines[0][0]
+        self.assertGreater(planned, 0.0)
+        self.assertTrue(all(p == planned for p, _ in lines), "one plan for the cycle: %s" % lines)
+        left = [l for _, l in lines]
+        self.assertTrue(all(a > b for a, b in zip(left, left[1:])), "the time left falls: %s" % left)
+        # printed to 0.1 s: a time left just under half the plan may print as half plus 0.05
+        self.assertLessEqual(left[1], planned / 2 + 0.05, "the halfway line: %s" % left)
+        end = re.search(COUNTDOWN_END, stdout)
+        self.assertIsNotNone(end, "no predicted against actual cycle in:\n" + stdout)
+        predicted, actual = float(end.group(1)), float(end.group(2))
+        self.assertEqual(predicted, planned)
+        self.assertAlmostEqual(predicted, actual, delta=CYCLE_TOLERANCE * actual,
+                               msg="predicted %.1f s, actual %.1f s" % (predicted, actual))
+        unknown = re.findall(r"haas_vf2: cycle of O01000: time to cycle end not known: (.+)$", stdout, re.M)
+        self.assertEqual(len(unknown), 1, "the VF-2's countdown told once in:\n" + stdout)
+        self.assertIn("macro", unknown[0])
 
     def check_the_traced_transfer_replays(self, out):
         """dnc_node traced the VF-2's RS-232 line (its ~wire_trace): played back by `cnc_dnc replay`
