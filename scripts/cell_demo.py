@@ -16,6 +16,9 @@ Once the machines are up, it reads what mtconnect_adapter_node (the cell's machi
 shop's MTConnect agent) serves, as an agent connecting to it does, and prints every machine's line.
 Before each of these steps the cell's robot (a stand-in) asks cell_monitor whether it may enter the
 machine and prints the answer with its reason,
+while the '@' router follows its path it prints cell_monitor's countdown to the cycle end (at the
+start, halfway, at the end) and the predicted against the actual cycle, once the countdown of a
+machine whose time to cycle end is not known, with the reason,
 and prints a readable line for everything that happens, with numbers. Exit status 0 only if
 every step succeeded. Then, unless --once, keeps printing the cell's state until Ctrl-C.
 
@@ -39,8 +42,8 @@ import yaml
 from geometry_msgs.msg import PointStamped
 from sensor_msgs.msg import PointCloud2
 
-from cnc_bridge.msg import (AtFollowPathAction, AtFollowPathGoal, CellState, CycleEvent, MachineState,
-                            RunJobAction, RunJobGoal, SlaveCommand, SlaveResponse, TransferAction,
+from cnc_bridge.msg import (AtFollowPathAction, AtFollowPathGoal, CellState, CycleCountdown, CycleEvent,
+                            MachineState, RunJobAction, RunJobGoal, SlaveCommand, SlaveResponse, TransferAction,
                             TransferGoal)
 from cnc_bridge.srv import DprntSaveSurface, RequestEntry
 
@@ -279,9 +282,14 @@ def run_job(machine, args):
 def follow_path(machine, args):
     shutil.copy(args.path_program, os.path.join(args.programs, os.path.basename(args.path_program)))
     goal = AtFollowPathGoal(gcode_file=os.path.basename(args.path_program), coolant=-1, tool=-1)
+    cycle = CycleFollow(machine, goal.gcode_file) if COUNTDOWNS else None
     started = time.time()
-    result = action(machine.ns + "/at_controller_node", "follow_path", AtFollowPathAction, goal, 300,
-                    Progress("%s: path" % machine.name, lambda f: 100.0 * f.progress))
+    try:
+        result = action(machine.ns + "/at_controller_node", "follow_path", AtFollowPathAction, goal, 300,
+                        Progress("%s: path" % machine.name, lambda f: 100.0 * f.progress))
+    finally:
+        if cycle:
+            cycle.finish()
     if not result.success:
         raise RuntimeError(result.message)
     p = result.final_position
@@ -292,6 +300,100 @@ def follow_path(machine, args):
         "as the controller reported it%s" % (
             machine.name, result.setpoints, result.underruns, time.time() - started, p.x * 1e3, p.y * 1e3,
             p.z * 1e3, ": " + confirmed.group(0) if confirmed else ""))
+
+
+# cell_monitor's time to cycle end (docs/cell_monitor.md), for the machines with a `cycle_time`
+# entry in the cell file; None when the cell has no cell_monitor.
+COUNTDOWN_TOPIC = "/cycle_countdown"
+COUNTDOWNS = None
+
+
+class Countdowns:
+    """cell_monitor's cycle_countdown: handed to the machine's follower while one listens, else
+    printed once per machine whose countdown in a cycle is not known, with the reason."""
+
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.followers, self.told = {}, set()
+        self.sub = rospy.Subscriber(COUNTDOWN_TOPIC, CycleCountdown, self._on_countdown)
+
+    def follow(self, machine, callback):
+        with self.lock:
+            self.followers[machine] = callback
+
+    def _on_countdown(self, countdown):
+        with self.lock:
+            follower = self.followers.get(countdown.machine)
+            tell = (follower is None and countdown.program and math.isnan(countdown.time_to_cycle_end)
+                    and countdown.machine not in self.told)
+            if tell:
+                self.told.add(countdown.machine)
+        if follower:
+            follower(countdown)
+        elif tell:
+            say("%s: cycle of %s: time to cycle end not known: %s" % (
+                countdown.machine, countdown.program, countdown.reason))
+
+
+class CycleFollow:
+    """One machine's cycle of one program: cell_monitor's countdown at its start, halfway and end,
+    and the planned cycle against the actual one (the machine's state ACTIVE until it leaves it)."""
+
+    def __init__(self, machine, program):
+        self.machine, self.program = machine, program
+        self.lock = threading.Lock()
+        self.first = self.last = None  # known countdowns
+        self.halfway_told = False
+        self.active_since = self.active_for = None
+        self.ended = threading.Event()
+        self.state_sub = rospy.Subscriber(machine.ns + "/state", MachineState, self._on_state)
+        COUNTDOWNS.follow(machine.name, self._on_countdown)
+
+    def _line(self, countdown):
+        return "%s: cycle of %s: %.1f s planned, %.1f s to go" % (
+            self.machine.name, countdown.program, countdown.planned_cycle_time, countdown.time_to_cycle_end)
+
+    def _on_countdown(self, countdown):
+        if countdown.program != self.program or math.isnan(countdown.time_to_cycle_end):
+            return
+        with self.lock:
+            first = self.first is None
+            halfway = (not first and not self.halfway_told
+                       and countdown.time_to_cycle_end <= countdown.planned_cycle_time / 2)
+            self.first = self.first or countdown
+            self.last = countdown
+            self.halfway_told = self.halfway_told or halfway
+        if first or halfway:
+            say(self._line(countdown))
+
+    def _on_state(self, state):
+        now = time.time()  # as received: the state comes at the node's state_rate (10 Hz)
+        with self.lock:
+            if self.active_since is None:
+                if state.execution == MachineState.EXECUTION_ACTIVE and state.program == self.program:
+                    self.active_since = now
+            elif self.active_for is None and state.execution not in (MachineState.EXECUTION_ACTIVE,
+                                                                        MachineState.EXECUTION_PAUSED):
+                self.active_for = now - self.active_since
+                self.ended.set()
+
+    def finish(self):
+        self.ended.wait(5.0)  # the state that ends the cycle may come just after the action's result
+        self.state_sub.unregister()
+        COUNTDOWNS.follow(self.machine.name, None)
+        with self.lock:
+            first, last, actual = self.first, self.last, self.active_for
+        if last is None:
+            say("%s: cycle of %s: no countdown from cell_monitor" % (self.machine.name, self.program))
+            return
+        if last is not first:
+            say(self._line(last))
+        if actual is None:
+            say("%s: cycle of %s: its end was not seen in the machine's state" % (self.machine.name, self.program))
+            return
+        planned = last.planned_cycle_time
+        say("%s: cycle of %s ended: predicted %.1f s, actual %.1f s (%+.1f %%)" % (
+            self.machine.name, self.program, planned, actual, 100.0 * (planned - actual) / actual))
 
 
 def step_bus(machine, args):
@@ -441,7 +543,7 @@ def main():
     parser.add_argument("--recorded", action="store_true",
                         help="a rosbag recorder runs: wait for it to subscribe before sending goals and commands")
     args = parser.parse_args(rospy.myargv()[1:])
-    global RECORDERS
+    global RECORDERS, COUNTDOWNS
     RECORDERS = 1 if args.recorded else 0
     with open(args.cell) as f:
         description = yaml.safe_load(f)
@@ -473,6 +575,8 @@ def main():
             say("cell_monitor: has not heard every machine's state after 30 s")
             return 1
         sub.unregister()
+        if any("cycle_time" in entry for entry in description.get("machines", [])):
+            COUNTDOWNS = Countdowns()
 
     failures = []
     if "mtconnect_adapter" in description:

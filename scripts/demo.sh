@@ -20,6 +20,9 @@ gui=false
 [[ "${GUI:-0}" == "1" ]] && gui=true
 out=${DEMO_OUTPUT:-$root/output/demo-$(date +%Y%m%d-%H%M%S)}
 mkdir -p "$out/programs" "$out/haas_vf2_memory"
+# The program the VF-2 runs (sim_mdc names it O01000, sim_dprnt prints its probe output) in the
+# cell's program folder, as a shop keeps its machines' programs: cell_monitor's countdown looks it up.
+cp "$root/config/dprnt/grid_probe.nc" "$out/programs/O01000.nc"
 out=$(cd "$out" && pwd)
 export CNC_DEMO_DIR=$out
 echo "demo: output folder $out (rosbag, surface map, logs)"

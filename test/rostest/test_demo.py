@@ -6,10 +6,11 @@ lines, the probe cloud, the actions' results, the '@' controller's planned path,
 commands, the MTConnect machine's state, events and conditions) and a wire trace of the VF-2's
 RS-232 line that replays to the same transfer. The MTConnect machine (mtconnect_mill) is reached
 only through its agent (the reference agent, fed by the simulated machine's SHDR adapter): a whole
-cycle must be read through it; and the cell's SHDR adapter must serve the other four machines. While it runs, every machine's tool_path trail and the '@' controller's job/path are
+cycle must be read through it; and the cell's SHDR adapter must serve every other machine. While it runs, every machine's tool_path trail and the '@' controller's job/path are
 watched: each must arrive, in its machine's frame, with the tool's motion in it. The Fanuc mill
 (fanuc_mill) is drip-fed a program by dnc_node: the bag must hold the commanded positions the node
-published during the feed, in the program's frame, more than one of them.
+published during the feed, in the program's frame, more than one of them. cell_monitor's
+countdown to the '@' router's cycle end must fall to the end, its plan near the actual cycle.
 """
 import glob
 import math
@@ -69,7 +70,15 @@ BAG_TOPICS = [
     "/cell/mtconnect_mill/state", "/cell/mtconnect_mill/joint_states", "/cell/mtconnect_mill/events",
     "/cell/mtconnect_mill/conditions", "/cell/fanuc_mill/state", "/cell/fanuc_mill/dnc_node/transfer/result",
     "/cell/fanuc_mill/dnc/commanded_position",
+    "/cycle_countdown",
 ]
+
+# cell_monitor's countdown to the '@' router's cycle end, as the scenario prints it.
+COUNTDOWN_LINE = r"at_router: cycle of at_path\.nc: ([\d.]+) s planned, ([\d.]+) s to go"
+COUNTDOWN_END = r"at_router: cycle of at_path\.nc ended: predicted ([\d.]+) s, actual ([\d.]+) s"
+# The predicted cycle against the actual one: the planner's limits in config/cell.yaml are the node's
+# (X and Y; Z is slower), the actual is measured from states 0.1 s apart.
+CYCLE_TOLERANCE = 0.25
 
 
 class PathWatch:
@@ -157,6 +166,7 @@ class Demo(unittest.TestCase):
         self.assertEqual(numbers["done"][0], 7)
         self.check_the_mtconnect_machine(numbers, run.stdout)
         self.check_the_drip_feed_line(numbers)
+        self.check_the_countdowns(run.stdout)
 
         pngs = glob.glob(os.path.join(out, "haas_vf2_surface*.png"))
         self.assertTrue(pngs, "no surface map PNG in %s: %s" % (out, os.listdir(out)))
@@ -263,6 +273,29 @@ class Demo(unittest.TestCase):
         printed = numbers["drip"][4:]
         self.assertTrue(any(all(abs(got * 1e3 - mm) <= 0.0005 + 1e-6 for got, mm in zip(p, printed)) for p in distinct),
                         "the printed last position %s mm is not in the bag" % printed)
+
+    def check_the_countdowns(self, stdout):
+        """cell_monitor's countdown to the '@' router's cycle end: the whole cycle planned, the time
+        left falling from the start through halfway to the end, the predicted cycle within
+        CYCLE_TOLERANCE of the actual; the VF-2's macro program has no countdown, and says why."""
+        lines = [(float(planned), float(left)) for planned, left in re.findall(COUNTDOWN_LINE, stdout)]
+        self.assertGreaterEqual(len(lines), 3, "start, halfway and end of the countdown in:\n" + stdout)
+        planned = lines[0][0]
+        self.assertGreater(planned, 0.0)
+        self.assertTrue(all(p == planned for p, _ in lines), "one plan for the cycle: %s" % lines)
+        left = [l for _, l in lines]
+        self.assertTrue(all(a > b for a, b in zip(left, left[1:])), "the time left falls: %s" % left)
+        # printed to 0.1 s: a time left just under half the plan may print as half plus 0.05
+        self.assertLessEqual(left[1], planned / 2 + 0.05, "the halfway line: %s" % left)
+        end = re.search(COUNTDOWN_END, stdout)
+        self.assertIsNotNone(end, "no predicted against actual cycle in:\n" + stdout)
+        predicted, actual = float(end.group(1)), float(end.group(2))
+        self.assertEqual(predicted, planned)
+        self.assertAlmostEqual(predicted, actual, delta=CYCLE_TOLERANCE * actual,
+                               msg="predicted %.1f s, actual %.1f s" % (predicted, actual))
+        unknown = re.findall(r"haas_vf2: cycle of O01000: time to cycle end not known: (.+)$", stdout, re.M)
+        self.assertEqual(len(unknown), 1, "the VF-2's countdown told once in:\n" + stdout)
+        self.assertIn("macro", unknown[0])
 
     def check_the_traced_transfer_replays(self, out):
         """dnc_node traced the VF-2's RS-232 line (its ~wire_trace): played back by `cnc_dnc replay`
