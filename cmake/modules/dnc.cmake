@@ -42,8 +42,7 @@ if(NOT CNC_BRIDGE_CORE_ONLY)
     src/ros/nodes/dnc_params.cpp
     src/ros/nodes/dnc_transfer_action.cpp
     src/ros/nodes/dnc_drip_handlers.cpp
-    src/ros/nodes/dnc_commanded_position.cpp
-    src/ros/nodes/dnc_requests.cpp)
+    src/ros/nodes/dnc_commanded_position.cpp)
   target_link_libraries(dnc_node cnc_bridge_xmodem cnc_bridge_programs cnc_bridge_drip cnc_bridge_requests)
 endif()
 
@@ -62,8 +61,15 @@ endif()
 # Program requests punched by the control (docs/dnc_node.md, "Program requests from the control"):
 # the idle listener reads a punch with the XModem receiver or the backup parser and answers; and
 # dnc_node's ROS-free transfer rules (one transfer at a time, the files a transfer may touch, the
-# archive, the counters).
-cnc_core_module(cnc_bridge_requests src/core/dnc/program_requests.cpp src/core/dnc/transfer_gate.cpp src/core/dnc/transfer_rules.cpp)
+# archive, the counters) and its transfer session (the link, the run of a transfer, the XModem,
+# drip and backup protocols, the program requests served).
+cnc_core_module(cnc_bridge_requests
+  src/core/dnc/program_requests.cpp
+  src/core/dnc/transfer_gate.cpp
+  src/core/dnc/transfer_rules.cpp
+  src/core/dnc/transfer_session.cpp
+  src/core/dnc/transfer_session_requests.cpp
+  src/core/dnc/drip_protocols.cpp)
 target_link_libraries(cnc_bridge_requests PUBLIC cnc_bridge_xmodem cnc_bridge_drip cnc_bridge_programs)
 if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   # A control played by lrzsz sx/rx (XModem) and by the test (text) on a pty pair.
@@ -73,6 +79,11 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
     target_compile_definitions(test_program_requests PRIVATE XMODEM_TEST_DATA="${PROJECT_SOURCE_DIR}/test/data/xmodem"
                                                              SIM_HAAS_SERIAL="$<TARGET_FILE:sim_haas_serial>")
     add_dependencies(test_program_requests sim_haas_serial)
+  endif()
+  # dnc_node's transfer session without ROS: XModem, drip and backup against a control on a pty.
+  cnc_core_gtest(test_transfer_session test/unit/test_transfer_session.cpp)
+  if(TARGET test_transfer_session)
+    target_link_libraries(test_transfer_session cnc_bridge_requests)
   endif()
 endif()
 if(NOT CNC_BRIDGE_CORE_ONLY AND CATKIN_ENABLE_TESTING)

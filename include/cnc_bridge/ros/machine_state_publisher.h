@@ -57,6 +57,8 @@ class MachineStatePublisher
   MachineState snapshot() const;
   const std::string& tfPrefix() const { return tf_prefix_; }
   const std::string& machineName() const { return machine_; }
+  /// \brief ~state_rate (Hz): how often the state, joints and tf go out.
+  double stateRate() const { return state_rate_; }
   /// \brief Frame names with the prefix: frame("tool") -> "<tf_prefix>tool".
   std::string frame(const std::string& name) const { return tf_prefix_ + name; }
   /// \brief The node's diagnostic updater, for protocol-specific tasks.

@@ -7,13 +7,12 @@
 
 namespace cnc_bridge
 {
-CommandedPositionPublisher::CommandedPositionPublisher(ros::NodeHandle nh, ros::NodeHandle pnh,
-                                                       const MachineStatePublisher& state)
+CommandedPositionPublisher::CommandedPositionPublisher(ros::NodeHandle nh, const MachineStatePublisher& state)
     : program_frame_(state.frame("program")), tool_frame_(state.frame("commanded_tool"))
 {
-  // ~state_rate (Hz, default 10; MachineStatePublisher checks it): a block end at most this often,
-  // so a feed of short blocks does not flood the topic and tf.
-  const double rate = pnh.param("state_rate", 10.0);
+  // A block end at most as often as the state goes out, so a feed of short blocks does not flood
+  // the topic and tf.
+  const double rate = state.stateRate();
   period_ = ros::Duration(rate > 0 ? 1.0 / rate : 0.1);
   point_pub_ = nh.advertise<geometry_msgs::PointStamped>("dnc/commanded_position", 100);
 }

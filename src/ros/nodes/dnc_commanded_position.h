@@ -24,8 +24,8 @@ namespace cnc_bridge
 class CommandedPositionPublisher
 {
  public:
-  /// Reads ~state_rate (Hz, default 10): the most often a new position is published.
-  CommandedPositionPublisher(ros::NodeHandle nh, ros::NodeHandle pnh, const MachineStatePublisher& state);
+  /// A new position is published at most at the state's rate (~state_rate).
+  CommandedPositionPublisher(ros::NodeHandle nh, const MachineStatePublisher& state);
 
   /// \brief A feed begins: the last one is forgotten. \p preamble (restart blocks, '\n'-separated)
   /// goes out before the first line of the file and is followed with it.
@@ -54,19 +54,4 @@ class CommandedPositionPublisher
   ros::Time last_publish_;
 };
 
-/// \brief begin() for the length of one feed, end() however it ends.
-class CommandedPositionScope
-{
- public:
-  CommandedPositionScope(CommandedPositionPublisher& publisher, const std::string& preamble) : publisher_(publisher)
-  {
-    publisher_.begin(preamble);
-  }
-  ~CommandedPositionScope() { publisher_.end(); }
-  CommandedPositionScope(const CommandedPositionScope&) = delete;
-  CommandedPositionScope& operator=(const CommandedPositionScope&) = delete;
-
- private:
-  CommandedPositionPublisher& publisher_;
-};
 }  // namespace cnc_bridge

@@ -1,21 +1,21 @@
 // dnc_node's drip-feed and backup protocols (docs/dnc_drip_feed.md): the `drip` and `backup`
-// handlers of ~transfer and the services, their parameters, the dnc/current_line topic, and state
-// and feedback while a program is fed. The protocols themselves are the core library
-// cnc_bridge_drip (include/cnc_bridge/dnc/).
+// handlers of ~transfer and the services, the dnc/current_line topic, and state and feedback
+// while a program is fed. The protocols themselves are the core's dnc::DripProtocols
+// (include/cnc_bridge/dnc/drip_protocols.h); their parameters are read in dnc_params.cpp.
 #pragma once
 
 #include <ros/ros.h>
 
-#include "dnc_node.h"
+#include "cnc_bridge/dnc/dnc_settings.h"
+#include "cnc_bridge/dnc/transfer_session.h"
+#include "cnc_bridge/ros/machine_state_publisher.h"
 
 namespace cnc_bridge
 {
-/// \brief Reads the ~drip_* and ~backup_* parameters and registers the protocols `drip` (send)
-/// and `backup` (receive) with \p node.
-/// \param serial the node's link settings (the drip-feed paces itself to their line rate).
+/// \brief Registers the protocols `drip` (send) and `backup` (receive) with \p session, with the
+/// options \p settings (the ~drip_* and ~backup_* parameters); advertises ~pause, ~resume,
+/// ~plan_drip and dnc/current_line.
 /// \param state the node's state publisher (block = line being fed, PAUSED while held).
-/// \param feedback_period action feedback at most this often (and on every hold/resume).
-/// \throws ConfigError for an invalid parameter.
-void registerDripProtocols(DncNode& node, ros::NodeHandle nh, ros::NodeHandle pnh, const SerialSettings& serial,
-                           MachineStatePublisher& state, ros::Duration feedback_period);
+void registerDripProtocols(dnc::TransferSession& session, ros::NodeHandle nh, ros::NodeHandle pnh,
+                           const dnc::DripSettings& settings, MachineStatePublisher& state);
 }  // namespace cnc_bridge
