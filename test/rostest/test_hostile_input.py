@@ -121,12 +121,13 @@ class FolderPeer:
 
 
 class GoalOutcome:
-    """A goal's end as a service answer reads: state, success, message."""
+    """A goal's end as a service answer reads: state, success (or granted), message (or reason)."""
 
     def __init__(self, state, result):
         self.state = state
-        self.success = bool(result is not None and result.success)
-        self.message = result.message if result is not None else ""
+        self.result = result
+        self.success = bool(result is not None and getattr(result, "success", getattr(result, "granted", False)))
+        self.message = (getattr(result, "message", "") or getattr(result, "reason", "")) if result is not None else ""
 
 
 def call_bounded(fn, fifo_path):
@@ -202,6 +203,8 @@ class HostileInput(unittest.TestCase):
             "haas_mdc_node": LogPeer(os.path.join(logs, "mdc_queries.txt")),
             "dprnt_node": None,  # only listens: nothing goes to its peer
             "slave_bus_node": LogPeer(os.path.join(logs, "slave_deliveries.txt")),
+            "cell_monitor": None,  # no wire: it only reads the machines' states
+            "surface_mapper": None,  # no wire unless its work-offset write is on (it is off here)
         }
         for node in cls.nodes:
             rospy.wait_for_service("%s/%s/get_loggers" % (cls.ns, node), timeout=60)
@@ -442,6 +445,35 @@ class HostileInput(unittest.TestCase):
         self.hostile_service_rows("slave_bus_node")  # its only services are switches: none hostile
         switch = rospy.ServiceProxy("%s/slave_bus_node/set_motion_enabled" % self.ns, get_service_class("std_srvs/SetBool"))
         self.assertTrue(switch(data=False).success)
+
+    def test_cell_monitor(self):
+        self.hostile_service_rows("cell_monitor")
+        client, goal_class = self.goal_rows(
+            "cell_monitor", "hold_entry", cnc.HoldEntryAction, {"machine": "haas_ngc", "robot": "r1", "timeout": 0.5},
+            [("machine", "string"), ("robot", "string")])
+        # A timeout that is no number must be refused at once (inf, 1e300 and 0 or less mean "until
+        # cancelled", which the row's bound would only time out).
+        goal = goal_class(machine="haas_ngc", robot="r1", timeout=float("nan"))
+        outcome = self.check_row("cell_monitor", "hold_entry goal timeout=nan", lambda: self.send_goal(client, goal))
+        self.assertIsInstance(outcome, GoalOutcome, "a NaN timeout: %s" % answer_text(outcome))
+        self.assertEqual(outcome.state, GoalStatus.REJECTED, "a NaN timeout: %s" % outcome.message)
+        self.assertIn("not a number", outcome.message)
+        request = rospy.ServiceProxy("%s/cell_monitor/request_entry" % self.ns, get_service_class("cnc_bridge/RequestEntry"))
+        answer = request(machine="haas_ngc", robot="r1")  # its machine reports nothing here: never safe
+        self.assertFalse(answer.granted)
+        self.assertTrue(answer.reason, "a valid request afterwards is answered with its reason")
+
+    def test_surface_mapper(self):
+        before = set(os.listdir(self.sandbox))
+        self.hostile_service_rows("surface_mapper")
+        maps = os.path.join(self.sandbox, "maps")
+        stray = sorted(set(os.listdir(self.sandbox)) - before - {"maps"})
+        self.assertEqual(stray, [], "files written beside the map folder: %s" % stray)
+        clear = rospy.ServiceProxy("%s/surface_mapper/clear" % self.ns, get_service_class("std_srvs/Trigger"))
+        self.assertTrue(clear().success, "a valid clear afterwards")
+        if os.path.isdir(maps):
+            for name in os.listdir(maps):
+                self.assertRegex(name, r"^[A-Za-z0-9_.-]+$", "a map file named from a hostile value: %r" % name)
 
 
 if __name__ == "__main__":

@@ -9,6 +9,7 @@
 #include <diagnostic_msgs/DiagnosticArray.h>
 #include <ros/ros.h>
 #include <yaml-cpp/yaml.h>
+#include <cmath>
 
 #include <chrono>
 #include <list>
@@ -298,10 +299,13 @@ class CellMonitorNode
   void onHoldGoal(Server::GoalHandle goal)
   {
     const auto& wanted = *goal.getGoal();
-    if (!rules_.has(wanted.machine) || wanted.robot.empty())
+    if (!rules_.has(wanted.machine) || wanted.robot.empty() || std::isnan(wanted.timeout))
     {
       HoldEntryResult result;
-      result.reason = wanted.robot.empty() ? "a robot id is needed" : "no machine '" + wanted.machine + "' in the cell";
+      result.reason = wanted.robot.empty() ? "a robot id is needed"
+                      : std::isnan(wanted.timeout)
+                          ? "the timeout is not a number: give seconds, or 0 to wait until cancelled"
+                          : "no machine '" + wanted.machine + "' in the cell";
       goal.setRejected(result, result.reason);
       return;
     }
