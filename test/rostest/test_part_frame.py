@@ -14,7 +14,9 @@ simulators' query logs (files another process writes), a poll with a deadline.
 Edge probes: the simulator models no side faces, so the test publishes synthetic contact points
 of the plate's front side (3, the x side) and left side (2, the y side), placed with yaw EDGE_YAW
 and corner EDGE_CORNER, to the edges mapper: its frame has that yaw and corner (within 1 urad and
-0.1 um: exact points), and its write moves G54 X/Y onto the corner (in the control's 0.0001 in).
+0.1 um: exact points), and its write moves G54 X/Y onto the corner (in the control's 0.0001 in);
+the same with one left side point 100 um proud (a burr) to the burr mapper: its write is refused
+(the side lines' residual above ~max_residual) and its control receives no X/Y write.
 """
 import math
 import os
@@ -93,6 +95,8 @@ class TestPartFrame(unittest.TestCase):
         cls.strict = Collector(cls.ns + "/strict/part_frame", PartFrame)
         cls.edges_log = rospy.get_param("~edges_queries")
         cls.edges = Collector(cls.ns + "/edges/part_frame", PartFrame)
+        cls.burr_log = rospy.get_param("~burr_queries")
+        cls.burr = Collector(cls.ns + "/burr/part_frame", PartFrame)
         cls.tf_buffer = tf2_ros.Buffer()
         cls.tf_listener = tf2_ros.TransformListener(cls.tf_buffer)
 
@@ -149,11 +153,12 @@ class TestPartFrame(unittest.TestCase):
         self.assertTrue(wait_for_query(self.refused_log, "?Q500", mark), "haas_mdc_node does not poll its control")
         self.assertEqual([q for q in queries(self.refused_log) if q.startswith("?E")], [])
 
-    def publish_edges(self):
-        """The plate's side contact points, to the edges mapper (once it listens)."""
+    def publish_edges(self, mapper="edges", burr=0.0):
+        """The plate's side contact points, to a mapper (once it listens); burr: m, how far the
+        first left side point stands proud of the face."""
         for side, points in (("edge_x", [on_plate(u, 0.0) for u in FRONT]),
-                             ("edge_y", [on_plate(0.0, v) for v in LEFT])):
-            publisher = rospy.Publisher(self.ns + "/edges/" + side, PointStamped, queue_size=10)
+                             ("edge_y", [on_plate(-burr if i == 0 else 0.0, v) for i, v in enumerate(LEFT)])):
+            publisher = rospy.Publisher(self.ns + "/" + mapper + "/" + side, PointStamped, queue_size=10)
             deadline = time.monotonic() + 30.0
             while publisher.get_num_connections() == 0 and time.monotonic() < deadline:
                 time.sleep(0.05)  # poll: a publisher has no event for a subscriber's connection
@@ -188,6 +193,21 @@ class TestPartFrame(unittest.TestCase):
         self.assertAlmostEqual(first.get("5221", float("nan")), G54_X_BEFORE + 1.0, delta=0.0001)
         self.assertAlmostEqual(first.get("5222", float("nan")), G54_Y_BEFORE + 0.5, delta=0.0001)
         self.assertIn("5223", first)
+
+    def test_a_burr_on_a_side_refuses_the_write(self):
+        self.publish_edges("burr", burr=100e-6)
+        refused = self.burr.wait(lambda m: m.work_offset.startswith("refused") and m.edge_points == 5, timeout=60.0)
+        self.assertIsNotNone(refused, "no refusal: %s" % [m.work_offset for m in self.burr.messages if m.work_offset])
+        self.assertIn("the side lines' largest residual", refused.work_offset)
+        self.assertGreater(refused.edge_residual_max, 50e-6)
+        # Before the edge points the mapper may have written Z (the plane alone is within the
+        # limit); after the refusal nothing: a status poll after it (one query at a time) shows
+        # that nothing sent before it is still on its way.
+        before = len(queries(self.burr_log))
+        self.assertTrue(wait_for_query(self.burr_log, "?Q500", before), "haas_mdc_node does not poll its control")
+        after = queries(self.burr_log)
+        self.assertEqual([q for q in after[before:] if q.startswith("?E")], [])
+        self.assertEqual([q for q in after if q.startswith(("?E5221", "?E5222"))], [])
 
 
 if __name__ == "__main__":
