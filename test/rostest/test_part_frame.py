@@ -10,6 +10,13 @@ decimals. Stated tolerances: the frame's origin within 3 um of (0, 0, 0.5 in), i
 by 0.05 um and 0.7 urad), the residual as the waviness makes it (rms 5.1 um, max 10.3 um). Expected
 numbers come from the formula, not from the fit's code. Every wait is on a message or, for the
 simulators' query logs (files another process writes), a poll with a deadline.
+
+Edge probes: the simulator models no side faces, so the test publishes synthetic contact points
+of the plate's front side (3, the x side) and left side (2, the y side), placed with yaw EDGE_YAW
+and corner EDGE_CORNER, to the edges mapper: its frame has that yaw and corner (within 1 urad and
+0.1 um: exact points), and its write moves G54 X/Y onto the corner (in the control's 0.0001 in);
+the same with one left side point 100 um proud (a burr) to the burr mapper: its write is refused
+(the side lines' residual above ~max_residual) and its control receives no X/Y write.
 """
 import math
 import os
@@ -22,6 +29,8 @@ import rospy
 import rostest
 import tf2_ros
 
+from geometry_msgs.msg import PointStamped
+
 from cnc_bridge.msg import PartFrame
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
@@ -32,7 +41,17 @@ HEIGHT = 0.5 * INCH
 NORMAL = (-0.002, 0.001, 1.0)
 HEIGHT_TOLERANCE = 3e-6  # m
 TILT_TOLERANCE = 20e-6  # rad
-G54_Z_BEFORE = -2.0  # in, test/data/mdc/plate.mdcsim
+G54_X_BEFORE, G54_Y_BEFORE, G54_Z_BEFORE = -12.5, -8.25, -2.0  # in, test/data/mdc/plate.mdcsim
+EDGE_YAW = 0.01  # rad
+EDGE_CORNER = (1.0 * INCH, 0.5 * INCH)  # m, in plate/work
+FRONT = (0.3 * INCH, 1.5 * INCH, 3.0 * INCH)  # along the part's X from the corner
+LEFT = (0.4 * INCH, 2.0 * INCH)  # along the part's Y
+
+
+def on_plate(u, v):
+    """The point (u, v) of the part's own frame in plate/work (m)."""
+    c, s = math.cos(EDGE_YAW), math.sin(EDGE_YAW)
+    return EDGE_CORNER[0] + c * u - s * v, EDGE_CORNER[1] + s * u + c * v
 
 
 def z_axis(q):
@@ -74,6 +93,10 @@ class TestPartFrame(unittest.TestCase):
         cls.frames = Collector(cls.ns + "/part_frame", PartFrame)
         cls.off = Collector(cls.ns + "/off/part_frame", PartFrame)
         cls.strict = Collector(cls.ns + "/strict/part_frame", PartFrame)
+        cls.edges_log = rospy.get_param("~edges_queries")
+        cls.edges = Collector(cls.ns + "/edges/part_frame", PartFrame)
+        cls.burr_log = rospy.get_param("~burr_queries")
+        cls.burr = Collector(cls.ns + "/burr/part_frame", PartFrame)
         cls.tf_buffer = tf2_ros.Buffer()
         cls.tf_listener = tf2_ros.TransformListener(cls.tf_buffer)
 
@@ -129,6 +152,62 @@ class TestPartFrame(unittest.TestCase):
         mark = len(queries(self.refused_log))
         self.assertTrue(wait_for_query(self.refused_log, "?Q500", mark), "haas_mdc_node does not poll its control")
         self.assertEqual([q for q in queries(self.refused_log) if q.startswith("?E")], [])
+
+    def publish_edges(self, mapper="edges", burr=0.0):
+        """The plate's side contact points, to a mapper (once it listens); burr: m, how far the
+        first left side point stands proud of the face."""
+        for side, points in (("edge_x", [on_plate(u, 0.0) for u in FRONT]),
+                             ("edge_y", [on_plate(-burr if i == 0 else 0.0, v) for i, v in enumerate(LEFT)])):
+            publisher = rospy.Publisher(self.ns + "/" + mapper + "/" + side, PointStamped, queue_size=10)
+            deadline = time.monotonic() + 30.0
+            while publisher.get_num_connections() == 0 and time.monotonic() < deadline:
+                time.sleep(0.05)  # poll: a publisher has no event for a subscriber's connection
+            self.assertGreater(publisher.get_num_connections(), 0, "surface_mapper does not listen on " + side)
+            for x, y in points:
+                msg = PointStamped()
+                msg.header.frame_id = "plate/work"
+                msg.point.x, msg.point.y, msg.point.z = x, y, 0.4 * INCH
+                publisher.publish(msg)
+
+    def test_edges_give_yaw_corner_and_the_xy_write(self):
+        self.publish_edges()
+        msg = self.edges.wait(lambda m: m.valid and m.points == 100 and m.edge_points == 5, timeout=60.0)
+        self.assertIsNotNone(msg, "no frame with the 5 edge points: %s" % [m.message for m in self.edges.messages[-3:]])
+        self.assertTrue(msg.xy_measured, msg.message)
+        self.assertAlmostEqual(msg.pose.position.x, EDGE_CORNER[0], delta=1e-7)
+        self.assertAlmostEqual(msg.pose.position.y, EDGE_CORNER[1], delta=1e-7)
+        x, y = EDGE_CORNER[0] / INCH, EDGE_CORNER[1] / INCH
+        self.assertAlmostEqual(msg.pose.position.z, (0.5 + 0.002 * x - 0.001 * y) * INCH, delta=HEIGHT_TOLERANCE)
+        self.assertAlmostEqual(msg.yaw, EDGE_YAW, delta=20e-6)  # the tilt moves the fixed-axis yaw by ~1e-8
+        self.assertLess(msg.edge_residual_max, 1e-9)
+        written = self.edges.wait(lambda m: "#5221" in m.work_offset, timeout=60.0)
+        self.assertIsNotNone(written, "no X/Y write: %s" % [m.work_offset for m in self.edges.messages if m.work_offset])
+        self.assertTrue(written.work_offset.startswith("written"), written.work_offset)
+        self.assertIn("G54 has no rotation", written.work_offset)
+        writes = [q for q in queries(self.edges_log) if q.startswith("?E")]
+        first = {}
+        for q in writes:
+            variable, value = q[2:].split()
+            first.setdefault(variable, float(value))
+        # G54 X/Y move onto the corner: work X0/Y0 at the corner of the plate.
+        self.assertAlmostEqual(first.get("5221", float("nan")), G54_X_BEFORE + 1.0, delta=0.0001)
+        self.assertAlmostEqual(first.get("5222", float("nan")), G54_Y_BEFORE + 0.5, delta=0.0001)
+        self.assertIn("5223", first)
+
+    def test_a_burr_on_a_side_refuses_the_write(self):
+        self.publish_edges("burr", burr=100e-6)
+        refused = self.burr.wait(lambda m: m.work_offset.startswith("refused") and m.edge_points == 5, timeout=60.0)
+        self.assertIsNotNone(refused, "no refusal: %s" % [m.work_offset for m in self.burr.messages if m.work_offset])
+        self.assertIn("the side lines' largest residual", refused.work_offset)
+        self.assertGreater(refused.edge_residual_max, 50e-6)
+        # Before the edge points the mapper may have written Z (the plane alone is within the
+        # limit); after the refusal nothing: a status poll after it (one query at a time) shows
+        # that nothing sent before it is still on its way.
+        before = len(queries(self.burr_log))
+        self.assertTrue(wait_for_query(self.burr_log, "?Q500", before), "haas_mdc_node does not poll its control")
+        after = queries(self.burr_log)
+        self.assertEqual([q for q in after[before:] if q.startswith("?E")], [])
+        self.assertEqual([q for q in after if q.startswith(("?E5221", "?E5222"))], [])
 
 
 if __name__ == "__main__":

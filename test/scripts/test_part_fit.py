@@ -4,6 +4,8 @@ points on a line give no frame and say why.
 
 Tolerances: exact points 1e-9 (m, rad); 5 um of noise on a 10 x 10 grid of 12.7 mm pitch:
 height within 10 um, tilt within 0.1 mrad (some 7 times the standard error of the fit).
+Edge probes: a rotated, shifted plate's sides give back its yaw and corner (Edges: tolerances
+there); too few or misplaced edge points give no X/Y origin and say why.
 """
 import math
 import unittest
@@ -122,11 +124,131 @@ class NoFrame(unittest.TestCase):
         self.assertAlmostEqual(fit.pitch, -math.atan(0.01), delta=1e-9)
 
 
+def rotate(yaw, shift, points):
+    """points (x, y) of the part's own frame in the work frame: rotated by yaw, then shifted."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([(shift[0] + c * u - s * v, shift[1] + s * u + c * v) for u, v in points])
+
+
+class Edges(unittest.TestCase):
+    """A 100 x 60 mm plate, rotated by YAW and with its corner at CORNER (m), probed on its front
+    side (the x side, along the part's X: 5 points) and its left side (the y side: 3 points).
+
+    Tolerances with 5 um of noise on the contact points: yaw within 0.5 mrad, the corner within
+    20 um (some 6 times the standard error of the fit)."""
+    YAW, CORNER = math.radians(1.5), (0.0123, -0.0045)
+    FRONT = [(u, 0.0) for u in (0.01, 0.03, 0.05, 0.07, 0.09)]
+    LEFT = [(0.0, v) for v in (0.01, 0.03, 0.05)]
+
+    def sides(self, yaw=YAW, corner=CORNER):
+        return rotate(yaw, corner, self.FRONT), rotate(yaw, corner, self.LEFT)
+
+    def test_yaw_and_corner_are_recovered(self):
+        for yaw in (self.YAW, -math.radians(20), 0.0, math.radians(80)):
+            edges = part_fit.fit_edges(*self.sides(yaw))
+            self.assertAlmostEqual(edges.yaw, yaw, delta=1e-9)
+            self.assertTrue(edges.corner)
+            np.testing.assert_allclose(edges.origin, self.CORNER, atol=1e-9)
+            self.assertLess(edges.residual_max, 1e-12)
+            self.assertEqual((edges.x_points, edges.y_points), (5, 3))
+
+    def test_points_in_reverse_order_give_the_same_frame(self):
+        front, left = self.sides()
+        edges = part_fit.fit_edges(front[::-1], left)
+        self.assertAlmostEqual(edges.yaw, self.YAW, delta=1e-9)
+
+    def test_one_point_on_the_y_side_is_enough(self):
+        front, left = self.sides()
+        edges = part_fit.fit_edges(front[:2], left[1:2])
+        self.assertAlmostEqual(edges.yaw, self.YAW, delta=1e-9)
+        np.testing.assert_allclose(edges.origin, self.CORNER, atol=1e-9)
+
+    def test_noise_within_tolerance_and_in_the_residual(self):
+        rng = np.random.default_rng(33)
+        front, left = self.sides()
+        front += rng.normal(0.0, 5e-6, front.shape)
+        left += rng.normal(0.0, 5e-6, left.shape)
+        edges = part_fit.fit_edges(front, left)
+        self.assertAlmostEqual(edges.yaw, self.YAW, delta=0.5e-3)
+        np.testing.assert_allclose(edges.origin, self.CORNER, atol=20e-6)
+        self.assertGreater(edges.residual_rms, 1e-6)
+        self.assertLess(edges.residual_rms, 10e-6)
+
+    def test_a_burr_on_a_side_is_the_largest_residual(self):
+        front, left = self.sides()
+        left[1] += 50e-6 * np.array([-math.cos(self.YAW), -math.sin(self.YAW)])  # 50 um proud of the face
+        edges = part_fit.fit_edges(front, left)
+        self.assertGreater(edges.residual_max, 30e-6)
+
+    def test_x_side_only_gives_yaw_and_its_line_not_the_corner(self):
+        front, _ = self.sides()
+        edges = part_fit.fit_edges(front)
+        self.assertFalse(edges.corner)
+        self.assertAlmostEqual(edges.yaw, self.YAW, delta=1e-9)
+        self.assertIn("not known", edges.message)
+        # The origin is on the front side's line, nearest the work origin.
+        normal = np.array([-math.sin(self.YAW), math.cos(self.YAW)])
+        self.assertAlmostEqual(float(normal @ np.array(edges.origin)), float(normal @ np.array(self.CORNER)),
+                               delta=1e-9)
+        self.assertAlmostEqual(float(np.array([math.cos(self.YAW), math.sin(self.YAW)]) @ edges.origin), 0.0,
+                               delta=1e-12)
+
+    def test_too_few_x_side_points_no_rotation(self):
+        front, left = self.sides()
+        for x_side in (front[:1], []):
+            with self.assertRaises(part_fit.FitError) as raised:
+                part_fit.fit_edges(x_side, left)
+            self.assertIn("at least 2 edge points on its x side", str(raised.exception))
+            self.assertIn("no X/Y origin", str(raised.exception))
+
+    def test_x_side_points_in_one_spot(self):
+        with self.assertRaises(part_fit.FitError) as raised:
+            part_fit.fit_edges([(0.01, 0.02)] * 3, [(0.0, 0.03)])
+        self.assertIn("one spot", str(raised.exception))
+
+    def test_y_side_points_on_the_x_side_line_no_corner(self):
+        front, _ = self.sides()
+        more = rotate(self.YAW, self.CORNER, [(0.12, 0.0), (0.14, 0.0)])
+        with self.assertRaises(part_fit.FitError) as raised:
+            part_fit.fit_edges(front, more)
+        self.assertIn("no corner", str(raised.exception))
+
+    def test_a_value_that_is_not_finite(self):
+        front, left = self.sides()
+        left[2][0] = float("inf")
+        with self.assertRaises(part_fit.FitError) as raised:
+            part_fit.fit_edges(front, left)
+        self.assertIn("y side point 3 is not finite", str(raised.exception))
+
+    def test_frame_with_plane_and_edges(self):
+        a, b, c = KnownPlate.A, KnownPlate.B, KnownPlate.C
+        fit = part_fit.fit_part_frame(plate(a, b, c), part_fit.fit_edges(*self.sides()))
+        x0, y0 = self.CORNER
+        np.testing.assert_allclose(fit.origin, (x0, y0, a * x0 + b * y0 + c), atol=1e-9)
+        r = fit.rotation
+        np.testing.assert_allclose(r.T @ r, np.eye(3), atol=1e-12)
+        self.assertAlmostEqual(math.atan2(r[1, 0], r[0, 0]), self.YAW, delta=1e-9)  # x axis above the side
+        self.assertLess(angle_between(r[:, 2], np.array([-a, -b, 1.0])), 1e-12)
+        self.assertAlmostEqual(fit.yaw, self.YAW, delta=1e-4)  # the tilt moves the fixed-axis yaw a little
+        self.assertTrue(fit.edges.corner)
+
+
 class OffsetShift(unittest.TestCase):
     def test_z_in_the_control_units_at_its_resolution(self):
         fit = part_fit.fit_part_frame(plate(0.002, -0.001, 0.5 * INCH + 1e-7))
         self.assertEqual(part_fit.offset_shift(fit, "inch"), {"Z": 0.5})
         self.assertEqual(part_fit.offset_shift(fit, "mm"), {"Z": 12.7})
+
+    def test_x_and_y_onto_the_corner(self):
+        edges = part_fit.fit_edges(*Edges().sides(corner=(1.25 * INCH, -0.5 * INCH)))
+        fit = part_fit.fit_part_frame(plate(0.0, 0.0, 0.5 * INCH), edges)
+        self.assertEqual(part_fit.offset_shift(fit, "inch"), {"X": 1.25, "Y": -0.5, "Z": 0.5})
+        self.assertEqual(part_fit.offset_shift(fit, "mm"), {"X": 31.75, "Y": -12.7, "Z": 12.7})
+
+    def test_x_side_only_moves_z_only(self):
+        front, _ = Edges().sides()
+        fit = part_fit.fit_part_frame(plate(0.0, 0.0, 0.5 * INCH), part_fit.fit_edges(front))
+        self.assertEqual(part_fit.offset_shift(fit, "inch"), {"Z": 0.5})
 
     def test_unknown_units(self):
         fit = part_fit.fit_part_frame(plate(0.0, 0.0, 0.0))
