@@ -136,7 +136,7 @@ class CycleWatch
 {
  public:
   /// \throws ConfigError for an invalid profile or a folder that does not exist.
-  CycleWatch(const CycleProfile& profile, const std::string& program_dir);
+  CycleWatch(CycleProfile profile, std::string program_dir);
 
   void observe(const CycleObservation& observation, double now);
   CyclePrediction predict(double now) const;

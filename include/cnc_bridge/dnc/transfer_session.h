@@ -140,7 +140,7 @@ class TransferSession
  public:
   /// Creates the program directory if missing and registers the XModem protocols.
   /// \throws ConfigError for a bad protected range or name pattern.
-  TransferSession(const TransferSettings& settings, const RequestSettings& requests, SessionParts parts);
+  TransferSession(const TransferSettings& settings, const RequestSettings& requests, const SessionParts& parts);
   /// Stops the request listener and cancels a running transfer.
   ~TransferSession();
   TransferSession(const TransferSession&) = delete;

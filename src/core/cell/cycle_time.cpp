@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <sstream>
+#include <utility>
 
 #include "cnc_bridge/at_protocol/planner.h"
 #include "cnc_bridge/common/error.h"
@@ -292,8 +293,8 @@ std::string findProgram(const std::string& program, const std::string& folder)
 }
 }  // namespace
 
-CycleWatch::CycleWatch(const CycleProfile& profile, const std::string& program_dir)
-    : profile_(profile), program_dir_(program_dir)
+CycleWatch::CycleWatch(CycleProfile profile, std::string program_dir)
+    : profile_(std::move(profile)), program_dir_(std::move(program_dir))
 {
   profile_.validate();
   if (program_dir_.empty())

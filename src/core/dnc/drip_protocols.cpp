@@ -125,7 +125,7 @@ SwitchAnswer DripProtocols::pause()
   std::lock_guard<std::mutex> lock(sender_mutex_);
   if (sender_ == nullptr)
     return {false, "refused: no drip-feed is running (pause applies to protocol drip)"};
-  const SwitchAnswer answer{true, sender_->paused() ? "already paused" : "paused: nothing more is sent until ~resume"};
+  SwitchAnswer answer{true, sender_->paused() ? "already paused" : "paused: nothing more is sent until ~resume"};
   sender_->pause();
   return answer;
 }

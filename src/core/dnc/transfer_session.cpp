@@ -36,7 +36,8 @@ TransferListener& listenerOf(const SessionParts& parts)
 }
 }  // namespace
 
-TransferSession::TransferSession(const TransferSettings& settings, const RequestSettings& requests, SessionParts parts)
+TransferSession::TransferSession(const TransferSettings& settings, const RequestSettings& requests,
+                                 const SessionParts& parts)
     : settings_(settings),
       requests_(requests),
       listener_(listenerOf(parts)),
@@ -317,7 +318,8 @@ TransferOutcome TransferSession::runXmodem(Transport& link, const TransferJob& j
     f.total = p.total;
     f.block = p.block;
     f.retries = p.retries;
-    f.percent = p.total > 0 ? static_cast<float>(100.0 * p.bytes / p.total) : 0.0f;
+    f.percent =
+        p.total > 0 ? static_cast<float>(100.0 * static_cast<double>(p.bytes) / static_cast<double>(p.total)) : 0.0f;
     if (progress)
       progress(f);
     state({std::nullopt, std::nullopt, p.block, std::nullopt});
