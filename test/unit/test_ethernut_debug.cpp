@@ -165,8 +165,8 @@ TEST(EthernutDebugChannel, LinesArriveOverAPtyAndTheChannelSurvivesThePortVanish
   test::TempDir dir("ethernut_debug");
   const std::string path = dir.file("debug_port");
   auto pty = std::make_unique<PtyMaster>(path);
+  Received got;  // before the channel: its thread reports to it until the channel is destroyed
   DebugChannel channel(ptySettings(path));
-  Received got;
   channel.start(
       [&](const DebugLine& line)
       {
