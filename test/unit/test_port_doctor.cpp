@@ -74,7 +74,8 @@ struct ToolRun
 ToolRun run(const std::string& command)
 {
   ToolRun result;
-  FILE* pipe = ::popen((command + " 2>&1").c_str(), "r");
+  // Bounded: a tool that hangs fails its case (status 124) instead of holding the whole run.
+  FILE* pipe = ::popen(("timeout -k 5 120 " + command + " 2>&1").c_str(), "r");
   char buffer[4096];
   size_t n;
   while ((n = std::fread(buffer, 1, sizeof(buffer), pipe)) > 0)
@@ -198,6 +199,14 @@ pid_t start(const std::vector<std::string>& argv, const std::string& io = "")
 void stop(pid_t pid)
 {
   ::kill(pid, SIGTERM);
+  for (int i = 0; i < 1000; ++i)
+  {
+    if (::waitpid(pid, nullptr, WNOHANG) == pid)
+      return;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));  // poll: waitpid has no timeout
+  }
+  ADD_FAILURE() << "process " << pid << " did not stop within 10 s of SIGTERM: killed";
+  ::kill(pid, SIGKILL);
   ::waitpid(pid, nullptr, 0);
 }
 
