@@ -230,6 +230,7 @@ class Demo(unittest.TestCase):
                              "MDC counts %d parts, DPRNT %d" % (mdc.part_count, dprnt.part_count))
         self.check_the_traced_transfer_replays(out)
         self.check_the_recorded_commanded_positions(bag_path, numbers)
+        self.check_the_recorded_dprnt_position(bag_path)
         shutil.rmtree(out, ignore_errors=True)  # kept for a look when something failed
 
     def check_the_mtconnect_machine(self, numbers, stdout):
@@ -255,6 +256,18 @@ class Demo(unittest.TestCase):
         self.assertEqual(last_line, 129, "the feed ends at the program's closing %")
         self.assertGreaterEqual(positions, distinct)
         self.assertGreater(distinct, 1, "the commanded position did not move during the feed")
+
+    def check_the_recorded_dprnt_position(self, bag_path):
+        """The VF-2's probe program prints where the spindle ended in machine coordinates
+        (`MACHINE X.. Y.. Z..`, config/dprnt/grid_probe.nc): dprnt_node's state in the bag carries it
+        as a reported position, and none before the first such line."""
+        with rosbag.Bag(bag_path) as bag:
+            states = [m for _, m, _ in bag.read_messages(topics=["/cell/haas_vf2/dprnt/state"])]
+        self.assertTrue(states, "no dprnt_node state in the bag")
+        reported = [m for m in states if m.position_valid]
+        self.assertTrue(reported, "dprnt_node's state never carried the printed machine position")
+        self.assertFalse(states[0].position_valid, "a position before the program printed one")
+        self.assertTrue(any(abs(m.position.x) + abs(m.position.y) + abs(m.position.z) > 0 for m in reported))
 
     def check_the_recorded_commanded_positions(self, bag_path, numbers):
         """The bag holds dnc_node's commanded positions of the drip-feed, in the program's frame
