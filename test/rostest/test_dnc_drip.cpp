@@ -522,8 +522,7 @@ TEST(DncDrip, CommandedPositionIsTheLastBlockEndFedInTheProgramFrame)
                                                   });
   Client client(ns + "/dnc_node/transfer", true);
   ASSERT_TRUE(client.waitForServer(ros::Duration(20)));
-  struct stat info;
-  ASSERT_TRUE(waitUntil([&] { return ::stat(pty.c_str(), &info) == 0; }, 20));  // never read it: a pty
+  ASSERT_TRUE(line_log::waitUntilExists(pty, 20));  // never read it: a pty
   ASSERT_TRUE(waitUntil(
       [&]
       { return line_sub.getNumPublishers() > 0 && point_sub.getNumPublishers() > 0 && tf_sub.getNumPublishers() > 0; },

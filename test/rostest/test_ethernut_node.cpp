@@ -14,6 +14,8 @@
 #include <std_srvs/Trigger.h>
 #include <visualization_msgs/MarkerArray.h>
 
+#include "line_log.h"
+
 #include <algorithm>
 #include <array>
 #include <atomic>
@@ -190,18 +192,16 @@ std::vector<std::string> simMessages()
 // Waits until the board has received a message named \p name after its first \p from messages.
 bool waitForSimMessage(const std::string& name, size_t from, double seconds = 10.0)
 {
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
-  do
-  {
-    const auto names = simMessages();
-    if (std::find(names.begin() + static_cast<long>(std::min(from, names.size())), names.end(), name) != names.end())
-    {
-      return true;
-    }
-    // The board writes the log from another process: the file is all there is to wait on.
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));  // poll
-  } while (std::chrono::steady_clock::now() < deadline);
-  return false;
+  // The board writes the log from another process: woken by each change of the file.
+  return line_log::waitForFile(
+      sim_messages,
+      [&]
+      {
+        const auto names = simMessages();
+        return std::find(names.begin() + static_cast<long>(std::min(from, names.size())), names.end(), name) !=
+               names.end();
+      },
+      seconds);
 }
 
 // The coordinates the node must send for a program: the end of every move, mm, as float; G53

@@ -135,13 +135,15 @@ class HostilePeers(unittest.TestCase):
         rospy.init_node("test_hostile_peers")
         cls.ns = rospy.get_param("~namespace")
         cls.states = {}
-        cls.lock = threading.Lock()
+        cls.lock = threading.RLock()
+        cls.changed = threading.Condition(cls.lock)  # notified with every state recorded
         cls.subs = []
 
     def watch(self, node):
         def keep(msg):
-            with self.lock:
+            with self.changed:
                 self.states[node] = msg
+                self.changed.notify_all()
 
         self.subs.append(rospy.Subscriber("%s/state" % self.machine(node), MachineState, keep))
 
@@ -164,12 +166,10 @@ class HostilePeers(unittest.TestCase):
             return self.states.get(node)
 
     def wait_for(self, what, predicate, timeout=20.0):
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            if predicate():
-                return
-            rospy.sleep(0.05)  # poll: the condition reads states another thread records
-        self.fail("timed out waiting for " + what)
+        # The predicates read the states the subscriber thread records: each one recorded wakes it.
+        with self.changed:
+            if not self.changed.wait_for(predicate, timeout):
+                self.fail("timed out waiting for " + what)
 
     def assert_well(self, node, pid, after):
         self.assertTrue(rosnode.rosnode_ping(self.full_name(node), max_count=1, verbose=False),
