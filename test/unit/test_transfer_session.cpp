@@ -159,6 +159,14 @@ struct SessionFixture : ::testing::Test
     return received;
   }
 
+  /// A refusal: no transfer counted, the port never opened, nothing reached the control.
+  void expectNothingSent(TransferSession& s)
+  {
+    EXPECT_EQ(s.totals().transfers, 0u);
+    EXPECT_TRUE(listener.links.empty());
+    EXPECT_EQ(controlReceived(), "");
+  }
+
   /// Reads from the control's end until a whole '%'-framed program has arrived (its closing
   /// '%' and the end of block after it), or nothing more comes for 5 s.
   std::string readPercentFramed()
@@ -279,9 +287,7 @@ TEST_F(SessionFixture, AProtectedProgramIsRefusedBeforeThePortIsOpened)
   EXPECT_EQ(outcome.message.rfind("refused: ", 0), 0u) << outcome.message;
   EXPECT_NE(outcome.message.find("~allow_protected_programs"), std::string::npos) << outcome.message;
   EXPECT_EQ(s.totals().refused, 1u);
-  EXPECT_EQ(s.totals().transfers, 0u);
-  EXPECT_TRUE(listener.links.empty());
-  EXPECT_EQ(controlReceived(), "");
+  expectNothingSent(s);
 }
 
 TEST_F(SessionFixture, UnknownProtocolsDirectionsAndFilesOutsideAreRefused)
@@ -295,9 +301,7 @@ TEST_F(SessionFixture, UnknownProtocolsDirectionsAndFilesOutsideAreRefused)
   EXPECT_EQ(direction.message, "refused: direction must be 'send' or 'receive', not 'upload'");
   const TransferOutcome outside = s.run(request(kDirectionSend, "../O01234.nc"), nullptr);
   EXPECT_EQ(outside.message.rfind("refused: ", 0), 0u) << outside.message;
-  EXPECT_EQ(s.totals().transfers, 0u);
-  EXPECT_TRUE(listener.links.empty());
-  EXPECT_EQ(controlReceived(), "");
+  expectNothingSent(s);
 }
 
 TEST_F(SessionFixture, ADripFeedIsRefusedWhileMotionIsDisabledAndSendsNothing)
@@ -311,9 +315,7 @@ TEST_F(SessionFixture, ADripFeedIsRefusedWhileMotionIsDisabledAndSendsNothing)
       0u)
       << outcome.message;
   EXPECT_NE(outcome.message.find("/mill/set_motion_enabled"), std::string::npos) << outcome.message;
-  EXPECT_EQ(s.totals().transfers, 0u);
-  EXPECT_TRUE(listener.links.empty());
-  EXPECT_EQ(controlReceived(), "");
+  expectNothingSent(s);
 }
 
 TEST_F(SessionFixture, ADripFeedSendsTheProgramWhenMotionIsEnabled)
