@@ -5,6 +5,7 @@
 #pragma once
 
 #include <diagnostic_updater/diagnostic_updater.h>
+#include <geometry_msgs/TransformStamped.h>
 #include <ros/ros.h>
 #include <sensor_msgs/JointState.h>
 #include <tf2_ros/transform_broadcaster.h>
@@ -20,6 +21,10 @@
 
 namespace cnc_bridge
 {
+/// \brief The transform \p parent -> \p child that is the translation \p p (m), no rotation.
+geometry_msgs::TransformStamped translationTransform(const ros::Time& stamp, const std::string& parent,
+                                                     const std::string& child, const geometry_msgs::Point& p);
+
 /// \brief Publishes one machine's state, joints, tf and link diagnostics. Thread-safe.
 ///
 /// Parameters (private): ~machine (string, default: the node name), ~tf_prefix (string, default ""),

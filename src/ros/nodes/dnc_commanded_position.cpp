@@ -77,15 +77,11 @@ void CommandedPositionPublisher::publish(const ros::Time& now)
     published_blocks_ = tracker_.motionBlocks();
     unknown_since_ = false;
   }
-  geometry_msgs::TransformStamped t;
-  t.header.stamp = now;
-  t.header.frame_id = program_frame_;
-  t.child_frame_id = tool_frame_;
-  t.transform.translation.x = p.x;
-  t.transform.translation.y = p.y;
-  t.transform.translation.z = p.z;
-  t.transform.rotation.w = 1.0;
-  tf_.sendTransform(t);
+  geometry_msgs::Point at;
+  at.x = p.x;
+  at.y = p.y;
+  at.z = p.z;
+  tf_.sendTransform(translationTransform(now, program_frame_, tool_frame_, at));
   last_publish_ = now;
 }
 }  // namespace cnc_bridge

@@ -25,8 +25,10 @@ bool sameIgnoringStamp(MachineState a, MachineState b)
   return a == b;
 }
 
-geometry_msgs::TransformStamped translation(const ros::Time& stamp, const std::string& parent, const std::string& child,
-                                            const geometry_msgs::Point& p)
+}  // namespace
+
+geometry_msgs::TransformStamped translationTransform(const ros::Time& stamp, const std::string& parent,
+                                                     const std::string& child, const geometry_msgs::Point& p)
 {
   geometry_msgs::TransformStamped t;
   t.header.stamp = stamp;
@@ -38,7 +40,6 @@ geometry_msgs::TransformStamped translation(const ros::Time& stamp, const std::s
   t.transform.rotation.w = 1.0;
   return t;
 }
-}  // namespace
 
 MachineStatePublisher::MachineStatePublisher(ros::NodeHandle nh, ros::NodeHandle pnh, const std::string& hardware_id)
     : nh_(nh), updater_(nh, pnh)
@@ -195,10 +196,10 @@ void MachineStatePublisher::publishLocked(const ros::Time& now)
   joints.position = {state_.position.x, state_.position.y, state_.position.z};
   joint_pub_.publish(joints);
 
-  tf_broadcaster_.sendTransform(translation(now, frame("machine"), frame("tool"), state_.position));
+  tf_broadcaster_.sendTransform(translationTransform(now, frame("machine"), frame("tool"), state_.position));
   if (state_.work_offset_valid)
   {
-    tf_broadcaster_.sendTransform(translation(now, frame("machine"), frame("work"), state_.work_offset));
+    tf_broadcaster_.sendTransform(translationTransform(now, frame("machine"), frame("work"), state_.work_offset));
   }
 }
 
