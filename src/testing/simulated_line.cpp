@@ -30,9 +30,11 @@ size_t SimulatedLine::End::read(uint8_t* buffer, size_t size, Milliseconds timeo
     }
     const auto t = Clock::now();
     size_t n = 0;
+    last_read_carried_.clear();
     while (n < size && !in_.queue.empty() && in_.queue.front().second <= t)
     {
       buffer[n++] = in_.queue.front().first;
+      last_read_carried_.push_back(in_.queue.front().second);
       in_.queue.pop_front();
     }
     if (n > 0 || t >= deadline || size == 0)
@@ -63,10 +65,17 @@ void SimulatedLine::End::write(const uint8_t* data, size_t size, Milliseconds /*
   for (size_t i = 0; i < size; ++i)
   {
     // A line that sat idle starts carrying now; a busy one after its last character.
-    out_.line_free = std::max(out_.line_free, now) + line_.char_time_;
+    last_write_starts_ = std::max(out_.line_free, now);
+    out_.line_free = last_write_starts_ + line_.char_time_;
     out_.queue.emplace_back(data[i], out_.line_free);
   }
   line_.changed_.notify_all();
+}
+
+SimulatedLine::End::TimePoint SimulatedLine::End::lastWriteStartsAt() const
+{
+  std::lock_guard<std::mutex> lock(line_.mutex_);
+  return last_write_starts_;
 }
 
 void SimulatedLine::End::drain()

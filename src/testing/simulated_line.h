@@ -2,7 +2,9 @@
 // character taking one character time on the wire in each direction. The host end's kernel
 // queue is explicit (pendingOutput(): characters written but not yet carried), and the control
 // end receives a character only once the line has carried it, so a simulated control counts
-// exactly what a host queued before an XOFF, free of a pty's scheduling delays. ROS-free.
+// exactly what a host queued before an XOFF, free of a pty's scheduling delays. Each end also
+// tells when its characters were on the wire (sim::LineClock), so the control judges its XOFF by
+// the wire's clock, not by when its own thread ran. ROS-free.
 #pragma once
 
 #include <atomic>
@@ -11,8 +13,10 @@
 #include <deque>
 #include <mutex>
 #include <string>
+#include <vector>
 
 #include "cnc_bridge/transport/transport.h"
+#include "sim/haas_serial/dnc_sim.h"
 
 namespace cnc_bridge
 {
@@ -37,7 +41,8 @@ class SimulatedLine
     std::deque<std::pair<uint8_t, Clock::time_point>> queue;
     Clock::time_point line_free;  ///< when the last character written finishes
   };
-  class End : public Transport
+  /// An end is also a LineClock: a simulated control judges its XOFFs by the wire's times.
+  class End : public Transport, public LineClock
   {
    public:
     End(SimulatedLine& line, Direction& out, Direction& in, std::string name)
@@ -53,6 +58,8 @@ class SimulatedLine
     void close() override { interrupt(); }
     bool isOpen() const override { return true; }
     std::string describe() const override { return name_; }
+    TimePoint lastReadCarriedAt(size_t index) const override { return last_read_carried_.at(index); }
+    TimePoint lastWriteStartsAt() const override;
 
    private:
     SimulatedLine& line_;
@@ -60,6 +67,8 @@ class SimulatedLine
     Direction& in_;
     std::string name_;
     std::atomic<bool> interrupted_{false};
+    std::vector<Clock::time_point> last_read_carried_;  // the reading thread's own
+    Clock::time_point last_write_starts_;               // under the line's mutex
   };
 
   Clock::duration char_time_;

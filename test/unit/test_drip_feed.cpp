@@ -559,6 +559,68 @@ TEST(DripControl, ItsOwnLatenessIsToldApartFromAHostThatIgnoresTheXoff)
   EXPECT_EQ(6u, stats.overflow_beyond_late) << stats.summary();
 }
 
+namespace
+{
+// The simulated control on a SimulatedLine, run until it has received \p total characters. Buffer
+// 1024 (nothing overflows), XOFF at 40, next to no execution.
+sim::DripControlStats runControlOnLine(sim::SimulatedLine& line, size_t total)
+{
+  StopSignal stop;
+  sim::DripControlOptions control;
+  control.buffer_size = 1024;
+  control.high_mark = 40;
+  control.low_mark = 20;
+  control.execution_cps = 1e-3;
+  sim::DripControlHooks hooks;
+  size_t received = 0;
+  hooks.reset = [&] { return received >= total; };  // ends the run, the XOFF event closed
+  return sim::runDripControl(
+      line.control(), control, stop, [&](const uint8_t*, size_t size) { received += size; }, nullptr, hooks);
+}
+}  // namespace
+
+// On a SimulatedLine the control judges its XOFF by the wire's clock. A control thread that runs
+// late between reads takes, after writing its DC3, characters that had arrived before it: they
+// are its own lateness, however many, and not the host's (the UART of a real control takes them
+// as they come, and its DC3 leaves at the character that crosses the mark).
+TEST(DripControl, OnTheLineCharactersThatArrivedBeforeItsXoffAreItsOwnLateness)
+{
+  sim::SimulatedLine line(1e12);  // every character carried the instant it is written
+  // All of it is on the wire before the control reads: its first read takes 256 (its read size),
+  // the 40th crosses the mark, the DC3 goes out, and the next read takes the other 144.
+  const std::string sent(400, 'X');
+  line.host().write(reinterpret_cast<const uint8_t*>(sent.data()), sent.size());
+  const auto stats = runControlOnLine(line, sent.size());
+  EXPECT_EQ(1u, stats.xoff_events);
+  EXPECT_EQ(0u, stats.max_after_xoff) << stats.summary();
+  EXPECT_EQ(sent.size() - 40, stats.late) << stats.summary();
+  EXPECT_EQ(0u, stats.overruns) << stats.summary();
+}
+
+// ... and a host that writes after the DC3 went out is counted, however the threads ran: here it
+// reads the DC3 off the line and only then sends twelve more, two beyond the allowance of ten.
+TEST(DripControl, OnTheLineCharactersSentAfterItsXoffCountAgainstTheHost)
+{
+  sim::SimulatedLine line(1e12);
+  const std::string first(40, 'X');
+  const std::string after_dc3(12, 'Y');
+  sim::DripControlStats stats;
+  std::thread control_thread([&] { stats = runControlOnLine(line, first.size() + after_dc3.size()); });
+  line.host().write(reinterpret_cast<const uint8_t*>(first.data()), first.size());
+  uint8_t from_control = 0;
+  const size_t n = line.host().read(&from_control, 1, Milliseconds(10000));  // the DC3 (10 s: none)
+  // Sent in either case, so that the control receives its total and ends.
+  line.host().write(reinterpret_cast<const uint8_t*>(after_dc3.data()), after_dc3.size());
+  control_thread.join();
+  ASSERT_EQ(1u, n) << "the control sent nothing at its high mark within 10 s";
+  EXPECT_EQ(kDc3, from_control);
+  EXPECT_EQ(1u, stats.xoff_events);
+  EXPECT_EQ(after_dc3.size(), stats.max_after_xoff) << stats.summary();
+  EXPECT_EQ(1u, stats.xoff_over_allowance) << stats.summary();
+  EXPECT_EQ(2u, stats.overruns) << stats.summary();
+  EXPECT_EQ(0u, stats.late) << stats.summary();
+}
+
 // On a pty, whose kernel may hand the control's DC3 to the host late on a loaded machine (or
 // under the sanitizers), the characters after an XOFF are not the host's measure (the tests on a
 // SimulatedLine above are): here the host must see every 0x93 as XOFF and stop, so that a program

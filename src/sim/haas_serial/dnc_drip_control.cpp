@@ -106,7 +106,13 @@ class DripSession
  public:
   DripSession(Transport& link, const DripControlOptions& options,
               const std::function<void(const uint8_t*, size_t)>& sink, UartModel& uart, const DripControlHooks& hooks)
-      : link_(link), options_(options), sink_(sink), uart_(uart), hooks_(hooks), execution_(hooks)
+      : link_(link),
+        line_clock_(dynamic_cast<const LineClock*>(&link)),
+        options_(options),
+        sink_(sink),
+        uart_(uart),
+        hooks_(hooks),
+        execution_(hooks)
   {
     masked_.reserve(sizeof(buffer_));
   }
@@ -194,13 +200,15 @@ class DripSession
       }
       ++stats_.received;
       masked_.push_back(c);
-      if (xoff_)
+      if (xoff_ && arrivedAfterXoff(i))
       {
         ++after_;
       }
-      else if (crossed)
+      else if (xoff_ || crossed)
       {
-        ++event_late_;  // a control reacting at the character that crossed would have sent DC3 already
+        // A control reacting at the character that crossed would have sent DC3 before this one
+        // arrived (or, on a LineClock, this one had arrived before the DC3 went out).
+        ++event_late_;
       }
       if (buffered_ >= options_.buffer_size)
       {
@@ -235,6 +243,10 @@ class DripSession
     if (crossed)
     {
       link_.writeByte(code(dnc::kDc3));
+      if (line_clock_ != nullptr)
+      {
+        xoff_on_wire_ = line_clock_->lastWriteStartsAt();
+      }
       xoff_ = true;
       after_ = 0;
       ++stats_.xoff_events;
@@ -243,6 +255,13 @@ class DripSession
     {
       sink_(masked_.data(), masked_.size());
     }
+  }
+
+  /// Character \p index of the last read came after the XOFF went out: on a LineClock, had it
+  /// fully arrived only once the DC3 started on the wire; elsewhere, it was read after the write.
+  bool arrivedAfterXoff(size_t index) const
+  {
+    return line_clock_ == nullptr || line_clock_->lastReadCarriedAt(index) > xoff_on_wire_;
   }
 
   void closeXoffEvent()
@@ -270,6 +289,7 @@ class DripSession
   }
 
   Transport& link_;
+  const LineClock* line_clock_;  // nullptr: a link without the wire's times (a pty, a port)
   const DripControlOptions& options_;
   const std::function<void(const uint8_t*, size_t)>& sink_;
   UartModel& uart_;
@@ -279,6 +299,7 @@ class DripSession
   size_t buffered_ = 0;
   double credit_ = 0;  // characters the control could have executed but has not yet
   bool xoff_ = false;
+  Clock::time_point xoff_on_wire_;  // when the standing XOFF's DC3 started out (LineClock links)
   uint64_t after_ = 0;
   uint64_t event_late_ = 0;      // this XOFF event: characters taken past the mark before the XOFF
   uint64_t event_overflow_ = 0;  // this XOFF event: characters lost to a full buffer

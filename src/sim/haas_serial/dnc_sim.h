@@ -58,8 +58,9 @@ struct DripControlStats
   uint64_t xoff_over_allowance = 0;  ///< XOFF events after which more than the allowance came
   uint64_t overruns = 0;             ///< characters beyond the allowance, summed over all XOFFs
   uint64_t overflow = 0;             ///< characters lost to a full buffer
-  /// Characters the control took past its high mark before its XOFF went out, summed: its own
-  /// reaction time (a simulator thread scheduled late reads a batch at once), not the host's.
+  /// Characters the control took past its high mark before its XOFF went out (on a LineClock:
+  /// that had arrived before it went out), summed: its own reaction time (a simulator thread
+  /// scheduled late reads a batch at once, or writes its DC3 late), not the host's.
   uint64_t late = 0;
   /// Of the overflow, the characters beyond what the control's own lateness explains, per XOFF
   /// event: the host's share, 0 for a host that honours XOFF within the buffer's headroom.
@@ -154,11 +155,27 @@ struct DripControlHooks
   std::function<bool()> reset;
 };
 
+/// \brief A link that knows when its characters were on the wire (sim::SimulatedLine). On such a
+/// link the control judges its XOFF by the line's clock: a character that had fully arrived
+/// before the DC3 started out counts as the control's own lateness (its thread ran late between
+/// the read and the write), not against the host, however the two threads were scheduled.
+class LineClock
+{
+ public:
+  using TimePoint = std::chrono::steady_clock::time_point;
+  virtual ~LineClock() = default;
+  /// When character \p index of the last read finished arriving.
+  virtual TimePoint lastReadCarriedAt(size_t index) const = 0;
+  /// When the last character written starts on the wire.
+  virtual TimePoint lastWriteStartsAt() const = 0;
+};
+
 /// \brief Runs the control until the program ends (stop_at_end), \p stop is signalled, the operator
 /// resets it (\p hooks), or the link fails. \p sink receives every received character (parity
 /// masked) in order. \p line: the UART model to use (kept across runs by the caller); nullptr = a
 /// new one of options.line_cps. At the end of a program the blocks still buffered are executed at
-/// once (the next run starts with an empty buffer).
+/// once (the next run starts with an empty buffer). On a link that is also a LineClock, characters
+/// count as after an XOFF by when they were on the wire.
 DripControlStats runDripControl(Transport& link, const DripControlOptions& options, StopSignal& stop,
                                 const std::function<void(const uint8_t*, size_t)>& sink, UartModel* line = nullptr,
                                 const DripControlHooks& hooks = {});
