@@ -15,6 +15,7 @@ the Displays panel.
   scripts/cell_launch.py config/cell.yaml -o launch/cell.launch --rviz rviz/cell.rviz
 """
 import argparse
+import math
 import os
 import sys
 from xml.sax.saxutils import quoteattr
@@ -86,9 +87,22 @@ def machine_group(cell, machine, simulate_all):
         lines.append(f"      <arg name=\"label\" value={attr(name)}/>")
         if not machine.get("axes", True):
             lines.append('      <arg name="axes" value="false"/>')
+        if "program_origin" in machine:
+            origin = " ".join("%g" % v for v in program_origin(machine))
+            lines.append(f"      <arg name=\"program_origin\" value={attr(origin)}/>")
         lines.append("    </include>")
     lines.append("  </group>")
     return lines
+
+
+def program_origin(machine):
+    """The machine's `program_origin`: x, y, z in metres, finite, or the cell file is refused."""
+    origin = machine["program_origin"]
+    if (not isinstance(origin, list) or len(origin) != 3
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in origin)):
+        raise ValueError("machine %s: program_origin must be [x, y, z], three finite numbers in metres (the work "
+                         "offset of its programs from machine zero), not %r" % (machine["name"], origin))
+    return origin
 
 
 def package_path(path):
@@ -153,12 +167,13 @@ def generate(description, source, rviz_path):
 
 # rviz displays of what a node publishes besides the machine's model and tool trail:
 # (kind, topic relative to the machine's namespace, display name suffix, colour); for "axes" a
-# frame relative to the machine's tf prefix.
+# frame relative to the machine's tf prefix; a "point" is shown for a machine with a program_origin.
 NODE_DISPLAYS = {
     "ethernut_node": [("path", "job/path", "job path", "25; 255; 0"),
                       ("markers", "job/markers", "job (rapids, feeds)", None)],
     "at_controller_node": [("path", "job/path", "planned path", "255; 170; 0")],
     "surface_mapper": [("cloud", "surface/cloud", "probe surface", None), ("axes", "part", "part frame", None)],
+    "dnc_node": [("point", "dnc/commanded_position", "commanded position", "0; 200; 255")],
 }
 
 
@@ -181,6 +196,11 @@ def rviz_display(kind, name, topic, color=None, width=0.02):
         return ["    - Class: rviz/Axes", f"      Name: {name}", "      Enabled: true", f"      Reference Frame: {topic}",
                 # Long enough to be seen beside the probe cloud at the cell's scale.
                 "      Length: 0.2", f"      Radius: {round(width / 3, 4)}", "      Value: true"]
+    if kind == "point":
+        # The last few points stay: a drip-feed's recent block ends, the newest ahead of the tool.
+        return ["    - Class: rviz/PointStamped", f"      Name: {name}", "      Enabled: true", f"      Topic: {topic}",
+                f"      Color: {color}", f"      Radius: {round(width, 4)}", "      History Length: 20", "      Alpha: 1",
+                "      Value: true"]
     if kind == "cloud":
         return ["    - Class: rviz/PointCloud2", f"      Name: {name}", "      Enabled: true", f"      Topic: {topic}",
                 "      Style: Boxes", f"      Size (m): {width}", "      Color Transformer: AxisColor", "      Axis: Z",
@@ -209,6 +229,8 @@ def generate_rviz(description):
             trails += rviz_display("path", f"{name} tool path", f"{space}/tool_path", "255; 40; 200", width)
         for node in machine.get("nodes", []):
             for kind, topic, label, color in NODE_DISPLAYS.get(node["launch"], []):
+                if kind == "point" and "program_origin" not in machine:
+                    continue  # in the program's frame, which only a program_origin places in the cell
                 # A probe grid is a few centimetres wide: its points drawn large enough to be seen.
                 size = width
                 where = machine.get("tf_prefix", name + "/") + topic if kind == "axes" else f"{space}/{topic}"
@@ -247,7 +269,11 @@ def main():
     with open(args.cell_yaml) as f:
         description = yaml.safe_load(f)
     rviz_path = package_path(args.rviz) if args.rviz else "$(find cnc_bridge)/rviz/cell.rviz"
-    text = generate(description, args.cell_yaml, rviz_path)
+    try:
+        text = generate(description, args.cell_yaml, rviz_path)
+    except ValueError as e:
+        sys.stderr.write("%s: %s\n" % (args.cell_yaml, e))
+        return 1
     if args.rviz:
         with open(args.rviz, "w") as f:
             f.write(generate_rviz(description))

@@ -81,6 +81,29 @@ COUNTDOWN_END = r"at_router: cycle of at_path\.nc ended: predicted ([\d.]+) s, a
 CYCLE_TOLERANCE = 0.25
 
 
+
+def in_root_frame(bag_path, frame, point):
+    """\p point of \p frame in the tf tree's root, through the static transforms in the bag (the
+    cell's frames are all static); fails when the chain does not reach `world`."""
+    parents = {}
+    with rosbag.Bag(bag_path) as bag:
+        for _, message, _ in bag.read_messages(topics=["/tf_static"]):
+            for t in message.transforms:
+                parents[t.child_frame_id] = (t.header.frame_id, t.transform)
+    p = list(point)
+    while frame != "world":
+        if frame not in parents:
+            raise AssertionError("no static transform places %s (known: %s)" % (frame, sorted(parents)))
+        frame, transform = parents[frame]
+        q, v = transform.rotation, transform.translation
+        # p' = q p q* + v, with the rotation's matrix form.
+        rotated = [
+            (1 - 2 * (q.y * q.y + q.z * q.z)) * p[0] + 2 * (q.x * q.y - q.z * q.w) * p[1] + 2 * (q.x * q.z + q.y * q.w) * p[2],
+            2 * (q.x * q.y + q.z * q.w) * p[0] + (1 - 2 * (q.x * q.x + q.z * q.z)) * p[1] + 2 * (q.y * q.z - q.x * q.w) * p[2],
+            2 * (q.x * q.z - q.y * q.w) * p[0] + 2 * (q.y * q.z + q.x * q.w) * p[1] + (1 - 2 * (q.x * q.x + q.y * q.y)) * p[2]]
+        p = [rotated[0] + v.x, rotated[1] + v.y, rotated[2] + v.z]
+    return p
+
 class PathWatch:
     """The last message of every watched nav_msgs/Path topic."""
 
@@ -286,6 +309,12 @@ class Demo(unittest.TestCase):
         printed = numbers["drip"][4:]
         self.assertTrue(any(all(abs(got * 1e3 - mm) <= 0.0005 + 1e-6 for got, mm in zip(p, printed)) for p in distinct),
                         "the printed last position %s mm is not in the bag" % printed)
+        # Placed in the cell (program_origin of config/cell.yaml, on the machine zero of the body-only
+        # model): every point on the mill, above its base and below machine zero (0.9 m up).
+        for x, y, z in distinct:
+            wx, wy, wz = in_root_frame(bag_path, "fanuc_mill/program", (x, y, z))
+            self.assertTrue(12.5 - 0.75 <= wx <= 12.5 + 0.75 and -0.35 <= wy <= 0.55 and 0.24 <= wz <= 0.9,
+                            "commanded position (%f, %f, %f) in world, not over fanuc_mill" % (wx, wy, wz))
 
     def check_the_countdowns(self, stdout):
         """cell_monitor's countdown to the '@' router's cycle end: the whole cycle planned, the time

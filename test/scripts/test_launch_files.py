@@ -206,6 +206,37 @@ class CellLaunch(unittest.TestCase):
         self.assertEqual(displays["mill probe surface"]["Topic"], "/shop/mill/surface/cloud")
         self.assertNotIn("lathe part frame", displays)
 
+    def test_a_program_origin_places_the_program_frame_and_shows_the_commanded_position(self):
+        description = dict(self.CELL)
+        lathe = dict(self.CELL["machines"][0], program_origin=[-0.1, 0, -0.3])
+        description["machines"] = [lathe, self.CELL["machines"][1]]
+        _, nodes, rviz, _ = self.generate(description)
+        placement = [node for node in nodes if node.name == "program_placement"]
+        self.assertEqual([node.namespace for node in placement], ["/shop/lathe/"])
+        self.assertEqual(placement[0].args.split(), ["-0.1", "0", "-0.3", "0", "0", "0", "lathe/machine", "lathe/program"])
+        displays = {d["Name"]: d for d in rviz["Visualization Manager"]["Displays"]}
+        self.assertEqual(displays["lathe commanded position"]["Class"], "rviz/PointStamped")
+        self.assertEqual(displays["lathe commanded position"]["Topic"], "/shop/lathe/dnc/commanded_position")
+        # Without a program_origin the program's frame is nowhere in the cell: neither is shown.
+        _, nodes, rviz, _ = self.generate(self.CELL)
+        self.assertFalse([node for node in nodes if node.name == "program_placement"])
+        self.assertNotIn("lathe commanded position", {d["Name"] for d in rviz["Visualization Manager"]["Displays"]})
+
+    def test_a_program_origin_that_is_not_three_finite_numbers_is_refused(self):
+        for origin in ([0.1, 0.2], [0.1, float("nan"), 0.0], [0.1, 1e400, 0.0], ["0.1", 0, 0], [True, 0, 0], "0 0 0"):
+            with self.subTest(origin=origin), tempfile.TemporaryDirectory() as scratch:
+                description = dict(self.CELL)
+                description["machines"] = [dict(self.CELL["machines"][0], program_origin=origin)]
+                cell_yaml = os.path.join(scratch, "shop.yaml")
+                with open(cell_yaml, "w") as f:
+                    yaml.safe_dump(description, f)
+                launch = os.path.join(scratch, "shop.launch")
+                run = subprocess.run([sys.executable, os.path.join(ROOT, "scripts", "cell_launch.py"), cell_yaml,
+                                      "-o", launch], capture_output=True, text=True)
+                self.assertEqual(1, run.returncode)
+                self.assertIn("machine lathe: program_origin must be [x, y, z]", run.stderr)
+                self.assertFalse(os.path.exists(launch))
+
     def test_root_frame_defaults_to_world(self):
         description = dict(self.CELL)
         del description["root_frame"]
