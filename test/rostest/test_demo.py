@@ -217,19 +217,26 @@ class Demo(unittest.TestCase):
                             "corner %s not in the planned path %s" % (corner, corners))
 
         # The part frame surface_mapper fitted to the VF-2's probe points, on /tf_static as rviz
-        # gets it: the demo's plate (config/cell.yaml: z = -0.01 + 0.002 x + 0.001 y in, with a
-        # waviness that averages out on the probed grid) gives a frame 0.254 mm below the work
-        # zero, its z axis along the plate's normal (-0.002, -0.001, 1).
+        # gets it. The demo's plate (config/cell.yaml: z = -0.01 + 0.002 x + 0.001 y in, with a
+        # waviness that averages out on the probed grid; its corner at X-.25 Y-.25 in, turned 0.5
+        # degrees, touched on its front face twice and its left face once) gives a frame at the
+        # corner, (-6.35, -6.35) mm, on the plane there, -0.01075 in = -0.273 mm, its x axis
+        # turned 0.5 degrees, its z axis along the plate's normal (-0.002, -0.001, 1).
         with rosbag.Bag(bag_path) as bag:
             parts = [t for _, m, _ in bag.read_messages(topics=["/tf_static"]) for t in m.transforms
                      if t.child_frame_id == "haas_vf2/part"]
         self.assertTrue(parts, "no haas_vf2/part frame on /tf_static")
         self.assertEqual(parts[-1].header.frame_id, "haas_vf2/work")
-        self.assertAlmostEqual(parts[-1].transform.translation.z, -0.000254, delta=3e-6)
+        origin = parts[-1].transform.translation
+        self.assertAlmostEqual(origin.x, -0.00635, delta=5e-6)
+        self.assertAlmostEqual(origin.y, -0.00635, delta=5e-6)
+        self.assertAlmostEqual(origin.z, -0.000273, delta=3e-6)
         q = parts[-1].transform.rotation
         normal = (2 * (q.x * q.z + q.y * q.w), 2 * (q.y * q.z - q.x * q.w), 1 - 2 * (q.x * q.x + q.y * q.y))
         self.assertAlmostEqual(normal[0], -0.002, delta=2e-5)
         self.assertAlmostEqual(normal[1], -0.001, delta=2e-5)
+        x_axis = (1 - 2 * (q.y * q.y + q.z * q.z), 2 * (q.x * q.y + q.z * q.w))
+        self.assertAlmostEqual(math.degrees(math.atan2(x_axis[1], x_axis[0])), 0.5, delta=0.01)
 
         # Every machine left a trail of its tool in its own frame, with the motion of the scenario.
         with watch.lock:

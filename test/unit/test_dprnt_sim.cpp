@@ -2,6 +2,8 @@
 // control would, so its loops, moves, probe cycle and DPRNT output are checked here on their own.
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include "../../src/sim/haas_serial/dprnt_program.h"
 #include "cnc_bridge/common/error.h"
 
@@ -110,4 +112,67 @@ TEST(DprntSim, ErrorsNameTheLine)
   EXPECT_NE(message("#1 = 1 / 0").find("division"), std::string::npos);
   EXPECT_NE(message("IF [1 EQ 1] GOTO99").find("N99"), std::string::npos);
   EXPECT_NE(message("WHILE [1 EQ 1] DO1\nEND1").find("endless"), std::string::npos);
+}
+
+namespace
+{
+std::string errorOf(const std::string& text, MacroMachine& machine)
+{
+  try
+  {
+    run(text, machine);
+  }
+  catch (const ConfigError& e)
+  {
+    return e.what();
+  }
+  return "no error";
+}
+}  // namespace
+
+// G65 P9811 X/Y: the probe moves from where it is toward the target and stops on the part's side;
+// a part square to the axes, its corner at (-0.25, -0.25).
+TEST(DprntSim, SingleSurfaceXyProbeTouchesThePartsSides)
+{
+  MacroMachine machine;
+  machine.side_contact = cnc_bridge::sim::rectangularPartSides(-0.25, -0.25, 0.0);
+  const auto lines =
+      run("G90 G00 X.5 Y-.75 Z.1\nG65 P9811 Y0.\nDPRNT[EDGEX*X#5061[44]*Y#5062[44]*Z#5063[44]]\n"
+          "G00 X-.75 Y2.\nG65 P9811 X0.\nDPRNT[EDGEY*X#5061[44]*Y#5062[44]]\n"
+          "G91 G65 P9811 X1.\nDPRNT[EDGEY*X#5061[44]]",
+          machine);
+  EXPECT_EQ(lines, (std::vector<std::string>{"EDGEX X   0.5000 Y  -0.2500 Z   0.1000", "EDGEY X  -0.2500 Y   2.0000",
+                                             "EDGEY X  -0.2500"}));
+  // The probe returns to where it started.
+  EXPECT_DOUBLE_EQ(machine.position[0], -0.75);
+  EXPECT_DOUBLE_EQ(machine.position[1], 2.0);
+}
+
+// A part turned 10 degrees: the front face rises toward +X, the left face leans toward -X.
+TEST(DprntSim, SingleSurfaceXyProbeFollowsATurnedPart)
+{
+  const double yaw = 10.0 * M_PI / 180.0;
+  MacroMachine machine;
+  machine.side_contact = cnc_bridge::sim::rectangularPartSides(-0.25, -0.25, yaw);
+  run("G90 G00 X.5 Y-.75\nG65 P9811 Y0.\n#1 = #5061\n#2 = #5062\nG00 X-.75 Y2.\nG65 P9811 X0.", machine);
+  EXPECT_DOUBLE_EQ(machine.variables[1], 0.5);
+  EXPECT_NEAR(machine.variables[2], -0.25 + 0.75 * std::tan(yaw), 1e-12);
+  EXPECT_NEAR(machine.variables[5061], -0.25 - 2.25 * std::tan(yaw), 1e-12);
+  EXPECT_DOUBLE_EQ(machine.variables[5062], 2.0);
+}
+
+// What a control alarms on stops the run with the line: no side modelled, a probe that touches
+// nothing (beyond the corner, or already on the part moving away), X and Y in one cycle.
+TEST(DprntSim, SingleSurfaceXyProbeErrorsNameTheCause)
+{
+  MacroMachine no_sides;
+  EXPECT_NE(errorOf("G65 P9811 X1.", no_sides).find("--part-corner"), std::string::npos);
+  MacroMachine machine;
+  machine.side_contact = cnc_bridge::sim::rectangularPartSides(-0.25, -0.25, 0.0);
+  const std::string beyond_the_corner = errorOf("G00 X-.5 Y-.75\nG65 P9811 Y0.", machine);
+  EXPECT_NE(beyond_the_corner.find("line 2"), std::string::npos) << beyond_the_corner;
+  EXPECT_NE(beyond_the_corner.find("without touching the part"), std::string::npos) << beyond_the_corner;
+  EXPECT_NE(errorOf("G00 X1. Y1.\nG65 P9811 Y2.", machine).find("without touching"), std::string::npos);
+  EXPECT_NE(errorOf("G65 P9811 X1. Y1.", machine).find("X or Y"), std::string::npos);
+  EXPECT_NE(errorOf("G65 P9811 Z1.", machine).find("X or Y"), std::string::npos);
 }

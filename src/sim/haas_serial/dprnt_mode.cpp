@@ -12,6 +12,8 @@
 #include <memory>
 #include <mutex>
 #include <sstream>
+#include <string>
+#include <vector>
 
 #include "cnc_bridge/common/error.h"
 #include "cnc_bridge/transport/tcp.h"
@@ -40,7 +42,7 @@ uint8_t withParity(uint8_t c, const std::string& parity)
 
 struct DprntOptions
 {
-  std::string program_file, link, eol, parity, surface_text, bind;
+  std::string program_file, link, eol, parity, surface_text, part_corner_text, bind;
   std::vector<std::string> var_args;
   int tcp_port = -1;
   bool tcp = false;
@@ -61,8 +63,11 @@ int parseDprntOptions(const std::vector<std::string>& args, DprntOptions& o, boo
           "var", po::value(&o.var_args)->composing(), "N=VALUE: macro variable #N before the run (repeatable)")(
           "surface", po::value(&o.surface_text)->default_value("0,0,0"),
           "Z0,AX,AY[,AMP,PERIOD]: probed height z = Z0 + AX*x + AY*y + AMP*sin(2 pi x/PERIOD)*sin(2 pi y/PERIOD), "
-          "program units")("rate", po::value(&o.rate)->default_value(0),
-                           "lines per second (0: as fast as the link takes them)")(
+          "program units")("part-corner", po::value(&o.part_corner_text)->default_value(""),
+                           "X,Y,YAW: the part's sides for G65 P9811 X/Y probes: its corner at X,Y (work "
+                           "coordinates, program units), its X side turned YAW degrees about Z, the part toward "
+                           "+X and +Y; empty: no sides")("rate", po::value(&o.rate)->default_value(0),
+                                                         "lines per second (0: as fast as the link takes them)")(
           "repeat", po::value(&o.repeat)->default_value(1), "run the program this many times (0: until stopped)")(
           "eol", po::value(&o.eol)->default_value("cr"), "line end: cr (Haas), lf, crlf")(
           "parity", po::value(&o.parity)->default_value("none"), "set bit 7 as none/even/odd parity (7E1 seen as 8N1)")(
@@ -92,6 +97,33 @@ int parseDprntOptions(const std::vector<std::string>& args, DprntOptions& o, boo
   return 0;
 }
 
+/// The part's sides of --part-corner X,Y,YAW (program units, degrees).
+std::function<bool(const double[2], const double[2], double[2])> partSides(const std::string& text)
+{
+  std::istringstream fields(text);
+  std::string item;
+  std::vector<double> values;
+  while (std::getline(fields, item, ','))
+  {
+    size_t used = 0;
+    double value = 0;
+    try
+    {
+      value = std::stod(item, &used);
+    }
+    catch (const std::exception&)
+    {
+      used = 0;
+    }
+    if (used != item.size() || !std::isfinite(value))
+      throw ConfigError("--part-corner " + text + ": '" + item + "' is not a finite number");
+    values.push_back(value);
+  }
+  if (values.size() != 3)
+    throw ConfigError("--part-corner " + text + ": expected X,Y,YAW (three numbers)");
+  return rectangularPartSides(values[0], values[1], values[2] * M_PI / 180.0);
+}
+
 /// The program, the machine's variables and surface, the line end, from the options.
 /// \throws ConfigError (std::exception) naming the option at fault.
 std::string setUpRun(const DprntOptions& o, MacroProgram& program, MacroMachine& machine)
@@ -118,6 +150,8 @@ std::string setUpRun(const DprntOptions& o, MacroProgram& program, MacroMachine&
     throw ConfigError("--surface: PERIOD must not be 0");
   machine.surface = [s](double x, double y)
   { return s[0] + s[1] * x + s[2] * y + s[3] * std::sin(2 * M_PI * x / s[4]) * std::sin(2 * M_PI * y / s[4]); };
+  if (!o.part_corner_text.empty())
+    machine.side_contact = partSides(o.part_corner_text);
   if (o.parity != "none" && o.parity != "even" && o.parity != "odd")
     throw ConfigError("--parity must be none, even or odd");
   if (o.eol == "cr")

@@ -1,6 +1,7 @@
 // MacroProgram: parsing and running a small subset of Haas macro programs (see the header).
 #include "dprnt_program.h"
 
+#include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <cstdlib>
@@ -328,6 +329,27 @@ AddressWords readAddressWords(const std::string& t, int line, MacroMachine& m)
   return w;
 }
 
+// Single-surface X/Y probe (WIPS, Renishaw Inspection Plus O9811 with X or Y): the probe moves
+// from where it is toward the target until it touches a side of the part, and returns; the
+// contact point is in #5061..#5063. Touching nothing is the control's alarm: an error here.
+void probeSide(const AddressWords& w, const std::string& t, int line, MacroMachine& m)
+{
+  if (w.has_axis[0] == w.has_axis[1] || w.has_axis[2])
+    throw blockError(line, t, "G65 P9811 here measures X or Y: give one of them");
+  if (!m.side_contact)
+    throw blockError(line, t, "the simulated part has no sides to touch (sim_haas_serial dprnt --part-corner)");
+  const int axis = w.has_axis[0] ? 0 : 1;
+  const double from[2] = {m.position[0], m.position[1]};
+  double to[2] = {m.position[0], m.position[1]};
+  to[axis] = m.incremental ? m.position[axis] + w.target[axis] : w.target[axis];
+  double contact[2];
+  if (!m.side_contact(from, to, contact))
+    throw blockError(line, t, "the probe reached its target without touching the part (a real control alarms)");
+  m.variables[5061] = contact[0];
+  m.variables[5062] = contact[1];
+  m.variables[5063] = m.position[2];
+}
+
 // A block of address words: a move, a probe cycle, the end. \returns false at M30/M02/M99.
 bool runAddressBlock(const std::string& t, int line, MacroMachine& m)
 {
@@ -340,6 +362,8 @@ bool runAddressBlock(const std::string& t, int line, MacroMachine& m)
         m.position[axis] = m.incremental ? m.position[axis] + w.target[axis] : w.target[axis];
     }
   }
+  if (w.probe && w.has_p && std::lround(w.p) == 9811)
+    probeSide(w, t, line, m);
   if (w.probe && w.has_p && std::lround(w.p) == 9995)
   {
     // Single-surface Z probe (WIPS): the probe comes down at the current X Y and stops on the
@@ -361,6 +385,37 @@ bool runAddressBlock(const std::string& t, int line, MacroMachine& m)
   return !w.end;
 }
 }  // namespace
+
+std::function<bool(const double from[2], const double to[2], double contact[2])> rectangularPartSides(double corner_x,
+                                                                                                      double corner_y,
+                                                                                                      double yaw_rad)
+{
+  const double c = std::cos(yaw_rad), s = std::sin(yaw_rad);
+  // The two faces: half-lines from the corner along the part's X (c, s) and its Y (-s, c).
+  const double faces[2][2] = {{c, s}, {-s, c}};
+  return [=](const double from[2], const double to[2], double contact[2])
+  {
+    const auto cross = [](double ax, double ay, double bx, double by) { return ax * by - ay * bx; };
+    const double ex = to[0] - from[0], ey = to[1] - from[1];
+    const double qx = corner_x - from[0], qy = corner_y - from[1];
+    double first = 2.0;  // along the move, 0 at its start, 1 at its end
+    for (const auto& d : faces)
+    {
+      const double denominator = cross(ex, ey, d[0], d[1]);
+      if (denominator == 0.0)
+        continue;  // the move runs along this face
+      const double along_move = cross(qx, qy, d[0], d[1]) / denominator;
+      const double along_face = cross(qx, qy, ex, ey) / denominator;
+      if (along_move >= 0.0 && along_move <= 1.0 && along_face >= 0.0)
+        first = std::min(first, along_move);
+    }
+    if (first > 1.0)
+      return false;
+    contact[0] = from[0] + first * ex;
+    contact[1] = from[1] + first * ey;
+    return true;
+  };
+}
 
 bool MacroProgram::printBlock(const std::string& t, MacroMachine& m, const PrintFn& print)
 {

@@ -21,11 +21,22 @@ struct MacroMachine
   bool incremental = false;         ///< G91 in effect
   /// Height of the part surface under (x, y), program units: what a G65 P9995 Z probe finds.
   std::function<double(double x, double y)> surface = [](double, double) { return 0.0; };
+  /// The part's sides: where a probe moving from \p from to \p to in X/Y first touches one
+  /// (\p contact), false when it touches none. What a G65 P9811 X/Y probe finds; unset: no sides.
+  std::function<bool(const double from[2], const double to[2], double contact[2])> side_contact;
   /// Blocks a run may execute before it is taken for an endless loop; 0: no limit (a paced program).
   uint64_t max_blocks = 10000000;
   /// Called before each DPRNT statement (the simulator refreshes #3001, the millisecond timer).
   std::function<void(MacroMachine&)> before_print;
 };
+
+/// \brief The sides of a rectangular part whose corner is at (\p corner_x, \p corner_y) and whose
+/// X side runs at \p yaw_rad from the X axis, the part lying toward +X and +Y of the corner: the
+/// front face (along the part's X) and the left face (along its Y), each a half-line from the
+/// corner. For MacroMachine::side_contact.
+std::function<bool(const double from[2], const double to[2], double contact[2])> rectangularPartSides(double corner_x,
+                                                                                                      double corner_y,
+                                                                                                      double yaw_rad);
 
 /// \brief A parsed macro program. Not thread-safe while running.
 ///
@@ -33,10 +44,12 @@ struct MacroMachine
 /// (comments); N numbers; '%' and O-number lines ignored; `#n = expr`; `DPRNT[...]`;
 /// `WHILE [expr] DOn` ... `ENDn`; `IF [expr] GOTOn` with `Nn` targets; G00/G01 X Y Z moves under
 /// G90/G91; `G65 P9995` single-surface Z probe (sets #5223, the G54 Z offset OpenDNC prints, and
-/// #5061..#5063, the probe trigger position); after every block #5041..#5043 hold the work position
-/// and #5021..#5023 the machine position (work position + G54 offset #5221..#5223);
-/// M30/M02/M99 end the program. Expressions: numbers,
-/// #n, #[expr], + - * /, [ ], EQ NE GT GE LT LE, AND OR, ABS SQRT SIN COS TAN ROUND FIX FUP.
+/// #5061..#5063, the probe trigger position); `G65 P9811 X..` or `Y..` single-surface X/Y probe
+/// (moves toward the target from the current position, sets #5061..#5063 to where it touched the
+/// part's side, returns; touching nothing is an error, as the control's alarm); after every block #5041..#5043 hold the
+/// work position and #5021..#5023 the machine position (work position + G54 offset #5221..#5223); M30/M02/M99 end the
+/// program. Expressions: numbers, #n, #[expr], + - * /, [ ], EQ NE GT GE LT LE, AND OR, ABS SQRT SIN COS TAN ROUND FIX
+/// FUP.
 class MacroProgram
 {
  public:
