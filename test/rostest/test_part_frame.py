@@ -11,12 +11,17 @@ by 0.05 um and 0.7 urad), the residual as the waviness makes it (rms 5.1 um, max
 numbers come from the formula, not from the fit's code. Every wait is on a message or, for the
 simulators' query logs (files another process writes), a poll with a deadline.
 
-Edge probes: the simulator models no side faces, so the test publishes synthetic contact points
-of the plate's front side (3, the x side) and left side (2, the y side), placed with yaw EDGE_YAW
-and corner EDGE_CORNER, to the edges mapper: its frame has that yaw and corner (within 1 urad and
-0.1 um: exact points), and its write moves G54 X/Y onto the corner (in the control's 0.0001 in);
-the same with one left side point 100 um proud (a burr) to the burr mapper: its write is refused
-(the side lines' residual above ~max_residual) and its control receives no X/Y write.
+Edge probes, probed: a second simulated Haas (cell/sided) has a plate with sides, its corner at
+SIDED_CORNER turned SIDED_YAW, and the program touches its front face twice (at X.5 and X4.) and
+its left face once (at Y2.), printing the contact points to 4 decimals: its frame has that corner
+within SIDED_CORNER_TOLERANCE and that yaw within SIDED_YAW_TOLERANCE (what the printed digits
+allow: 0.00005 in on each coordinate, the front points 3.5 in apart), and its write moves G54 X/Y
+onto the corner. Edge probes, exact: the test publishes contact points of the plate's front side
+(3, the x side) and left side (2, the y side), placed with yaw EDGE_YAW and corner EDGE_CORNER, to
+the edges mapper: its frame has that yaw and corner (within 1 urad and 0.1 um), and its write moves
+G54 X/Y onto the corner (in the control's 0.0001 in); the same with one left side point 100 um
+proud (a burr) to the burr mapper: its write is refused (the side lines' residual above
+~max_residual) and its control receives no X/Y write.
 """
 import math
 import os
@@ -46,6 +51,10 @@ EDGE_YAW = 0.01  # rad
 EDGE_CORNER = (1.0 * INCH, 0.5 * INCH)  # m, in plate/work
 FRONT = (0.3 * INCH, 1.5 * INCH, 3.0 * INCH)  # along the part's X from the corner
 LEFT = (0.4 * INCH, 2.0 * INCH)  # along the part's Y
+SIDED_CORNER = (-0.3, -0.2)  # in, part_frame.test's --part-corner
+SIDED_YAW = math.radians(0.3)
+SIDED_CORNER_TOLERANCE = 5e-6  # m
+SIDED_YAW_TOLERANCE = 50e-6  # rad
 
 
 def on_plate(u, v):
@@ -97,6 +106,8 @@ class TestPartFrame(unittest.TestCase):
         cls.edges = Collector(cls.ns + "/edges/part_frame", PartFrame)
         cls.burr_log = rospy.get_param("~burr_queries")
         cls.burr = Collector(cls.ns + "/burr/part_frame", PartFrame)
+        cls.sided_log = rospy.get_param("~sided_queries")
+        cls.sided = Collector("/cell/sided/part_frame", PartFrame)
         cls.tf_buffer = tf2_ros.Buffer()
         cls.tf_listener = tf2_ros.TransformListener(cls.tf_buffer)
 
@@ -193,6 +204,30 @@ class TestPartFrame(unittest.TestCase):
         self.assertAlmostEqual(first.get("5221", float("nan")), G54_X_BEFORE + 1.0, delta=0.0001)
         self.assertAlmostEqual(first.get("5222", float("nan")), G54_Y_BEFORE + 0.5, delta=0.0001)
         self.assertIn("5223", first)
+
+    def test_the_simulated_probe_of_a_plates_sides_gives_its_corner_and_turn(self):
+        msg = self.sided.wait(lambda m: m.valid and m.points == 100 and m.edge_points == 3, timeout=60.0)
+        self.assertIsNotNone(msg, "no frame with the 3 probed edge points: %s" % [m.message for m in self.sided.messages[-3:]])
+        self.assertTrue(msg.xy_measured, msg.message)
+        self.assertAlmostEqual(msg.pose.position.x, SIDED_CORNER[0] * INCH, delta=SIDED_CORNER_TOLERANCE)
+        self.assertAlmostEqual(msg.pose.position.y, SIDED_CORNER[1] * INCH, delta=SIDED_CORNER_TOLERANCE)
+        x, y = SIDED_CORNER
+        self.assertAlmostEqual(msg.pose.position.z, (0.5 + 0.002 * x - 0.001 * y) * INCH, delta=HEIGHT_TOLERANCE)
+        self.assertAlmostEqual(msg.yaw, SIDED_YAW, delta=SIDED_YAW_TOLERANCE)
+        self.assertLess(angle(z_axis(msg.pose.orientation), NORMAL), TILT_TOLERANCE)
+        written = self.sided.wait(lambda m: "#5221" in m.work_offset, timeout=60.0)
+        self.assertIsNotNone(written, "no X/Y write: %s" % [m.work_offset for m in self.sided.messages if m.work_offset])
+        self.assertTrue(written.work_offset.startswith("written"), written.work_offset)
+        first = {}
+        for q in queries(self.sided_log):
+            if q.startswith("?E"):
+                variable, value = q[2:].split()
+                first.setdefault(variable, float(value))
+        # G54 X/Y move onto the corner, Z onto the top face there (in, the control's 0.0001).
+        self.assertAlmostEqual(first.get("5221", float("nan")), G54_X_BEFORE + x, delta=0.0002)
+        self.assertAlmostEqual(first.get("5222", float("nan")), G54_Y_BEFORE + y, delta=0.0002)
+        self.assertAlmostEqual(first.get("5223", float("nan")), G54_Z_BEFORE + 0.5 + 0.002 * x - 0.001 * y,
+                               delta=0.0002)
 
     def test_a_burr_on_a_side_refuses_the_write(self):
         self.publish_edges("burr", burr=100e-6)
