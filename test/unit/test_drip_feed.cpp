@@ -497,17 +497,24 @@ TEST(DripEndToEndAllowance, AHostQueueingAheadOfTheLineIsCaught)
 
 namespace
 {
+// A control that holds what it takes: XOFF at 40, XON at 20, next to no execution.
+sim::DripControlOptions holdingControl(size_t buffer_size)
+{
+  sim::DripControlOptions control;
+  control.buffer_size = buffer_size;
+  control.high_mark = 40;
+  control.low_mark = 20;
+  control.execution_cps = 1e-3;
+  return control;
+}
+
 // The simulated control on a scripted link: \p first_batch characters in one read, then
-// \p after_dc3 more once its DC3 has gone out. Buffer 64, XOFF at 40, next to no execution.
+// \p after_dc3 more once its DC3 has gone out. Buffer 64.
 sim::DripControlStats runScriptedControl(size_t first_batch, size_t after_dc3)
 {
   FakeTransport link;
   StopSignal stop;
-  sim::DripControlOptions control;
-  control.buffer_size = 64;
-  control.high_mark = 40;
-  control.low_mark = 20;
-  control.execution_cps = 1e-3;
+  const sim::DripControlOptions control = holdingControl(64);
   link.onWrite(
       [&](FakeTransport& fake, const std::vector<uint8_t>& bytes)
       {
@@ -562,15 +569,11 @@ TEST(DripControl, ItsOwnLatenessIsToldApartFromAHostThatIgnoresTheXoff)
 namespace
 {
 // The simulated control on a SimulatedLine, run until it has received \p total characters. Buffer
-// 1024 (nothing overflows), XOFF at 40, next to no execution.
+// 1024: nothing overflows.
 sim::DripControlStats runControlOnLine(sim::SimulatedLine& line, size_t total)
 {
   StopSignal stop;
-  sim::DripControlOptions control;
-  control.buffer_size = 1024;
-  control.high_mark = 40;
-  control.low_mark = 20;
-  control.execution_cps = 1e-3;
+  const sim::DripControlOptions control = holdingControl(1024);
   sim::DripControlHooks hooks;
   size_t received = 0;
   hooks.reset = [&] { return received >= total; };  // ends the run, the XOFF event closed
