@@ -15,7 +15,14 @@
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size)
 {
   using namespace cnc_bridge::dnc;
-  static const std::string path = "/tmp/fuzz_dnc_program." + std::to_string(::getpid()) + ".nc";
+  // planDrip reads a file: one scratch file per fuzzing process, removed as the fuzzer exits.
+  struct ScratchFile
+  {
+    std::string path = "/tmp/fuzz_dnc_program." + std::to_string(::getpid()) + ".nc";
+    ~ScratchFile() { std::remove(path.c_str()); }
+  };
+  static const ScratchFile scratch;
+  const std::string& path = scratch.path;
   std::FILE* file = std::fopen(path.c_str(), "wb");
   if (file == nullptr)
   {

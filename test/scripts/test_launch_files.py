@@ -34,8 +34,10 @@ def load(path, *argv):
     return {name: param.value for name, param in config.params.items()}, config.nodes
 
 
-def parameter_file(values):
+def parameter_file(test, values):
+    """A YAML file of `values` that roslaunch reads by name; removed when `test` ends."""
     handle = tempfile.NamedTemporaryFile("w", suffix=".yaml", delete=False)
+    test.addCleanup(os.unlink, handle.name)
     yaml.safe_dump(values, handle)
     handle.close()
     return handle.name
@@ -75,11 +77,11 @@ class NodeLaunchFiles(unittest.TestCase):
                 first, second = sorted(name for name in defaults if not isinstance(defaults[name], (dict, list)))[:2]
                 ours = {"%s" % first.split("/")[-1]: self.other_than(defaults[first]),
                         "%s" % second.split("/")[-1]: self.other_than(defaults[second]), "profile_only": 42}
-                with_file, _ = load(path, "params_file:=" + parameter_file(ours))
+                with_file, _ = load(path, "params_file:=" + parameter_file(self, ours))
                 self.assertEqual(with_file[first], ours[first.split("/")[-1]], "the file's value over the default")
                 self.assertEqual(with_file["/%s/profile_only" % node], 42)
                 argument = self.other_than(ours[second.split("/")[-1]])
-                given, _ = load(path, "params_file:=" + parameter_file(ours), "%s:=%s" % (second.split("/")[-1],
+                given, _ = load(path, "params_file:=" + parameter_file(self, ours), "%s:=%s" % (second.split("/")[-1],
                                                                                        argument))
                 self.assertEqual(str(given[second]).lower(), str(argument).lower(), "the argument over the file")
                 untouched = [name for name in defaults if name not in (first, second)]
@@ -95,7 +97,7 @@ class NodeLaunchFiles(unittest.TestCase):
 
     def test_dnc_node_takes_a_serial_profile_and_keeps_given_arguments(self):
         path = os.path.join(LAUNCH, "dnc_node.launch")
-        profile = parameter_file({"baud": 4800, "data_bits": 7, "parity": "even", "stop_bits": 2})
+        profile = parameter_file(self, {"baud": 4800, "data_bits": 7, "parity": "even", "stop_bits": 2})
         params, _ = load(path, "params_file:=" + profile, "baud:=9600", "port:=/dev/ttyS3")
         self.assertEqual((params["/dnc_node/baud"], params["/dnc_node/data_bits"], params["/dnc_node/parity"],
                           params["/dnc_node/stop_bits"], params["/dnc_node/port"]), (9600, 7, "even", 2, "/dev/ttyS3"))

@@ -8,6 +8,7 @@
 #include <atomic>
 #include <chrono>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <future>
 #include <iterator>
@@ -21,22 +22,15 @@
 #include "cnc_bridge/common/job_hold.h"
 #include "cnc_bridge/common/port_lock.h"
 #include "cnc_bridge/common/program_dir.h"
+#include "temp_dir.h"
 
 using namespace cnc_bridge;
 
 namespace
 {
-class TempDir : public ::testing::Test
+class InScratchDir : public ::testing::Test
 {
  protected:
-  void SetUp() override
-  {
-    char pattern[] = "/tmp/cnc_bridge_test_XXXXXX";
-    ASSERT_NE(::mkdtemp(pattern), nullptr);
-    dir_ = pattern;
-  }
-  void TearDown() override { std::system(("rm -rf " + dir_).c_str()); }
-
   std::string read(const std::string& path)
   {
     std::ifstream in(path);
@@ -45,26 +39,15 @@ class TempDir : public ::testing::Test
     return s.str();
   }
   void writeFile(const std::string& path, const std::string& text) { std::ofstream(path) << text; }
-  int entries()
-  {
-    int n = 0;
-    const std::string cmd = "ls -A " + dir_ + " | wc -l";
-    FILE* p = ::popen(cmd.c_str(), "r");
-    if (p)
-    {
-      if (std::fscanf(p, "%d", &n) != 1)
-        n = -1;
-      ::pclose(p);
-    }
-    return n;
-  }
+  int entries() const { return static_cast<int>(std::distance(std::filesystem::directory_iterator(dir_), {})); }
 
-  std::string dir_;
+  const test::TempDir scratch_{"cnc_bridge_test"};
+  const std::string dir_ = scratch_.path;
 };
 }  // namespace
 
-using AtomicFile = TempDir;
-using ProgramDir = TempDir;
+using AtomicFile = InScratchDir;
+using ProgramDir = InScratchDir;
 
 TEST_F(AtomicFile, CommitReplacesTheDestinationWhole)
 {
@@ -198,21 +181,12 @@ TEST(PortLock, OneHolderAtATimeAcrossObjects)
   EXPECT_FALSE(dnc.heldElsewhere());
 }
 
-namespace
-{
-// A lock directory of the test's own, so no other program's lock on the same name interferes.
-std::string lockDir()
-{
-  char path[] = "/tmp/cnc_bridge_lock_test_XXXXXX";
-  const char* dir = ::mkdtemp(path);
-  return dir ? dir : "/tmp";
-}
-}  // namespace
-
 TEST(PortLock, NodesOnOneDeviceServerPortShareTheLockWhicheverProtocolTheyUse)
 {
   // dnc_node on tcp://, haas_mdc_node on rfc2217:// to the same server port: one line, one lock.
-  const std::string dir = lockDir();
+  // A lock directory of the test's own, so no other program's lock on the same name interferes.
+  const test::TempDir locks("cnc_bridge_lock_test");
+  const std::string& dir = locks.path;
   PortLock dnc("tcp://10.0.0.7:4001", dir);
   PortLock mdc("rfc2217://10.0.0.7:4001", dir);
   PortLock other_port("rfc2217://10.0.0.7:4002", dir);
@@ -227,7 +201,9 @@ TEST(PortLock, NodesOnOneDeviceServerPortShareTheLockWhicheverProtocolTheyUse)
 
 TEST(PortLock, ATransferWaitingForTheLockGoesBeforeTheNextQuery)
 {
-  const std::string dir = lockDir();
+  // A lock directory of the test's own, so no other program's lock on the same name interferes.
+  const test::TempDir locks("cnc_bridge_lock_test");
+  const std::string& dir = locks.path;
   PortLock poller("/dev/ttyS_test_cnc_bridge", dir);
   PortLock dnc("/dev/ttyS_test_cnc_bridge", dir);
   ASSERT_TRUE(poller.tryLockForQuery());  // a query in flight
@@ -254,7 +230,9 @@ TEST(PortLock, QueriesAndTransfersNeverOverlapAndTransfersAreNotStarved)
   // A poller that queries back to back (holding the lock for 2 ms, releasing it for microseconds)
   // and a transfer that needs the line five times, each within 2 s. Without the transfer's
   // announced wait the poller would win nearly every race for the lock.
-  const std::string dir = lockDir();
+  // A lock directory of the test's own, so no other program's lock on the same name interferes.
+  const test::TempDir locks("cnc_bridge_lock_test");
+  const std::string& dir = locks.path;
   std::atomic<int> inside{0};
   std::atomic<bool> overlap{false}, done{false};
   std::atomic<int> queries{0};
@@ -303,7 +281,9 @@ TEST(PortLock, QueriesAndTransfersNeverOverlapAndTransfersAreNotStarved)
 
 TEST(PortLock, EachTransferBumpsTheGenerationQueriesDoNot)
 {
-  const std::string dir = lockDir();
+  // A lock directory of the test's own, so no other program's lock on the same name interferes.
+  const test::TempDir locks("cnc_bridge_lock_test");
+  const std::string& dir = locks.path;
   PortLock poller("/dev/ttyS_test_cnc_bridge", dir);
   PortLock dnc("/dev/ttyS_test_cnc_bridge", dir);
   ASSERT_TRUE(poller.tryLockForQuery());
@@ -321,7 +301,9 @@ TEST(PortLock, EachTransferBumpsTheGenerationQueriesDoNot)
 
 TEST(PortLock, ACancelledTransferStopsWaiting)
 {
-  const std::string dir = lockDir();
+  // A lock directory of the test's own, so no other program's lock on the same name interferes.
+  const test::TempDir locks("cnc_bridge_lock_test");
+  const std::string& dir = locks.path;
   PortLock poller("/dev/ttyS_test_cnc_bridge", dir);
   PortLock dnc("/dev/ttyS_test_cnc_bridge", dir);
   ASSERT_TRUE(poller.tryLockForQuery());
@@ -440,7 +422,9 @@ TEST(JobHold, AResumeDoesNotShortenADwell)
 // with a message that says what is there.
 TEST(PortLock, ALinkPlantedAtTheLockPathIsRefusedAndItsTargetUnchanged)
 {
-  const std::string dir = lockDir();
+  // A lock directory of the test's own, so no other program's lock on the same name interferes.
+  const test::TempDir locks("cnc_bridge_lock_test");
+  const std::string& dir = locks.path;
   const std::string victim = dir + "/victim.conf";
   {
     std::ofstream out(victim);
@@ -480,7 +464,9 @@ TEST(PortLock, ALinkPlantedAtTheLockPathIsRefusedAndItsTargetUnchanged)
 
 TEST(PortLock, LockFilesAreCreatedOwnerWritableOnly)
 {
-  const std::string dir = lockDir();
+  // A lock directory of the test's own, so no other program's lock on the same name interferes.
+  const test::TempDir locks("cnc_bridge_lock_test");
+  const std::string& dir = locks.path;
   PortLock lock("/dev/ttyS_test_cnc_bridge", dir);
   ASSERT_TRUE(lock.tryLock());
   struct stat info;

@@ -13,6 +13,7 @@
 #include "cnc_bridge/ethernut/client.h"
 #include "cnc_bridge/transport/tcp.h"
 #include "sim/ethernut/board.h"
+#include "temp_dir.h"
 #include "testing/fake_transport.h"
 
 using namespace cnc_bridge;
@@ -679,8 +680,8 @@ TEST(EthernutClient, CommandsWhileDisconnectedAreRefused)
 // despite a RESEND on every third one.
 TEST(EthernutBoard, JobOverTcpWithInjectedResends)
 {
-  const std::string log_path = ::testing::TempDir() + "ethernut_board_log.txt";
-  std::remove(log_path.c_str());
+  const test::TempDir scratch("test_ethernut_client");
+  const std::string log_path = scratch.file("board_log.txt");
   BoardOptions bo;
   bo.speed_mm_per_s = 0;
   bo.resend_every = 3;

@@ -29,20 +29,16 @@
 #include "cnc_bridge/transport/port_doctor.h"
 #include "cnc_bridge/transport/serial_port.h"
 #include "cnc_bridge/transport/tcp.h"
+#include "temp_dir.h"
 
 using namespace cnc_bridge;
 
 namespace
 {
-struct TempDir
+/// A scratch folder of this file's tests, removed with everything in it when the test ends.
+struct TempDir : test::TempDir
 {
-  std::string path;
-  TempDir()
-  {
-    char pattern[] = "/tmp/test_port_doctor.XXXXXX";
-    path = ::mkdtemp(pattern);
-  }
-  ~TempDir() { std::system(("rm -rf '" + path + "'").c_str()); }
+  TempDir() : test::TempDir("test_port_doctor") {}
 };
 
 /// A pty pair; the slave's path is what a program opens.

@@ -1415,6 +1415,45 @@ TEST(XmodemSender, SilenceAfterEveryBlockWasAckedCompletesWithTheEndUnconfirmed)
   auto gone_again = receiver({});
   Sender strict(*gone_again, Mode::kChecksum, config);
   EXPECT_THROW(strict.send(Bytes(1025, 'A')), TimeoutError);
+
+  // Even when one EOT is all it may send, the sender sends a second before it takes silence for
+  // a receiver that has left: the first may have been lost.
+  config.eot_silence_completes = true;
+  config.eot_retries = 1;
+  auto gone_at_once = receiver({});
+  Sender once(*gone_at_once, Mode::kChecksum, config);
+  EXPECT_EQ(once.send(Bytes(1025, 'A')).eot_unanswered, 2u);
+  EXPECT_EQ(gone_at_once->written().size(), 9 * 132 + 2u);
+}
+
+// lrzsz rx flushes its input right after it ACKs the last block: an EOT that crosses that flush is
+// lost, and rx waits on for it (5 s, then NAKs until it gives up and deletes the file). A sender
+// allowed a single EOT that took the silence for the end fooled itself; it asks again and is answered.
+TEST(XmodemSender, AnEotLostToTheReceiversFlushIsSentAgainAndAnswered)
+{
+  FakeTransport rx;
+  rx.feed(Bytes{kNak});
+  int eots = 0;
+  rx.onWrite(
+      [&eots](FakeTransport& t, const Bytes& bytes)
+      {
+        if (bytes.size() == 1 && bytes[0] == kEot)
+        {
+          if (++eots == 2)
+            t.feed(Bytes{kAck});  // the first was flushed away unread
+        }
+        else
+          t.feed(Bytes{kAck});
+      });
+  Config config = fastConfig();
+  config.eot_retries = 1;
+  config.eot_timeout = Milliseconds(100);
+  Sender sender(rx, Mode::kChecksum, config);
+  const Stats stats = sender.send(Bytes(1025, 'A'));
+  EXPECT_EQ(stats.blocks, 9u);
+  EXPECT_EQ(eots, 2);
+  EXPECT_EQ(stats.eot_unanswered, 0u) << "the second EOT was answered: the end is confirmed";
+  EXPECT_EQ(stats.summary().find("the end was not"), std::string::npos) << stats.summary();
 }
 
 // XModem has no length field: a sender that goes on past Config::max_bytes is cancelled with CANs,

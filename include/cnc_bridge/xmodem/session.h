@@ -81,7 +81,8 @@ struct Config
   unsigned max_retries = 10;
   /// Sender: wait this long for the answer to EOT (lrzsz `rx` answers after 1 s of silence).
   Milliseconds eot_timeout{5000};
-  /// Sender: EOT sent at most this many times.
+  /// Sender: EOT sent at most this many times (twice when the first met silence and
+  /// eot_silence_completes: a lone EOT may have been lost).
   unsigned eot_retries = 10;
   /// Receiver: do not send the first NAK/'C' (the caller saw the sender start already; the simulator).
   bool skip_initial_request = false;
@@ -93,11 +94,11 @@ struct Config
   /// must not pass for success (the receiver stored nothing). Off: any CANs after EOT fail the
   /// transfer. On by default because the Haas path (dnc_node, cnc_dnc send --mode checksum) needs it.
   bool eot_can_completes = true;
-  /// Sender: take silence after every EOT, once every block was ACKed, as a completed transfer
-  /// whose end went unconfirmed (Stats::eot_unanswered; the summary says so). The receiver holds
-  /// every block; a receiver that leaves as soon as it has the EOT loses its last ACK (lrzsz rx
-  /// flushes its tty as it exits). A NAK or anything else in answer to EOT still fails. Off:
-  /// an unanswered EOT fails the transfer.
+  /// Sender: take silence after every EOT (two EOTs at least), once every block was ACKed, as a
+  /// completed transfer whose end went unconfirmed (Stats::eot_unanswered; the summary says so).
+  /// The receiver holds every block; a receiver that leaves as soon as it has the EOT loses its
+  /// last ACK (lrzsz rx flushes its tty as it exits). A NAK or anything else in answer to EOT
+  /// still fails. Off: an unanswered EOT fails the transfer.
   bool eot_silence_completes = true;
   /// Receiver: the most payload taken; a sender that goes past it is cancelled (CAN CAN) and the
   /// transfer fails naming max_bytes_name. sendFile() refuses a larger file the same way. XModem

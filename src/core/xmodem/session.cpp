@@ -136,6 +136,10 @@ constexpr size_t kReplyReadSize = 64;
 constexpr Milliseconds kDoubleReplyQuiet{1};
 // Receiver, the same for the byte that follows a packet shifted by a doubled byte.
 constexpr Milliseconds kDoubledByteQuiet{1};
+// Sender: EOTs that must meet silence before silence is taken as a receiver that has left. One
+// is not enough: lrzsz rx flushes its input right after it ACKs the last block, and an EOT that
+// crosses that flush is thrown away while rx waits on for it (and then fails the transfer).
+constexpr unsigned kSilentEotsToComplete = 2;
 
 Sender::Sender(Transport& link, Mode mode, Config config, const std::atomic<bool>* cancel)
     : link_(link),
@@ -423,7 +427,9 @@ void Sender::sendEot()
     else
       input_.purge(config_.turnaround, config_.turnaround * 10);
     eot_met_only_silence = eot_met_only_silence && reply == Reply::kTimeout;
-    if (attempt >= config_.eot_retries)
+    const bool silence_needs_another_eot =
+        config_.eot_silence_completes && eot_met_only_silence && attempt < kSilentEotsToComplete;
+    if (attempt >= config_.eot_retries && !silence_needs_another_eot)
     {
       // Every block was ACKed, so the receiver holds the whole payload; only the end went
       // unconfirmed. Silence is what a receiver that has left leaves behind; anything else
