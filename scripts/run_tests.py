@@ -7,7 +7,9 @@ each under its time limit, and makes sure that each leaves a JUnit result that t
   test and the limit (catkin ignores GoogleTest timeouts, so nothing else would stop it);
 - a test program that exits non-zero although its XML says every case passed (a crash or a
   sanitizer report after GoogleTest wrote its results) fails;
-- a test that writes no result at all fails.
+- a test that writes no result at all fails;
+- each test has a scratch folder of its own as TMPDIR (the rostests' pid files, pty links and logs go
+  there), removed when the test passed and kept, its path printed, when it failed.
 
 usage: run_tests.py --build BUILD --results DIR [--only NAME ...] [--manifest FILE]
 Unit tests run from BUILD (as catkin runs them); rostests with the package's source as --pkgdir.
@@ -17,9 +19,11 @@ the log of a test that failed. Exit status 1 if any test failed.
 import argparse
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 import xml.etree.ElementTree as ET
 
@@ -68,13 +72,16 @@ def rostest_time_limit(launch_file):
     return int(sum(limits)) + ROSTEST_MARGIN_S
 
 
-def run_limited(command, limit, log_path, cwd):
+def run_limited(command, limit, log_path, cwd, scratch):
     """(exit status, seconds, timed out): `command` in a process group of its own, killed whole
-    (the master and nodes a rostest started too) when it is still running after `limit` seconds."""
+    (the master and nodes a rostest started too) when it is still running after `limit` seconds.
+    Its scratch files (TMPDIR: the rostests' pid files, pty links and logs, Python's tempfile) go
+    to `scratch`."""
     start = time.monotonic()
     with open(log_path, "wb") as log:
         process = subprocess.Popen(command, cwd=cwd, stdout=log, stderr=subprocess.STDOUT,
-                                   stdin=subprocess.DEVNULL, start_new_session=True)
+                                   stdin=subprocess.DEVNULL, start_new_session=True,
+                                   env=dict(os.environ, TMPDIR=scratch))
         try:
             status = process.wait(timeout=limit)
             timed_out = False
@@ -139,7 +146,17 @@ def command_of(test, build, results, source):
 
 
 def run_one(test, build, results, source, logs):
-    """Runs `test`; returns None if it passed, else why it failed."""
+    """Runs `test` with a scratch folder of its own as TMPDIR, removed if it passed and kept for a
+    look if it failed (and left something there); returns None if it passed, else why it failed."""
+    scratch = tempfile.mkdtemp(prefix="cnc_test.")
+    problem = run_in(test, build, results, source, logs, scratch)
+    if problem is None or not os.listdir(scratch):
+        shutil.rmtree(scratch, ignore_errors=True)
+        return problem
+    return f"{problem}; its scratch folder is kept: {scratch}"
+
+
+def run_in(test, build, results, source, logs, scratch):
     files = result_files(test, results)
     for path in files:
         if os.path.exists(path):
@@ -150,7 +167,7 @@ def run_one(test, build, results, source, logs):
         junit_step.failed(files[0], test.name, message)
         return message
     command, limit = command_of(test, build, results, source)
-    status, seconds, timed_out = run_limited(command, limit, log, build)
+    status, seconds, timed_out = run_limited(command, limit, log, build, scratch)
     if timed_out:
         message = f"{test.name} hung: still running after its time limit of {limit} s, killed (log: {log})"
         add_failed_case(files[0], "time limit", message, log)

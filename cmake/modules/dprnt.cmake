@@ -18,7 +18,11 @@ if(CATKIN_ENABLE_TESTING OR CNC_BRIDGE_CORE_ONLY)
   target_link_libraries(test_dprnt cnc_bridge_dprnt)
   target_compile_definitions(test_dprnt PRIVATE CONFIG_DIR="${PROJECT_SOURCE_DIR}/config")
   cnc_core_gtest(test_dprnt_sim test/unit/test_dprnt_sim.cpp src/sim/haas_serial/dprnt_program.cpp)
-  target_link_libraries(test_dprnt_sim cnc_bridge_dprnt)
+  if(TARGET test_dprnt_sim)
+    target_link_libraries(test_dprnt_sim cnc_bridge_dprnt)
+    target_compile_definitions(test_dprnt_sim PRIVATE SIM_HAAS_SERIAL="$<TARGET_FILE:sim_haas_serial>")
+    add_dependencies(test_dprnt_sim sim_haas_serial)
+  endif()
 endif()
 
 

@@ -15,12 +15,17 @@ ALL_PASS = '<testsuites tests="1"><testsuite name="S" tests="1"><testcase name="
 
 # Stand-ins for GoogleTest binaries: each writes its --gtest_output=xml:PATH like GoogleTest does.
 WRITE_RESULT = 'out="${1#--gtest_output=xml:}"; echo \'' + ALL_PASS + '\' >"$out"'
+SCRATCH = '\ntouch "$TMPDIR/simulator.pid"; echo -n "$TMPDIR" >"$(dirname "$0")/scratch_of_{name}"'
 PROGRAMS = {
     "test_passes": WRITE_RESULT + "\nexit 0",
     # Writes an all-pass result, then dies: a crash in a destructor, a leak report.
     "test_crashes_after_passing": WRITE_RESULT + "\nkill -SEGV $$",
     # Never ends: the hang itself is what is under test (the runner must kill it at its limit).
     "test_hangs": "exec sleep 600",
+    # Each leaves a file in its TMPDIR (as a rostest's simulators leave pid files and pty links) and
+    # tells where that was; one passes, one fails.
+    "test_passes_leaving_scratch": WRITE_RESULT + SCRATCH.format(name="passing") + "\nexit 0",
+    "test_fails_leaving_scratch": WRITE_RESULT + SCRATCH.format(name="failing") + "\nexit 3",
 }
 
 
@@ -46,7 +51,8 @@ class RunTests(unittest.TestCase):
         command = [sys.executable, os.path.join(SCRIPTS, "run_tests.py"), "--build", self.build, "--results", self.results]
         if only:
             command += ["--only", *only]
-        return subprocess.run(command, capture_output=True, text=True, timeout=120)
+        # The runner makes each test's scratch folder in its own TMPDIR: here, this test's folder.
+        return subprocess.run(command, capture_output=True, text=True, timeout=120, env=dict(os.environ, TMPDIR=self.build))
 
     def failures(self):
         tally, failures, _ = count_results.count(os.path.join(self.build, "test_results"), set())
@@ -73,6 +79,19 @@ class RunTests(unittest.TestCase):
         tally, failures = self.failures()
         self.assertEqual(tally["unit tests"][1], 1)
         self.assertIn("test_hangs hung", failures[0])
+
+    def test_each_test_has_a_scratch_folder_removed_if_it_passed_and_kept_if_it_failed(self):
+        run = self.run_tests("test_passes_leaving_scratch", "test_fails_leaving_scratch")
+        self.assertEqual(run.returncode, 1)
+        with open(os.path.join(self.build, "scratch_of_passing")) as f:
+            passing = f.read()
+        with open(os.path.join(self.build, "scratch_of_failing")) as f:
+            failing = f.read()
+        self.assertNotEqual(passing, failing)
+        self.assertEqual(os.path.dirname(passing), self.build, "no folder of its own")
+        self.assertFalse(os.path.exists(passing), "the passing test's scratch folder was left")
+        self.assertTrue(os.path.exists(os.path.join(failing, "simulator.pid")))
+        self.assertIn("its scratch folder is kept: " + failing, run.stdout)
 
     def test_a_declared_test_that_was_not_built_fails(self):
         run = self.run_tests("test_never_built")

@@ -1,11 +1,14 @@
 // The macro interpreter behind `sim_haas_serial dprnt`: the rostests trust it to print what a Haas
 // control would, so its loops, moves, probe cycle and DPRNT output are checked here on their own.
 #include <gtest/gtest.h>
+#include <sys/wait.h>
 
 #include <cmath>
+#include <cstdio>
 
 #include "../../src/sim/haas_serial/dprnt_program.h"
 #include "cnc_bridge/common/error.h"
+#include "temp_dir.h"
 
 using cnc_bridge::ConfigError;
 using cnc_bridge::sim::MacroMachine;
@@ -175,4 +178,39 @@ TEST(DprntSim, SingleSurfaceXyProbeErrorsNameTheCause)
   EXPECT_NE(errorOf("G00 X1. Y1.\nG65 P9811 Y2.", machine).find("without touching"), std::string::npos);
   EXPECT_NE(errorOf("G65 P9811 X1. Y1.", machine).find("X or Y"), std::string::npos);
   EXPECT_NE(errorOf("G65 P9811 Z1.", machine).find("X or Y"), std::string::npos);
+}
+
+// `--part-corner` is three finite numbers; anything else stops the simulator before it opens its
+// port (exit 2), naming the value at fault, so a rostest with a typo fails at once, not on a probe.
+TEST(DprntSim, APartCornerThatIsNotThreeFiniteNumbersIsRefusedNamingIt)
+{
+  const cnc_bridge::test::TempDir dir("test_dprnt_sim");
+  const std::string program = dir.write("O1.nc", "%\nO00001\nG65 P9811 X1.\nM30\n%\n");
+  const std::string link = dir.file("port");
+  const auto run = [&](const std::string& corner)
+  {
+    const std::string command = std::string(SIM_HAAS_SERIAL) + " dprnt --link " + link + " --program " + program +
+                                " --part-corner '" + corner + "' 2>&1";
+    FILE* out = ::popen(command.c_str(), "r");
+    std::string said;
+    char buffer[256];
+    while (out != nullptr && std::fgets(buffer, sizeof(buffer), out) != nullptr)
+      said += buffer;
+    const int status = out != nullptr ? ::pclose(out) : -1;
+    return std::make_pair(WIFEXITED(status) ? WEXITSTATUS(status) : -1, said);
+  };
+  for (const auto& [corner, named] :
+       std::vector<std::pair<std::string, std::string>>{{"1,x,2", "'x' is not a finite number"},
+                                                        {"1,nan,2", "'nan' is not a finite number"},
+                                                        {"1e400,0,0", "'1e400' is not a finite number"},
+                                                        {"1,2", "expected X,Y,YAW (three numbers)"},
+                                                        {"1,2,3,4", "expected X,Y,YAW (three numbers)"},
+                                                        {"0.5 ,1,2", "'0.5 ' is not a finite number"}})
+  {
+    SCOPED_TRACE(corner);
+    const auto [status, said] = run(corner);
+    EXPECT_EQ(status, 2) << said;
+    EXPECT_NE(said.find("--part-corner " + corner + ": " + named), std::string::npos) << said;
+    EXPECT_FALSE(cnc_bridge::test::exists(link)) << "the simulator opened its port";
+  }
 }
