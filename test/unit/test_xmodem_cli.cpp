@@ -704,6 +704,45 @@ std::string exchange(const std::string& bytes)
   }
   return out;
 }
+
+/// lrzsz `rx FILE` in \p dir on one pty, the tap between it and the pty `cnc_dnc send` opens.
+class RxThroughTap
+{
+ public:
+  RxThroughTap(const std::string& dir, const std::string& file)
+      : dir_(dir), tap_(rx_side_, dnc_side_), rx_(startRx(rx_side_.slavePath(), dir, file))
+  {
+  }
+  /// Side A is rx, side B cnc_dnc.
+  Tap& tap() { return tap_; }
+  const Tap& tap() const { return tap_; }
+  /// The port cnc_dnc opens.
+  const std::string& cncDncPort() const { return dnc_side_.slavePath(); }
+  /// Waits for rx's start request (it has set its port up by then).
+  bool started() const { return tap_.waitForA(1, Milliseconds(20000)); }
+  /// `cnc_dnc send --mode checksum --binary --retries 1 FILE` to rx. One retry: rx answers a second
+  /// EOT only when it did not get the first, and has left otherwise.
+  ToolRun send(const std::string& file) const
+  {
+    return cncDnc(
+        {"send", "--port", cncDncPort(), "--mode", "checksum", "--binary", "--timeout", "30", "--retries", "1", file},
+        dir_);
+  }
+  /// rx's exit status, once it has ended.
+  int rxStatus() const { return exitStatus(rx_); }
+  /// What rx said (its verbose log) and what each side sent, for a failure message.
+  std::string account() const
+  {
+    return "rx said: " + readFile(dir_ + "/rx.log") + "\nrx sent: " + exchange(tap_.fromA()) +
+           "\ncnc_dnc sent: " + exchange(tap_.fromB());
+  }
+
+ private:
+  std::string dir_;
+  PtyMaster rx_side_, dnc_side_;
+  Tap tap_;
+  pid_t rx_;
+};
 }  // namespace
 
 // The interop check that reported complete transfers as failed: cnc_dnc send to lrzsz rx, a
@@ -717,17 +756,11 @@ TEST(CncDncCli, EverySendToRxOfAProgramSucceedsAndArrivesExact)
   for (int round = 0; round < 10; ++round)
   {
     SCOPED_TRACE("round " + std::to_string(round));
-    PtyMaster rx_side, dnc_side;
-    Tap tap(rx_side, dnc_side);
     const std::string received = "received" + std::to_string(round) + ".nc";
-    const pid_t rx = startRx(rx_side.slavePath(), dir.path, received);
-    ASSERT_TRUE(tap.waitForA(1, Milliseconds(20000))) << "rx sent no start request";
-    const ToolRun send = cncDnc({"send", "--port", dnc_side.slavePath(), "--mode", "checksum", "--binary", "--timeout",
-                                 "30", "--retries", "1", dir.path + "/O01025.nc"},
-                                dir.path);
-    EXPECT_EQ(exitStatus(rx), 0) << "rx said: " << readFile(dir.path + "/rx.log")
-                                 << "\nrx sent: " << exchange(tap.fromA())
-                                 << "\ncnc_dnc sent: " << exchange(tap.fromB());
+    const RxThroughTap link(dir.path, received);
+    ASSERT_TRUE(link.started()) << "rx sent no start request";
+    const ToolRun send = link.send(dir.path + "/O01025.nc");
+    EXPECT_EQ(link.rxStatus(), 0) << link.account();
     EXPECT_EQ(send.status, 0) << send.err;
     unconfirmed += send.out.find("the end was not") != std::string::npos ? 1 : 0;
     const std::string got = readFile(dir.path + "/" + received);
@@ -747,18 +780,13 @@ TEST(CncDncCli, AnEotLostOnTheWayToRxIsSentAgainAndRxKeepsTheFile)
   TempDir dir("test_xmodem_cli");
   const std::string payload = program(1026, 3 * 128 + 7);
   writeFile(dir.path + "/O01026.nc", payload);
-  PtyMaster rx_side, dnc_side;
-  Tap tap(rx_side, dnc_side);
-  tap.loseNextEotFromB();
-  const pid_t rx = startRx(rx_side.slavePath(), dir.path, "received.nc");
-  ASSERT_TRUE(tap.waitForA(1, Milliseconds(20000))) << "rx sent no start request";
-  const ToolRun send = cncDnc({"send", "--port", dnc_side.slavePath(), "--mode", "checksum", "--binary", "--timeout",
-                               "30", "--retries", "1", dir.path + "/O01026.nc"},
-                              dir.path);
-  EXPECT_EQ(exitStatus(rx), 0) << "rx said: " << readFile(dir.path + "/rx.log")
-                               << "\ncnc_dnc sent: " << exchange(tap.fromB());
+  RxThroughTap link(dir.path, "received.nc");
+  link.tap().loseNextEotFromB();
+  ASSERT_TRUE(link.started()) << "rx sent no start request";
+  const ToolRun send = link.send(dir.path + "/O01026.nc");
+  EXPECT_EQ(link.rxStatus(), 0) << link.account();
   EXPECT_EQ(send.status, 0) << send.err;
-  const std::string from_dnc = tap.fromB();
+  const std::string from_dnc = link.tap().fromB();
   EXPECT_EQ(std::count(from_dnc.end() - 2, from_dnc.end(), '\x04'), 2) << "cnc_dnc did not send EOT again";
   const std::string got = readFile(dir.path + "/received.nc");
   ASSERT_GE(got.size(), payload.size()) << "rx did not keep the file";
@@ -770,29 +798,24 @@ TEST(CncDncCli, SendStartsOnTheNakRxSentBeforeThePortWasOpened)
   TempDir dir("test_xmodem_cli");
   const std::string payload = program(4321, 3 * 128 + 40);
   writeFile(dir.path + "/O04321.nc", payload);
-  PtyMaster rx_side, dnc_side;
-  Tap tap(rx_side, dnc_side);
-  const pid_t rx = startRx(rx_side.slavePath(), dir.path, "received.nc");
-  ASSERT_TRUE(tap.waitForA(1, Milliseconds(20000))) << "rx sent no start request";
-  ASSERT_EQ(tap.fromA(), "\x15") << "rx's first request is one NAK (checksum mode)";
+  const RxThroughTap link(dir.path, "received.nc");
+  ASSERT_TRUE(link.started()) << "rx sent no start request";
+  ASSERT_EQ(link.tap().fromA(), "\x15") << "rx's first request is one NAK (checksum mode)";
   {
     // The NAK is now queued on cnc_dnc's side of the link, where nobody has the port open yet.
-    const int probe = ::open(dnc_side.slavePath().c_str(), O_RDONLY | O_NOCTTY | O_NONBLOCK);
+    const int probe = ::open(link.cncDncPort().c_str(), O_RDONLY | O_NOCTTY | O_NONBLOCK);
     ASSERT_GE(probe, 0);
     pollfd ready{probe, POLLIN, 0};
     ASSERT_EQ(::poll(&ready, 1, 10000), 1) << "the NAK never reached cnc_dnc's port";
     ::close(probe);
   }
-  // --retries 1: rx's ACK of EOT may be lost (below), and nobody answers a second EOT.
-  const ToolRun send = cncDnc({"send", "--port", dnc_side.slavePath(), "--mode", "checksum", "--binary", "--timeout",
-                               "30", "--retries", "1", dir.path + "/O04321.nc"},
-                              dir.path);
-  const int rx_status = exitStatus(rx);
+  const ToolRun send = link.send(dir.path + "/O04321.nc");
+  const int rx_status = link.rxStatus();
   // rx flushes its tty as it exits, so its ACK of EOT can be lost: the send still succeeds (every
   // block was acknowledged) and says the end went unconfirmed.
   EXPECT_EQ(send.status, 0) << send.err;
-  EXPECT_EQ(rx_status, 0);
-  const std::string from_rx = tap.fromA(), from_dnc = tap.fromB();
+  EXPECT_EQ(rx_status, 0) << link.account();
+  const std::string from_rx = link.tap().fromA(), from_dnc = link.tap().fromB();
   ASSERT_GE(from_dnc.size(), 132u);
   EXPECT_EQ(from_dnc[0], '\x01') << "cnc_dnc's first byte is not SOH";
   EXPECT_EQ(from_dnc[1], '\x01') << "cnc_dnc's first packet is not block 1";
