@@ -46,6 +46,10 @@ class InstallSpace:
         self.prefix = None
         self.home = os.path.join(scratch, "home")
         os.makedirs(self.home)
+        # What the launch files and programs put in TMPDIR (pid files, pty links, a sandbox a test
+        # launch file makes as it is loaded) stays in the scratch folder.
+        self.tmp = os.path.join(scratch, "tmp")
+        os.makedirs(self.tmp)
         self.processes = []
 
     def install(self):
@@ -63,7 +67,7 @@ class InstallSpace:
     def environment(self, extra=None):
         """A login-like environment: nothing of the calling shell, so no ROS path leaks in."""
         env = {"HOME": self.home, "PATH": "/usr/bin:/bin", "LANG": "C.UTF-8",
-               "ROS_HOME": os.path.join(self.home, ".ros")}
+               "ROS_HOME": os.path.join(self.home, ".ros"), "TMPDIR": self.tmp}
         env.update(extra or {})
         return env
 

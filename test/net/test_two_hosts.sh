@@ -14,16 +14,19 @@ cell=cnc_cell_$suffix
 machine=cnc_machine_$suffix
 log=$(mktemp -d /tmp/cnc_two_hosts.XXXXXX)
 
+passed=0
 cleanup() {
   ip netns pids "$cell" 2>/dev/null | xargs -r kill 2>/dev/null
   ip netns pids "$machine" 2>/dev/null | xargs -r kill 2>/dev/null
   ip netns del "$cell" 2>/dev/null
   ip netns del "$machine" 2>/dev/null
+  [[ $passed == 1 ]] && rm -rf "$log"  # a failure's message names its logs: kept then
 }
 trap cleanup EXIT
 
 result() {  # name, failure message (empty = pass)
   if [[ -z "$2" ]]; then
+    passed=1
     echo "<testsuite name=\"two_hosts\"><testcase classname=\"net.two_hosts\" name=\"$1\"/></testsuite>" >"$junit"
   else
     echo "two_hosts: $2 (logs in $log)"
